@@ -1,0 +1,153 @@
+"""Build stage: C sources -> a per-model cffi extension module.
+
+cffi runs in API mode, but we drive the compiler ourselves instead of going
+through setuptools: it is faster, it lets the model source and the wrapper
+compile in parallel, and a failure raises :class:`BuildError` with the exact
+command and the compiler's full output (nothing is swallowed).
+
+Everything is written to a private temporary directory first and moved into
+place with ``os.replace``; ``manifest.json`` is moved last and marks a
+complete build.  Two processes building the same model at once therefore
+both succeed and leave one valid build.
+"""
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+import os
+import shlex
+import shutil
+import subprocess
+import sysconfig
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import cffi
+
+from .errors import BuildError
+
+#: Default optimisation for models whose routines fit one function, and for big ones.
+OPT_SMALL = "-O2"
+OPT_LARGE = "-O1"
+#: Statement count above which OPT_LARGE is used.
+LARGE_MODEL = 6000
+BASE_FLAGS = ("-std=c99", "-fPIC", "-Wall", "-Wextra")
+
+
+@dataclass(frozen=True)
+class BuildResult:
+    directory: Path
+    module_name: str
+    module_path: Path
+    manifest: dict
+    cached: bool
+    seconds: float
+
+
+def compiler() -> list:
+    """The C compiler command: ``$CC`` if set, else ``cc``."""
+    return shlex.split(os.environ.get("CC", "cc"))
+
+
+def compile_flags(statements: int) -> list:
+    opt = OPT_LARGE if statements > LARGE_MODEL else OPT_SMALL
+    extra = shlex.split(os.environ.get("MODELGEN_CFLAGS", ""))
+    return [opt, *BASE_FLAGS, *extra]
+
+
+def manifest_path(directory: Path) -> Path:
+    return Path(directory) / "manifest.json"
+
+
+def read_manifest(directory: Path) -> dict | None:
+    try:
+        return json.loads(manifest_path(directory).read_text())
+    except (OSError, ValueError):
+        return None
+
+
+def cached_build(directory: Path, build_hash: str) -> BuildResult | None:
+    """The existing build in ``directory`` if it matches ``build_hash``."""
+    manifest = read_manifest(directory)
+    if not manifest or manifest.get("build_hash") != build_hash:
+        return None
+    module_path = Path(directory) / manifest["module_file"]
+    if not module_path.is_file():
+        return None
+    return BuildResult(Path(directory), manifest["module_name"], module_path, manifest, True, 0.0)
+
+
+def _run(commands: list, cwd: Path) -> None:
+    """Run compiler commands in parallel; raise BuildError on the first failure."""
+    procs = [(cmd, subprocess.Popen(cmd, cwd=cwd, stdout=subprocess.PIPE,
+                                    stderr=subprocess.STDOUT, text=True)) for cmd in commands]
+    failure = None
+    for cmd, proc in procs:
+        out, _ = proc.communicate()
+        if proc.returncode != 0 and failure is None:
+            failure = BuildError(f"C compiler failed (exit {proc.returncode})", cmd, out)
+    if failure:
+        raise failure
+
+
+def _write_if_changed(path: Path, text: str, tmpdir: Path) -> None:
+    """Atomically replace ``path`` with ``text`` unless it already holds it."""
+    data = text.encode()
+    try:
+        if path.read_bytes() == data:
+            return
+    except OSError:
+        pass
+    tmp = tmpdir / (path.name + ".new")
+    tmp.write_bytes(data)
+    os.replace(tmp, path)
+
+
+def build_module(directory: Path, name: str, sources: dict, manifest: dict,
+                 statements: int) -> BuildResult:
+    """Compile ``sources`` (``<name>.c``, ``<name>.h``, ``cdef``) into ``directory``.
+
+    ``manifest`` must hold ``build_hash``; the module is named after it so a
+    changed model never collides with an already imported one.
+    """
+    start = time.perf_counter()
+    directory = Path(directory)
+    directory.mkdir(parents=True, exist_ok=True)
+    module_name = f"_mg_{name}_{manifest['build_hash'][:16]}"
+    suffix = sysconfig.get_config_var("EXT_SUFFIX") or ".so"
+    module_file = module_name + suffix
+    flags = compile_flags(statements)
+
+    tmp = Path(tempfile.mkdtemp(prefix=".build-", dir=directory))
+    try:
+        for fname in (f"{name}.c", f"{name}.h"):
+            (tmp / fname).write_text(sources[fname])
+        ffi = cffi.FFI()
+        ffi.cdef(sources["cdef"])
+        ffi.set_source(module_name, f'#include "{name}.h"')
+        with contextlib.redirect_stdout(io.StringIO()):   # cffi announces the file
+            ffi.emit_c_code(str(tmp / f"{module_name}.c"))
+
+        cc = compiler()
+        py_include = sysconfig.get_paths()["include"]
+        model_obj = [*cc, *flags, "-Werror", "-c", f"{name}.c", "-o", f"{name}.o"]
+        wrap_obj = [*cc, "-O1", "-fPIC", "-w", f"-I{py_include}", "-I.", "-c",
+                    f"{module_name}.c", "-o", f"{module_name}.o"]
+        _run([model_obj, wrap_obj], tmp)
+        link = [*cc, "-shared", f"{module_name}.o", f"{name}.o", "-o", module_file, "-lm"]
+        _run([link], tmp)
+
+        manifest = dict(manifest, module_name=module_name, module_file=module_file,
+                        compile_command=" ".join(model_obj), compile_flags=flags)
+        _write_if_changed(directory / f"{name}.c", sources[f"{name}.c"], tmp)
+        _write_if_changed(directory / f"{name}.h", sources[f"{name}.h"], tmp)
+        os.replace(tmp / module_file, directory / module_file)
+        (tmp / "manifest.json").write_text(json.dumps(manifest, indent=2, sort_keys=True))
+        os.replace(tmp / "manifest.json", manifest_path(directory))
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    return BuildResult(directory, module_name, directory / module_file, manifest, False,
+                       time.perf_counter() - start)

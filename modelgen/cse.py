@@ -1,0 +1,129 @@
+"""CSE stage: one common-subexpression pass per generated C function.
+
+Input: the program of named intermediates (:class:`modelgen.graph.Graph`) and
+the outputs a function must write.  Output: a :class:`Routine`, the ordered
+statements that compute exactly those outputs (dead intermediates dropped),
+after one ``sympy.cse`` pass over all of them, with operation counts before
+and after.
+
+``sympy.cse`` returns its replacements ahead of the reduced expressions, but
+here a replacement may use intermediates defined by earlier statements.  The
+statements are therefore merged in dependency order: every replacement is
+emitted just before the first statement that needs it.  That keeps the
+original, deterministic program order (``order='none'`` is used for speed;
+determinism comes from the program order and the numbered symbols).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import sympy
+
+from .graph import Graph
+
+
+@dataclass(frozen=True)
+class Routine:
+    """A straight-line routine ready to print.
+
+    ``statements``: ((symbol, expr), ...) in execution order;
+    ``outputs``: ((array name, (expr, ...)), ...), written after the statements;
+    ``inputs``: ((array name, (symbol, ...)), ...) -- element i of the array is
+    the i-th symbol; scalar inputs (``t``) have a 1-tuple and ``scalar=True``
+    in ``scalars``.
+    """
+    name: str
+    inputs: tuple
+    outputs: tuple
+    statements: tuple
+    ops_before: int
+    ops_after: int
+
+
+def count_ops(exprs) -> int:
+    """Floating-point operations of a list of expressions (sympy's count)."""
+    return int(sum(sympy.count_ops(e) for e in exprs))
+
+
+def _numbered(prefix):
+    i = 0
+    while True:
+        yield sympy.Symbol(f"{prefix}{i}")
+        i += 1
+
+
+def eliminate(graph: Graph, outputs) -> tuple:
+    """One ``sympy.cse`` pass over everything needed for ``outputs``.
+
+    Returns ``(new_graph, new_outputs)``: a program whose statements compute
+    the same values with common subexpressions named ``mg_c<i>``, and the
+    outputs rewritten in terms of it (dead statements are dropped).
+    """
+    outputs = list(outputs)
+    program = graph.closure(outputs)
+    if not program:
+        return Graph(()), outputs
+    exprs = [e for _, e in program] + outputs
+    replacements, reduced = sympy.cse(exprs, symbols=_numbered("mg_c"), order="none")
+    rep = dict(replacements)
+    emitted = set()
+    statements = []
+
+    def emit_deps(expr):
+        stack = [(expr, False)]
+        while stack:
+            e, ready = stack.pop()
+            if ready:
+                if e not in emitted:
+                    emitted.add(e)
+                    statements.append((e, rep[e]))
+                continue
+            deps = {e} if e.is_Symbol else e.free_symbols
+            for s in sorted((s for s in deps if s in rep and s not in emitted),
+                            key=str, reverse=True):
+                stack.append((s, True))
+                stack.append((rep[s], False))
+
+    for (sym, _), expr in zip(program, reduced):
+        emit_deps(expr)
+        statements.append((sym, expr))
+    new_outputs = reduced[len(program):]
+    for e in new_outputs:
+        emit_deps(e)
+    return Graph(tuple(statements)), list(new_outputs)
+
+
+def make_routines(graph: Graph, routines, *, cse: bool = True) -> tuple:
+    """Build several routines from one program with a single CSE pass.
+
+    ``routines`` is a sequence of ``(name, inputs, outputs)`` where ``outputs``
+    is ``((array name, (expr, ...)), ...)``.
+
+    >>> import sympy
+    >>> from modelgen.graph import GraphBuilder
+    >>> x, y = sympy.symbols("x y")
+    >>> g = GraphBuilder(); a = g.name(x*y + x); b = g.name((x*y + 1)**2)
+    >>> (r,) = make_routines(g.freeze(), [("f", (("in", (x, y)),), (("out", (a, b)),))])
+    >>> [str(e) for _, e in r.statements], r.ops_before, r.ops_after
+    (['x*y', 'mg_c0 + x', '(mg_c0 + 1)**2'], 5, 4)
+    """
+    routines = [(name, tuple(inputs), tuple(outputs)) for name, inputs, outputs in routines]
+    all_outputs = [e for _, _, outs in routines for _, items in outs for e in items]
+    before = {}
+    for name, _, outs in routines:
+        flat = [e for _, items in outs for e in items]
+        before[name] = count_ops([e for _, e in graph.closure(flat)]) + count_ops(flat)
+    if cse:
+        graph, all_outputs = eliminate(graph, all_outputs)
+    result = []
+    pos = 0
+    for name, inputs, outs in routines:
+        new_outs = []
+        for array, items in outs:
+            new_outs.append((array, tuple(all_outputs[pos:pos + len(items)])))
+            pos += len(items)
+        flat = [e for _, items in new_outs for e in items]
+        statements = graph.closure(flat)
+        after = count_ops([e for _, e in statements]) + count_ops(flat)
+        result.append(Routine(name, inputs, tuple(new_outs), statements, before[name], after))
+    return tuple(result)

@@ -1,0 +1,262 @@
+"""Dynamics stage: mass matrix A, velocity-product term h and generalized forces tau.
+
+The equations of motion are ``A(q) q_ddot = tau(t, q, q_dot, u) - h(q, q_dot, t)``,
+derived by virtual power (Kane's method):
+
+* ``A_kl = sum_i m_i b_k^i . b_l^i + c_k^i . (I_i c_l^i)``
+* ``h_k  = sum_i b_k^i . m_i a_i^bias + c_k^i . (I_i alpha_i^bias + omega_i x I_i omega_i)``
+* ``tau_k = sum_i b_k^i . F_i + c_k^i . M_i``  (forces F_i at G_i, moments M_i about G_i)
+
+where b_k^i, c_k^i are the partial (the seed's *virtual*) velocities of body
+i's centre of mass and base.  The seed calls h "dA/dt q_dot"; that name is
+only right for one coordinate.  In general ``h = dA/dt q_dot - dT/dq``, which
+is what virtual power gives and what is computed here (see the README).
+
+The sums are organised the way the composite-rigid-body algorithm does: each
+body's partial velocities are written as a spatial vector at O,
+``S_k^i = (c_k^i, b_k^i - c_k^i x r_Gi)``.  Bodies downstream of the place
+where q_k enters share the *same symbols* for S_k, so
+``A_kl = S_k . (sum_{i in X} M_i) S_l`` with the sum over the shared set X
+computed once and reused (a composite inertia).  For a chain this is O(n^2)
+instead of O(n^3); for any tree it reduces to CRBA and the backward
+recursion of RNEA.  Nothing here assumes a chain: bodies that do not share
+symbols simply fall into separate groups.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import sympy
+
+from .graph import (ZERO, ZERO3, Graph, GraphBuilder, add, cross, dot, matvec,
+                    scale, sub)
+from .kinematics import Kinematics
+from .spec import TIME, symbol
+
+
+@dataclass(frozen=True)
+class Equations:
+    """Output of :func:`derive_equations`: everything the C functions compute."""
+    name: str
+    graph: Graph
+    t: sympy.Symbol
+    q: tuple
+    qd: tuple
+    u: tuple                # input symbols
+    p: tuple                # parameter symbols
+    bodies: tuple           # body names, in spec order
+    A: tuple                # n x n rows (symmetric)
+    h: tuple                # n
+    tau: tuple              # n, the sum of tau_parts
+    tau_parts: tuple        # ((label, n-tuple), ...): gravity and each action
+    kinetic: sympy.Expr
+    potential: sympy.Expr   # of gravity, zero at O
+    poses: tuple            # per body: 16 entries of the 4x4 pose, row-major
+
+
+def _transform_inertia(g: GraphBuilder, R, inertia):
+    """I_E = R I R^T as a named symmetric 3x3 (tuple of rows)."""
+    # X = I R^T  (X[i][j] = sum_l I[i][l] R[j][l])
+    X = [[sympy.Add(*[inertia[i][l] * R[j][l] for l in range(3)]) for j in range(3)]
+         for i in range(3)]
+    X = [[g.name(x) for x in row] for row in X]
+    out = [[None] * 3 for _ in range(3)]
+    for i in range(3):
+        for j in range(i, 3):
+            out[i][j] = out[j][i] = g.name(sympy.Add(*[R[i][l] * X[l][j] for l in range(3)]))
+    return tuple(tuple(row) for row in out)
+
+
+@dataclass(frozen=True)
+class _Spatial:
+    """Spatial inertia about O in E: (I_O, h = m r_G, m); I_O as 6 unique entries."""
+    I: tuple     # (xx, yy, zz, xy, xz, yz)
+    h: tuple
+    m: sympy.Expr
+
+    def plus(self, other, g):
+        return _Spatial(g.vec(add(self.I, other.I)), g.vec(add(self.h, other.h)),
+                        g.name(self.m + other.m))
+
+    def times(self, S, g):
+        """M S for a spatial motion S = (c, beta): (I_O c + h x beta, m beta + c x h)."""
+        c, beta = S[:3], S[3:]
+        xx, yy, zz, xy, xz, yz = self.I
+        Ic = (xx * c[0] + xy * c[1] + xz * c[2],
+              xy * c[0] + yy * c[1] + yz * c[2],
+              xz * c[0] + yz * c[1] + zz * c[2])
+        ang = add(Ic, cross(self.h, beta))
+        lin = add(scale(self.m, beta), cross(c, self.h))
+        return g.vec(ang + lin)
+
+
+def _sum_vectors(a, b, g):
+    return g.vec(add(a, b))
+
+
+class _SetSums:
+    """Memoised sums of per-body quantities over sets of bodies.
+
+    A set is built from the largest already-known subsets (greedy cover), so
+    nested sets along a chain cost one addition each, as in CRBA.
+    """
+
+    def __init__(self, items: dict, plus, g):
+        self.items = items          # body index -> quantity
+        self.plus = plus
+        self.g = g
+        self.memo: dict = {}
+
+    def __call__(self, bodies: frozenset):
+        if bodies in self.memo:
+            return self.memo[bodies]
+        remaining = set(bodies)
+        total = None
+        for known in sorted((s for s in self.memo if s < bodies),
+                            key=lambda s: (-len(s), sorted(s))):
+            if known <= remaining:
+                total = self.memo[known] if total is None else self.plus(total, self.memo[known], self.g)
+                remaining -= known
+        for i in sorted(remaining):
+            total = self.items[i] if total is None else self.plus(total, self.items[i], self.g)
+        self.memo[bodies] = total
+        return total
+
+
+def _warm(sums: _SetSums, sets):
+    """Compute sets smallest-first so larger ones reuse them."""
+    for s in sorted(set(sets), key=lambda s: (len(s), sorted(s))):
+        sums(s)
+
+
+def derive_equations(kin: Kinematics) -> Equations:
+    """Derive A, h and tau (and energies, poses) from the kinematics.
+
+    >>> from modelgen.model import load_model       # doctest: +SKIP
+    >>> eqs = derive_equations(derive_kinematics(load_model("models/simple_pendulum.yaml")))  # doctest: +SKIP
+    """
+    spec = kin.spec
+    g = GraphBuilder(kin.graph)
+    n = spec.n
+
+    # -- per body: spatial partials, inertias, bias and external forces -------
+    S = []            # per body: {k: 6-tuple}
+    M = {}            # body index -> _Spatial
+    bias = {}         # body index -> 6-tuple spatial force at O (N_O, F)
+    ext_parts = []    # [(label, {body index: 6-tuple})]
+    kinetic = ZERO
+    potential = ZERO
+    poses = []
+    gravity = spec.gravity
+    grav_forces = {}
+    for i, body in enumerate(spec.bodies):
+        B = kin.bases[body.base]
+        G = kin.points[body.G]
+        r = G.r
+        Si = {}
+        for k in sorted(set(B.partials) | set(G.partials)):
+            c = B.partials.get(k, ZERO3)
+            w, beta = G.partials.get(k, (ZERO3, ZERO3))
+            if w != c:
+                beta = g.vec(add(beta, cross(sub(w, c), r)))
+            if any(x != 0 for x in c + beta):
+                Si[k] = c + tuple(beta)
+        S.append(Si)
+
+        m = body.mass
+        IE = _transform_inertia(g, B.R, body.inertia)
+        h_vec = g.vec(scale(m, r))
+        rr = g.name(r[0] ** 2 + r[1] ** 2 + r[2] ** 2)
+        I_O = (g.name(IE[0][0] + m * (rr - r[0] ** 2)),
+               g.name(IE[1][1] + m * (rr - r[1] ** 2)),
+               g.name(IE[2][2] + m * (rr - r[2] ** 2)),
+               g.name(IE[0][1] - r[0] * h_vec[1]),
+               g.name(IE[0][2] - r[0] * h_vec[2]),
+               g.name(IE[1][2] - r[1] * h_vec[2]))
+        M[i] = _Spatial(I_O, h_vec, m)
+
+        omega, alpha = B.omega, B.alpha_bias
+        I_omega = g.vec(matvec(IE, omega))
+        F = g.vec(scale(m, G.a_bias))
+        N_G = add(matvec(IE, alpha), cross(omega, I_omega))
+        bias[i] = g.vec(add(N_G, cross(r, F))) + F
+
+        kinetic += (m * (G.v[0] ** 2 + G.v[1] ** 2 + G.v[2] ** 2) + dot(omega, I_omega)) / 2
+        if gravity is not None:
+            Fg = g.vec(scale(m, gravity))
+            grav_forces[i] = g.vec(cross(r, Fg)) + Fg
+            potential -= dot(Fg, r)
+        R = B.R
+        poses.append(tuple(R[0]) + (r[0],) + tuple(R[1]) + (r[1],) + tuple(R[2]) + (r[2],)
+                     + (ZERO, ZERO, ZERO, sympy.S.One))
+
+    if gravity is not None:
+        ext_parts.append(("gravity", grav_forces))
+    body_index = {b.name: i for i, b in enumerate(spec.bodies)}
+    for act in spec.actions:
+        Rb = kin.bases[act.base].R
+        F = g.vec(matvec(Rb, act.force))
+        T = g.vec(matvec(Rb, act.torque))
+        rP = kin.points[act.point].r
+        ext_parts.append((f"action:{act.name}",
+                          {body_index[act.body]: g.vec(add(T, cross(rP, F))) + F}))
+
+    # -- group bodies by identical spatial partials ----------------------------
+    groups = []       # per k: [(S, frozenset of bodies)]
+    for k in range(n):
+        by_motion: dict = {}
+        for i in range(len(spec.bodies)):
+            if k in S[i]:
+                by_motion.setdefault(S[i][k], []).append(i)
+        groups.append([(motion, frozenset(members)) for motion, members in by_motion.items()])
+
+    # -- mass matrix: composite inertias ---------------------------------------
+    inertia_sums = _SetSums(M, lambda a, b, gb: a.plus(b, gb), g)
+    _warm(inertia_sums, [X & Y for k in range(n) for l in range(k, n)
+                         for _, X in groups[k] for _, Y in groups[l] if X & Y])
+    forces_memo: dict = {}
+    A = [[ZERO] * n for _ in range(n)]
+    for l in range(n):
+        for k in range(l + 1):
+            total = ZERO
+            for Sk, X in groups[k]:
+                for Sl, Y in groups[l]:
+                    XY = X & Y
+                    if not XY:
+                        continue
+                    key = (XY, Sl)
+                    if key not in forces_memo:
+                        forces_memo[key] = inertia_sums(XY).times(Sl, g)
+                    total += dot(Sk, forces_memo[key])
+            A[k][l] = A[l][k] = g.name(total)
+
+    # -- velocity-product term and generalized forces: grouped force sums ------
+    def project(per_body: dict) -> tuple:
+        sums = _SetSums(per_body, _sum_vectors, g)
+        _warm(sums, [frozenset(i for i in X if i in per_body)
+                     for k in range(n) for _, X in groups[k]] and
+              [s for s in (frozenset(i for i in X if i in per_body)
+                           for k in range(n) for _, X in groups[k]) if s])
+        out = []
+        for k in range(n):
+            total = ZERO
+            for Sk, X in groups[k]:
+                X = frozenset(i for i in X if i in per_body)
+                if X:
+                    total += dot(Sk, sums(X))
+            out.append(g.name(total))
+        return tuple(out)
+
+    h = project(bias)
+    tau_parts = tuple((label, project(forces)) for label, forces in ext_parts)
+    tau = tuple(g.name(sympy.Add(*[part[k] for _, part in tau_parts])) for k in range(n)) \
+        if tau_parts else (ZERO,) * n
+
+    kinetic, potential = g.name(kinetic), g.name(potential)
+    return Equations(
+        name=spec.name, graph=g.freeze(), t=TIME, q=kin.q, qd=kin.qd,
+        u=tuple(symbol(x) for x in spec.inputs),
+        p=tuple(symbol(x) for x in spec.parameter_names),
+        bodies=tuple(b.name for b in spec.bodies),
+        A=tuple(tuple(row) for row in A), h=h, tau=tau, tau_parts=tau_parts,
+        kinetic=kinetic, potential=potential, poses=tuple(poses))

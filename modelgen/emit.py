@@ -1,0 +1,233 @@
+"""Emit stage: routines -> C header and source, through jinja2 templates.
+
+The templates get a plain dict of strings, ints and lists (see
+:func:`template_context`); every expression is printed here, by
+:class:`modelgen.printer.ModelPrinter`.
+
+Large routines are cut into ``noinline`` parts of about ``CHUNK`` statements
+that share a work array ``w`` on the caller's stack.  gcc's time grows faster
+than linearly with function size (register allocation), so this keeps builds
+of big models fast at no cost at run time.  Values used only inside one part
+stay ``const double`` locals.
+"""
+from __future__ import annotations
+
+import functools
+import hashlib
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import jinja2
+
+from . import __version__
+from .cse import Routine
+from .errors import TemplateError
+from .printer import ModelPrinter
+
+#: Version of the generated C ABI, checked by the Python loader.
+ABI_VERSION = 1
+#: Statements per noinline part of a large routine.
+CHUNK = 150
+#: Routines up to this many statements stay in one function.
+SINGLE_LIMIT = 400
+
+
+def templates_dir() -> Path:
+    """Where the jinja2 templates live (inside the wheel, or the source tree)."""
+    here = Path(__file__).resolve().parent
+    for candidate in (here / "templates", here.parent / "templates"):
+        if (candidate / "model.c.j2").is_file():
+            return candidate
+    raise TemplateError(f"modelgen templates not found next to {here}")
+
+
+@functools.lru_cache(maxsize=None)
+def environment() -> jinja2.Environment:
+    """The one cached jinja2 environment."""
+    return jinja2.Environment(
+        loader=jinja2.FileSystemLoader(str(templates_dir())),
+        trim_blocks=True, lstrip_blocks=True, keep_trailing_newline=True,
+        undefined=jinja2.StrictUndefined, autoescape=False)
+
+
+def templates_digest() -> str:
+    """Hash of every template file, part of the build cache key."""
+    h = hashlib.sha256()
+    for path in sorted(templates_dir().glob("*.j2")):
+        h.update(path.name.encode())
+        h.update(path.read_bytes())
+    return h.hexdigest()
+
+
+def render(template: str, context: dict) -> str:
+    """Render one template; errors become :class:`TemplateError`."""
+    try:
+        return environment().get_template(template).render(**context)
+    except jinja2.TemplateError as exc:
+        raise TemplateError(f"template {template} failed: {exc}") from exc
+
+
+# -- input arrays ----------------------------------------------------------------
+
+#: C parameter declaration of every input array name
+_PARAM = {"t": "double t", "q": "const double *q", "qd": "const double *qd",
+          "x": "const double *x", "u": "const double *u", "p": "const double *p"}
+
+
+def _input_slots(routine: Routine) -> dict:
+    slots = {}
+    for array, symbols in routine.inputs:
+        if array == "t":
+            slots[symbols[0]] = "t"
+            continue
+        for i, s in enumerate(symbols):
+            slots[s] = f"{array}[{i}]"
+    return slots
+
+
+@dataclass(frozen=True)
+class CFunction:
+    """A routine printed to C: parts (noinline helpers) and the main body."""
+    name: str
+    params: str             # input parameters, comma separated
+    args: str               # the same, as call arguments
+    inputs: tuple           # input array names, for (void) casts
+    work_size: int
+    parts: tuple            # (lines, ...) one per noinline part
+    body: tuple             # lines of the main function (after the parts)
+    ops_before: int
+    ops_after: int
+    statements: int
+
+
+def print_routine(routine: Routine, outputs_c: dict) -> CFunction:
+    """Print a routine; ``outputs_c`` maps output array name -> C array name."""
+    statements = list(routine.statements)
+    inputs = tuple(a for a, _ in routine.inputs)
+    params = ", ".join(_PARAM[a] for a in inputs)
+    args = ", ".join(inputs)
+    n_parts = 1 if len(statements) <= SINGLE_LIMIT else -(-len(statements) // CHUNK)
+    size = CHUNK if n_parts > 1 else max(len(statements), 1)
+    part_of = {sym: i // size for i, (sym, _) in enumerate(statements)}
+
+    # symbols used outside the part that defines them live in the work array
+    shared = set()
+    for i, (_, expr) in enumerate(statements):
+        here = i // size
+        for s in expr.free_symbols:
+            if s in part_of and part_of[s] != here:
+                shared.add(s)
+    if n_parts > 1:
+        for _, items in routine.outputs:
+            for e in items:
+                shared.update(s for s in e.free_symbols if s in part_of)
+
+    slots = _input_slots(routine)
+    work = 0
+    for i, (sym, _) in enumerate(statements):
+        if sym in shared:
+            slots[sym] = f"w[{work}]"
+            work += 1
+        else:
+            slots[sym] = f"v{i}"
+    printer = ModelPrinter(slots)
+
+    parts = [[] for _ in range(n_parts)]
+    for i, (sym, expr) in enumerate(statements):
+        code = printer.doprint(expr)
+        if sym in shared:
+            parts[i // size].append(f"{slots[sym]} = {code};")
+        else:
+            parts[i // size].append(f"const double {slots[sym]} = {code};")
+    out_lines = []
+    for array, items in routine.outputs:
+        target = outputs_c[array]
+        for j, e in enumerate(items):
+            out_lines.append(f"{target}[{j}] = {printer.doprint(e)};")
+    if n_parts == 1:
+        return CFunction(routine.name, params, args, inputs, work, (),
+                         tuple(parts[0] + out_lines), routine.ops_before,
+                         routine.ops_after, len(statements))
+    return CFunction(routine.name, params, args, inputs, work,
+                     tuple(tuple(p) for p in parts), tuple(out_lines),
+                     routine.ops_before, routine.ops_after, len(statements))
+
+
+def _comment_safe(text: str) -> str:
+    """Text that cannot close or nest a C comment, nor smuggle a line break."""
+    return "".join(ch if ch.isprintable() else " " for ch in text).replace("*/", "* /").replace("/*", "/ *")
+
+
+def template_context(*, name: str, description: str, model_hash: str, n: int,
+                     coordinates, parameters, inputs, bodies,
+                     functions: dict) -> dict:
+    """The plain dict every C template receives."""
+    return {
+        "name": name,
+        "NAME": name.upper(),
+        "version": __version__,
+        "abi_version": ABI_VERSION,
+        "model_hash": model_hash,
+        "description": _comment_safe(description),
+        "n": n,
+        "nx": 2 * n,
+        "np": len(parameters),
+        "nu": len(inputs),
+        "nbodies": len(bodies),
+        "coordinates": list(coordinates),
+        "parameters": [{"name": p, "default": repr(float(v))} for p, v in parameters],
+        "inputs": list(inputs),
+        "bodies": list(bodies),
+        "functions": {k: asdict(f) for k, f in functions.items()},
+        "api": public_api(name, n, len(parameters), len(inputs), len(bodies)),
+    }
+
+
+def public_api(name: str, n: int, n_p: int, n_u: int, n_b: int) -> list:
+    """Prototypes and documentation of every exported function.
+
+    The header and the cffi ``cdef`` are both rendered from this one list.
+    """
+    P = f"p: {n_p} parameters (see {name}_default_parameters)"
+    return [
+        {"ret": "int", "name": f"{name}_abi_version", "params": "void",
+         "doc": [f"Returns the ABI version ({ABI_VERSION}) this file was generated for."]},
+        {"ret": "void", "name": f"{name}_default_parameters", "params": "double *p",
+         "doc": [f"Writes the {n_p} default parameter values into p, in declaration order."]},
+        {"ret": "void", "name": f"{name}_mass_matrix",
+         "params": "const double *q, const double *p, double *A",
+         "doc": [f"Mass matrix A(q, p): q[{n}] coordinates; {P};",
+                 f"A[{n}*{n}] row-major, symmetric (SI units: kg, kg m, kg m^2)."]},
+        {"ret": "void", "name": f"{name}_velocity_terms",
+         "params": "const double *q, const double *qd, const double *p, double *h",
+         "doc": [f"Velocity-product term h(q, qd, p) (Coriolis, centrifugal, gyroscopic),",
+                 f"so that A qdd = tau - h: q[{n}], qd[{n}]; {P}; h[{n}]."]},
+        {"ret": "void", "name": f"{name}_generalized_forces",
+         "params": "double t, const double *q, const double *qd, const double *u, const double *p, double *tau",
+         "doc": [f"Generalized forces tau of gravity and actions: t [s]; q[{n}]; qd[{n}];",
+                 f"u[{n_u}] inputs; {P}; tau[{n}] (N or N m per coordinate)."]},
+        {"ret": "int", "name": f"{name}_rhs",
+         "params": "double t, const double *x, const double *u, const double *p, double *xdot",
+         "doc": [f"State derivative for x = [q, qd] (x[{2 * n}]): xdot = [qd, qdd] with",
+                 "A qdd = tau - h solved by Cholesky in place. u, p as above.",
+                 "Returns 0, or k > 0 when pivot k (1-based) of A is not positive",
+                 "(A not positive definite); xdot[n..2n) is then NaN."]},
+        {"ret": "void", "name": f"{name}_energy",
+         "params": "const double *q, const double *qd, const double *p, double *out",
+         "doc": ["out[0] kinetic energy, out[1] potential energy of gravity (zero at O) [J]."]},
+        {"ret": "void", "name": f"{name}_body_poses",
+         "params": "const double *q, const double *p, double *T",
+         "doc": [f"Pose of every body: T[{n_b}*16], one row-major 4x4 matrix per body",
+                 "[[R, r_G], [0, 0, 0, 1]]: R's columns are the body base's unit vectors",
+                 "in E, r_G the centre of mass from O in E [m]."]},
+    ]
+
+
+def emit_sources(context: dict) -> dict:
+    """Render ``<name>.h``, ``<name>.c`` and the cffi cdef text."""
+    name = context["name"]
+    return {
+        f"{name}.h": render("model.h.j2", dict(context, template="model.h.j2")),
+        f"{name}.c": render("model.c.j2", dict(context, template="model.c.j2")),
+        "cdef": render("cdef.h.j2", dict(context, template="cdef.h.j2")),
+    }

@@ -1,0 +1,195 @@
+"""Kinematics stage: frames, points, velocities and partial velocities.
+
+Every quantity is built recursively from its parent and named (see
+:mod:`modelgen.graph`), so the cost is linear in the size of the tree instead
+of exponential.  All vectors are in components of the canonical base E.
+
+For base B obtained from parent P by angle theta about P's axis e:
+
+* ``R_B = R_P @ Rot(axis, theta)``  (columns of R_B: B's unit vectors in E)
+* ``omega_B = omega_P + theta_dot * e``
+* ``alpha_B = alpha_P + theta_ddot * e + theta_dot * (omega_P x e)``
+* partial angular velocity ``c_k^B = c_k^P + d(theta)/d(q_k) * e``
+
+For point P at coordinates c (in base B) from point Q, with d = R_B c:
+
+* ``r_P = r_Q + d``
+* ``v_P = v_Q + omega_B x d + R_B c_dot``
+* ``a_P = a_Q + alpha_B x d + omega_B x (omega_B x d) + 2 omega_B x R_B c_dot + R_B c_ddot``
+
+Accelerations are kept as *bias* accelerations: the part that remains when
+every q_ddot is zero.  The full acceleration is ``sum_k b_k q_ddot_k + bias``.
+
+Partial velocities of points are stored in a screw-like form: for coordinate
+k, ``b_k^P = beta_k^P + w_k^P x r_P``.  Along a chain of points fixed in the
+same moving base, ``w`` and ``beta`` are *the same named symbols* from body to
+body, which lets the dynamics stage recognise bodies that move together and
+sum their inertias once (composite rigid body grouping).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import sympy
+
+from .graph import (ZERO, ZERO3, Graph, GraphBuilder, add, cross, is_zero_vec,
+                    matvec, scale, sub)
+from .spec import CANONICAL_BASE, CANONICAL_POINT, TIME, ModelSpec, symbol
+
+IDENTITY = ((sympy.S.One, ZERO, ZERO), (ZERO, sympy.S.One, ZERO), (ZERO, ZERO, sympy.S.One))
+
+
+@dataclass(frozen=True)
+class BaseKinematics:
+    R: tuple            # 3x3 rows; columns are the base's unit vectors in E
+    omega: tuple        # angular velocity wrt E, in E
+    alpha_bias: tuple   # angular acceleration with all q_ddot = 0, in E
+    partials: dict      # k -> c_k (partial angular velocity, in E)
+
+
+@dataclass(frozen=True)
+class PointKinematics:
+    r: tuple            # position from O, in E
+    v: tuple            # velocity wrt E, in E
+    a_bias: tuple       # acceleration with all q_ddot = 0, in E
+    partials: dict      # k -> (w_k, beta_k) with b_k = beta_k + w_k x r
+
+
+@dataclass(frozen=True)
+class Kinematics:
+    """Output of :func:`derive_kinematics`."""
+    spec: ModelSpec
+    graph: Graph
+    q: tuple            # coordinate symbols
+    qd: tuple           # speed symbols
+    bases: dict         # name -> BaseKinematics
+    points: dict        # name -> PointKinematics
+
+    def point_partial(self, point: str, k: int) -> tuple:
+        """Partial velocity b_k of a point (components in E)."""
+        pk = self.points[point]
+        if k not in pk.partials:
+            return ZERO3
+        w, beta = pk.partials[k]
+        return add(beta, cross(w, pk.r))
+
+
+def _rotation_columns(axis: int, c, s):
+    """Child unit vectors in parent components for a right-handed rotation."""
+    if axis == 1:
+        return ((1, 0, 0), (0, c, s), (0, -s, c))
+    if axis == 2:
+        return ((c, 0, -s), (0, 1, 0), (s, 0, c))
+    return ((c, s, 0), (-s, c, 0), (0, 0, 1))
+
+
+def _rows_from_columns(cols):
+    return tuple(tuple(cols[j][i] for j in range(3)) for i in range(3))
+
+
+def _column(R, j):
+    return (R[0][j], R[1][j], R[2][j])
+
+
+class _Deriver:
+    """Time derivatives of user expressions f(q, t) along the motion."""
+
+    def __init__(self, q, qd):
+        self.q = q
+        self.qd = qd
+
+    def gradient(self, expr):
+        """{k: df/dq_k} for the coordinates f depends on."""
+        free = expr.free_symbols
+        return {k: sympy.diff(expr, qk) for k, qk in enumerate(self.q) if qk in free}
+
+    def rate(self, expr, grad=None):
+        """df/dt = sum_k df/dq_k * qd_k + df/dt (explicit)."""
+        grad = self.gradient(expr) if grad is None else grad
+        total = sympy.Add(*[g * self.qd[k] for k, g in grad.items()])
+        if expr.has(TIME):
+            total += sympy.diff(expr, TIME)
+        return total
+
+    def bias_rate(self, expr_dot):
+        """d/dt of an expression in (q, qd, t) with every qdd set to zero."""
+        total = sympy.Add(*[sympy.diff(expr_dot, qk) * self.qd[k]
+                            for k, qk in enumerate(self.q) if qk in expr_dot.free_symbols])
+        if expr_dot.has(TIME):
+            total += sympy.diff(expr_dot, TIME)
+        return total
+
+
+def derive_kinematics(spec: ModelSpec, graph: Graph | None = None) -> Kinematics:
+    """Build the kinematics of every base and point of ``spec``.
+
+    >>> from modelgen.spec import ModelSpec, BaseSpec, symbol
+    >>> spec = ModelSpec("m", coordinates=("q1",),
+    ...                  bases=(BaseSpec("B1", "E", 3, symbol("q1")),))
+    >>> kin = derive_kinematics(spec)
+    >>> kin.bases["B1"].omega
+    (0, 0, q1_dot)
+    """
+    g = GraphBuilder(graph)
+    q = tuple(symbol(c) for c in spec.coordinates)
+    qd = tuple(symbol(s) for s in spec.speeds)
+    d = _Deriver(q, qd)
+
+    bases = {CANONICAL_BASE: BaseKinematics(IDENTITY, ZERO3, ZERO3, {})}
+    for b in spec.bases:
+        parent = bases[b.parent]
+        theta = b.angle
+        c, s = g.name(sympy.cos(theta)), g.name(sympy.sin(theta))
+        local = _rotation_columns(b.axis, c, s)
+        cols = [g.vec(matvec(parent.R, col)) for col in local]
+        R = _rows_from_columns(cols)
+        e = _column(parent.R, b.axis - 1)
+        grad = d.gradient(theta)
+        theta_dot = g.name(d.rate(theta, grad))
+        omega = g.vec(add(parent.omega, scale(theta_dot, e)))
+        theta_ddot = g.name(d.bias_rate(d.rate(theta, grad)))
+        alpha = g.vec(add(add(parent.alpha_bias, scale(theta_ddot, e)),
+                          scale(theta_dot, g.vec(cross(parent.omega, e)))))
+        partials = dict(parent.partials)
+        for k, dk in grad.items():
+            dk = g.name(dk)
+            partials[k] = g.vec(add(partials.get(k, ZERO3), scale(dk, e)))
+        bases[b.name] = BaseKinematics(R, omega, alpha, partials)
+
+    points = {CANONICAL_POINT: PointKinematics(ZERO3, ZERO3, ZERO3, {})}
+    for p in spec.points:
+        Q = points[p.parent]
+        B = bases[p.base]
+        dvec = g.vec(matvec(B.R, p.coordinates))
+        r = g.vec(add(Q.r, dvec))
+        w_x_d = g.vec(cross(B.omega, dvec))
+        v = add(Q.v, w_x_d)
+        a = add(add(Q.a_bias, cross(B.alpha_bias, dvec)), cross(B.omega, w_x_d))
+        grads = [d.gradient(ci) for ci in p.coordinates]
+        moving = any(grads) or any(ci.has(TIME) for ci in p.coordinates)
+        if moving:   # coordinates that change in time (prismatic-like)
+            cdot = tuple(d.rate(ci, gi) for ci, gi in zip(p.coordinates, grads))
+            rel_v = g.vec(matvec(B.R, g.vec(cdot)))
+            cddot = g.vec(d.bias_rate(x) for x in cdot)
+            v = add(v, rel_v)
+            a = add(add(a, scale(2, cross(B.omega, rel_v))), matvec(B.R, cddot))
+        v = g.vec(v)
+        a = g.vec(a)
+
+        partials = {}
+        for k in sorted(set(Q.partials) | set(B.partials) | {k for gi in grads for k in gi}):
+            wQ, betaQ = Q.partials.get(k, (ZERO3, ZERO3))
+            cB = B.partials.get(k, ZERO3)
+            beta = betaQ
+            if wQ != cB:
+                beta = add(beta, cross(sub(wQ, cB), Q.r))
+            dc = tuple(gi.get(k, ZERO) for gi in grads)
+            if not is_zero_vec(dc):
+                beta = add(beta, matvec(B.R, dc))
+            beta = g.vec(beta)
+            if is_zero_vec(beta) and is_zero_vec(cB):
+                continue
+            partials[k] = (cB, beta)
+        points[p.name] = PointKinematics(r, v, a, partials)
+
+    return Kinematics(spec, g.freeze(), q, qd, bases, points)

@@ -1,0 +1,120 @@
+"""The whole pipeline: spec -> kinematics -> dynamics -> CSE -> C -> module.
+
+:func:`generate` runs every stage (or reuses the cache) and reports the time
+of each stage and the operation counts.  It knows nothing of YAML or the CLI.
+"""
+from __future__ import annotations
+
+import hashlib
+import os
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+from . import __version__
+from .build import BuildResult, build_module, cached_build, compiler
+from .cse import make_routines
+from .dynamics import Equations, derive_equations
+from .emit import ABI_VERSION, emit_sources, print_routine, template_context, templates_digest
+from .kinematics import derive_kinematics
+from .spec import ModelSpec
+
+DEFAULT_OUTPUT = Path("generated")
+
+
+@dataclass(frozen=True)
+class Generated:
+    """What :func:`generate` did: the build and the figures of each stage."""
+    build: BuildResult
+    manifest: dict
+
+    @property
+    def seconds(self) -> dict:
+        return self.manifest["seconds"]
+
+    @property
+    def ops(self) -> dict:
+        return self.manifest["ops"]
+
+
+def build_hash(spec: ModelSpec) -> str:
+    """Cache key: the model, the generator version, templates, compiler and flags."""
+    h = hashlib.sha256()
+    for part in (repr(spec), __version__, str(ABI_VERSION), templates_digest(),
+                 " ".join(compiler()), os.environ.get("MODELGEN_CFLAGS", "")):
+        h.update(part.encode())
+        h.update(b"\0")
+    return h.hexdigest()
+
+
+def routines_for(eqs: Equations):
+    """The C routines of a model: (name, inputs, outputs) for make_routines."""
+    n = len(eqs.q)
+    t = (("t", (eqs.t,)),)
+    q, qd, u, p = ("q", eqs.q), ("qd", eqs.qd), ("u", eqs.u), ("p", eqs.p)
+    x = ("x", eqs.q + eqs.qd)
+    A_flat = tuple(eqs.A[i][j] for i in range(n) for j in range(n))
+    b = tuple(eqs.tau[k] - eqs.h[k] for k in range(n))
+    return [
+        ("mass_matrix", (q, p), (("A", A_flat),)),
+        ("velocity_terms", (q, qd, p), (("h", eqs.h),)),
+        ("generalized_forces", t + (q, qd, u, p), (("tau", eqs.tau),)),
+        ("rhs", t + (x, u, p), (("A", A_flat), ("b", b))),
+        ("energy", (q, qd, p), (("out", (eqs.kinetic, eqs.potential)),)),
+        ("body_poses", (q, p), (("T", tuple(e for pose in eqs.poses for e in pose)),)),
+    ]
+
+
+def generate(spec: ModelSpec, out_dir=None, *, force: bool = False) -> Generated:
+    """Generate, compile and cache the model; reuse an unchanged build.
+
+    ``out_dir`` defaults to ``generated/<name>``.
+
+    >>> g = generate(load_model("models/double_pendulum.yaml"))   # doctest: +SKIP
+    >>> g.manifest["n"]                                             # doctest: +SKIP
+    2
+    """
+    directory = Path(out_dir) if out_dir is not None else DEFAULT_OUTPUT / spec.name
+    key = build_hash(spec)
+    if not force:
+        hit = cached_build(directory, key)
+        if hit is not None:
+            return Generated(hit, hit.manifest)
+
+    seconds = {}
+    t0 = time.perf_counter()
+    eqs = derive_equations(derive_kinematics(spec))
+    t1 = time.perf_counter()
+    seconds["derive"] = t1 - t0
+    routines = make_routines(eqs.graph, routines_for(eqs))
+    t2 = time.perf_counter()
+    seconds["cse"] = t2 - t1
+    outputs_c = {"A": "A", "h": "h", "tau": "tau", "b": "b", "out": "out", "T": "T"}
+    functions = {r.name: print_routine(r, outputs_c) for r in routines}
+    context = template_context(
+        name=spec.name, description=spec.description, model_hash=key[:16], n=spec.n,
+        coordinates=spec.coordinates, parameters=spec.parameters, inputs=spec.inputs,
+        bodies=eqs.bodies, functions=functions)
+    sources = emit_sources(context)
+    t3 = time.perf_counter()
+    seconds["emit"] = t3 - t2
+    statements = max(f.statements for f in functions.values())
+    manifest = {
+        "name": spec.name,
+        "description": spec.description,
+        "version": __version__,
+        "abi_version": ABI_VERSION,
+        "build_hash": key,
+        "n": spec.n,
+        "coordinates": list(spec.coordinates),
+        "parameters": [[name, float(value)] for name, value in spec.parameters],
+        "inputs": list(spec.inputs),
+        "bodies": list(eqs.bodies),
+        "ops": {f.name: {"before_cse": f.ops_before, "after_cse": f.ops_after,
+                         "statements": f.statements} for f in functions.values()},
+    }
+    build = build_module(directory, spec.name, sources, dict(manifest, seconds=seconds),
+                         statements)
+    seconds["compile"] = build.seconds
+    manifest = dict(build.manifest, seconds=seconds)
+    return Generated(build, manifest)
