@@ -34,6 +34,7 @@ import sympy
 
 from .graph import (ZERO, ZERO3, Graph, GraphBuilder, add, cross, is_zero_vec,
                     matvec, scale, sub)
+from .errors import ModelError
 from .spec import CANONICAL_BASE, CANONICAL_POINT, TIME, ModelSpec, symbol
 
 IDENTITY = ((sympy.S.One, ZERO, ZERO), (ZERO, sympy.S.One, ZERO), (ZERO, ZERO, sympy.S.One))
@@ -120,6 +121,24 @@ class _Deriver:
         return total
 
 
+def _reject_explicit_time(spec: ModelSpec) -> None:
+    """Prescribed motion (t in an angle or a point) is not supported yet.
+
+    A(q), h(q, qd), the energy and the poses are generated without a time
+    argument, so kinematics must be scleronomic.  Drive such a motion with a
+    coordinate and an action instead.
+    """
+    items = [(f"bases.{b.name}.angle", (b.angle,)) for b in spec.bases]
+    items += [(f"points.{p.name}.coordinates", p.coordinates) for p in spec.points]
+    for key, exprs in items:
+        if any(getattr(e, "has", lambda *_: False)(TIME) for e in exprs):
+            raise ModelError(
+                "time 't' in a base angle or point position (prescribed motion) is not "
+                "supported: A(q), h(q, qd), energy and poses take no time argument",
+                file=spec.source, line=spec.line_of(key), key=key,
+                fix="make the motion a generalized coordinate and drive it with an action")
+
+
 def derive_kinematics(spec: ModelSpec, graph: Graph | None = None) -> Kinematics:
     """Build the kinematics of every base and point of ``spec``.
 
@@ -130,6 +149,7 @@ def derive_kinematics(spec: ModelSpec, graph: Graph | None = None) -> Kinematics
     >>> kin.bases["B1"].omega
     (0, 0, q1_dot)
     """
+    _reject_explicit_time(spec)
     g = GraphBuilder(graph)
     q = tuple(symbol(c) for c in spec.coordinates)
     qd = tuple(symbol(s) for s in spec.speeds)
