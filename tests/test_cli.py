@@ -1,0 +1,64 @@
+"""The command line, called in-process through ``main(argv)``."""
+from __future__ import annotations
+
+import csv
+
+import numpy as np
+import pytest
+
+from modelgen.cli import main
+
+from conftest import MODELS
+
+
+def test_generate_prints_sizes_operation_counts_and_stage_times(tmp_path, capsys):
+    assert main(["generate", str(MODELS / "double_pendulum.yaml"), "-o", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "n          2 coordinates, 5 parameters, 1 inputs, 2 bodies" in out
+    assert "ops before CSE" in out and "rhs" in out
+    for stage in ("derive", "cse", "emit", "compile", "total"):
+        assert f"\n{stage}" in out
+    assert (tmp_path / "double_pendulum.c").is_file()
+    assert (tmp_path / "double_pendulum.h").is_file()
+    # a second run reuses the build
+    assert main(["generate", str(MODELS / "double_pendulum.yaml"), "-o", str(tmp_path)]) == 0
+    assert "reused the cached build" in capsys.readouterr().out
+
+
+def test_simulate_writes_csv_and_png_with_small_energy_error(tmp_path, capsys):
+    out_dir = tmp_path / "out"
+    argv = ["simulate", str(MODELS / "double_pendulum.yaml"), "--build-dir", str(tmp_path / "b"),
+            "-o", str(out_dir), "--init", "q1=1.0", "--t-end", "2", "--dt", "1e-3"]
+    assert main(argv) == 0
+    with open(out_dir / "double_pendulum.csv") as fh:
+        rows = list(csv.reader(fh))
+    assert rows[0][:5] == ["t", "q1", "q2", "q1_dot", "q2_dot"]
+    data = np.array(rows[1:], dtype=float)
+    assert data.shape[0] == 2001 and data[0, 1] == 1.0 and data[-1, 0] == 2.0
+    total = data[:, -1]
+    assert abs(total[-1] - total[0]) < 1e-8 * np.abs(data[:, -3:-1]).max()
+    assert (out_dir / "double_pendulum.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_bad_model_exits_2_with_file_line_and_fix(tmp_path, capsys):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text((MODELS / "double_pendulum.yaml").read_text().replace(
+        "B2: {parent: B1, axis: 3", "B2: {parent: B1, axis: 7"))
+    assert main(["generate", str(bad), "-o", str(tmp_path / "g")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("modelgen: error: ") and f"{bad}:" in err and "axis" in err
+
+
+def test_unknown_initial_state_name_is_an_error(tmp_path, capsys):
+    argv = ["simulate", str(MODELS / "simple_pendulum.yaml"), "--build-dir", str(tmp_path),
+            "-o", str(tmp_path), "--init", "q9=1", "--no-plot"]
+    assert main(argv) == 2
+    assert "--init q9: unknown state" in capsys.readouterr().err
+
+
+def test_help_lists_subcommands(capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["--help"])
+    assert exc.value.code == 0
+    out = capsys.readouterr().out
+    assert "generate" in out and "simulate" in out

@@ -1,0 +1,86 @@
+"""Physical properties every model must have, checked on the compiled C.
+
+These need no reference implementation: A is symmetric positive definite,
+T = 1/2 qd^T A qd, and a conservative system conserves energy along RK4 with
+an error that shrinks like h^4.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from modelgen.chains import spatial_chain
+from modelgen.simulate import rk4
+
+from conftest import MODELS
+
+MODEL_NAMES = sorted(p.stem for p in MODELS.glob("*.yaml"))
+
+
+def _random_state(cm, rng):
+    return rng.uniform(-np.pi, np.pi, cm.n), rng.normal(size=cm.n)
+
+
+@pytest.mark.parametrize("name", MODEL_NAMES)
+def test_mass_matrix_is_symmetric_positive_definite(compiled, name):
+    cm = compiled(name)
+    rng = np.random.default_rng(1)
+    for _ in range(20):
+        q, _ = _random_state(cm, rng)
+        A = cm.mass_matrix(q)
+        assert np.allclose(A, A.T, rtol=0, atol=1e-14 * np.abs(A).max())
+        assert np.linalg.eigvalsh(A).min() > 0
+
+
+@pytest.mark.parametrize("name", MODEL_NAMES)
+def test_kinetic_energy_equals_half_qd_A_qd(compiled, name):
+    cm = compiled(name)
+    rng = np.random.default_rng(2)
+    for _ in range(20):
+        q, qd = _random_state(cm, rng)
+        T = cm.energy(q, qd)[0]
+        assert T == pytest.approx(0.5 * qd @ cm.mass_matrix(q) @ qd, rel=1e-13)
+
+
+@pytest.mark.parametrize("name", MODEL_NAMES)
+def test_rhs_solves_the_equations_of_motion(compiled, name):
+    cm = compiled(name)
+    rng = np.random.default_rng(3)
+    u = rng.normal(size=len(cm.inputs))
+    for _ in range(10):
+        q, qd = _random_state(cm, rng)
+        xdot = cm.rhs(0.3, np.concatenate([q, qd]), u=u)
+        A = cm.mass_matrix(q)
+        residual = A @ xdot[cm.n:] - (cm.generalized_forces(0.3, q, qd, u=u)
+                                      - cm.velocity_terms(q, qd))
+        assert np.array_equal(xdot[:cm.n], qd)
+        assert np.linalg.norm(residual) <= 1e-12 * max(1.0, np.linalg.norm(A @ xdot[cm.n:]))
+
+
+def _energy_drift(cm, x0, dt, p):
+    res = rk4(cm, x0, (0.0, 1.0), dt, p=p)
+    assert res.success, res.message
+    total = res.energy.sum(axis=1)
+    return abs(total[-1] - total[0])
+
+
+@pytest.mark.parametrize("name, dt", [("double_pendulum", 0.02), ("spherical_pendulum", 0.02),
+                                      ("heavy_top", 0.02), ("torque_free_body", 0.02),
+                                      ("arm7", 0.0025)])   # the wrist's small inertia is fast
+def test_energy_is_conserved_to_fourth_order_without_forces(compiled, name, dt):
+    """No gravity, no inputs: RK4's energy error must fall ~16x when h halves."""
+    cm = compiled(name)
+    p = {k: 0.0 for k in cm.parameters if k == "g"}
+    rng = np.random.default_rng(4)
+    x0 = np.concatenate([rng.uniform(-1, 1, cm.n), rng.uniform(-2, 2, cm.n)])
+    e1 = _energy_drift(cm, x0, dt, p)
+    e2 = _energy_drift(cm, x0, dt / 2, p)
+    assert e2 < 1e-5 * cm.energy(x0[:cm.n], x0[cm.n:], p)[0]
+    assert 2**3.5 < e1 / e2 < 2**4.7, (e1, e2)
+
+
+def test_gravity_energy_is_conserved_for_chain(compiled):
+    cm = compiled(spatial_chain(4).spec())
+    x0 = np.concatenate([np.full(4, 0.4), np.zeros(4)])
+    drift = _energy_drift(cm, x0, 1e-3, None)
+    assert drift < 1e-8
