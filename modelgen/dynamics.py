@@ -248,9 +248,14 @@ def derive_equations(kin: Kinematics) -> Equations:
         return tuple(out)
 
     h = project(bias)
+    # tau projects the sum of all external forces once; the per-effect parts
+    # stay in the graph and cost nothing unless a routine outputs them.
+    total_ext: dict = {}
+    for _, forces in ext_parts:
+        for i, f in forces.items():
+            total_ext[i] = g.vec(add(total_ext[i], f)) if i in total_ext else f
+    tau = project(total_ext)
     tau_parts = tuple((label, project(forces)) for label, forces in ext_parts)
-    tau = tuple(g.name(sympy.Add(*[part[k] for _, part in tau_parts])) for k in range(n)) \
-        if tau_parts else (ZERO,) * n
 
     kinetic, potential = g.name(kinetic), g.name(potential)
     return Equations(
