@@ -138,7 +138,27 @@ def eliminate(graph: Graph, outputs) -> tuple:
     new_outputs = reduced[len(program):]
     for e in new_outputs:
         emit_deps(e)
-    return Graph(tuple(statements)), list(new_outputs)
+    return _propagate_copies(statements, list(new_outputs))
+
+
+def _propagate_copies(statements, outputs):
+    """Drop statements ``a = b`` (b a symbol or number) and use b in place of a."""
+    alias = {}
+    kept = []
+    for sym, expr in statements:
+        if alias and not expr.is_Atom:
+            expr = expr.xreplace({s: alias[s] for s in expr.free_symbols if s in alias})
+        elif expr in alias:
+            expr = alias[expr]
+        if expr.is_Symbol or expr.is_Number:
+            alias[sym] = expr
+        else:
+            kept.append((sym, expr))
+    if alias:
+        outputs = [alias.get(e, e) if e.is_Symbol else
+                   e.xreplace({s: alias[s] for s in e.free_symbols if s in alias})
+                   for e in outputs]
+    return Graph(tuple(kept)), outputs
 
 
 def make_routines(graph: Graph, routines, *, cse: bool = True) -> tuple:

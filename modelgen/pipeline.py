@@ -8,7 +8,7 @@ from __future__ import annotations
 import hashlib
 import os
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from . import __version__
@@ -37,11 +37,24 @@ class Generated:
         return self.manifest["ops"]
 
 
-def build_hash(spec: ModelSpec) -> str:
-    """Cache key: the model, the generator version, templates, compiler and flags."""
+def model_hash(spec: ModelSpec) -> str:
+    """Hash of what determines the generated C: the model, modelgen, the templates.
+
+    The file the model came from and its line numbers are not part of it, so
+    the same model gives the same C wherever it lies.
+    """
     h = hashlib.sha256()
-    for part in (repr(spec), __version__, str(ABI_VERSION), templates_digest(),
-                 " ".join(compiler()), os.environ.get("MODELGEN_CFLAGS", "")):
+    for part in (repr(replace(spec, source=None, lines=())), __version__, str(ABI_VERSION),
+                 templates_digest()):
+        h.update(part.encode())
+        h.update(b"\0")
+    return h.hexdigest()
+
+
+def build_hash(spec: ModelSpec) -> str:
+    """Cache key of the compiled module: the model hash, the compiler and its flags."""
+    h = hashlib.sha256()
+    for part in (model_hash(spec), " ".join(compiler()), os.environ.get("MODELGEN_CFLAGS", "")):
         h.update(part.encode())
         h.update(b"\0")
     return h.hexdigest()
@@ -92,7 +105,7 @@ def generate(spec: ModelSpec, out_dir=None, *, force: bool = False) -> Generated
     outputs_c = {"A": "A", "h": "h", "tau": "tau", "b": "b", "out": "out", "T": "T"}
     functions = {r.name: print_routine(r, outputs_c) for r in routines}
     context = template_context(
-        name=spec.name, description=spec.description, model_hash=key[:16], n=spec.n,
+        name=spec.name, description=spec.description, model_hash=model_hash(spec)[:16], n=spec.n,
         coordinates=spec.coordinates, parameters=spec.parameters, inputs=spec.inputs,
         bodies=eqs.bodies, functions=functions)
     sources = emit_sources(context)

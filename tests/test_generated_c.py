@@ -1,0 +1,499 @@
+"""The generated C as a product of its own: it builds outside Python, warning-free,
+as C99 and as C++, it is deterministic, and the build around it is robust.
+
+* ``examples/embedded_c`` (plain C, classic RK4) is built with its Makefile and
+  its final state is compared with scipy's DOP853 on the same model.
+* Every model in ``models/*.yaml``, ``spatial_chain(3)`` and ``spatial_chain(12)``
+  (large enough that routines are cut into ``noinline`` parts) compile with
+  ``cc -std=c99 -Wall -Wextra -Werror -pedantic`` and
+  ``c++ -x c++ -std=c++11 -Wall -Wextra -Werror``, whole and as the two
+  ``MG_PART`` halves, and a small generated ``main`` calls every exported
+  function of the header.
+* Golden files: ``tests/golden/double_pendulum.c`` and ``.h`` are the generated
+  source, byte for byte.  The preamble holds the modelgen version and the
+  model hash (which covers the generator version, the templates, the model,
+  and the compiler command), so a version bump or any template change changes
+  the golden files on purpose.  After checking the diff, regenerate them with::
+
+      MODELGEN_UPDATE_GOLDEN=1 pytest tests/test_generated_c.py -k golden
+
+Every model here is generated with ``$CC`` and ``$MODELGEN_CFLAGS`` unset (the
+default compiler ``cc``), because both enter the model hash printed in the
+preamble; the compile checks call ``cc`` and ``c++`` by name.
+"""
+from __future__ import annotations
+
+import concurrent.futures
+import difflib
+import json
+import os
+import re
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import scipy.integrate
+
+import modelgen
+from modelgen.chains import spatial_chain
+from modelgen.emit import SINGLE_LIMIT
+
+ROOT = Path(__file__).resolve().parent.parent
+MODELS = ROOT / "models"
+DOUBLE_PENDULUM = MODELS / "double_pendulum.yaml"
+EXAMPLE = ROOT / "examples" / "embedded_c"
+GOLDEN = Path(__file__).resolve().parent / "golden"
+UPDATE_GOLDEN = os.environ.get("MODELGEN_UPDATE_GOLDEN") == "1"
+#: A chain whose largest routine exceeds SINGLE_LIMIT statements, so it is cut
+#: into noinline parts sharing a work array.
+LARGE_CHAIN = 12
+#: Environment variables that change the generated text (through the model hash).
+HASH_ENV = ("CC", "MODELGEN_CFLAGS")
+#: Every function a model exports, without the "<name>_" prefix; written out
+#: here rather than taken from modelgen.emit.public_api, which renders the header.
+EXPORTED = ("abi_version", "default_parameters", "mass_matrix", "velocity_terms",
+            "generalized_forces", "rhs", "energy", "body_poses")
+C99 = ("cc", "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic")
+CXX11 = ("c++", "-x", "c++", "-std=c++11", "-Wall", "-Wextra", "-Werror")
+JOBS = max(2, os.cpu_count() or 2)
+
+
+def _clean_env(**extra) -> dict:
+    env = {k: v for k, v in os.environ.items() if k not in HASH_ENV}
+    env.update(extra)
+    return env
+
+
+@pytest.fixture(autouse=True)
+def _default_compiler(monkeypatch):
+    """Every test sees the same build hash as the shared builds below."""
+    for var in HASH_ENV:
+        monkeypatch.delenv(var, raising=False)
+
+
+class _Builds:
+    """Fresh builds of the models of this file, generated on first use."""
+
+    def __init__(self, root: Path):
+        self.root = root
+        self.sources = {path.stem: path for path in sorted(MODELS.glob("*.yaml"))}
+        self.sources["spatial_chain_3"] = spatial_chain(3).spec()
+        self.sources[f"spatial_chain_{LARGE_CHAIN}"] = spatial_chain(LARGE_CHAIN).spec()
+        self.dirs = {}
+
+    def __getitem__(self, name: str) -> Path:
+        if name not in self.dirs:
+            with pytest.MonkeyPatch.context() as mp:
+                for var in HASH_ENV:
+                    mp.delenv(var, raising=False)
+                g = modelgen.generate_model(self.sources[name], self.root / name)
+            assert g.manifest["name"] == name
+            self.dirs[name] = self.root / name
+        return self.dirs[name]
+
+    def all(self) -> dict:
+        return {name: self[name] for name in self.sources}
+
+
+@pytest.fixture(scope="module")
+def generated(tmp_path_factory) -> _Builds:
+    """Shared builds: ``generated[name]`` is the directory of that model's build."""
+    return _Builds(tmp_path_factory.mktemp("generated"))
+
+
+def _run(cmd, cwd=None, env=None, timeout=120) -> subprocess.CompletedProcess:
+    return subprocess.run([str(c) for c in cmd], cwd=cwd, env=env, timeout=timeout,
+                          stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+
+
+def _run_all(commands) -> list:
+    """Run (cmd, cwd) pairs in parallel; the failures as readable text."""
+    with concurrent.futures.ThreadPoolExecutor(JOBS) as pool:
+        results = list(pool.map(lambda c: (c[0], _run(*c)), commands))
+    return [f"$ {' '.join(map(str, cmd))}\n{r.stdout}" for cmd, r in results if r.returncode]
+
+
+# -- the embedded example ------------------------------------------------------
+
+def _run_example(binary: Path, *args) -> dict:
+    r = _run([binary, *args])
+    assert r.returncode == 0, r.stdout
+    fields = {}
+    for line in r.stdout.splitlines():
+        key, _, value = line.partition(":")
+        fields[key] = value
+    state = np.array(fields["final state"].split(), dtype=float)
+    energy = re.match(r"\s*initial (\S+) J, final (\S+) J", fields["energy"])
+    drift = float(fields["energy drift"].split()[0])
+    return {"x": state, "e0": float(energy[1]), "e1": float(energy[2]), "drift": drift}
+
+
+def test_embedded_example_builds_and_runs(generated, tmp_path):
+    """The plain-C RK4 example matches DOP853 to RK4's own error at h = 1e-3.
+
+    RK4's global error is C h^4: about 4e-10 for this state after 2 s at
+    h = 1e-3 (it shrinks 13-16x per halving of h, as a fourth-order method's
+    should).  DOP853 at rtol = atol = 1e-12 is accurate to about 1e-12, so
+    TOL = 1e-8 leaves a margin of ~25 over RK4's truncation error, and any
+    mistake in the model or the integrator exceeds it by orders of magnitude
+    (a stage weight of 1.9 instead of 2 gives an error of 1.7).
+    The convergence ratio between h = 2e-3 and 1e-3 (16 in theory, 8 for a
+    third-order method) checks the order itself.
+    """
+    TOL, T, X0 = 1e-8, 2.0, [-0.5, 0.5, 0.0, 0.0]
+    model_dir, build = generated["double_pendulum"], tmp_path / "build"
+    tree_before = sorted(p.name for p in EXAMPLE.iterdir())
+    r = _run(["make", "-C", EXAMPLE, f"MODEL_DIR={model_dir}", f"BUILD_DIR={build}"])
+    assert r.returncode == 0, r.stdout
+    assert sorted(p.name for p in EXAMPLE.iterdir()) == tree_before, "make wrote into the source tree"
+    binary = build / "double_pendulum_rk4"
+
+    cm = modelgen.load(DOUBLE_PENDULUM, model_dir)
+    ref = scipy.integrate.solve_ivp(cm.rhs, (0.0, T), X0, method="DOP853",
+                                    rtol=1e-12, atol=1e-12)
+    assert ref.success
+    x_ref = ref.y[:, -1]
+
+    fine = _run_example(binary, T, 1e-3, *X0)
+    coarse = _run_example(binary, T, 2e-3, *X0)
+    err_fine = np.linalg.norm(fine["x"] - x_ref)
+    err_coarse = np.linalg.norm(coarse["x"] - x_ref)
+    assert err_fine < TOL, (fine["x"], x_ref)
+    assert err_coarse / err_fine > 10, (err_coarse, err_fine)
+
+    # energy: the C program's numbers are those of the compiled model, and drift little
+    q, qd = fine["x"][:2], fine["x"][2:]
+    assert fine["e1"] == pytest.approx(cm.energy(q, qd).sum(), rel=1e-13, abs=1e-13)
+    assert fine["e0"] == pytest.approx(cm.energy(X0[:2], X0[2:]).sum(), rel=1e-13, abs=1e-13)
+    assert abs(fine["drift"]) < 1e-9 * abs(fine["e0"])
+    default = _run_example(binary)                      # 10 s at h = 1e-3
+    assert abs(default["drift"]) < 1e-8 * abs(default["e0"])
+
+    # a nonzero rhs status (NaN state: no Cholesky pivot is positive) stops the program
+    r = _run([binary, 1, 1e-3, "nan", 0, 0, 0])
+    assert r.returncode != 0
+    assert "mass matrix not positive definite" in r.stdout
+
+
+# -- compiling the C on its own -----------------------------------------------------
+
+PROTOTYPE = re.compile(r"^(int|void) (\w+)\(([^)]*)\);$", re.M)
+
+
+def _prototypes(model_dir: Path, name: str) -> list:
+    """(return type, function, parameters) of every prototype in the header."""
+    protos = PROTOTYPE.findall((model_dir / f"{name}.h").read_text())
+    assert sorted(f for _, f, _ in protos) == sorted(f"{name}_{s}" for s in EXPORTED), \
+        f"{name}.h does not declare exactly the expected functions"
+    return protos
+
+
+def _checker(model_dir: Path, name: str) -> str:
+    """A C function ``check_<name>()`` calling every function of the header once.
+
+    Arrays are sized from the header's constants; it returns the number of
+    failures (ABI mismatch, nonzero rhs status, non-finite derivative).
+    """
+    N = name.upper()
+    arg = {"double t": "0.25", "const double *q": "x", "const double *qd": f"x + {N}_NQ",
+           "const double *x": "x", "const double *u": "u", "const double *p": "p",
+           "double *p": "p"}
+    lines = [
+        f"static int check_{name}(void)",
+        "{",
+        f"    double p[{N}_NP + 1], x[{N}_NX], u[{N}_NU + 1];",
+        f"    double out[{N}_NQ * {N}_NQ + 16 * {N}_NBODIES + {N}_NX + 1];",
+        "    int i, failures = 0;",
+        f"    for (i = 0; i < {N}_NX; ++i) x[i] = 0.1 * (i + 1);",
+        f"    for (i = 0; i <= {N}_NU; ++i) u[i] = 0.0;",
+        f"    {name}_default_parameters(p);",
+    ]
+    for ret, fn, params in _prototypes(model_dir, name):
+        args = []
+        for param in (s.strip() for s in params.split(",")):
+            if param == "void":
+                continue
+            if param not in arg and not param.startswith("double *"):
+                raise AssertionError(f"{fn}: parameter {param!r} unknown to this test")
+            args.append(arg.get(param, "out"))
+        call = f"{fn}({', '.join(args)})"
+        if fn == f"{name}_abi_version":
+            lines.append(f"    if ({call} != {N}_ABI_VERSION) ++failures;")
+        elif fn == f"{name}_rhs":
+            lines += [f"    if ({call} != 0) ++failures;",
+                      f"    for (i = 0; i < {N}_NX; ++i) if (!(out[i] - out[i] == 0.0)) ++failures;"]
+        else:
+            lines.append(f"    {'(void)' if ret != 'void' else ''}{call};")
+        lines.append(f'    printf("called {fn}\\n");')
+    lines += ["    return failures;", "}", ""]
+    return "\n".join(lines)
+
+
+def _main_source(models: dict) -> str:
+    """A main (valid C99 and C++11) that checks every model of ``models``."""
+    head = ["#include <stdio.h>"] + [f'#include "{n}.h"' for n in models] + [""]
+    body = [_checker(d, n) for n, d in models.items()]
+    calls = " + ".join(f"check_{n}()" for n in models)
+    main = ["int main(void)", "{", f"    int failures = {calls};",
+            '    printf("failures: %d\\n", failures);', "    return failures != 0;", "}", ""]
+    return "\n".join(head + body + main)
+
+
+def _defined_globals(obj: Path) -> list:
+    r = _run(["nm", "-g", "--defined-only", obj])
+    assert r.returncode == 0, r.stdout
+    return sorted(line.split()[-1] for line in r.stdout.splitlines() if line.strip())
+
+
+def test_generated_c_compiles_warning_free_as_c99_and_cxx(generated, tmp_path):
+    """Strict C99 (-pedantic) and C++11, whole and per MG_PART half; nothing missing.
+
+    Unoptimised compiles, to keep this fast: the shared builds already passed
+    the build's own ``-O2 -Wall -Wextra -Werror``, which covers the warnings
+    that need optimisation.  Each model links three ways (C main + C object,
+    C++ main + the C halves, C main + the C++-compiled halves), each program
+    calls every function of the header, and ``nm`` shows that the object
+    defines exactly the prefixed functions and the halves split them.
+    """
+    large = f"spatial_chain_{LARGE_CHAIN}"
+    ops = json.loads((generated[large] / "manifest.json").read_text())["ops"]
+    assert max(o["statements"] for o in ops.values()) > SINGLE_LIMIT, \
+        f"{large} is no longer chunked; use a larger chain to cover the noinline parts"
+    assert f"{large}_rhs_part0(" in (generated[large] / f"{large}.c").read_text()
+
+    models = generated.all()
+    compiles, links, binaries = [], [], {}
+    for name, src in models.items():
+        out = tmp_path / name
+        out.mkdir()
+        (out / "main.c").write_text(_main_source({name: src}))
+        inc = f"-I{src}"
+        for tag, flags in (("all", []), ("1", ["-DMG_PART=1"]), ("2", ["-DMG_PART=2"])):
+            compiles.append(([*C99, *flags, "-c", src / f"{name}.c", "-o", f"c_{tag}.o"], out))
+            compiles.append(([*CXX11, *flags, "-c", src / f"{name}.c", "-o", f"cxx_{tag}.o"], out))
+        compiles.append(([*C99, inc, "-c", "main.c", "-o", "main_c.o"], out))
+        compiles.append(([*CXX11, "-pedantic", inc, "-c", "main.c", "-o", "main_cxx.o"], out))
+        # C main + whole C file; C++ main + the two C halves (extern "C");
+        # C main + the two C++-compiled halves
+        for exe, cmd in (("c_all", ["cc", "main_c.o", "c_all.o"]),
+                         ("cxx_main_c_parts", ["c++", "main_cxx.o", "c_1.o", "c_2.o"]),
+                         ("c_main_cxx_parts", ["c++", "main_c.o", "cxx_1.o", "cxx_2.o"])):
+            links.append(([*cmd, "-o", exe, "-lm"], out))
+            binaries[(name, exe)] = out / exe
+
+    failures = _run_all(compiles)
+    assert not failures, "generated C does not compile cleanly:\n" + "\n".join(failures)
+    failures = _run_all(links)
+    assert not failures, "generated C does not link:\n" + "\n".join(failures)
+    for (name, exe), binary in binaries.items():
+        r = _run([binary])
+        assert r.returncode == 0, f"{name} {exe}:\n{r.stdout}"
+        for suffix in EXPORTED:
+            assert f"called {name}_{suffix}\n" in r.stdout, f"{name} {exe}:\n{r.stdout}"
+
+    for name in models:
+        out = tmp_path / name
+        exported = sorted(f"{name}_{s}" for s in EXPORTED)
+        assert _defined_globals(out / "c_all.o") == exported, name
+        halves = _defined_globals(out / "c_1.o") + _defined_globals(out / "c_2.o")
+        assert sorted(halves) == exported, f"{name}: MG_PART halves overlap or miss symbols"
+
+
+def test_two_models_link_into_one_program_without_symbol_clashes(generated, tmp_path):
+    models = {n: generated[n] for n in ("double_pendulum", "simple_pendulum")}
+    (tmp_path / "main.c").write_text(_main_source(models))
+    incs = [f"-I{d}" for d in models.values()]
+    objs = [f"{n}.o" for n in models]
+    compiles = [([*C99, *incs, "-c", "main.c", "-o", "main.o"], tmp_path)]
+    compiles += [([*C99, "-O2", "-c", d / f"{n}.c", "-o", f"{n}.o"], tmp_path)
+                 for n, d in models.items()]
+    failures = _run_all(compiles)
+    assert not failures, "\n".join(failures)
+    r = _run(["cc", "main.o", *objs, "-o", "two_models", "-lm"], cwd=tmp_path)
+    assert r.returncode == 0, r.stdout
+    r = _run([tmp_path / "two_models"])
+    assert r.returncode == 0 and "failures: 0" in r.stdout, r.stdout
+    symbols = [s for o in objs for s in _defined_globals(tmp_path / o)]
+    assert len(symbols) == len(set(symbols)) == 2 * len(EXPORTED)
+
+
+# -- determinism and golden files ---------------------------------------------------
+
+_GENERATE = """
+import sys
+import modelgen
+from modelgen.chains import spatial_chain
+modelgen.generate_model(sys.argv[1], sys.argv[2] + "/double_pendulum", force=True)
+modelgen.generate_model(spatial_chain(3).spec(), sys.argv[2] + "/spatial_chain_3", force=True)
+"""
+
+
+def _sources(directory: Path, name: str) -> dict:
+    return {ext: (directory / f"{name}{ext}").read_bytes() for ext in (".c", ".h")}
+
+
+def test_generated_c_is_deterministic(generated, tmp_path):
+    # two subprocesses with other hash seeds run while this process generates twice
+    seeds = ("1", "2") if os.environ.get("PYTHONHASHSEED") not in ("1", "2") else ("3", "4")
+    procs = [subprocess.Popen([sys.executable, "-c", _GENERATE, str(DOUBLE_PENDULUM),
+                               str(tmp_path / f"seed{s}")], cwd=ROOT,
+                              env=_clean_env(PYTHONHASHSEED=s), stdout=subprocess.PIPE,
+                              stderr=subprocess.STDOUT, text=True) for s in seeds]
+    # the shared builds are a first derivation in this process, this is a second
+    out = tmp_path / "again"
+    modelgen.generate_model(DOUBLE_PENDULUM, out / "double_pendulum", force=True)
+    modelgen.generate_model(spatial_chain(3).spec(), out / "spatial_chain_3", force=True)
+    runs = {"second run in this process": out}
+    for s, proc in zip(seeds, procs):
+        output, _ = proc.communicate(timeout=120)
+        assert proc.returncode == 0, output
+        runs[f"PYTHONHASHSEED={s}"] = tmp_path / f"seed{s}"
+    for name in ("double_pendulum", "spatial_chain_3"):
+        expected = _sources(generated[name], name)
+        for label, out in runs.items():
+            got = _sources(out / name, name)
+            for ext in (".c", ".h"):
+                assert got[ext] == expected[ext], \
+                    f"{name}{ext} differs ({label}):\n{_diff(expected[ext], got[ext], label)}"
+
+
+def test_generated_c_does_not_depend_on_where_the_model_file_lies(generated, tmp_path):
+    copy = tmp_path / "elsewhere" / "double_pendulum.yaml"
+    copy.parent.mkdir()
+    copy.write_bytes(DOUBLE_PENDULUM.read_bytes())
+    modelgen.generate_model(copy, tmp_path / "out")
+    expected = _sources(generated["double_pendulum"], "double_pendulum")
+    got = _sources(tmp_path / "out", "double_pendulum")
+    assert got == expected, _diff(expected[".c"], got[".c"], "model file copied elsewhere")
+
+
+def _diff(old: bytes, new: bytes, label: str, lines: int = 60) -> str:
+    diff = difflib.unified_diff(old.decode().splitlines(keepends=True),
+                                new.decode().splitlines(keepends=True),
+                                fromfile="expected", tofile=label)
+    return "".join(list(diff)[:lines])
+
+
+def test_golden_double_pendulum(generated):
+    got = _sources(generated["double_pendulum"], "double_pendulum")
+    if UPDATE_GOLDEN:
+        GOLDEN.mkdir(exist_ok=True)
+        for ext, data in got.items():
+            (GOLDEN / f"double_pendulum{ext}").write_bytes(data)
+    problems = []
+    for ext, data in got.items():
+        golden = GOLDEN / f"double_pendulum{ext}"
+        if not golden.is_file():
+            problems.append(f"{golden} is missing")
+            continue
+        if golden.read_bytes() != data:
+            diff = difflib.unified_diff(
+                golden.read_text().splitlines(keepends=True), data.decode().splitlines(keepends=True),
+                fromfile=f"tests/golden/double_pendulum{ext}",
+                tofile=f"generated/double_pendulum{ext}")
+            problems.append("".join(list(diff)[:60]))
+    if problems:
+        pytest.fail("generated double_pendulum differs from the golden files:\n"
+                    + "\n".join(problems)
+                    + "\nIf the change is intended (a new version or template changes the "
+                    "preamble too), regenerate them with\n"
+                    "    MODELGEN_UPDATE_GOLDEN=1 pytest tests/test_generated_c.py -k golden")
+
+
+# -- the build around the C -----------------------------------------------------------
+
+def test_build_cache_reuses_unchanged_model(tmp_path):
+    spec = modelgen.as_spec(MODELS / "simple_pendulum.yaml")
+    first = modelgen.generate_model(spec, tmp_path)
+    assert not first.build.cached
+    so = first.build.module_path
+    mtimes = {p.name: p.stat().st_mtime_ns for p in (so, tmp_path / "simple_pendulum.c")}
+
+    start = time.perf_counter()
+    second = modelgen.generate_model(MODELS / "simple_pendulum.yaml", tmp_path)
+    elapsed = time.perf_counter() - start
+    assert second.build.cached
+    assert elapsed < 0.5, elapsed
+    assert second.build.module_path == so
+    assert {p.name: p.stat().st_mtime_ns for p in (so, tmp_path / "simple_pendulum.c")} == mtimes
+
+    # a changed model is rebuilt, not served from the cache
+    import dataclasses
+    changed = dataclasses.replace(spec, parameters=(("L", 2.0),) + spec.parameters[1:])
+    third = modelgen.generate_model(changed, tmp_path)
+    assert not third.build.cached
+    assert third.build.module_path != so
+
+
+_RACE = """
+import sys, time
+from pathlib import Path
+import modelgen
+spec = modelgen.as_spec(sys.argv[1])
+barrier = Path(sys.argv[3])
+(barrier / sys.argv[4]).touch()
+deadline = time.monotonic() + 60
+while len(list(barrier.iterdir())) < 2 and time.monotonic() < deadline:
+    time.sleep(0.002)
+print("cached", modelgen.generate_model(spec, sys.argv[2]).build.cached)
+"""
+
+_CHECK_MODULE = """
+import importlib.util, json, sys
+from pathlib import Path
+d = Path(sys.argv[1])
+m = json.loads((d / "manifest.json").read_text())
+spec = importlib.util.spec_from_file_location(m["module_name"], d / m["module_file"])
+mod = importlib.util.module_from_spec(spec)
+spec.loader.exec_module(mod)
+ffi, lib = mod.ffi, mod.lib
+p, u, out = ffi.new("double[5]"), ffi.new("double[1]"), ffi.new("double[4]")
+lib.double_pendulum_default_parameters(p)
+status = lib.double_pendulum_rhs(0.0, ffi.new("double[]", [-0.5, 0.5, 0.0, 0.0]), u, p, out)
+print(status, *[repr(v) for v in out])
+"""
+
+
+def test_concurrent_builds_both_succeed(generated, tmp_path):
+    out, barrier = tmp_path / "out", tmp_path / "barrier"
+    barrier.mkdir()
+    procs = [subprocess.Popen([sys.executable, "-c", _RACE, str(DOUBLE_PENDULUM), str(out),
+                               str(barrier), f"p{i}"], cwd=ROOT, env=_clean_env(),
+                              stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+             for i in range(2)]
+    outputs = [p.communicate(timeout=120)[0] for p in procs]
+    for proc, output in zip(procs, outputs):
+        assert proc.returncode == 0, output
+        # both found no build and compiled at the same time: the race happened
+        assert "cached False" in output, output
+
+    names = sorted(p.name for p in out.iterdir())
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert names == sorted(["manifest.json", "double_pendulum.c", "double_pendulum.h",
+                            manifest["module_file"]]), names
+    assert not [n for n in names if n.startswith(".build-")]
+
+    r = _run([sys.executable, "-c", _CHECK_MODULE, out])
+    assert r.returncode == 0, r.stdout
+    status, *xdot = r.stdout.split()
+    expected = modelgen.load(DOUBLE_PENDULUM, generated["double_pendulum"]).rhs(
+        0.0, [-0.5, 0.5, 0.0, 0.0])
+    assert status == "0"
+    np.testing.assert_array_equal(np.array(xdot, dtype=float), expected)
+
+
+def test_compiler_failure_raises_build_error_with_command_and_output(monkeypatch, tmp_path):
+    monkeypatch.setenv("CC", "cc -DMG_FORCE_ERROR -include /nonexistent.h")
+    with pytest.raises(modelgen.BuildError) as info:
+        modelgen.generate_model(MODELS / "simple_pendulum.yaml", tmp_path)
+    err = info.value
+    message = str(err)
+    assert "cc -DMG_FORCE_ERROR -include /nonexistent.h" in message
+    assert " ".join(err.command) in message
+    assert "/nonexistent.h" in err.output and err.output in message
+    assert "error" in err.output.lower()
+    # nothing half-built is left behind
+    assert sorted(p.name for p in tmp_path.iterdir()) == []
