@@ -1,0 +1,651 @@
+"""A restricted expression language for model files, and its printer.
+
+Model files are untrusted input, so their expressions are never given to
+``eval`` or ``sympy.sympify``.  This module reads them with a small
+hand-written tokenizer and a Pratt parser and builds sympy expressions
+directly.  The grammar, loosest binding first::
+
+    expression := term (('+' | '-') term)*
+    term       := unary (('*' | '/') unary)*
+    unary      := ('-' | '+') unary | power
+    power      := atom ('**' unary)?            # right-associative
+    atom       := number | name | name '(' arguments ')' | '(' expression ')'
+
+so, as in Python, ``-x**2`` is ``-(x**2)``, ``2**-1`` is ``1/2`` and
+``a**b**c`` is ``a**(b**c)``.
+
+* Numbers: ``3``, ``0.25``, ``.5``, ``1e-3``, ``2.5E+2``.  They are exact:
+  ``0.1`` is ``Rational(1, 10)``, never a float.
+* Names: ``[A-Za-z_][A-Za-z0-9_]*``, looked up in the ``allowed`` mapping
+  (the caller decides which coordinates, parameters... and whether time
+  ``t`` may appear).  ``pi`` is always the constant pi.
+* Functions (fixed whitelist): ``sin cos tan asin acos atan sinh cosh tanh
+  exp log sqrt abs sign`` take one argument and ``atan2`` two.  ``abs`` is
+  ``sympy.Abs``; Euler's number is written ``exp(1)``.
+
+Sums and products are built in one call (``sympy.Add(*terms)``,
+``sympy.Mul(*factors)``) rather than pairwise, which keeps long chains
+linear in time.  sympy's automatic simplification still applies: ``x + x``
+gives ``2*x`` and ``(x + y)/2`` gives ``x/2 + y/2``.  One visible
+consequence of building products in one call: ``2*(x + y)*z`` stays
+``2*z*(x + y)`` (Python's pairwise ``*`` would give ``z*(2*x + 2*y)``).
+
+Hostile input is bounded: at most :data:`MAX_LENGTH` characters, nesting
+depth :data:`MAX_DEPTH`, number literals of at most :data:`MAX_NUMBER_CHARS`
+characters with exponents up to :data:`MAX_EXPONENT`, and exact powers of
+numbers whose result would exceed :data:`MAX_POWER_BITS` bits are refused.
+Results that are not finite and real (``1/0``, ``log(0)``, ``sqrt(-1)``)
+are refused too.
+
+:func:`format_expression` writes a sympy expression back in this grammar, so
+that ``parse_expression(format_expression(e), allowed) == e``.  To make that
+hold despite sympy's automatic evaluation (which is not always idempotent,
+and which can leave the grammar because names are not assumed real, e.g.
+``abs(exp(x))`` becomes ``exp(re(x))``), :func:`parse_expression` prints and
+re-parses its result until nothing changes, and refuses expressions that
+sympy rewrites into something the grammar cannot express.
+"""
+from __future__ import annotations
+
+import math
+import numbers
+import re
+from fractions import Fraction
+from typing import Mapping, Optional
+
+import sympy
+
+from modelgen.errors import ExpressionError
+
+__all__ = [
+    "FUNCTIONS", "CONSTANTS", "MAX_LENGTH", "MAX_DEPTH", "MAX_NUMBER_CHARS",
+    "MAX_EXPONENT", "MAX_POWER_BITS", "ExpressionParseError",
+    "parse_expression", "format_expression",
+]
+
+#: Longest expression text accepted, in characters.
+MAX_LENGTH = 10_000
+#: Deepest nesting accepted (parentheses, unary signs, powers, calls).
+MAX_DEPTH = 200
+#: Longest number literal accepted, in characters.
+MAX_NUMBER_CHARS = 100
+#: Largest decimal exponent accepted in a number literal (``1e400``).
+MAX_EXPONENT = 400
+#: Largest exact power of numbers that is computed, in bits.
+MAX_POWER_BITS = 10_000
+
+#: Function name -> (sympy function, number of arguments).
+FUNCTIONS: Mapping[str, tuple] = {
+    "sin": (sympy.sin, 1), "cos": (sympy.cos, 1), "tan": (sympy.tan, 1),
+    "asin": (sympy.asin, 1), "acos": (sympy.acos, 1), "atan": (sympy.atan, 1),
+    "atan2": (sympy.atan2, 2),
+    "sinh": (sympy.sinh, 1), "cosh": (sympy.cosh, 1), "tanh": (sympy.tanh, 1),
+    "exp": (sympy.exp, 1), "log": (sympy.log, 1), "sqrt": (sympy.sqrt, 1),
+    "abs": (sympy.Abs, 1), "sign": (sympy.sign, 1),
+}
+
+#: Named constants of the grammar.
+CONSTANTS: Mapping[str, sympy.Expr] = {"pi": sympy.pi}
+
+#: sympy function class -> name in the grammar (for the printer).
+_FUNCTION_NAMES = {
+    sympy.sin: "sin", sympy.cos: "cos", sympy.tan: "tan",
+    sympy.asin: "asin", sympy.acos: "acos", sympy.atan: "atan",
+    sympy.atan2: "atan2",
+    sympy.sinh: "sinh", sympy.cosh: "cosh", sympy.tanh: "tanh",
+    sympy.exp: "exp", sympy.log: "log",
+    sympy.Abs: "abs", sympy.sign: "sign",
+}
+
+_GRAMMAR_HINT = ("use numbers, names, + - * / **, parentheses and the functions "
+                 + " ".join(FUNCTIONS))
+
+_NOT_FINITE_REAL = (sympy.S.ImaginaryUnit, sympy.S.ComplexInfinity,
+                    sympy.S.NaN, sympy.S.Infinity, sympy.S.NegativeInfinity)
+
+
+class ExpressionParseError(ExpressionError):
+    """An expression was rejected; the pieces are kept for better messages.
+
+    ``reason`` says what is wrong, ``column`` is the 1-based column in
+    ``text`` (None when the error is not tied to a position), ``hint`` says
+    how to fix it and ``name`` is the offending name for an undefined name
+    (None otherwise).  ``str(error)`` combines them.
+
+    >>> try:
+    ...     parse_expression("2*", {})
+    ... except ExpressionParseError as e:
+    ...     print(e.reason, e.column)
+    expected a number, a name, '(' or '-' but found the end of the expression 3
+    """
+
+    def __init__(self, reason: str, text: Optional[str], column: Optional[int] = None,
+                 hint: Optional[str] = None, name: Optional[str] = None):
+        self.reason = reason
+        self.text = text
+        self.column = column
+        self.hint = hint
+        self.name = name
+        message = reason
+        if column is not None:
+            message += f" at column {column} of {_quote(text)}"
+        elif text is not None:
+            message += f" in {_quote(text)}"
+        if hint:
+            message += f"; {hint}"
+        super().__init__(message)
+
+
+def _quote(text: str) -> str:
+    """Quote an expression for a message, shortening very long ones."""
+    if len(text) > 80:
+        text = text[:60] + "..." + text[-15:]
+    return repr(text)
+
+
+# -- tokenizer ---------------------------------------------------------------
+
+_NUMBER = re.compile(r"(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")
+_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
+_WORD_TAIL = re.compile(r"[A-Za-z0-9_.]*")
+_OPERATORS = ("**", "+", "-", "*", "/", "(", ")", ",")
+
+
+class _Token:
+    __slots__ = ("kind", "text", "column", "value")
+
+    def __init__(self, kind: str, text: str, column: int, value=None):
+        self.kind = kind        # "number", "name", "op" or "end"
+        self.text = text
+        self.column = column    # 1-based
+        self.value = value
+
+    def describe(self) -> str:
+        if self.kind == "end":
+            return "the end of the expression"
+        return repr(self.text)
+
+
+def _tokenize(text: str) -> list:
+    tokens = []
+    i, n = 0, len(text)
+    while i < n:
+        c = text[i]
+        if c in " \t\r\n":
+            i += 1
+            continue
+        column = i + 1
+        if c.isdigit() or (c == "." and i + 1 < n and text[i + 1].isdigit()):
+            match = _NUMBER.match(text, i)
+            end = match.end()
+            tail = _WORD_TAIL.match(text, end).group()
+            if tail:
+                literal = text[i:end]
+                if tail[0] in "eE.":
+                    raise ExpressionParseError(
+                        f"malformed number {literal + tail!r}", text, column,
+                        "write numbers like 3, 0.25 or 1.5e-3")
+                raise ExpressionParseError(
+                    f"missing operator between {literal!r} and {tail!r}", text,
+                    end + 1, f"write {literal}*{tail} for a product")
+            tokens.append(_Token("number", text[i:end], column,
+                                 _number(text[i:end], text, column)))
+            i = end
+            continue
+        if c.isalpha() or c == "_":
+            match = _NAME.match(text, i)
+            if match is None:  # a non-ASCII letter
+                raise ExpressionParseError(
+                    f"unexpected character {c!r}", text, column,
+                    "names use ASCII letters, digits and '_'")
+            tokens.append(_Token("name", match.group(), column))
+            i = match.end()
+            continue
+        for op in _OPERATORS:
+            if text.startswith(op, i):
+                tokens.append(_Token("op", op, column))
+                i += len(op)
+                break
+        else:
+            hint = _GRAMMAR_HINT
+            if c == "^":
+                hint = "write powers as x**2"
+            raise ExpressionParseError(f"unexpected character {c!r}", text,
+                                       column, hint)
+    tokens.append(_Token("end", "", n + 1))
+    return tokens
+
+
+def _number(literal: str, text: str, column: int) -> sympy.Rational:
+    """Exact value of a number literal (already matched by ``_NUMBER``)."""
+    if len(literal) > MAX_NUMBER_CHARS:
+        raise ExpressionParseError(
+            f"number literal is {len(literal)} characters long", text, column,
+            f"use at most {MAX_NUMBER_CHARS} characters (e.g. exponent notation)")
+    mantissa, _, exponent = literal.lower().partition("e")
+    if exponent and abs(int(exponent)) > MAX_EXPONENT:
+        raise ExpressionParseError(
+            f"exponent of {literal!r} is out of range", text, column,
+            f"use exponents between -{MAX_EXPONENT} and {MAX_EXPONENT}")
+    if not exponent and "." not in mantissa:
+        return sympy.Integer(int(mantissa))
+    value = Fraction(literal)
+    return sympy.Rational(value.numerator, value.denominator)
+
+
+# -- parser ------------------------------------------------------------------
+
+# binding powers: + - 10, * / 20, unary sign 25, ** 30 (right-associative)
+_BINARY = {"+": 10, "-": 10, "*": 20, "/": 20, "**": 30}
+_UNARY_BP = 25
+
+
+class _Parser:
+    def __init__(self, text: str, allowed: Mapping[str, sympy.Symbol],
+                 kinds: Optional[str]):
+        self.text = text
+        self.allowed = allowed
+        self.kinds = kinds
+        self.tokens = _tokenize(text)
+        self.pos = 0
+
+    def error(self, reason: str, column: Optional[int], hint: Optional[str] = None,
+              name: Optional[str] = None) -> ExpressionParseError:
+        return ExpressionParseError(reason, self.text, column, hint, name)
+
+    def peek(self) -> _Token:
+        return self.tokens[self.pos]
+
+    def take(self) -> _Token:
+        token = self.tokens[self.pos]
+        self.pos += 1
+        return token
+
+    def expect(self, op: str, opened: Optional[_Token] = None) -> None:
+        token = self.take()
+        if token.kind == "op" and token.text == op:
+            return
+        hint = None
+        if opened is not None:
+            hint = f"close the '{opened.text}' opened at column {opened.column}"
+        raise self.error(f"expected '{op}' but found {token.describe()}",
+                         token.column, hint)
+
+    def parse(self) -> sympy.Expr:
+        result = self.expression(0, 1)
+        token = self.peek()
+        if token.kind != "end":
+            if token.kind == "op" and token.text == ")":
+                raise self.error("unmatched ')'", token.column,
+                                 "remove it or add the missing '('")
+            raise self.error(
+                f"expected an operator or the end of the expression but found "
+                f"{token.describe()}", token.column,
+                "join terms with + - * / or **")
+        return result
+
+    def expression(self, min_bp: int, depth: int) -> sympy.Expr:
+        """Pratt loop: a prefix, then binary operators binding tighter than min_bp."""
+        if depth > MAX_DEPTH:
+            raise self.error(f"expression is nested more than {MAX_DEPTH} levels deep",
+                             self.peek().column, "simplify the expression")
+        left = self.prefix(depth)
+        while True:
+            token = self.peek()
+            if token.kind != "op" or token.text not in _BINARY:
+                return left
+            bp = _BINARY[token.text]
+            if bp <= min_bp:
+                return left
+            if token.text in "+-":
+                left = self.chain(left, depth, additive=True)
+            elif token.text in "*/":
+                left = self.chain(left, depth, additive=False)
+            else:  # '**', right-associative: the exponent may contain '**'
+                self.take()
+                exponent = self.expression(bp - 1, depth + 1)
+                left = self.power(left, exponent, token)
+
+    def chain(self, first: sympy.Expr, depth: int, additive: bool) -> sympy.Expr:
+        """A run of + - (or * /) operators, built with one Add (or Mul)."""
+        ops = "+-" if additive else "*/"
+        bp = 10 if additive else 20
+        items = [first]
+        while True:
+            token = self.peek()
+            if token.kind != "op" or token.text not in ops:
+                break
+            self.take()
+            operand = self.expression(bp, depth + 1)
+            if token.text == "-":
+                operand = -operand
+            elif token.text == "/":
+                if operand == 0:
+                    raise self.error("division by zero", token.column,
+                                     "check the divisor")
+                operand = sympy.Pow(operand, -1)
+            items.append(operand)
+        return sympy.Add(*items) if additive else sympy.Mul(*items)
+
+    def prefix(self, depth: int) -> sympy.Expr:
+        token = self.take()
+        if token.kind == "number":
+            return token.value
+        if token.kind == "name":
+            return self.name(token, depth)
+        if token.kind == "op" and token.text == "(":
+            inner = self.expression(0, depth + 1)
+            self.expect(")", token)
+            return inner
+        if token.kind == "op" and token.text in "+-":
+            operand = self.expression(_UNARY_BP, depth + 1)
+            return -operand if token.text == "-" else operand
+        raise self.error(
+            f"expected a number, a name, '(' or '-' but found {token.describe()}",
+            token.column)
+
+    def name(self, token: _Token, depth: int) -> sympy.Expr:
+        name = token.text
+        follower = self.peek()
+        called = follower.kind == "op" and follower.text == "("
+        if name in FUNCTIONS:
+            if not called:
+                raise self.error(f"function '{name}' must be called", token.column,
+                                 f"write {name}(...)")
+            return self.call(token, depth)
+        if called:
+            raise self.error(f"'{name}' is not a function", token.column,
+                             "the functions are " + " ".join(FUNCTIONS))
+        if name in CONSTANTS:
+            return CONSTANTS[name]
+        symbol = self.allowed.get(name)
+        if symbol is None:
+            if self.kinds:
+                hint = f"allowed here: {self.kinds}"
+            elif self.allowed:
+                names = sorted(self.allowed)
+                shown = ", ".join(names[:12]) + (", ..." if len(names) > 12 else "")
+                hint = f"allowed names: {shown}"
+            else:
+                hint = "no names are allowed here"
+            raise self.error(f"undefined name '{name}'", token.column, hint, name)
+        return symbol
+
+    def call(self, token: _Token, depth: int) -> sympy.Expr:
+        name = token.text
+        function, arity = FUNCTIONS[name]
+        opened = self.take()  # '('
+        args = []
+        if not (self.peek().kind == "op" and self.peek().text == ")"):
+            while True:
+                args.append(self.expression(0, depth + 1))
+                follower = self.peek()
+                if follower.kind == "op" and follower.text == ",":
+                    self.take()
+                    continue
+                break
+        self.expect(")", opened)
+        if len(args) != arity:
+            plural = "argument" if arity == 1 else "arguments"
+            raise self.error(
+                f"function '{name}' takes {arity} {plural} but was given {len(args)}",
+                token.column,
+                "write atan2(y, x)" if name == "atan2" else f"write {name}(x)")
+        result = function(*args)
+        if result.has(*_NOT_FINITE_REAL):
+            raise self.error(f"{name}(...) is not a finite real number here",
+                             token.column, "check the argument")
+        return result
+
+    def power(self, base: sympy.Expr, exponent: sympy.Expr, token: _Token) -> sympy.Expr:
+        if exponent.is_Rational and base.is_number:
+            if base == 0 and exponent < 0:
+                raise self.error("division by zero (0 to a negative power)",
+                                 token.column, "check the base and the exponent")
+            size = 2
+            if base.is_Rational:
+                size = max(abs(base.p), abs(base.q)).bit_length()
+            if size > 1 and abs(exponent.p) * size > MAX_POWER_BITS:
+                raise self.error("the power is too large to compute exactly",
+                                 token.column, "use a smaller exponent")
+        result = sympy.Pow(base, exponent)
+        if result.has(*_NOT_FINITE_REAL):
+            raise self.error("the power is not a finite real number", token.column,
+                             "check the base and the exponent")
+        return result
+
+
+def parse_expression(text_or_number, allowed: Mapping[str, sympy.Symbol], *,
+                     kinds: Optional[str] = None) -> sympy.Expr:
+    """Parse an expression of the restricted grammar into a sympy expression.
+
+    ``text_or_number`` is a string in the grammar of this module, an int or
+    float (as YAML gives them; a float becomes the exact rational of its
+    shortest repr, so ``9.81`` is ``981/100``), or a sympy expression (it is
+    printed with :func:`format_expression` and parsed back, which checks that
+    it only uses the grammar and ``allowed``).  Booleans are rejected.
+
+    ``allowed`` maps each name that may appear to its symbol; include
+    ``"t": modelgen.spec.TIME`` to allow time.  ``kinds`` describes the
+    allowed names for the "undefined name" message (e.g. ``"coordinates,
+    parameters and t"``); without it the allowed names are listed.
+
+    Raises :class:`ExpressionParseError` (an ``ExpressionError``).
+
+    >>> from modelgen.spec import symbol
+    >>> parse_expression("m1*l1**2/12", {"m1": symbol("m1"), "l1": symbol("l1")})
+    l1**2*m1/12
+    >>> parse_expression(0.1, {})
+    1/10
+    >>> parse_expression("-x**2", {"x": symbol("x")})
+    -x**2
+    """
+    if isinstance(text_or_number, bool):
+        raise ExpressionParseError(
+            f"expected an expression but got the boolean {text_or_number}",
+            None, None, "write a number or an expression")
+    if isinstance(text_or_number, sympy.Basic):
+        text_or_number = format_expression(text_or_number)
+    elif isinstance(text_or_number, numbers.Integral):
+        return sympy.Integer(int(text_or_number))
+    elif isinstance(text_or_number, numbers.Rational):
+        return sympy.Rational(text_or_number.numerator, text_or_number.denominator)
+    elif isinstance(text_or_number, numbers.Real):
+        value = float(text_or_number)
+        if not math.isfinite(value):
+            raise ExpressionParseError(f"{value!r} is not a finite number", None,
+                                       None, "write a finite number")
+        exact = Fraction(repr(value))
+        return sympy.Rational(exact.numerator, exact.denominator)
+    if not isinstance(text_or_number, str):
+        kind = type(text_or_number).__name__
+        raise ExpressionParseError(f"expected an expression but got a {kind}",
+                                   None, None, "write a number or an expression string")
+    text = text_or_number
+    if len(text) > MAX_LENGTH:
+        raise ExpressionParseError(f"expression is {len(text)} characters long",
+                                   None, None, f"use at most {MAX_LENGTH} characters")
+    if not text.strip():
+        raise ExpressionParseError("empty expression", None, None,
+                                   "write a number or an expression")
+    result = _Parser(text, allowed, kinds).parse()
+    if result.has(*_NOT_FINITE_REAL):
+        raise ExpressionParseError("the expression is not a finite real number", text,
+                                   None, "check divisors, logarithms and square roots")
+    return _stable(result, text, allowed)
+
+
+def _stable(result: sympy.Expr, text: str, allowed: Mapping[str, sympy.Symbol]) -> sympy.Expr:
+    """Make ``result`` a fixed point of format-then-parse.
+
+    sympy's automatic evaluation is not always idempotent (``Abs(3*Abs(x))``
+    can come out as ``3*Abs(Abs(x))``, which parses back as ``3*Abs(x)``) and
+    can leave the grammar (``abs(exp(x))`` becomes ``exp(re(x))`` because
+    names are not assumed real).  Printing and re-parsing until nothing
+    changes gives an expression that survives a round trip through YAML, and
+    refuses the ones that cannot be written at all.
+    """
+    hint = ("simplify the expression by hand (names are not assumed real, so e.g. "
+            "abs(exp(x)) becomes exp(re(x)))")
+    for _ in range(4):
+        try:
+            printed = _fmt(result)[0]
+        except _Unprintable as exc:
+            raise ExpressionParseError(
+                f"sympy rewrites the expression as {_quote(str(result))}, and "
+                f"{type(exc.node).__name__} is not part of modelgen's expression grammar",
+                text, None, hint) from None
+        try:
+            again = _Parser(printed, allowed, None).parse()
+        except ExpressionParseError:
+            break
+        if again == result:
+            return result
+        result = again
+    raise ExpressionParseError("the expression has no stable form under sympy's automatic "
+                               "simplification", text, None, hint)
+
+
+# -- printer -----------------------------------------------------------------
+
+_PREC_ADD, _PREC_MUL, _PREC_NEG, _PREC_POW, _PREC_ATOM = 10, 20, 25, 30, 40
+
+
+def format_expression(expr) -> str:
+    """Write a sympy expression in the grammar of :func:`parse_expression`.
+
+    ``Abs`` is written ``abs``, Euler's number ``exp(1)``, rationals ``a/b``
+    and sympy floats as their shortest decimal (which parses back to the
+    exact rational of that decimal).  Python ints and floats are accepted
+    too.  Anything outside the grammar (e.g. an undefined function, ``I``,
+    ``oo``) raises :class:`ExpressionParseError`.
+
+    For an expression ``e`` returned by :func:`parse_expression`,
+    ``parse_expression(format_expression(e), allowed) == e`` structurally.
+
+    >>> from modelgen.spec import symbol
+    >>> m, l = symbol("m"), symbol("l")
+    >>> format_expression(-m*l**2/12 + sympy.sqrt(2)*sympy.Abs(l))
+    '-m*l**2/12 + sqrt(2)*abs(l)'
+    """
+    if isinstance(expr, bool):
+        raise ExpressionParseError("cannot write a boolean as an expression", None)
+    if isinstance(expr, sympy.Basic):
+        pass
+    elif isinstance(expr, numbers.Integral):
+        expr = sympy.Integer(int(expr))
+    elif isinstance(expr, numbers.Real):
+        expr = sympy.Float(float(expr))
+    if not isinstance(expr, sympy.Basic):
+        raise ExpressionParseError(f"cannot write a {type(expr).__name__} as an expression",
+                                   None)
+    try:
+        return _fmt(expr)[0]
+    except _Unprintable as exc:
+        raise ExpressionParseError(
+            f"cannot write {_quote(str(exc.node))}: {type(exc.node).__name__} is not part of "
+            "modelgen's expression grammar", None, None, _GRAMMAR_HINT) from None
+
+
+def _wrap(item: tuple, minimum: int) -> str:
+    text, prec = item
+    return f"({text})" if prec < minimum else text
+
+
+def _fmt(e) -> tuple:
+    """(text, precedence) of ``e``; the precedence tells the caller when to wrap."""
+    if e.is_Integer:
+        return (str(int(e)), _PREC_NEG if e < 0 else _PREC_ATOM)
+    if e.is_Rational:
+        text = f"{abs(e.p)}/{e.q}"
+        return ("-" + text, _PREC_NEG) if e.p < 0 else (text, _PREC_MUL)
+    if isinstance(e, sympy.Float):
+        value = float(e)
+        if not math.isfinite(value):
+            raise ExpressionParseError(f"{value!r} is not a finite number", None)
+        return (repr(value), _PREC_NEG if value < 0 else _PREC_ATOM)
+    if e is sympy.pi:
+        return ("pi", _PREC_ATOM)
+    if e is sympy.E:
+        return ("exp(1)", _PREC_ATOM)
+    if e.is_Symbol:
+        return (e.name, _PREC_ATOM)
+    if e.is_Add:
+        return _fmt_add(e)
+    if e.is_Mul:
+        return _fmt_mul(e)
+    if e.is_Pow:
+        return _fmt_pow(e.base, e.exp)
+    name = _FUNCTION_NAMES.get(e.func)
+    if name is not None and e.args:
+        return (f"{name}({', '.join(_fmt(a)[0] for a in e.args)})", _PREC_ATOM)
+    raise _Unprintable(e)
+
+
+class _Unprintable(Exception):
+    """Internal: a node outside the grammar (turned into ExpressionParseError)."""
+
+    def __init__(self, node):
+        super().__init__(str(node))
+        self.node = node
+
+
+def _negative_coefficient(term) -> bool:
+    coefficient = term.as_coeff_Mul()[0]
+    return coefficient.is_Number and coefficient < 0
+
+
+def _fmt_add(e) -> tuple:
+    parts = []
+    for i, term in enumerate(e.as_ordered_terms()):
+        if i and _negative_coefficient(term):
+            parts.append(" - " + _wrap(_fmt(-term), _PREC_MUL))
+        elif i:
+            parts.append(" + " + _wrap(_fmt(term), _PREC_MUL))
+        else:
+            parts.append(_wrap(_fmt(term), _PREC_MUL))
+    return ("".join(parts), _PREC_ADD)
+
+
+def _fmt_mul(e) -> tuple:
+    coefficient, factors = e.as_coeff_mul()
+    sign = ""
+    if coefficient.is_Number and coefficient < 0:
+        sign, coefficient = "-", -coefficient
+    numerator, denominator = [], []
+    if coefficient.is_Rational:
+        if coefficient.p != 1:
+            numerator.append((str(coefficient.p), _PREC_ATOM))
+        if coefficient.q != 1:
+            denominator.append((str(coefficient.q), _PREC_ATOM))
+    elif coefficient != 1:  # a Float coefficient
+        numerator.append(_fmt(coefficient))
+    for factor in factors:
+        if factor.is_Pow and factor.exp.is_Number and factor.exp < 0:
+            if factor.exp == -1:
+                denominator.append(_fmt(factor.base))
+            else:
+                denominator.append(_fmt_pow(factor.base, -factor.exp))
+        else:
+            numerator.append(_fmt(factor))
+    if sign and numerator and numerator[0][1] <= _PREC_MUL:
+        # "-(a + b)*c" would negate the sum before multiplying; "-1*(a + b)*c"
+        # keeps the -1 as a separate factor, as in the expression printed
+        numerator.insert(0, ("1", _PREC_ATOM))
+    text = "*".join(_wrap(item, _PREC_MUL + 1) for item in numerator) or "1"
+    for item in denominator:
+        text += "/" + _wrap(item, _PREC_POW)
+    return (sign + text, _PREC_NEG if sign else _PREC_MUL)
+
+
+def _fmt_pow(base, exponent) -> tuple:
+    if exponent == sympy.S.Half:
+        return (f"sqrt({_fmt(base)[0]})", _PREC_ATOM)
+    if exponent.is_Number and exponent < 0:
+        if exponent == -1:
+            inner = _fmt(base)
+        else:
+            inner = _fmt_pow(base, -exponent)
+        return ("1/" + _wrap(inner, _PREC_POW), _PREC_MUL)
+    return (_wrap(_fmt(base), _PREC_ATOM) + "**" + _wrap(_fmt(exponent), _PREC_ATOM),
+            _PREC_POW)
