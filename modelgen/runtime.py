@@ -248,9 +248,10 @@ def _cholesky_pivot(A, tol=1e-13):
     A = np.array(A, dtype=float)
     n = A.shape[0]
     L = np.zeros_like(A)
+    largest = max(np.max(np.diag(A)), 0.0)
     for j in range(n):
         d = A[j, j] - L[j, :j] @ L[j, :j]
-        if not d > tol * A[j, j]:
+        if not (d > tol * A[j, j] and A[j, j] > tol * largest):
             return j
         L[j, j] = np.sqrt(d)
         L[j + 1:, j] = (A[j + 1:, j] - L[j + 1:, :j] @ L[j, :j]) / L[j, j]

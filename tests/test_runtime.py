@@ -1,0 +1,102 @@
+"""The Python runtime: argument handling, parameters, the fast path, failures."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import scipy.integrate
+from scipy.special import ellipk
+
+import modelgen
+from modelgen.errors import DerivationError, SimulationError
+from modelgen.model import Model
+from modelgen.runtime import MassMatrixError
+
+
+@pytest.fixture(scope="module")
+def dp(compiled):
+    return compiled("double_pendulum")
+
+
+def test_attributes_describe_the_model(dp):
+    assert dp.n == 2
+    assert dp.coordinates == ("q1", "q2")
+    assert dp.parameters == {"m1": 1.0, "m2": 1.0, "l1": 1.0, "l2": 1.0, "g": 9.81}
+    assert dp.inputs == ("T1",)
+    assert dp.bodies == ("rod1", "rod2")
+
+
+def test_parameters_as_dict_array_or_defaults_agree(dp):
+    q = [0.3, -0.4]
+    p = np.array([2.0, 1.0, 1.5, 1.0, 9.81])
+    assert np.array_equal(dp.mass_matrix(q, {"m1": 2.0, "l1": 1.5}), dp.mass_matrix(q, p))
+    assert not np.array_equal(dp.mass_matrix(q), dp.mass_matrix(q, p))
+    # the override changes nothing else: the default vector is untouched
+    assert np.array_equal(dp.params(), [1.0, 1.0, 1.0, 1.0, 9.81])
+
+
+@pytest.mark.parametrize("call, message", [
+    (lambda cm: cm.mass_matrix([0.1]), r"q must have shape \(2,\), got \(1,\)"),
+    (lambda cm: cm.rhs(0, [0, 0, 0]), r"x must have shape \(4,\)"),
+    (lambda cm: cm.mass_matrix([0, 0], {"mass": 1}), "unknown parameter 'mass'"),
+    (lambda cm: cm.mass_matrix([0, 0], {"g": float("nan")}), r"parameters must be finite; got \['g'\]"),
+    (lambda cm: cm.mass_matrix([0, 0], [1, 2]), r"p must have shape \(5,\)"),
+    (lambda cm: cm.generalized_forces(0, [0, 0], [0, 0], u={"T9": 1}), "unknown input 'T9'"),
+])
+def test_nonsense_arguments_raise_clear_errors(dp, call, message):
+    with pytest.raises(SimulationError, match=message):
+        call(dp)
+
+
+def test_input_drives_generalized_force(dp):
+    tau0 = dp.generalized_forces(0, [0.2, 0.1], [0, 0])
+    tau1 = dp.generalized_forces(0, [0.2, 0.1], [0, 0], u=[2.5])
+    assert tau1 - tau0 == pytest.approx([2.5, 0.0], abs=1e-15)
+    assert np.array_equal(dp.generalized_forces(0, [0.2, 0.1], [0, 0], u={"T1": 2.5}), tau1)
+
+
+def test_fast_paths_agree_with_rhs(dp):
+    x = np.array([0.3, -0.2, 1.1, 0.4])
+    f = dp.rhs_function(p={"m2": 2.0}, u=[0.5])
+    expected = dp.rhs(0.0, x, u=[0.5], p={"m2": 2.0})
+    first = f(0.0, x)
+    assert np.array_equal(first, expected)
+    assert f(0.0, x + 1) is not first           # fresh arrays: safe for solve_ivp
+    out = np.empty(4)
+    assert f(0.0, x, out) is out and np.array_equal(out, expected)
+    f.x[:] = x
+    f.inplace(0.0)
+    assert np.array_equal(f.out, expected)
+
+
+def test_solve_ivp_gives_the_elliptic_period_of_the_pendulum(compiled):
+    """Released from horizontal, L = 1, g = 9.81: T = 4 sqrt(L/g) K(sin^2(pi/4))."""
+    cm = compiled("simple_pendulum")
+    period = 4 * np.sqrt(1 / 9.81) * ellipk(np.sin(np.pi / 4) ** 2)
+    assert period == pytest.approx(2.367841947576237, rel=1e-15)
+    q0 = np.pi / 2                       # q is measured from the downward vertical
+
+    def crossing(t, x):
+        return x[0]
+    crossing.direction = 1
+    sol = scipy.integrate.solve_ivp(cm.rhs, (0, 3), [q0, 0.0], method="DOP853",
+                                    rtol=1e-12, atol=1e-12, events=crossing)
+    # released at rest at +90 deg, it passes the bottom with q increasing after 3/4 period
+    assert sol.t_events[0][0] == pytest.approx(0.75 * period, rel=1e-9)
+
+
+def test_singular_mass_matrix_is_detected_at_generation(tmp_path):
+    m = Model("massless_tip")
+    m.add_coordinates("q1", "q2")
+    m.add_parameter("m", 1.0)
+    m.add_base("B1", parent="E", axis=3, angle="q1")
+    m.add_base("B2", parent="B1", axis=1, angle="q2")   # spins the rod about its own axis
+    m.add_point("G", parent="O", base="B1", coordinates=[1, 0, 0])
+    m.add_body("rod", mass="m", G="G", base="B2")          # a particle: no inertia about x
+    with pytest.raises(DerivationError, match="coordinate 'q2'"):
+        modelgen.load(m, tmp_path)
+
+
+def test_rhs_reports_the_failing_pivot_as_mass_matrix_error(compiled):
+    cm = compiled("double_pendulum")
+    with pytest.raises(MassMatrixError, match=r"pivot 1 \(coordinate 'q1'\)"):
+        cm.rhs(0.0, [0.1, 0.2, 0, 0], p={"m1": 0.0, "m2": 0.0})
