@@ -153,6 +153,44 @@ def print_routine(routine: Routine, outputs_c: dict) -> CFunction:
                      routine.ops_before, routine.ops_after, len(statements))
 
 
+#: Up to this many coordinates the solve is emitted as straight-line LDL^T
+#: (no sqrt, independent chains the compiler can interleave); above it, a
+#: right-looking Cholesky loop.
+UNROLL_SOLVE = 12
+
+
+def unrolled_ldlt(n: int, tol: str) -> list:
+    """Straight-line C that solves ``A y = b`` by LDL^T for a fixed ``n``.
+
+    No square roots: each pivot costs one division, which shortens the
+    dependency chain from pivot to pivot.  Reads the lower triangle of the
+    row-major ``A``; overwrites ``b`` with y.  Returns the 1-based failing
+    pivot (d_j <= tol * A_jj, or A_jj <= tol * max A_ii) like the loop version.
+    """
+    lines = ["double largest = 0.0;"]
+    for j in range(n):
+        lines.append(f"if (A[{j * n + j}] > largest) largest = A[{j * n + j}];")
+    for j in range(n):
+        # u{j}_{k} = L{j}_{k} * d{k}: reused by every row below j
+        for k in range(j):
+            lines.append(f"const double u{j}_{k} = L{j}_{k} * d{k};")
+        terms = "".join(f" - u{j}_{k} * L{j}_{k}" for k in range(j))
+        lines.append(f"const double d{j} = A[{j * n + j}]{terms};")
+        lines.append(f"if (!(d{j} > {tol} * A[{j * n + j}]) || "
+                     f"!(A[{j * n + j}] > {tol} * largest)) return {j + 1};")
+        lines.append(f"const double inv{j} = 1.0 / d{j};")
+        for i in range(j + 1, n):
+            terms = "".join(f" - L{i}_{k} * u{j}_{k}" for k in range(j))
+            lines.append(f"const double L{i}_{j} = (A[{i * n + j}]{terms}) * inv{j};")
+    for i in range(n):
+        terms = "".join(f" - L{i}_{k} * y{k}" for k in range(i))
+        lines.append(f"const double y{i} = b[{i}]{terms};")
+    for i in reversed(range(n)):
+        terms = "".join(f" - L{k}_{i} * b[{k}]" for k in range(i + 1, n))
+        lines.append(f"b[{i}] = y{i} * inv{i}{terms};")
+    return lines
+
+
 def _comment_safe(text: str) -> str:
     """Text that cannot close or nest a C comment, nor smuggle a line break."""
     return "".join(ch if ch.isprintable() else " " for ch in text).replace("*/", "* /").replace("/*", "/ *")
@@ -180,6 +218,7 @@ def template_context(*, name: str, description: str, model_hash: str, n: int,
         "bodies": list(bodies),
         "functions": {k: asdict(f) for k, f in functions.items()},
         "api": public_api(name, n, len(parameters), len(inputs), len(bodies)),
+        "solve_lines": unrolled_ldlt(n, f"{name.upper()}_PIVOT_TOL") if n <= UNROLL_SOLVE else [],
     }
 
 

@@ -15,6 +15,7 @@ from . import __version__
 from .build import BuildResult, build_module, cached_build, compiler
 from .cse import make_routines
 from .dynamics import Equations, derive_equations
+from .errors import ModelError
 from .emit import ABI_VERSION, emit_sources, print_routine, template_context, templates_digest
 from .kinematics import derive_kinematics
 from .spec import ModelSpec
@@ -78,6 +79,18 @@ def routines_for(eqs: Equations):
     ]
 
 
+def _check_generable(spec: ModelSpec) -> None:
+    """A model needs a coordinate and a body, or its mass matrix is empty or zero."""
+    if not spec.coordinates:
+        raise ModelError("the model has no generalized coordinates", file=spec.source,
+                         line=spec.line_of("coordinates"), key="coordinates",
+                         fix="declare at least one coordinate, e.g. coordinates: [q1]")
+    if not spec.bodies:
+        raise ModelError("the model has no bodies, so its mass matrix is zero",
+                         file=spec.source, line=spec.line_of("bodies"), key="bodies",
+                         fix="declare at least one body with a mass under 'bodies'")
+
+
 def generate(spec: ModelSpec, out_dir=None, *, force: bool = False) -> Generated:
     """Generate, compile and cache the model; reuse an unchanged build.
 
@@ -87,6 +100,7 @@ def generate(spec: ModelSpec, out_dir=None, *, force: bool = False) -> Generated
     >>> g.manifest["n"]                                             # doctest: +SKIP
     2
     """
+    _check_generable(spec)
     directory = Path(out_dir) if out_dir is not None else DEFAULT_OUTPUT / spec.name
     key = build_hash(spec)
     if not force:

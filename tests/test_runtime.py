@@ -100,3 +100,15 @@ def test_rhs_reports_the_failing_pivot_as_mass_matrix_error(compiled):
     cm = compiled("double_pendulum")
     with pytest.raises(MassMatrixError, match=r"pivot 1 \(coordinate 'q1'\)"):
         cm.rhs(0.0, [0.1, 0.2, 0, 0], p={"m1": 0.0, "m2": 0.0})
+
+
+@pytest.mark.parametrize("text, key, problem", [
+    ("name: empty\nbodies: {}\n", "coordinates", "the model has no generalized coordinates"),
+    ("name: nobody\ncoordinates: [q1]\n", "bodies", "the model has no bodies"),
+])
+def test_model_without_coordinates_or_bodies_is_refused(tmp_path, text, key, problem):
+    path = tmp_path / "m.yaml"
+    path.write_text(text)
+    with pytest.raises(modelgen.ModelError, match=problem) as exc:
+        modelgen.load(path, tmp_path / "out")
+    assert exc.value.key == key and exc.value.file == str(path)
