@@ -18,6 +18,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import jinja2
+import sympy
 
 from . import __version__
 from .cse import Routine
@@ -135,7 +136,11 @@ def print_routine(routine: Routine, outputs_c: dict) -> CFunction:
     parts = [[] for _ in range(n_parts)]
     for i, (sym, expr) in enumerate(statements):
         code = printer.doprint(expr)
-        if sym in shared:
+        if sym in shared and expr.func in (sympy.sin, sympy.cos):
+            # through a local, so gcc still pairs sin and cos into one sincos call
+            parts[i // size].append(f"const double v{i} = {code};")
+            parts[i // size].append(f"{slots[sym]} = v{i};")
+        elif sym in shared:
             parts[i // size].append(f"{slots[sym]} = {code};")
         else:
             parts[i // size].append(f"const double {slots[sym]} = {code};")

@@ -1,0 +1,810 @@
+"""How modelgen scales with the size of a model, and how it compares with MuJoCo.
+
+Run from the repository root::
+
+    .venv/bin/python bench/codegen_scaling.py            # n = 2 4 7 10 15 20 30 50
+    .venv/bin/python bench/codegen_scaling.py --quick    # n = 2 4 7 10
+    .venv/bin/python bench/codegen_scaling.py --n 2 4 7 --json out.json
+
+Model
+    ``modelgen.chains.spatial_chain(n)``: n uniform rods hanging from the
+    origin, hinge axes alternating z (odd joints) and y (even joints).  If
+    ``models/arm7.yaml`` exists (``--arm``), the 7-joint arm gets a row too;
+    it is the official target of the per-call goals.
+
+Method
+    * Generation.  Every model is generated in a fresh subprocess (so memory
+      is measured per model) into a temporary directory, with
+      ``modelgen.load(spec, out_dir, force=True)``: derive, CSE, emit and
+      compile are modelgen's own stage timers (``manifest["seconds"]``);
+      *total* is the wall time from the ModelSpec in hand to a loaded
+      ``CompiledModel`` (it also covers hashing, import of the extension and
+      the mass-matrix sanity check; the difference is the column *other*).
+      The child's import of modelgen (with sympy and numpy; column *import*)
+      and the building of the spec (JSON only) are not in *total*.  Peak RSS is
+      ``getrusage(RUSAGE_SELF).ru_maxrss`` of the child just after loading
+      (the Python side, including the interpreter and sympy) and
+      ``RUSAGE_CHILDREN`` (the largest compiler process).
+    * Operation counts are modelgen's counts for the ``rhs`` routine (the
+      mass matrix A and b = tau - h) before and after CSE.  They do not
+      include the Cholesky solve that ``<name>_rhs`` runs on A in a C loop
+      (about n^3/6 multiply-adds).  The exponent is a least-squares fit of
+      log(ops) against log(n) over the chains run; the *local* exponent is
+      the slope between the two largest n (closer to the asymptotic one).
+    * rhs in C.  A small harness that includes the generated ``<name>.h`` is
+      compiled at -O2 and linked with ``<name>.c`` compiled by the exact
+      command modelgen's build used for the rhs part (from the manifest's
+      ``compile_commands``, i.e. ``build.compile_flags``).  It calls
+      ``<name>_rhs`` in a loop, perturbing one entry of x from the previous
+      output every iteration (so nothing can be hoisted and consecutive calls
+      form a dependency chain), and reports the minimum per-call time over 5
+      repeats of at least 0.2 s each.  The modelgen and MuJoCo harnesses are
+      run alternately ``--rounds`` times (default 3) and the minimum of each
+      is kept, so a busy spell of a shared machine hits both sides.
+    * rhs from Python: ``f.inplace(t)`` (state in ``f.x``, no copies) and
+      ``f = cm.rhs_function(); f(t, x, out)`` with a
+      preallocated ``out`` (the low-overhead path), and plain
+      ``cm.rhs(t, x)``; ``timeit`` with the same min-of-5 x >= 0.2 s rule.
+    * MuJoCo.  The identical chain is written as MJCF (hinges about z / y of
+      the body frame, which sits at the joint; inertial at (l/2, 0, 0) with
+      the rods' principal moments; gravity (0, 0, -g); contacts disabled; no
+      damping or armature; timestep 0.001, RK4).  Agreement: at 5 seeded
+      random states, ``qacc`` after ``mj_forward`` against modelgen's qdd,
+      reported as max over states of ||qacc - qdd||_inf / ||qdd||_inf.
+      Timing: a C harness linked against the wheel's libmujoco times
+      ``mj_forward`` (one forward-dynamics evaluation = one rhs call) with
+      the same perturbation rule, and ``mj_step`` with RK4 divided by 4 (four
+      force evaluations per step; the state restarts from x0 every 1000
+      steps).  Column *mj_forward py* is the same call from a Python loop, for
+      the binding overhead.  If the MuJoCo headers or library are not
+      usable the Python loop ``mujoco.mj_forward(m, d)`` is timed instead
+      (marked ``py``); if mujoco is not installed its columns are skipped.
+
+Reading the tables
+    Times in seconds (generation) or microseconds (per call); RSS in MB.
+    The header gives the 1-minute load average before the run: on a 2-core
+    machine anything above ~0.5 means something else is running and the
+    per-call times (and ratios near 1) are noisy; run it again when quiet.
+    Column *-O* gives the optimisation levels modelgen's build chose for the
+    two compiled parts of ``<name>.c`` (it drops to -O1 for big routines).
+    ``mj/mg`` is MuJoCo's mj_forward time over modelgen's rhs time, both in
+    C: above 1 means modelgen is faster.  ``rel diff`` should be around 1e-9
+    or below (it grows with cond(A), roughly n^4 for these chains).  The goal
+    list at the end states each goal, the measured value and whether it is
+    met (``not run`` when the n it needs was not in this run).
+"""
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import json
+import os
+import platform
+import resource
+import shlex
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+import timeit
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parent.parent
+DEFAULT_NS = (2, 4, 7, 10, 15, 20, 30, 50)
+QUICK_NS = (2, 4, 7, 10)
+RESULT_MARK = "@@codegen_scaling@@ "
+MIN_SECONDS = 0.2        # each timing repeat runs at least this long
+REPEATS = 5              # minimum over this many repeats
+N_CHECK_STATES = 5       # random states for the MuJoCo agreement check
+STEP_RESET = 1000        # mj_step harness: restart from x0 every this many steps
+
+
+# ---------------------------------------------------------------------------------
+# C harnesses
+# ---------------------------------------------------------------------------------
+
+_MG_HARNESS = r"""/* Timing harness for {name}_rhs, written by bench/codegen_scaling.py. */
+#define _POSIX_C_SOURCE 199309L
+#include <stdio.h>
+#include <time.h>
+#include "{name}.h"
+
+#define NX {nx}
+
+static double now(void)
+{{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}}
+
+static const double x0[NX] = {{{x0}}};
+static const double p[{np_}] = {{{p}}};
+static double u[{nu_}];
+static double x[NX], xdot[NX];
+static int status;
+static double sink;
+
+/* ``loops`` calls; x[j] is reset to x0[j] plus a tiny amount taken from the
+ * previous output, so every call depends on the one before. */
+static double run(long loops)
+{{
+    long k;
+    const double start = now();
+    for (k = 0; k < loops; ++k) {{
+        const int j = (int)(k % NX);
+        x[j] = x0[j] + 1e-9 * xdot[NX - 1 - j];
+        status |= {name}_rhs(0.0, x, u, p, xdot);
+        sink += xdot[NX - 1];
+    }}
+    return now() - start;
+}}
+
+int main(void)
+{{
+    long loops = 1;
+    int r, i;
+    double best = 1e300;
+    for (i = 0; i < NX; ++i)
+        x[i] = x0[i];
+    status = {name}_rhs(0.0, x, u, p, xdot);
+    while (run(loops) < {min_seconds})
+        loops *= 2;
+    for (r = 0; r < {repeats}; ++r) {{
+        const double t = run(loops) / (double)loops;
+        if (t < best)
+            best = t;
+    }}
+    printf("%.9e %ld %d %.17g\n", best, loops, status, sink);
+    return 0;
+}}
+"""
+
+_MJ_HARNESS = r"""/* Timing harness for MuJoCo's mj_forward and mj_step, written by
+ * bench/codegen_scaling.py.  Usage: mjbench model.xml state.txt
+ * where state.txt holds qpos then qvel (nq + nv numbers). */
+#define _POSIX_C_SOURCE 199309L
+#include <stdio.h>
+#include <string.h>
+#include <time.h>
+#include <mujoco/mujoco.h>
+
+static double now(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
+
+static mjModel *m;
+static mjData *d;
+static double q0[1024], v0[1024];
+static double sink;
+
+static void reset(void)
+{
+    memcpy(d->qpos, q0, sizeof(double) * (size_t)m->nq);
+    memcpy(d->qvel, v0, sizeof(double) * (size_t)m->nv);
+    d->time = 0.0;
+}
+
+static double run_forward(long loops)
+{
+    long k;
+    const int nv = m->nv;
+    const double start = now();
+    for (k = 0; k < loops; ++k) {
+        const int j = (int)(k % nv);
+        d->qpos[j] = q0[j] + 1e-9 * d->qacc[nv - 1 - j];
+        mj_forward(m, d);
+        sink += d->qacc[nv - 1];
+    }
+    return now() - start;
+}
+
+static double run_step(long loops)
+{
+    long k;
+    double start;
+    reset();
+    start = now();
+    for (k = 0; k < loops; ++k) {
+        if (k % STEP_RESET == 0)
+            reset();
+        mj_step(m, d);
+        sink += d->qacc[0];
+    }
+    return now() - start;
+}
+
+static double best_of(double (*run)(long))
+{
+    long loops = 1;
+    int r;
+    double best = 1e300;
+    while (run(loops) < MIN_SECONDS)
+        loops *= 2;
+    for (r = 0; r < REPEATS; ++r) {
+        const double t = run(loops) / (double)loops;
+        if (t < best)
+            best = t;
+    }
+    return best;
+}
+
+int main(int argc, char **argv)
+{
+    char error[1000] = "";
+    FILE *f;
+    int i;
+    double forward, step;
+    if (argc != 3) {
+        fprintf(stderr, "usage: %s model.xml state.txt\n", argv[0]);
+        return 2;
+    }
+    m = mj_loadXML(argv[1], NULL, error, sizeof(error));
+    if (!m) {
+        fprintf(stderr, "mj_loadXML: %s\n", error);
+        return 1;
+    }
+    if (m->nq > 1024 || m->nv > 1024) {
+        fprintf(stderr, "model too large for the harness\n");
+        return 1;
+    }
+    d = mj_makeData(m);
+    f = fopen(argv[2], "r");
+    if (!f) {
+        fprintf(stderr, "cannot open %s\n", argv[2]);
+        return 1;
+    }
+    for (i = 0; i < m->nq; ++i)
+        if (fscanf(f, "%lf", &q0[i]) != 1) return 1;
+    for (i = 0; i < m->nv; ++i)
+        if (fscanf(f, "%lf", &v0[i]) != 1) return 1;
+    fclose(f);
+    reset();
+    mj_forward(m, d);
+    forward = best_of(run_forward);
+    step = best_of(run_step);
+    printf("%.9e %.9e %d %.17g\n", forward, step,
+           d->warning[mjWARN_BADQACC].number, sink);
+    mj_deleteData(d);
+    mj_deleteModel(m);
+    return 0;
+}
+"""
+
+
+def _run_checked(cmd, cwd=None) -> str:
+    """Run a command; raise RuntimeError with its full output if it fails."""
+    proc = subprocess.run(cmd, cwd=cwd, capture_output=True, text=True)
+    if proc.returncode != 0:
+        raise RuntimeError(f"command failed (exit {proc.returncode}): {shlex.join(cmd)}\n"
+                           f"{proc.stdout}{proc.stderr}")
+    return proc.stdout
+
+
+def _c_array(values) -> str:
+    return ", ".join(repr(float(v)) for v in values)
+
+
+def build_rhs_harness(cm, x0, work: Path):
+    """Compile the C timing harness of ``<name>_rhs``; returns (executable, command).
+
+    ``<name>.c`` is compiled by the exact command modelgen's build used for the
+    part holding the rhs (from the manifest), the harness itself at -O2.
+    """
+    from modelgen.build import compile_flags, compiler
+    name, manifest = cm.name, cm.manifest
+    src_dir = Path(cm.path).parent
+    work.mkdir(parents=True, exist_ok=True)
+    harness = work / "rhs_bench.c"
+    harness.write_text(_MG_HARNESS.format(
+        name=name, nx=2 * cm.n, x0=_c_array(x0), np_=max(len(cm.parameters), 1),
+        p=_c_array(cm.params()) or "0.0", nu_=max(len(cm.inputs), 1),
+        min_seconds=MIN_SECONDS, repeats=REPEATS))
+
+    # The rhs lives in part 2 of <name>.c; compile it exactly as the build did.
+    commands = [shlex.split(c) for c in manifest.get("compile_commands", [])]
+    part2 = [c for c in commands if "-DMG_PART=2" in c]
+    if part2:
+        cmd = list(part2[0])
+        cmd[cmd.index("-o") + 1] = str(work / "model_rhs.o")
+        cmd[cmd.index(f"{name}.c")] = str(src_dir / f"{name}.c")
+    else:   # no compile_commands in the manifest: rebuild them from compile_flags
+        statements = max(r["statements"] for r in manifest["ops"].values())
+        cmd = [*compiler(), *compile_flags(statements, 2), "-DMG_PART=2", "-c",
+               str(src_dir / f"{name}.c"), "-o", str(work / "model_rhs.o")]
+    cc = compiler()
+    _run_checked(cmd)
+    _run_checked([*cc, "-O2", "-std=c99", f"-I{src_dir}", "-c", str(harness),
+                  "-o", str(work / "rhs_bench.o")])
+    exe = work / "rhs_bench"
+    _run_checked([*cc, str(work / "rhs_bench.o"), str(work / "model_rhs.o"), "-o", str(exe),
+                  "-lm"])
+    return exe, shlex.join(cmd)
+
+
+def run_rhs_harness(exe: Path) -> float:
+    """One run of the rhs harness: per-call time in µs (min over REPEATS)."""
+    best, _loops, status, _sink = _run_checked([str(exe)]).split()
+    if int(status):
+        raise RuntimeError(f"{exe}: the rhs returned status {status}")
+    return float(best) * 1e6
+
+
+def have_mujoco() -> bool:
+    """Whether the mujoco Python package imports."""
+    try:
+        import mujoco  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+def mujoco_paths():
+    """(include dir, library file) of the installed mujoco wheel, or None."""
+    spec = importlib.util.find_spec("mujoco")
+    if spec is None or not spec.submodule_search_locations:
+        return None
+    root = Path(list(spec.submodule_search_locations)[0])
+    include = root / "include"
+    libs = sorted(root.glob("libmujoco.so*")) or sorted(root.glob("libmujoco*.dylib"))
+    if not (include / "mujoco" / "mujoco.h").is_file() or not libs:
+        return None
+    return include, libs[0]
+
+
+def build_mujoco_harness(work: Path):
+    """Compile the MuJoCo timing harness; returns its path, or (None, reason)."""
+    paths = mujoco_paths()
+    if paths is None:
+        return None, "mujoco headers or library not found in the wheel"
+    include, lib = paths
+    work.mkdir(parents=True, exist_ok=True)
+    src = work / "mj_bench.c"
+    src.write_text(_MJ_HARNESS)
+    exe = work / "mj_bench"
+    cmd = [*shlex.split(os.environ.get("CC", "cc")), "-O2", "-std=c99",
+           f"-DMIN_SECONDS={MIN_SECONDS}", f"-DREPEATS={REPEATS}", f"-DSTEP_RESET={STEP_RESET}",
+           f"-I{include}", str(src), "-o", str(exe), str(lib), f"-Wl,-rpath,{lib.parent}",
+           "-lm"]
+    try:
+        _run_checked(cmd)
+    except RuntimeError as exc:
+        return None, f"MuJoCo harness did not build: {exc}"
+    return exe, None
+
+
+# ---------------------------------------------------------------------------------
+# MuJoCo model of the chain
+# ---------------------------------------------------------------------------------
+
+def chain_mjcf(n: int, params: dict) -> str:
+    """MJCF of ``spatial_chain(n)`` with the given parameter values (see the docstring)."""
+    r, g = params["r"], params["g"]
+    lines = [f'<mujoco model="spatial_chain_{n}">',
+             '  <compiler inertiafromgeom="false"/>',
+             f'  <option timestep="0.001" integrator="RK4" gravity="0 0 {-g!r}">',
+             '    <flag contact="disable"/>',
+             '  </option>',
+             '  <worldbody>']
+    for i in range(1, n + 1):
+        m, l = params[f"m{i}"], params[f"l{i}"]
+        pos = "0 0 0" if i == 1 else f"{params[f'l{i - 1}']!r} 0 0"
+        axis = "0 0 1" if i % 2 else "0 1 0"
+        axial, transverse = m * r ** 2 / 2, m * l ** 2 / 12 + m * r ** 2 / 4
+        pad = "  " * (i + 1)
+        lines += [f'{pad}<body name="rod{i}" pos="{pos}">',
+                  f'{pad}  <joint name="q{i}" type="hinge" axis="{axis}" damping="0" '
+                  f'armature="0"/>',
+                  f'{pad}  <inertial pos="{l / 2!r} 0 0" mass="{m!r}" '
+                  f'diaginertia="{axial!r} {transverse!r} {transverse!r}"/>']
+    lines += ["  " * (i + 1) + "</body>" for i in range(n, 0, -1)]
+    lines += ['  </worldbody>', '</mujoco>', '']
+    return "\n".join(lines)
+
+
+def mujoco_check(cm, n: int, states, work: Path):
+    """Build the MuJoCo chain, check qacc against modelgen's qdd, time mj_forward from Python.
+
+    Returns (row fields, path of the MJCF file).
+    """
+    import mujoco
+    import numpy as np
+    xml_path = work / f"spatial_chain_{n}.xml"
+    xml_path.write_text(chain_mjcf(n, cm.parameters))
+    model = mujoco.MjModel.from_xml_path(str(xml_path))
+    data = mujoco.MjData(model)
+    worst = 0.0
+    for x in states:
+        data.qpos[:], data.qvel[:] = x[:n], x[n:]
+        mujoco.mj_forward(model, data)
+        qdd = cm.rhs(0.0, x)[n:]
+        worst = max(worst, float(np.max(np.abs(data.qacc - qdd)) / np.max(np.abs(qdd))))
+    data.qpos[:], data.qvel[:] = states[0][:n], states[0][n:]
+    py_us = per_call_python("mj_forward(m, d)", {"mj_forward": mujoco.mj_forward,
+                                                 "m": model, "d": data})
+    return {"mujoco_version": mujoco.__version__, "mj_rel_diff": worst,
+            "mj_forward_py_us": py_us}, xml_path
+
+
+def run_mj_harness(harness: Path, xml_path: Path, x0) -> tuple:
+    """One run of the MuJoCo harness: (mj_forward µs, mj_step µs / 4, bad-qacc warnings)."""
+    state_path = xml_path.with_suffix(".state")
+    state_path.write_text(" ".join(repr(float(v)) for v in x0) + "\n")
+    forward, step, bad, _sink = _run_checked([str(harness), str(xml_path),
+                                              str(state_path)]).split()
+    return float(forward) * 1e6, float(step) * 1e6 / 4, int(bad)
+
+
+# ---------------------------------------------------------------------------------
+# The child: one model, one fresh process
+# ---------------------------------------------------------------------------------
+
+def per_call_python(stmt: str, namespace: dict) -> float:
+    """Per-call time of ``stmt`` in µs: min over REPEATS runs of >= MIN_SECONDS."""
+    timer = timeit.Timer(stmt, globals=namespace)
+    loops, elapsed = 1, 0.0
+    while elapsed < MIN_SECONDS:
+        loops *= 2
+        elapsed = timer.timeit(loops)
+    return min(timer.repeat(REPEATS, loops)) / loops * 1e6
+
+
+def child(kind: str, arg: str, work: Path, mj_harness, rounds: int) -> dict:
+    """Generate one model and measure it; returns the row as a dict."""
+    loadavg = os.getloadavg()[0]
+    t = time.perf_counter()
+    sys.path.insert(0, str(REPO))
+    import numpy as np
+
+    import modelgen
+    from modelgen.chains import spatial_chain
+    from modelgen.model import load_model
+    import_s = time.perf_counter() - t
+
+    t = time.perf_counter()
+    spec = spatial_chain(int(arg)).spec() if kind == "chain" else load_model(arg)
+    spec_s = time.perf_counter() - t
+
+    t = time.perf_counter()
+    cm = modelgen.load(spec, work / "model", force=True)
+    total = time.perf_counter() - t
+    rss_self = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024      # kB -> MB
+    rss_cc = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024
+
+    seconds, ops = cm.manifest["seconds"], cm.manifest["ops"]["rhs"]
+    row = {"kind": kind, "model": cm.name, "n": cm.n, "import_s": import_s, "spec_s": spec_s,
+           "loadavg_before": loadavg,
+           **{f"{k}_s": v for k, v in seconds.items()}, "total_s": total,
+           "other_s": total - sum(seconds.values()),
+           "rss_py_mb": rss_self, "rss_cc_mb": rss_cc,
+           "ops_before": ops["before_cse"], "ops_after": ops["after_cse"],
+           "statements": ops["statements"],
+           "compile_flags": sorted({c.split()[1] for c in cm.manifest.get("compile_commands",
+                                                                           [])})}
+
+    rng = np.random.default_rng(1000 + cm.n)
+    states = [np.concatenate([rng.uniform(-np.pi, np.pi, cm.n), rng.uniform(-2, 2, cm.n)])
+              for _ in range(N_CHECK_STATES)]
+    x0 = states[0]
+    rhs_exe, row["rhs_compile_command"] = build_rhs_harness(cm, x0, work / "harness")
+
+    f, out, xp = cm.rhs_function(), np.empty(2 * cm.n), x0.copy()
+    row["rhs_py_fast_us"] = per_call_python("f(0.0, x, out)", {"f": f, "x": xp, "out": out})
+    f.x[:] = x0
+    row["rhs_py_inplace_us"] = per_call_python("inplace(0.0)", {"inplace": f.inplace})
+    row["rhs_py_plain_us"] = per_call_python("rhs(0.0, x)", {"rhs": cm.rhs, "x": xp})
+
+    xml_path = None
+    if kind == "chain" and have_mujoco():
+        fields, xml_path = mujoco_check(cm, cm.n, states, work)
+        row.update(fields)
+
+    # The C timings, alternating modelgen and MuJoCo over ``rounds`` rounds and
+    # keeping the minimum of each, so that a slow spell of a shared machine
+    # hits both and the ratio stays meaningful.
+    rhs_c, forward, step, bad = [], [], [], 0
+    for _ in range(rounds):
+        rhs_c.append(run_rhs_harness(rhs_exe))
+        if xml_path is not None and mj_harness:
+            fwd, stp, warnings = run_mj_harness(Path(mj_harness), xml_path, x0)
+            forward.append(fwd)
+            step.append(stp)
+            bad += warnings
+    row["rhs_c_us"], row["rhs_c_us_rounds"] = min(rhs_c), rhs_c
+    if xml_path is not None:
+        if forward:
+            row.update(mj_forward_us=min(forward), mj_step4_us=min(step), mj_timing="C",
+                       mj_forward_us_rounds=forward, mj_badqacc_warnings=bad)
+        else:
+            row.update(mj_forward_us=row["mj_forward_py_us"], mj_step4_us=None,
+                       mj_timing="py")
+        row["mj_over_mg"] = row["mj_forward_us"] / row["rhs_c_us"]
+    return row
+
+
+# ---------------------------------------------------------------------------------
+# The parent: run the children, fit, print
+# ---------------------------------------------------------------------------------
+
+def run_one(kind, arg, work: Path, mj_harness, rounds, timeout) -> dict:
+    """Run :func:`child` in a fresh interpreter; a failure becomes an ``error`` row."""
+    cmd = [sys.executable, str(Path(__file__).resolve()), "--child", f"{kind}:{arg}",
+           "--workdir", str(work), "--mj-harness", str(mj_harness or ""),
+           "--rounds", str(rounds)]
+    start = time.perf_counter()
+    try:
+        proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout)
+    except subprocess.TimeoutExpired:
+        return {"kind": kind, "arg": arg, "error": f"timed out after {timeout} s"}
+    wall = time.perf_counter() - start
+    for line in proc.stdout.splitlines():
+        if line.startswith(RESULT_MARK):
+            return dict(json.loads(line[len(RESULT_MARK):]), child_wall_s=wall)
+    tail = (proc.stderr or proc.stdout).strip().splitlines()[-15:]
+    return {"kind": kind, "arg": arg, "error": f"exit {proc.returncode}: " + "\n".join(tail)}
+
+
+def fit_exponent(ns, values):
+    """Least-squares slope of log(values) against log(ns), or None."""
+    import numpy as np
+    if len(ns) < 2:
+        return None
+    return float(np.polyfit(np.log(ns), np.log(values), 1)[0])
+
+
+def fmt(value, spec=".3g", missing="–") -> str:
+    """``value`` formatted with ``spec``, or ``missing`` for None."""
+    return missing if value is None else format(value, spec)
+
+
+def markdown(headers, rows, left=1) -> str:
+    """A markdown table; the first ``left`` columns are left-aligned, the rest right."""
+    lines = ["| " + " | ".join(headers) + " |",
+             "|" + "|".join(":---" if i < left else "---:" for i in range(len(headers))) + "|"]
+    lines += ["| " + " | ".join(str(c) for c in row) + " |" for row in rows]
+    return "\n".join(lines)
+
+
+def label(row) -> str:
+    return str(row["n"]) if row.get("kind") == "chain" else f"{row['model']} ({row['n']})"
+
+
+def generation_table(rows) -> str:
+    headers = ["n", "import s", "derive s", "CSE s", "emit s", "compile s", "other s",
+               "**total s**",
+               "RSS py MB", "RSS cc MB", "ops before", "ops after", "stmts", "-O"]
+    body = []
+    for r in rows:
+        if "error" in r:
+            body.append([r.get("arg"), "**failed**"] + [""] * (len(headers) - 2))
+            continue
+        body.append([label(r), fmt(r["import_s"]), fmt(r["derive_s"]), fmt(r["cse_s"]), fmt(r["emit_s"]),
+                     fmt(r["compile_s"]), fmt(r["other_s"]), f"**{fmt(r['total_s'])}**",
+                     fmt(r["rss_py_mb"], ".0f"), fmt(r["rss_cc_mb"], ".0f"),
+                     r["ops_before"], r["ops_after"], r["statements"],
+                     "/".join(f.lstrip("-") for f in r["compile_flags"])])
+    return markdown(headers, body)
+
+
+def runtime_table(rows, with_mujoco) -> str:
+    headers = ["n", "rhs C µs", "py f.inplace µs", "py f(t,x,out) µs", "py cm.rhs µs"]
+    if with_mujoco:
+        headers += ["mj_forward µs", "mj_step/4 µs", "mj_forward py µs", "**mj/mg**",
+                    "rel diff"]
+    body = []
+    for r in rows:
+        if "error" in r:
+            continue
+        line = [label(r), fmt(r["rhs_c_us"]), fmt(r.get("rhs_py_inplace_us")),
+                fmt(r["rhs_py_fast_us"]),
+                fmt(r["rhs_py_plain_us"])]
+        if with_mujoco:
+            if "mj_forward_us" in r:
+                mark = "" if r["mj_timing"] == "C" else " (py)"
+                line += [fmt(r["mj_forward_us"]) + mark, fmt(r["mj_step4_us"]),
+                         fmt(r["mj_forward_py_us"]), f"**{fmt(r['mj_over_mg'])}**",
+                         fmt(r["mj_rel_diff"], ".1e")]
+            else:
+                line += ["–"] * 5
+        body.append(line)
+    return markdown(headers, body)
+
+
+def goals(rows, fits) -> list:
+    """[(goal, measured, verdict)] for the goals of the issue."""
+    chain = {r["n"]: r for r in rows if r.get("kind") == "chain" and "error" not in r}
+    failed = {int(r["arg"]) for r in rows if r.get("kind") == "chain" and "error" in r}
+    arms = [r for r in rows if r.get("kind") == "file" and "error" not in r]
+    arm = arms[0] if arms else None
+    out = []
+
+    def verdict(ok):
+        return "met" if ok else "**NOT met**"
+
+    def by_n(n, goal, measure, test):
+        if n in chain:
+            value = measure(chain[n])
+            out.append((goal, value[0], verdict(test(*value[1:]))))
+        elif n in failed:
+            out.append((goal, "failed", "**NOT met**"))
+        else:
+            out.append((goal, "n not run", "not run"))
+
+    by_n(10, "n=10: model to importable module ≤ 3 s",
+         lambda r: (f"{r['total_s']:.2f} s", r["total_s"]), lambda t: t <= 3)
+    by_n(30, "n=30: ≤ 15 s and ≤ 1 GB (python + largest compiler RSS)",
+         lambda r: (f"{r['total_s']:.2f} s, {r['rss_py_mb'] + r['rss_cc_mb']:.0f} MB",
+                    r["total_s"], r["rss_py_mb"] + r["rss_cc_mb"]),
+         lambda t, mb: t <= 15 and mb <= 1024)
+    if 50 in chain:
+        out.append(("n=50 completes", f"{chain[50]['total_s']:.2f} s", "met"))
+    else:
+        out.append(("n=50 completes", "failed" if 50 in failed else "n not run",
+                    "**NOT met**" if 50 in failed else "not run"))
+
+    def per_call_goal(goal, key, limit):
+        if arm is not None:
+            out.append((goal + f" [{arm['model']}]", f"{arm[key]:.3g} µs",
+                        verdict(arm[key] <= limit)))
+        if 7 in chain:
+            note = "chain n=7" + ("" if arm is not None else "; proxy, arm7.yaml not found")
+            out.append((goal + f" [{note}]", f"{chain[7][key]:.3g} µs",
+                        verdict(chain[7][key] <= limit)))
+        elif arm is None:
+            out.append((goal, "neither arm7 nor n=7 run", "not run"))
+
+    per_call_goal("7-dof rhs in C ≤ 0.5 µs", "rhs_c_us", 0.5)
+    if fits.get("ops_after") is None:
+        out.append(("ops after CSE grow ≤ ~n²", "fewer than 2 chains", "not run"))
+    else:
+        local = fits.get("ops_after_local")
+        value = f"n^{fits['ops_after']:.2f} (fit)" + (
+            f", n^{local:.2f} (last two n)" if local is not None else "")
+        out.append(("ops after CSE grow ≤ ~n² (exponent ≤ 2.2)", value,
+                    verdict(fits["ops_after"] <= 2.2)))
+    if 20 in chain and "mj_forward_us" in chain[20]:
+        r = chain[20]
+        out.append(("n=20: rhs in C < one MuJoCo mj_forward",
+                    f"{r['rhs_c_us']:.3g} µs vs {r['mj_forward_us']:.3g} µs",
+                    verdict(r["rhs_c_us"] < r["mj_forward_us"])))
+    else:
+        out.append(("n=20: rhs in C < one MuJoCo mj_forward",
+                    "n=20 or mujoco not run", "not run"))
+    per_call_goal("Python low-overhead call (f.inplace) ≤ 1 µs", "rhs_py_inplace_us", 1.0)
+    return out
+
+
+def environment() -> dict:
+    cpu = platform.processor()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    cc = shlex.split(os.environ.get("CC", "cc"))
+    try:
+        cc_version = _run_checked([*cc, "--version"]).splitlines()[0]
+    except (RuntimeError, OSError):
+        cc_version = "unknown"
+    return {"cpu": cpu, "cores": os.cpu_count(), "python": platform.python_version(),
+            "loadavg_at_start": os.getloadavg()[0],
+            "compiler": cc_version, "MODELGEN_CFLAGS": os.environ.get("MODELGEN_CFLAGS", "")}
+
+
+def parse_args(argv):
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--n", type=int, nargs="+", metavar="N",
+                        help=f"chain sizes (default {' '.join(map(str, DEFAULT_NS))})")
+    parser.add_argument("--quick", action="store_true",
+                        help=f"chain sizes {' '.join(map(str, QUICK_NS))}")
+    parser.add_argument("--arm", default=str(REPO / "models" / "arm7.yaml"),
+                        help="model file of the 7-joint arm, included if it exists "
+                             "(default: models/arm7.yaml); '' to skip")
+    parser.add_argument("--json", metavar="PATH", help="also save the results as JSON")
+    parser.add_argument("--timeout", type=float, default=3600,
+                        help="seconds allowed per model (default 3600)")
+    parser.add_argument("--rounds", type=int, default=3,
+                        help="alternating rounds of the C timings of modelgen and MuJoCo; "
+                             "the minimum is kept (default 3)")
+    parser.add_argument("--keep", action="store_true",
+                        help="keep the temporary directory (its path is printed)")
+    # Internal: the per-model child process.
+    parser.add_argument("--child", help=argparse.SUPPRESS)
+    parser.add_argument("--workdir", help=argparse.SUPPRESS)
+    parser.add_argument("--mj-harness", default="", help=argparse.SUPPRESS)
+    return parser.parse_args(argv)
+
+
+def main(argv=None) -> int:
+    args = parse_args(argv)
+    if args.child:
+        kind, arg = args.child.split(":", 1)
+        row = child(kind, arg, Path(args.workdir), args.mj_harness or None, args.rounds)
+        print(RESULT_MARK + json.dumps(row), flush=True)
+        return 0
+
+    ns = sorted(set(args.n or (QUICK_NS if args.quick else DEFAULT_NS)))
+    env = environment()
+    mujoco_ok = have_mujoco()
+    root = Path(tempfile.mkdtemp(prefix="modelgen-scaling-"))
+    notes = []
+    try:
+        harness = None
+        if mujoco_ok:
+            harness, why = build_mujoco_harness(root / "mujoco")
+            if harness is None:
+                notes.append(f"MuJoCo timed through Python (py): {why}")
+        else:
+            notes.append("mujoco is not installed: MuJoCo columns skipped")
+
+        jobs = [("chain", n) for n in ns]
+        if args.arm and Path(args.arm).is_file():
+            jobs.append(("file", str(Path(args.arm).resolve())))
+        elif args.arm:
+            notes.append(f"{args.arm} not found: per-call goals use chain n=7 as a proxy")
+        rows = []
+        for kind, arg in jobs:
+            print(f"... {kind} {arg}", file=sys.stderr, flush=True)
+            work = root / (f"chain_{arg}" if kind == "chain" else Path(arg).stem)
+            row = run_one(kind, arg, work, harness, args.rounds, args.timeout)
+            rows.append(row)
+            if "error" in row:
+                print(f"    FAILED: {row['error']}", file=sys.stderr, flush=True)
+            else:
+                print(f"    total {row['total_s']:.2f} s, rhs {row['rhs_c_us']:.3g} µs",
+                      file=sys.stderr, flush=True)
+    finally:
+        if args.keep:
+            print(f"kept {root}", file=sys.stderr)
+        else:
+            shutil.rmtree(root, ignore_errors=True)
+
+    good = [r for r in rows if r.get("kind") == "chain" and "error" not in r]
+    fits = {key: fit_exponent([r["n"] for r in good], [r[key] for r in good])
+            for key in ("ops_before", "ops_after", "total_s", "rhs_c_us")}
+    if len(good) >= 2:
+        a, b = good[-2], good[-1]
+        fits["ops_after_local"] = fit_exponent([a["n"], b["n"]], [a["ops_after"], b["ops_after"]])
+    if any("mujoco_version" in r for r in rows):
+        env["mujoco"] = next(r["mujoco_version"] for r in rows if "mujoco_version" in r)
+
+    print(f"# modelgen code generation scaling: spatial chain\n")
+    print(f"{env['cpu']}, {env['cores']} cores; {env['compiler']}; Python {env['python']}"
+          + (f"; MuJoCo {env['mujoco']}" if "mujoco" in env else "")
+          + f"; load average before the run {env['loadavg_at_start']:.2f}")
+    print("\n## Model to importable module (fresh process per model)\n")
+    print(generation_table(rows))
+    print("\n## Per-call time of the right-hand side (one forward-dynamics evaluation)\n")
+    print(runtime_table(rows, mujoco_ok))
+    print("\n## Fitted exponents (least squares on log-log over the chains run)\n")
+    for key, what in (("ops_before", "rhs ops before CSE"), ("ops_after", "rhs ops after CSE"),
+                      ("ops_after_local", "rhs ops after CSE, last two n"),
+                      ("total_s", "total generation time"), ("rhs_c_us", "rhs time in C")):
+        if fits.get(key) is not None:
+            print(f"- {what}: n^{fits[key]:.2f}")
+    print("\n## Goals\n")
+    print(markdown(["goal", "measured", "verdict"], goals(rows, fits), left=3))
+    for r in rows:
+        if "error" in r:
+            notes.append(f"{r['kind']} {r['arg']} failed: {r['error']}")
+        elif r.get("mj_badqacc_warnings"):
+            notes.append(f"n={r['n']}: MuJoCo reported bad qacc during mj_step timing")
+    if notes:
+        print("\nNotes:\n" + "\n".join(f"- {n}" for n in notes))
+
+    if args.json:
+        Path(args.json).write_text(json.dumps(
+            {"environment": env, "ns": ns, "rows": rows, "fits": fits,
+             "goals": [dict(zip(("goal", "measured", "verdict"), g))
+                       for g in goals(rows, fits)], "notes": notes}, indent=2))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
