@@ -11,7 +11,7 @@ __version__ = "0.1.0"
 from .errors import (BuildError, DerivationError, ModelError, ModelgenError,  # noqa: E402
                      SimulationError, TemplateError)
 
-__all__ = ["load", "generate_model", "ModelgenError", "ModelError", "BuildError",
+__all__ = ["load", "load_scene", "generate_model", "ModelgenError", "ModelError", "BuildError",
            "DerivationError", "SimulationError", "TemplateError", "__version__"]
 
 
@@ -49,3 +49,27 @@ def load(source, out_dir=None, *, force: bool = False):
     if not generated.build.cached:
         check_mass_matrix(cm)
     return cm
+
+
+def load_scene(path, out_dir=None, *, force: bool = False, progress=None):
+    """Load a scene file and build its reduced model; returns a ``Scene``.
+
+    Only the effects and outputs the scene selects are generated.  Output goes
+    to ``out_dir`` (default ``generated/<scene name>``).
+
+    >>> res = modelgen.load_scene("models/scenes/dp_damped.yaml").run()   # doctest: +SKIP
+    """
+    from .scene import load_scene as load_scene_spec
+    from .simulate import Scene
+    return Scene(load_scene_spec(path), out_dir, force=force, progress=progress)
+
+
+def is_scene_file(path) -> bool:
+    """True if a YAML file is a scene (it has a top-level ``scene:`` key)."""
+    import re
+    from pathlib import Path
+    try:
+        text = Path(path).read_text()
+    except OSError:
+        return False
+    return re.search(r"^scene\s*:", text, re.MULTILINE) is not None

@@ -3,8 +3,9 @@
 ``modelgen generate MODEL.yaml [-o DIR]``  writes the C, header and compiled
 module and prints n, the operation counts and the time of each stage.
 
-``modelgen simulate MODEL.yaml [-o OUT]``  builds (or reuses) the model,
-integrates it with RK4 and writes a CSV and a PNG plot.
+``modelgen simulate SCENE.yaml [-o OUT]``  builds (or reuses) the scene's
+reduced model, integrates it in C and writes CSV, NPZ and PNG; given a model
+file instead of a scene, integrates it with RK4 from ``--init`` values.
 """
 from __future__ import annotations
 
@@ -57,11 +58,43 @@ def _parse_assignments(items, what):
     return out
 
 
+def _simulate_scene(args) -> int:
+    from . import load_scene
+
+    def progress(message):
+        print(message, file=sys.stderr, flush=True)
+    t0 = time.perf_counter()
+    scene = load_scene(args.model, args.build_dir, progress=progress)
+    print(scene.summary())
+    progress(f"{scene.spec.name}: integrating ({time.perf_counter() - t0:.2f} s so far)")
+    result = scene.run()
+    out = Path(args.output)
+    out.mkdir(parents=True, exist_ok=True)
+    name = scene.spec.name
+    print(f"wrote {result.to_csv(out / f'{name}.csv')}")
+    print(f"wrote {result.to_npz(out / f'{name}.npz')}")
+    if not args.no_plot:
+        png = result.plot(out / f"{name}.png", title=f"scene {name}",
+                          energy_error=scene.conservative)
+        print(f"wrote {png}")
+    total = result.energy.sum(axis=1)
+    change = (total[-1] - total[0]) / max(abs(result.energy).max(), 1e-300)
+    label = "relative energy error" if scene.conservative else "relative energy change"
+    print(f"{label} {change:.3e}; {len(result.t)} samples to t = {result.t[-1]:g} s "
+          f"in {time.perf_counter() - t0:.2f} s")
+    if not result.success:
+        print(f"simulation stopped: {result.message}", file=sys.stderr)
+        return 1
+    return 0
+
+
 def _simulate(args) -> int:
     import numpy as np
 
-    from . import load
+    from . import is_scene_file, load
     from .simulate import rk4
+    if is_scene_file(args.model):
+        return _simulate_scene(args)
     cm = load(args.model, args.build_dir)
     init = _parse_assignments(args.init, "init")
     names = list(cm.coordinates) + [c + "_dot" for c in cm.coordinates]
@@ -108,11 +141,12 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--force", action="store_true", help="rebuild even if cached")
     g.set_defaults(func=_generate)
 
-    s = sub.add_parser("simulate", help="integrate a model with RK4; write CSV and PNG",
-                       description="Build (or reuse) the model, integrate it with fixed-step "
-                                   "RK4 from the given initial state and write "
-                                   "OUT/<name>.csv and OUT/<name>.png.")
-    s.add_argument("model", help="model YAML file")
+    s = sub.add_parser("simulate", help="run a scene (or a model) and write CSV, NPZ and PNG",
+                       description="Run a scene file: build (or reuse) its reduced model with "
+                                   "only the effects and outputs it selects, integrate it in C "
+                                   "and write OUT/<scene>.csv, .npz and .png. Given a model "
+                                   "file instead, integrate it with RK4 from --init values.")
+    s.add_argument("model", help="scene YAML file (or model YAML file)")
     s.add_argument("-o", "--output", default="out", help="output directory (default: out)")
     s.add_argument("--build-dir", default=None,
                    help="where the model is built (default: generated/<name>)")

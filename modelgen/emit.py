@@ -203,7 +203,7 @@ def _comment_safe(text: str) -> str:
 
 def template_context(*, name: str, description: str, model_hash: str, n: int,
                      coordinates, parameters, inputs, bodies,
-                     functions: dict) -> dict:
+                     functions: dict, output_columns=()) -> dict:
     """The plain dict every C template receives."""
     return {
         "name": name,
@@ -222,18 +222,42 @@ def template_context(*, name: str, description: str, model_hash: str, n: int,
         "inputs": list(inputs),
         "bodies": list(bodies),
         "functions": {k: asdict(f) for k, f in functions.items()},
-        "api": public_api(name, n, len(parameters), len(inputs), len(bodies)),
+        "ny": len(output_columns),
+        "output_columns": list(output_columns),
+        "api": public_api(name, n, len(parameters), len(inputs), len(bodies),
+                          len(output_columns)),
         "solve_lines": unrolled_ldlt(n, f"{name.upper()}_PIVOT_TOL") if n <= UNROLL_SOLVE else [],
     }
 
 
-def public_api(name: str, n: int, n_p: int, n_u: int, n_b: int) -> list:
+def public_api(name: str, n: int, n_p: int, n_u: int, n_b: int, n_y: int = 0) -> list:
     """Prototypes and documentation of every exported function.
 
     The header and the cffi ``cdef`` are both rendered from this one list.
     """
     P = f"p: {n_p} parameters (see {name}_default_parameters)"
-    return [
+    extra = []
+    if n_y:
+        extra.append(
+            {"ret": "void", "name": f"{name}_outputs",
+             "params": "double t, const double *x, const double *u, const double *p, double *y",
+             "doc": [f"The scene's recorded outputs y[{n_y}] at state x[{2 * n}] (columns in",
+                     "the order listed at the top of this file)."]})
+    extra.append(
+        {"ret": "int", "name": f"{name}_simulate_rk4",
+         "params": "double t0, double step, long n_steps, long every, const double *x0, "
+                   "const double *p, long n_u, const double *u_times, const double *u_values, "
+                   "int u_hold, double *t_out, double *x_out, double *y_out, long *n_out, "
+                   "double *t_stop",
+         "doc": ["Classic RK4 from x0 at t0 for n_steps steps of size step, recording t, x",
+                 f"(and the {n_y} outputs) every `every` steps and after the last step:",
+                 "t_out[], x_out[][NX], y_out[][NY] need n_steps/every + 2 rows.",
+                 f"Inputs: n_u samples u_times[n_u] (increasing), u_values[n_u][{n_u}],",
+                 "interpolated linearly (u_hold = 0) or held (u_hold = 1), ends held;",
+                 "n_u = 0 means all inputs are zero.  Returns 0; or k > 0 when pivot k",
+                 "of A failed, -1 when the state became non-finite.  *n_out rows were",
+                 "written either way, *t_stop is the time of the last good state."]})
+    return extra + [
         {"ret": "int", "name": f"{name}_abi_version", "params": "void",
          "doc": [f"Returns the ABI version ({ABI_VERSION}) this file was generated for."]},
         {"ret": "void", "name": f"{name}_default_parameters", "params": "double *p",

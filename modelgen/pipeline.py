@@ -18,6 +18,7 @@ from .dynamics import Equations, derive_equations
 from .errors import ModelError
 from .emit import ABI_VERSION, emit_sources, print_routine, template_context, templates_digest
 from .kinematics import derive_kinematics
+from .outputs import derive_outputs
 from .spec import ModelSpec
 
 DEFAULT_OUTPUT = Path("generated")
@@ -38,30 +39,30 @@ class Generated:
         return self.manifest["ops"]
 
 
-def model_hash(spec: ModelSpec) -> str:
+def model_hash(spec: ModelSpec, outputs=()) -> str:
     """Hash of what determines the generated C: the model, modelgen, the templates.
 
     The file the model came from and its line numbers are not part of it, so
     the same model gives the same C wherever it lies.
     """
     h = hashlib.sha256()
-    for part in (repr(replace(spec, source=None, lines=())), __version__, str(ABI_VERSION),
-                 templates_digest()):
+    for part in (repr(replace(spec, source=None, lines=())), repr(tuple(outputs)),
+                 __version__, str(ABI_VERSION), templates_digest()):
         h.update(part.encode())
         h.update(b"\0")
     return h.hexdigest()
 
 
-def build_hash(spec: ModelSpec) -> str:
+def build_hash(spec: ModelSpec, outputs=()) -> str:
     """Cache key of the compiled module: the model hash, the compiler and its flags."""
     h = hashlib.sha256()
-    for part in (model_hash(spec), " ".join(compiler()), os.environ.get("MODELGEN_CFLAGS", "")):
+    for part in (model_hash(spec, outputs), " ".join(compiler()), os.environ.get("MODELGEN_CFLAGS", "")):
         h.update(part.encode())
         h.update(b"\0")
     return h.hexdigest()
 
 
-def routines_for(eqs: Equations):
+def routines_for(eqs: Equations, output_exprs=()):
     """The C routines of a model: (name, inputs, outputs) for make_routines."""
     n = len(eqs.q)
     t = (("t", (eqs.t,)),)
@@ -76,7 +77,7 @@ def routines_for(eqs: Equations):
         ("rhs", t + (x, u, p), (("A", A_flat), ("b", b))),
         ("energy", (q, qd, p), (("out", (eqs.kinetic, eqs.potential)),)),
         ("body_poses", (q, p), (("T", tuple(e for pose in eqs.poses for e in pose)),)),
-    ]
+    ] + ([("outputs", t + (x, u, p), (("y", tuple(output_exprs)),))] if output_exprs else [])
 
 
 def _check_generable(spec: ModelSpec) -> None:
@@ -91,10 +92,12 @@ def _check_generable(spec: ModelSpec) -> None:
                          fix="declare at least one body with a mass under 'bodies'")
 
 
-def generate(spec: ModelSpec, out_dir=None, *, force: bool = False) -> Generated:
+def generate(spec: ModelSpec, out_dir=None, *, force: bool = False, outputs=()) -> Generated:
     """Generate, compile and cache the model; reuse an unchanged build.
 
-    ``out_dir`` defaults to ``generated/<name>``.
+    ``out_dir`` defaults to ``generated/<name>``.  ``outputs`` (a tuple of
+    :class:`~modelgen.spec.OutputSpec`, from a scene) adds a
+    ``<name>_outputs`` routine computing exactly those quantities.
 
     >>> g = generate(load_model("models/double_pendulum.yaml"))   # doctest: +SKIP
     >>> g.manifest["n"]                                             # doctest: +SKIP
@@ -102,7 +105,7 @@ def generate(spec: ModelSpec, out_dir=None, *, force: bool = False) -> Generated
     """
     _check_generable(spec)
     directory = Path(out_dir) if out_dir is not None else DEFAULT_OUTPUT / spec.name
-    key = build_hash(spec)
+    key = build_hash(spec, outputs)
     if not force:
         hit = cached_build(directory, key)
         if hit is not None:
@@ -110,18 +113,23 @@ def generate(spec: ModelSpec, out_dir=None, *, force: bool = False) -> Generated
 
     seconds = {}
     t0 = time.perf_counter()
-    eqs = derive_equations(derive_kinematics(spec))
+    kin = derive_kinematics(spec)
+    eqs = derive_equations(kin)
+    columns = derive_outputs(kin, eqs, outputs) if outputs else None
+    graph = columns.graph if columns else eqs.graph
     t1 = time.perf_counter()
     seconds["derive"] = t1 - t0
-    routines = make_routines(eqs.graph, routines_for(eqs))
+    routines = make_routines(graph, routines_for(eqs, columns.exprs if columns else ()))
     t2 = time.perf_counter()
     seconds["cse"] = t2 - t1
-    outputs_c = {"A": "A", "h": "h", "tau": "tau", "b": "b", "out": "out", "T": "T"}
+    outputs_c = {"A": "A", "h": "h", "tau": "tau", "b": "b", "out": "out", "T": "T", "y": "y"}
     functions = {r.name: print_routine(r, outputs_c) for r in routines}
     context = template_context(
-        name=spec.name, description=spec.description, model_hash=model_hash(spec)[:16], n=spec.n,
+        name=spec.name, description=spec.description, model_hash=model_hash(spec, outputs)[:16],
+        n=spec.n,
         coordinates=spec.coordinates, parameters=spec.parameters, inputs=spec.inputs,
-        bodies=eqs.bodies, functions=functions)
+        bodies=eqs.bodies, functions=functions,
+        output_columns=[c for cols in columns.columns for c in cols] if columns else ())
     sources = emit_sources(context)
     t3 = time.perf_counter()
     seconds["emit"] = t3 - t2
@@ -137,6 +145,8 @@ def generate(spec: ModelSpec, out_dir=None, *, force: bool = False) -> Generated
         "parameters": [[name, float(value)] for name, value in spec.parameters],
         "inputs": list(spec.inputs),
         "bodies": list(eqs.bodies),
+        "outputs": [{"name": name, "columns": list(cols)}
+                    for name, cols in zip(columns.names, columns.columns)] if columns else [],
         "ops": {f.name: {"before_cse": f.ops_before, "after_cse": f.ops_after,
                          "statements": f.statements} for f in functions.values()},
     }

@@ -8,7 +8,7 @@ everything computed up to the failure, its time and the reason.
 from __future__ import annotations
 
 import csv
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -28,23 +28,41 @@ class SimulationResult:
     status: int = 0
     message: str = "success"
     energy: np.ndarray | None = None
+    outputs: dict = field(default_factory=dict)          # name -> (samples, columns)
+    output_columns: dict = field(default_factory=dict)   # name -> column names
 
     @property
     def success(self) -> bool:
         return self.status == 0
 
+    def __getitem__(self, name):
+        """A recorded output by name, shape (samples, columns)."""
+        return self.outputs[name]
+
     def columns(self) -> list:
         speeds = [c + "_dot" for c in self.coordinates]
         names = ["t", *self.coordinates, *speeds]
+        for name in self.outputs:
+            names += list(self.output_columns[name])
         if self.energy is not None:
             names += ["kinetic", "potential", "total"]
         return names
 
     def table(self) -> np.ndarray:
-        parts = [self.t[:, None], self.x]
+        parts = [self.t[:, None], self.x, *self.outputs.values()]
         if self.energy is not None:
             parts += [self.energy, self.energy.sum(axis=1, keepdims=True)]
         return np.hstack(parts)
+
+    def to_npz(self, path) -> Path:
+        """t, x, the energies and every output as arrays in one .npz file."""
+        path = Path(path)
+        arrays = {"t": self.t, "x": self.x, **{f"output:{k}": v for k, v in self.outputs.items()}}
+        if self.energy is not None:
+            arrays["energy"] = self.energy
+        np.savez(path, status=self.status, message=self.message,
+                 coordinates=np.array(self.coordinates), **arrays)
+        return path
 
     def to_csv(self, path) -> Path:
         path = Path(path)
@@ -55,12 +73,16 @@ class SimulationResult:
                 writer.writerow([repr(float(v)) for v in row])
         return path
 
-    def plot(self, path, title: str = "") -> Path:
-        """Coordinates against time, and the energy with its relative error."""
+    def plot(self, path, title: str = "", energy_error: bool = True) -> Path:
+        """Coordinates against time, and the energy with its relative error.
+
+        ``energy_error=False`` leaves out the error panel (for scenes with
+        dissipation or driving forces, whose energy is not conserved).
+        """
         import matplotlib
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
-        rows = 3 if self.energy is not None else 1
+        rows = 1 if self.energy is None else (3 if energy_error else 2)
         fig, axes = plt.subplots(rows, 1, figsize=(8, 2.6 * rows + 0.6), sharex=True,
                                  squeeze=False)
         axes = axes[:, 0]
@@ -76,6 +98,7 @@ class SimulationResult:
             axes[1].plot(self.t, total, label="total", color="k")
             axes[1].set_ylabel("energy [J]")
             axes[1].legend(loc="upper right", fontsize="small")
+        if self.energy is not None and energy_error:
             scale = max(np.max(np.abs(self.energy)), 1e-300)
             axes[2].semilogy(self.t[1:], np.maximum(np.abs(total[1:] - total[0]) / scale, 1e-17))
             axes[2].set_ylabel("relative energy error")
@@ -135,3 +158,103 @@ def rk4(cm, x0, t_span, dt, *, u=None, p=None, record_energy=True) -> Simulation
         n = cm.n
         energy = np.array([cm.energy(row[:n], row[n:], p) for row in xs])
     return SimulationResult(ts, xs, cm.coordinates, status, message, energy)
+
+
+#: effect kinds whose forces derive from a potential (energy is then conserved)
+CONSERVATIVE_KINDS = ("gravity", "spring", "torsion_spring")
+
+
+class Scene:
+    """A scene ready to run: its reduced model built with exactly its outputs.
+
+    >>> scene = modelgen.load_scene("models/scenes/dp_damped.yaml")   # doctest: +SKIP
+    >>> res = scene.run()                                             # doctest: +SKIP
+    >>> res.t, res.x, res["tip"]                                      # doctest: +SKIP
+    """
+
+    def __init__(self, spec, out_dir=None, *, force: bool = False, progress=None):
+        from .pipeline import generate
+        from .runtime import CompiledModel, check_mass_matrix
+        self.spec = spec
+        if progress:
+            progress(f"{spec.name}: generating (or reusing) the model")
+        generated = generate(spec.model, out_dir, force=force, outputs=spec.outputs)
+        self.generated = generated
+        self.model = CompiledModel(generated.manifest, generated.build.module_path)
+        if not generated.build.cached:
+            check_mass_matrix(self.model)
+
+    @property
+    def conservative(self) -> bool:
+        """True when every selected effect derives from a potential."""
+        kinds = {e.name: e.kind for e in self.spec.full_model.effects}
+        kinds.update({a.name: "action" for a in self.spec.full_model.actions})
+        kinds["gravity"] = "gravity"
+        return all(kinds.get(name) in CONSERVATIVE_KINDS for name in self.spec.effects)
+
+    def summary(self) -> str:
+        """What the scene simulates: effects, stiff ones flagged, outputs, ops."""
+        s = self.spec
+        lines = [f"scene {s.name}: model {s.full_model.name}, n = {s.model.n}",
+                 f"effects on: {', '.join(s.effects) or 'none'}"]
+        off = [name for name in _effect_names(s.full_model) if name not in s.effects]
+        lines.append(f"effects off (not generated): {', '.join(off) or 'none'}")
+        if s.stiff_effects:
+            lines.append(f"STIFF or non-smooth: {', '.join(s.stiff_effects)} -- a small step "
+                         f"or a stiff integrator is needed")
+        lines.append(f"outputs: {', '.join(o.name for o in s.outputs) or 'none'}")
+        ops = self.generated.manifest["ops"]["rhs"]
+        lines.append(f"rhs: {ops['after_cse']} operations after CSE")
+        lines.append(f"time {s.t_start:g} .. {s.t_end:g} s, {s.method} step {s.step:g} s, "
+                     f"sampled every {s.sample_dt:g} s")
+        return "\n".join(lines)
+
+    def _inputs(self):
+        s = self.spec
+        signals = {sig.name: sig for sig in s.inputs}
+        names = self.model.inputs
+        if not signals:
+            return None
+        if all(sig.constant is not None for sig in signals.values()):
+            return {name: sig.constant for name, sig in signals.items()}
+        grid = sorted({t for sig in signals.values() for t in sig.times})
+        values = np.zeros((len(grid), len(names)))
+        holds = {sig.interpolation for sig in signals.values() if sig.constant is None}
+        if len(holds) > 1:
+            raise SimulationError(f"scene {s.name}: all sampled inputs must use the same "
+                                  f"interpolation, got {sorted(holds)}")
+        hold = holds.pop() == "hold"
+        for j, name in enumerate(names):
+            sig = signals.get(name)
+            if sig is None:
+                continue
+            if sig.constant is not None:
+                values[:, j] = sig.constant
+            elif hold:
+                idx = np.searchsorted(sig.times, grid, side="right") - 1
+                values[:, j] = np.asarray(sig.values)[np.clip(idx, 0, len(sig.times) - 1)]
+            else:
+                values[:, j] = np.interp(grid, sig.times, sig.values)
+        return (np.array(grid), values, "hold" if hold else "linear")
+
+    def run(self, p=None, x0=None) -> SimulationResult:
+        """Integrate the scene in C; energies are recorded for the plot."""
+        s = self.spec
+        every = max(1, int(round(s.sample_dt / s.step)))
+        if abs(every * s.step - s.sample_dt) > 1e-9 * s.sample_dt:
+            raise SimulationError(f"scene {s.name}: the sampling interval {s.sample_dt:g} s "
+                                  f"must be a multiple of the step {s.step:g} s")
+        if s.method != "rk4":
+            raise SimulationError(f"scene {s.name}: method {s.method!r} is not available; "
+                                  f"use rk4")
+        x0 = np.array(s.initial if x0 is None else x0, dtype=float)
+        res = self.model.simulate_rk4(x0, (s.t_start, s.t_end), s.step, every=every,
+                                      u=self._inputs(), p=p)
+        n = self.model.n
+        res.energy = np.array([self.model.energy(row[:n], row[n:], p) for row in res.x])
+        return res
+
+
+def _effect_names(spec) -> list:
+    names = ["gravity"] if spec.gravity is not None else []
+    return names + [a.name for a in spec.actions] + [e.name for e in spec.effects]

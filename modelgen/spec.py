@@ -113,6 +113,108 @@ class ActionSpec:
     base: str
     torque: Vec3
     force: Vec3
+    kind = "action"
+
+
+# -- effects: the physical effects a scene may switch on ---------------------------
+# Each contributes to the generalized forces tau and, where it has one, to the
+# potential energy.  Every name below is a field of the YAML entry
+# ``effects: {<name>: {type: <kind>, <field>: ...}}``.
+
+@dataclass(frozen=True)
+class GravityEffect:
+    """Uniform field: force m * vector on every body at its G (vector in ``base``)."""
+    name: str
+    vector: Vec3
+    base: str = CANONICAL_BASE
+    kind = "gravity"
+
+
+@dataclass(frozen=True)
+class SpringEffect:
+    """Linear spring between two points: tension k (l - rest_length) + preload.
+
+    Potential: k/2 (l - rest_length)^2 + preload * l.  The force acts along
+    the line between the points; its generalized force uses the points'
+    partial velocities.
+    """
+    name: str
+    point_a: str
+    point_b: str
+    stiffness: Expr
+    rest_length: Expr
+    preload: Expr = sympy.S.Zero
+    kind = "spring"
+
+
+@dataclass(frozen=True)
+class TorsionSpringEffect:
+    """Torque -k (q - rest_angle) on one coordinate; potential k/2 (q - rest)^2."""
+    name: str
+    coordinate: str
+    stiffness: Expr
+    rest_angle: Expr = sympy.S.Zero
+    kind = "torsion_spring"
+
+
+@dataclass(frozen=True)
+class DamperEffect:
+    """Linear damper between two points: tension c * dl/dt along the line."""
+    name: str
+    point_a: str
+    point_b: str
+    damping: Expr
+    kind = "damper"
+
+
+@dataclass(frozen=True)
+class JointDampingEffect:
+    """Viscous damping -c q_dot on each listed coordinate."""
+    name: str
+    coordinates: tuple
+    damping: Expr
+    kind = "joint_damping"
+
+
+@dataclass(frozen=True)
+class FrictionEffect:
+    """Coulomb + viscous + Stribeck friction on one coordinate, regularised.
+
+    ``tau = -(coulomb + (static - coulomb) exp(-(v/stribeck_speed)^2))
+    * tanh(v / smoothing_speed) - viscous * v`` with v the coordinate's speed.
+    ``smoothing_speed`` sets the width of the smooth transition through v = 0
+    (exact stick/slip needs event handling in the integrators).
+    """
+    name: str
+    coordinate: str
+    coulomb: Expr
+    viscous: Expr = sympy.S.Zero
+    static: Expr | None = None           # None: same as coulomb (no Stribeck peak)
+    stribeck_speed: Expr = sympy.S.One
+    smoothing_speed: Expr = sympy.Rational(1, 1000)
+    kind = "friction"
+
+
+@dataclass(frozen=True)
+class DragEffect:
+    """Quadratic drag on ``body`` at ``point``: F = -1/2 rho Cd A |v| v.
+
+    v is the velocity of the body-fixed point at ``point`` relative to still
+    air; the force acts on the body at that point.
+    """
+    name: str
+    body: str
+    point: str
+    density: Expr
+    drag_coefficient: Expr
+    area: Expr
+    kind = "drag"
+
+
+EFFECT_TYPES = (GravityEffect, SpringEffect, TorsionSpringEffect, DamperEffect,
+                JointDampingEffect, FrictionEffect, DragEffect)
+#: effects that can make a problem stiff or non-smooth: scenes flag them
+STIFF_KINDS = ("spring", "torsion_spring", "friction")
 
 
 @dataclass(frozen=True)
@@ -129,6 +231,7 @@ class ModelSpec:
     bodies: tuple = ()                 # tuple[BodySpec, ...]
     gravity: Optional[Vec3] = None     # components in E, acting at every G
     actions: tuple = ()                # tuple[ActionSpec, ...]
+    effects: tuple = ()                # tuple of the effect dataclasses above
     #: where the spec came from (file path or None) -- for error messages only
     source: Optional[str] = field(default=None, compare=False)
     #: (dotted key, line) pairs for error messages from later stages
@@ -158,3 +261,70 @@ class ModelSpec:
             if k == key:
                 return line
         return None
+
+
+# -- scenes: which effects and outputs a simulation needs ---------------------------
+
+#: output kinds and the keys each takes (see SceneSpec)
+OUTPUT_KINDS = {
+    "position": ("point", "from", "base"),        # r(point) - r(from) in base (from: O, base: E)
+    "velocity": ("point", "base"),                # velocity of a point wrt E, in base
+    "orientation": ("base", "relative_to"),       # 3x3 change-of-basis matrix, row-major
+    "angular_velocity": ("base", "relative_to", "components"),
+    "energy": ("which",),                         # kinetic | potential | total
+    "generalized_force": ("effect",),             # tau of one effect (n values)
+    "pose": ("body",),                            # 4x4 pose, row-major
+}
+
+
+@dataclass(frozen=True)
+class OutputSpec:
+    """One recorded output of a scene: ``kind`` with its resolved arguments."""
+    name: str
+    kind: str               # a key of OUTPUT_KINDS
+    args: tuple             # ((key, value), ...) with every key of the kind, defaults filled
+
+    def arg(self, key):
+        return dict(self.args)[key]
+
+
+@dataclass(frozen=True)
+class InputSignal:
+    """An input's value at run time: a constant, or samples in time.
+
+    ``times``/``values`` are increasing sample times and the values there;
+    ``interpolation`` is ``"linear"`` or ``"hold"`` (zero-order hold); before
+    the first and after the last sample the end values are held.
+    """
+    name: str
+    constant: Optional[float] = None
+    times: tuple = ()
+    values: tuple = ()
+    interpolation: str = "linear"
+
+
+@dataclass(frozen=True)
+class SceneSpec:
+    """A validated scene: a model, the effects switched on, and what to record.
+
+    ``model`` is the scene's reduced model: only the selected effects (the
+    top-level gravity is the effect named ``gravity``; actions are effects by
+    their names), only the parameters they still use, parameter overrides
+    applied as new defaults, and named after the scene so its C never
+    collides with the full model's.
+    """
+    name: str
+    model: ModelSpec
+    full_model: ModelSpec
+    effects: tuple                  # names switched on, in model order
+    initial: tuple                  # full state in [q, q_dot] order, floats
+    t_start: float
+    t_end: float
+    sample_dt: float
+    method: str = "rk4"
+    step: float = 1e-3
+    inputs: tuple = ()              # tuple[InputSignal, ...] in model input order
+    outputs: tuple = ()             # tuple[OutputSpec, ...]
+    stiff_effects: tuple = ()       # names of selected effects in STIFF_KINDS
+    source: Optional[str] = field(default=None, compare=False)
+    lines: tuple = field(default=(), compare=False)

@@ -55,7 +55,7 @@ HASH_ENV = ("CC", "MODELGEN_CFLAGS")
 #: Every function a model exports, without the "<name>_" prefix; written out
 #: here rather than taken from modelgen.emit.public_api, which renders the header.
 EXPORTED = ("abi_version", "default_parameters", "mass_matrix", "velocity_terms",
-            "generalized_forces", "rhs", "energy", "body_poses")
+            "generalized_forces", "rhs", "energy", "body_poses", "simulate_rk4")
 C99 = ("cc", "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic")
 CXX11 = ("c++", "-x", "c++", "-std=c++11", "-Wall", "-Wextra", "-Werror")
 JOBS = max(2, os.cpu_count() or 2)
@@ -212,6 +212,18 @@ def _checker(model_dir: Path, name: str) -> str:
         f"    {name}_default_parameters(p);",
     ]
     for ret, fn, params in _prototypes(model_dir, name):
+        if fn == f"{name}_simulate_rk4":
+            # 10 steps recorded every 5: rows at steps 0, 5 and 10
+            lines += [
+                "    {",
+                f"        double ts[4], xs[4 * {N}_NX], ys[4 * ({N}_NY + 1)], t_stop;",
+                "        long rows = 0;",
+                f"        if ({fn}(0.0, 1e-3, 10, 5, x, p, 0, 0, 0, 0, ts, xs, ys, &rows, "
+                "&t_stop) != 0) ++failures;",
+                "        if (rows != 3 || ts[2] != 10 * 1e-3 || t_stop != ts[2]) ++failures;",
+                "    }",
+                f'    printf("called {fn}\\n");']
+            continue
         args = []
         for param in (s.strip() for s in params.split(",")):
             if param == "void":
