@@ -208,7 +208,7 @@ class CompiledModel:
         return f
 
     def energy(self, q, qd, p=None) -> np.ndarray:
-        """[kinetic, potential of gravity] in J."""
+        """[kinetic, potential] in J; potential of gravity (zero at O) and of springs."""
         q, qd = self._vector(q, self.n, "q"), self._vector(qd, self.n, "qd")
         out = np.empty(2)
         self._energy(self._ptr(q), self._ptr(qd), self._ptr(self.params(p)), self._ptr(out))

@@ -18,6 +18,11 @@ Translation rules (the conventions of :mod:`modelgen.spec`):
 * loads: gravity ``m g`` at every G (``g`` in components of ``E``); for each
   action a torque on the body's frame and a force applied at the *body-fixed*
   point that coincides with the action point (``v2pt_theory`` from G);
+* effects (``spec.effects``, as documented in :mod:`modelgen.spec`): gravity
+  fields in any base; springs and dampers between two points, acting at the
+  points themselves (their own velocities); drag at a body-fixed point;
+  torsion springs, joint damping and friction as generalized forces added to
+  Kane's Fr; spring potentials are part of V;
 * coordinates ``q_k`` become dynamicsymbols and the speeds are ``u_k = q_k'``,
   so ``mass_matrix`` is modelgen's ``A`` and ``forcing`` is ``tau - h``.
 
@@ -52,7 +57,8 @@ from typing import Optional
 import numpy as np
 import sympy
 from sympy.physics.mechanics import (KanesMethod, Particle, Point,
-                                     ReferenceFrame, RigidBody, dynamicsymbols)
+                                     ReferenceFrame, RigidBody, dynamicsymbols,
+                                     msubs)
 from sympy.physics.vector import Vector
 
 from modelgen.spec import (CANONICAL_BASE, CANONICAL_POINT, TIME, ModelSpec,
@@ -74,8 +80,8 @@ class MechanicsReference:
     Attributes of interest (all symbolic results are in the spec's plain
     symbols: ``q1``, ``q1_dot``, parameters, inputs and ``t``):
 
-    ``mass_matrix``, ``forcing``, ``fr`` (tau), ``kinetic_energy``,
-    ``potential_energy``, ``rotations`` (list of R_B per body, columns are the
+    ``mass_matrix`` (A), ``forcing`` (tau - h), ``fr`` (tau), ``velocity_terms``
+    (h), ``kinetic_energy``, ``potential_energy``, ``rotations`` (list of R_B per body, columns are the
     body base's unit vectors in E) and ``mass_centres`` (r_G in E per body);
     ``frames``, ``points``, ``bodies`` and ``kane`` are the mechanics objects.
     """
@@ -110,6 +116,8 @@ class MechanicsReference:
         self._to_plain = {q: s for q, s in zip(self.q, self.q_syms)}
         self._to_plain.update({u: s for u, s in zip(self.u, self.qd_syms)})
         self._qdot_to_u = {q.diff(t): u for q, u in zip(self.q, self.u)}
+        self._replacements = {q.diff(t): s for q, s in zip(self.q, self.qd_syms)}
+        self._replacements.update(self._to_plain)
 
         def dyn(expr):
             return sympy.sympify(expr).xreplace(to_dynamic)
@@ -155,7 +163,7 @@ class MechanicsReference:
             else:
                 e = (frame.x, frame.y, frame.z)
                 dyadic = sum((I[i][j] * (e[i] | e[j])
-                              for i in range(3) for j in range(3) if I[i][j] != 0 and i <= j),
+                              for i in range(3) for j in range(3) if I[i][j] != 0),
                              start=0 * (e[0] | e[0]))
                 body = RigidBody(b.name, masscenter=G, frame=frame, mass=mass,
                                  inertia=(dyadic, G))
@@ -163,48 +171,117 @@ class MechanicsReference:
             by_name[b.name] = (body, G, frame, mass)
         self.bodies = bodies
 
-        # loads
+        # loads (forces on points, torques on frames), generalized forces put
+        # directly on coordinates, and potential energy
         loads = []
-        g_vec = Vector(0)
-        if spec.gravity is not None:
-            g_vec = vector(CANONICAL_BASE, spec.gravity)
-            for body, G, frame, mass in by_name.values():
-                if g_vec != Vector(0):
-                    loads.append((G, mass * g_vec))
-        for a in spec.actions:
-            body, G, frame, mass = by_name[a.body]
+        direct = [sympy.Integer(0)] * spec.n
+        V = sympy.Integer(0)
+        coordinate_index = {c: k for k, c in enumerate(spec.coordinates)}
+
+        def body_point(name, body, P):
+            """The point of ``body``'s frame that coincides with P (velocity from G)."""
+            _, G, frame, _ = by_name[body]
+            if P is G:
+                return G
+            P_body = G.locatenew(name, P.pos_from(G))
+            P_body.v2pt_theory(G, N, frame)
+            return P_body
+
+        def add_gravity(g_vec, potential):
+            nonlocal V
+            if g_vec == Vector(0):
+                return
+            for _, G, _, mass in by_name.values():
+                loads.append((G, mass * g_vec))
+                if potential:
+                    V -= mass * g_vec.dot(G.pos_from(O))
+
+        def add_action(a):
+            _, G, frame, _ = by_name[a.body]
             torque = vector(a.base, a.torque)
             force = vector(a.base, a.force)
             if torque != Vector(0):
                 loads.append((frame, torque))
             if force != Vector(0):
-                P = points[a.point]
-                if P is G:
-                    loads.append((G, force))
+                # the body-fixed point coinciding with P, not P's own velocity
+                loads.append((body_point(f"{a.name}_on_{a.body}", a.body, points[a.point]),
+                              force))
+
+        if spec.gravity is not None:
+            add_gravity(vector(CANONICAL_BASE, spec.gravity), potential=True)
+        for a in spec.actions:
+            add_action(a)
+        for eff in getattr(spec, "effects", ()):
+            kind = eff.kind
+            if kind == "action":
+                add_action(eff)
+            elif kind == "gravity":
+                # a potential only for a field fixed in E
+                add_gravity(vector(eff.base, eff.vector),
+                            potential=eff.base == CANONICAL_BASE)
+            elif kind in ("spring", "damper"):
+                A, B = points[eff.point_a], points[eff.point_b]
+                d = B.pos_from(A)
+                length = sympy.sqrt(d.dot(d))
+                unit = d / length
+                if kind == "spring":
+                    stretch = length - dyn(eff.rest_length)
+                    tension = dyn(eff.stiffness) * stretch + dyn(eff.preload)
+                    V += dyn(eff.stiffness) * stretch**2 / 2 + dyn(eff.preload) * length
                 else:
-                    # the body-fixed point coinciding with P (not P's own velocity)
-                    P_body = G.locatenew(f"{a.name}_on_{a.body}", P.pos_from(G))
-                    P_body.v2pt_theory(G, N, frame)
-                    loads.append((P_body, force))
+                    rate = unit.dot(B.vel(N) - A.vel(N))
+                    tension = dyn(eff.damping) * rate
+                # the points' own velocities (points are not attached to bodies)
+                loads.append((B, -tension * unit))
+                loads.append((A, tension * unit))
+            elif kind == "torsion_spring":
+                k = coordinate_index[eff.coordinate]
+                stretch = self.q[k] - dyn(eff.rest_angle)
+                direct[k] += -dyn(eff.stiffness) * stretch
+                V += dyn(eff.stiffness) * stretch**2 / 2
+            elif kind == "joint_damping":
+                for c in eff.coordinates:
+                    k = coordinate_index[c]
+                    direct[k] += -dyn(eff.damping) * self.u[k]
+            elif kind == "friction":
+                k = coordinate_index[eff.coordinate]
+                v = self.u[k]
+                coulomb = dyn(eff.coulomb)
+                static = coulomb if eff.static is None else dyn(eff.static)
+                level = coulomb + (static - coulomb) * sympy.exp(
+                    -(v / dyn(eff.stribeck_speed)) ** 2)
+                direct[k] += (-level * sympy.tanh(v / dyn(eff.smoothing_speed))
+                              - dyn(eff.viscous) * v)
+            elif kind == "drag":
+                P_body = body_point(f"{eff.name}_on_{eff.body}", eff.body, points[eff.point])
+                v = P_body.vel(N)
+                speed = sympy.sqrt(v.dot(v))
+                coefficient = -dyn(eff.density) * dyn(eff.drag_coefficient) * dyn(eff.area) / 2
+                loads.append((P_body, coefficient * speed * v))
+            else:
+                raise NotImplementedError(
+                    f"the mechanics reference does not model effects of kind {kind!r}")
         self.loads = loads
 
         # Kane's equations with u_k = q_k'
         kd = [q.diff(t) - u for q, u in zip(self.q, self.u)]
         kane = KanesMethod(N, q_ind=self.q, u_ind=self.u, kd_eqs=kd)
-        fr, _frstar = kane.kanes_equations(bodies, loads)
+        fr, frstar = kane.kanes_equations(bodies, loads)
         self.kane = kane
 
         plain = self._plain
+        direct = plain(sympy.Matrix(direct).xreplace(self._qdot_to_u))
         self.mass_matrix = plain(kane.mass_matrix)
-        self.forcing = plain(kane.forcing)
-        self.fr = plain(fr)
+        self.forcing = plain(kane.forcing) + direct
+        self.fr = plain(fr) + direct
+        # Fr* = -(M u' + h): h is -Fr* at u' = 0.  (Taken from Fr* rather than as
+        # tau - forcing so that the loads do not cancel in floating point.)
+        udot_zero = {u.diff(t): 0 for u in self.u}
+        self.velocity_terms = plain(-msubs(frstar, udot_zero))
 
         # energies, poses
         T = sum((body.kinetic_energy(N) for body in bodies), start=sympy.Integer(0))
         self.kinetic_energy = plain(T)
-        V = sympy.Integer(0)
-        for body, G, frame, mass in by_name.values():
-            V -= mass * g_vec.dot(G.pos_from(O))
         self.potential_energy = plain(V)
         self.rotations = [plain(N.dcm(frame)) for _, _, frame, _ in by_name.values()]
         self.mass_centres = [plain(G.pos_from(O).to_matrix(N))
@@ -212,19 +289,17 @@ class MechanicsReference:
 
     def _plain(self, expr):
         """Replace q_k', u_k, q_k (functions of t) by the spec's plain symbols."""
-        expr = sympy.sympify(expr)
-        expr = expr.xreplace(self._qdot_to_u)
-        expr = expr.xreplace(self._to_plain)
-        leftover = [f for f in expr.atoms(sympy.Derivative)]
-        if leftover:
-            raise AssertionError(f"derivatives left in reference expression: {leftover}")
+        # one pass: xreplace matches q_k' before descending into it
+        expr = sympy.sympify(expr).xreplace(self._replacements)
+        if expr.has(sympy.Derivative, *self.q, *self.u):
+            raise AssertionError(f"dynamicsymbols left in reference expression: {expr}")
         return expr
 
     def _lambdify(self) -> None:
         args = [TIME, self.q_syms, self.qd_syms, self.input_syms, self.param_syms]
         n_bodies = len(self.spec.bodies)
         outputs = [self.mass_matrix, self.forcing, self.fr,
-                   self.kinetic_energy, self.potential_energy]
+                   self.kinetic_energy, self.potential_energy, self.velocity_terms]
         outputs += list(self.rotations) + list(self.mass_centres)
         self._n_bodies = n_bodies
         self._function = sympy.lambdify(args, outputs, modules="numpy", cse=True)
@@ -249,7 +324,8 @@ class MechanicsReference:
         """Numeric values at one state.
 
         Returns a dict of numpy arrays: ``A`` (n, n), ``forcing`` (n,) = tau - h,
-        ``tau`` (n,), ``h`` (n,), ``qdd`` (n,), ``T``, ``V`` (floats),
+        ``tau`` (n,), ``h`` (n,), ``qdd`` (n,), ``T``, ``V`` (floats; V is the
+        potential of gravity fixed in E and of the springs),
         ``R`` (n_bodies, 3, 3), ``r_G`` (n_bodies, 3) and ``poses``
         (n_bodies, 4, 4) laid out like modelgen's ``body_poses``.
         """
@@ -265,13 +341,14 @@ class MechanicsReference:
         A = np.array(out[0], dtype=float).reshape(n, n)
         forcing = np.array(out[1], dtype=float).reshape(n)
         tau = np.array(out[2], dtype=float).reshape(n)
-        R = np.array([np.array(m, dtype=float).reshape(3, 3) for m in out[5:5 + nb]]).reshape(nb, 3, 3)
-        r_G = np.array([np.array(m, dtype=float).reshape(3) for m in out[5 + nb:5 + 2 * nb]]).reshape(nb, 3)
+        h = np.array(out[5], dtype=float).reshape(n)
+        R = np.array([np.array(m, dtype=float).reshape(3, 3) for m in out[6:6 + nb]]).reshape(nb, 3, 3)
+        r_G = np.array([np.array(m, dtype=float).reshape(3) for m in out[6 + nb:6 + 2 * nb]]).reshape(nb, 3)
         poses = np.zeros((nb, 4, 4))
         poses[:, :3, :3] = R
         poses[:, :3, 3] = r_G
         poses[:, 3, 3] = 1.0
-        return dict(A=A, forcing=forcing, tau=tau, h=tau - forcing,
+        return dict(A=A, forcing=forcing, tau=tau, h=h,
                     qdd=np.linalg.solve(A, forcing) if n else forcing,
                     T=float(out[3]), V=float(out[4]), R=R, r_G=r_G, poses=poses)
 
@@ -358,15 +435,20 @@ def spatial_chain_spec(n: int):
         bodies=tuple(bodies), gravity=(z, z, -g))
 
 
-def free_body_spec(gravity: bool = False):
+def free_body_spec(gravity: bool = False, products: bool = False):
     """A rigid body about a fixed point O, ZXZ Euler angles (phi, theta, psi).
 
     ``R = Rz(phi) Rx(theta) Rz(psi)``; inertia ``diag(I1, I2, I3)`` about G in the
-    body base; G is at ``a`` along the body's z axis (``a = 0``: torque-free).
+    body base (plus products of inertia ``I1/10, -I2/9, I3/8`` if ``products``);
+    G is at ``a`` along the body's z axis (``a = 0``: torque-free).
     """
     from modelgen.spec import BaseSpec, BodySpec, PointSpec
     phi, theta, psi, m, a, I1, I2, I3, g = sympy.symbols("phi theta psi m a I1 I2 I3 g")
     z = sympy.Integer(0)
+    inertia = _diag(I1, I2, I3)
+    if products:
+        ixy, ixz, iyz = I1 / 10, -I2 / 9, I3 / 8
+        inertia = ((I1, ixy, ixz), (ixy, I2, iyz), (ixz, iyz, I3))
     return ModelSpec(
         name="free_body", coordinates=("phi", "theta", "psi"),
         parameters=(("m", 2.0), ("a", 0.3 if gravity else 0.0),
@@ -374,7 +456,7 @@ def free_body_spec(gravity: bool = False):
         bases=(BaseSpec("B1", "E", 3, phi), BaseSpec("B2", "B1", 1, theta),
                BaseSpec("B", "B2", 3, psi)),
         points=(PointSpec("G", "O", "B", (z, z, a)),),
-        bodies=(BodySpec("body", m, "G", "B", _diag(I1, I2, I3)),),
+        bodies=(BodySpec("body", m, "G", "B", inertia),),
         gravity=(z, z, -g) if gravity else None)
 
 
@@ -382,7 +464,8 @@ def actions_spec():
     """A two-body model exercising every kind of load.
 
     A cart (particle, sliding along E.x by ``x``) carries a pendulum (rigid body,
-    angle ``th`` about E.z, full inertia tensor).  Actions: an input force on the
+    angle ``th`` about E.z, full inertia tensor given in base ``C``, which is
+    tilted from the pendulum's base ``B`` so that the products of inertia matter).  Actions: an input force on the
     cart; a torque and a force on the pendulum given in the pendulum's base and
     applied at its tip (not at G), depending on the speeds, ``t`` and inputs;
     a force on the pendulum given in E at a point fixed in the cart frame.
@@ -404,7 +487,7 @@ def actions_spec():
                 PointSpec("TIP", "C0", "B", (L / 3, -L, z)),
                 PointSpec("Q", "C0", "E", (L / 2, z, -L / 4))),
         bodies=(BodySpec("cart", M, "C0", "E", _zero3x3()),
-                BodySpec("pend", m, "G", "B", inertia)),
+                BodySpec("pend", m, "G", "C", inertia)),
         gravity=(z, -g, z),
         actions=(ActionSpec("push", "cart", "C0", "E", (z, z, z), (F, z, z)),
                  ActionSpec("tip", "pend", "TIP", "C",
@@ -412,3 +495,146 @@ def actions_spec():
                             (-c * x_dot, k * sympy.cos(th) * t, F / 3)),
                  ActionSpec("wind", "pend", "Q", "E",
                             (z, z, z), (k * x, c, -x_dot * th_dot))))
+
+
+def effects_spec():
+    """A cart, a pendulum and a bob with every kind of effect switched on.
+
+    The cart (particle, ``x`` along E.x) carries a pendulum (angle ``th`` about
+    E.z, base B) whose tip carries a bob turning about B.x by ``ph`` (base C,
+    full inertia tensor).  Effects: gravity in E and a "buoyancy" field fixed
+    in the rotating base B; a spring from a point fixed in E to the tip, a
+    damper from O to the bob's centre; a torsion spring on ``th``; joint
+    damping on ``x`` and ``ph``; friction with a Stribeck peak on ``x``; drag
+    on the bob at a point off its centre that is defined in the pendulum's
+    base (so the body-fixed point matters); an action given as an effect.
+    Requires the effect dataclasses of :mod:`modelgen.spec`.
+    """
+    from modelgen.spec import (ActionSpec, BaseSpec, BodySpec, DamperEffect, DragEffect,
+                               FrictionEffect, GravityEffect, JointDampingEffect,
+                               PointSpec, SpringEffect, TorsionSpringEffect)
+    x, th, ph = sympy.symbols("x th ph")
+    (M, m1, m2, L, a, g, b, k, l0, F0, c, kt, th0, cj, mu, mus, vs, eps, cv, rho, cd,
+     area, J, Tq) = sympy.symbols(
+        "M m1 m2 L a g b k l0 F0 c kt th0 cj mu mus vs eps cv rho cd area J Tq")
+    z = sympy.Integer(0)
+    bob_inertia = ((J, J / 10, -J / 7), (J / 10, 2 * J, J / 5), (-J / 7, J / 5, 3 * J))
+    return ModelSpec(
+        name="effects", coordinates=("x", "th", "ph"),
+        parameters=(("M", 2.0), ("m1", 0.7), ("m2", 0.4), ("L", 0.8), ("a", 0.15),
+                    ("g", 9.81), ("b", 1.3), ("k", 40.0), ("l0", 0.6), ("F0", 2.0),
+                    ("c", 0.8), ("kt", 3.0), ("th0", 0.3), ("cj", 0.25), ("mu", 1.5),
+                    ("mus", 2.5), ("vs", 0.4), ("eps", 0.05), ("cv", 0.2), ("rho", 1.2),
+                    ("cd", 1.1), ("area", 0.3), ("J", 0.02)),
+        inputs=("Tq",),
+        bases=(BaseSpec("B", "E", 3, th), BaseSpec("C", "B", 1, ph)),
+        points=(PointSpec("C0", "O", "E", (x, z, z)),
+                PointSpec("G1", "C0", "B", (z, -L / 2, z)),
+                PointSpec("TIP", "C0", "B", (z, -L, z)),
+                PointSpec("G2", "TIP", "C", (z, z, -a)),
+                # fixed in the pendulum's base but dragged on the bob: its own
+                # velocity differs from the bob's body-fixed point's
+                PointSpec("FIN", "TIP", "B", (a, a / 2, -a)),
+                PointSpec("W", "O", "E", (sympy.Rational(1, 2), sympy.Rational(1, 4),
+                                          sympy.Rational(1, 5)))),
+        bodies=(BodySpec("cart", M, "C0", "E", _zero3x3()),
+                BodySpec("pend", m1, "G1", "B", _diag(m1 * L**2 / 12, J, m1 * L**2 / 12)),
+                BodySpec("bob", m2, "G2", "C", bob_inertia)),
+        effects=(GravityEffect("gravity", (z, -g, z)),
+                 GravityEffect("buoyancy", (z, b, z), base="B"),
+                 SpringEffect("spring", "W", "TIP", k, l0, F0),
+                 DamperEffect("damper", "O", "G2", c),
+                 TorsionSpringEffect("hinge", "th", kt, th0),
+                 JointDampingEffect("bearings", ("x", "ph"), cj),
+                 FrictionEffect("rail", "x", mu, cv, mus, vs, eps),
+                 DragEffect("drag", "bob", "FIN", rho, cd, area),
+                 ActionSpec("motor", "bob", "G2", "C", (Tq, z, z), (z, z, z))))
+
+
+# -- closed forms (numpy only) --------------------------------------------------
+
+def double_pendulum_closed_form(q, qd, p):
+    """Rods in a vertical plane, q1 absolute from E.x, q2 relative; gravity -y.
+
+    T = 1/2 m1 l1^2/3 q1'^2
+      + 1/2 m2 (l1^2 q1'^2 + l2^2/4 w2^2 + l1 l2 cos q2 q1' w2) + 1/2 m2 l2^2/12 w2^2,
+    with w2 = q1' + q2'.  V = g (m1 l1/2 sin q1 + m2 (l1 sin q1 + l2/2 sin(q1+q2))).
+    """
+    m1, m2, l1, l2, g = p
+    c2, s2 = np.cos(q[1]), np.sin(q[1])
+    A = np.array([
+        [m1 * l1**2 / 3 + m2 * (l1**2 + l2**2 / 3 + l1 * l2 * c2),
+         m2 * (l2**2 / 3 + l1 * l2 * c2 / 2)],
+        [m2 * (l2**2 / 3 + l1 * l2 * c2 / 2), m2 * l2**2 / 3]])
+    # h = dA/dt qd - dT/dq; only q2 enters A: dA/dq2 = -m2 l1 l2 s2 [[1, 1/2], [1/2, 0]]
+    k = m2 * l1 * l2 * s2 / 2
+    h = np.array([-k * (2 * qd[0] * qd[1] + qd[1] ** 2), k * qd[0] ** 2])
+    tau = -g * np.array([
+        m1 * l1 / 2 * np.cos(q[0]) + m2 * (l1 * np.cos(q[0]) + l2 / 2 * np.cos(q[0] + q[1])),
+        m2 * l2 / 2 * np.cos(q[0] + q[1])])
+    T = 0.5 * qd @ A @ qd
+    V = g * (m1 * l1 / 2 * np.sin(q[0]) + m2 * (l1 * np.sin(q[0]) + l2 / 2 * np.sin(q[0] + q[1])))
+    return dict(A=A, h=h, tau=tau, T=T, V=V)
+
+
+def zxz_rotation(q):
+    """R = Rz(phi) Rx(theta) Rz(psi): columns are the body's unit vectors in E."""
+    phi, theta, psi = q
+    def rz(a):
+        return np.array([[np.cos(a), -np.sin(a), 0], [np.sin(a), np.cos(a), 0], [0, 0, 1]])
+    def rx(a):
+        return np.array([[1, 0, 0], [0, np.cos(a), -np.sin(a)], [0, np.sin(a), np.cos(a)]])
+    return rz(phi) @ rx(theta) @ rz(psi)
+
+
+def zxz_body_rate_matrix(q):
+    """J with omega_B = J(q) qd for ZXZ Euler angles (phi, theta, psi). Works for complex q."""
+    phi, theta, psi = q
+    s, c = np.sin, np.cos
+    return np.array([
+        [s(theta) * s(psi), c(psi), 0 * psi],
+        [s(theta) * c(psi), -s(psi), 0 * psi],
+        [c(theta), 0 * psi, 1 + 0 * psi]])
+
+
+def euler_closed_form(q, qd, inertia):
+    """:func:`rigid_body_closed_form` for ZXZ Euler angles."""
+    return rigid_body_closed_form(zxz_body_rate_matrix, q, qd, inertia)
+
+
+def zyx_rotation(q):
+    """R = Rz(yaw) Ry(pitch) Rx(roll): columns are the body's unit vectors in E."""
+    yaw, pitch, roll = q
+    cy, sy, cp, sp, cr, sr = (np.cos(yaw), np.sin(yaw), np.cos(pitch), np.sin(pitch),
+                              np.cos(roll), np.sin(roll))
+    rz = np.array([[cy, -sy, 0], [sy, cy, 0], [0, 0, 1]])
+    ry = np.array([[cp, 0, sp], [0, 1, 0], [-sp, 0, cp]])
+    rx = np.array([[1, 0, 0], [0, cr, -sr], [0, sr, cr]])
+    return rz @ ry @ rx
+
+
+def zyx_body_rate_matrix(q):
+    """J with omega_B = J(q) qd for ZYX angles (yaw, pitch, roll). Works for complex q."""
+    yaw, pitch, roll = q
+    s, c = np.sin, np.cos
+    zero = 0 * yaw
+    return np.array([
+        [-s(pitch), zero, 1 + zero],
+        [c(pitch) * s(roll), c(roll), zero],
+        [c(pitch) * c(roll), -s(roll), zero]])
+
+
+def rigid_body_closed_form(rate_matrix, q, qd, inertia):
+    """Euler's equations mapped to the angles: A = J'IJ, h = J'(I Jdot qd + w x Iw).
+
+    ``rate_matrix(q)`` gives J with omega_B = J qd; Jdot qd is taken by complex
+    step, exact to rounding.  Returns (A, h, omega_B).
+    """
+    J = rate_matrix(q)
+    w = J @ qd
+    step = 1e-30
+    Jdot = rate_matrix(q + 1j * step * qd).imag / step
+    I = np.diag(inertia)
+    A = J.T @ I @ J
+    h = J.T @ (I @ Jdot @ qd + np.cross(w, I @ w))
+    return A, h, w

@@ -7,7 +7,8 @@ things that do not use sympy.physics.mechanics at all:
   in ZXZ Euler angles through Euler's equations);
 * an independent Lagrangian derivation for every hand-built spec, done with
   plain sympy matrices (rotation matrices, position Jacobians, T = 1/2 qd' A qd,
-  h = dA/dt qd - dT/dq, tau = -dV/dq + J' F), compared at seeded random states.
+  h = dA/dt qd - dT/dq, tau = -dV/dq + J' F; springs enter only through their
+  potential), compared at seeded random states.
 """
 from __future__ import annotations
 
@@ -17,9 +18,12 @@ import numpy as np
 import pytest
 import sympy
 
-from mechanics_reference import (MechanicsReference, actions_spec, free_body_spec,
-                                 particle_pendulum_spec, rod_double_pendulum_spec,
-                                 spatial_chain_spec)
+from mechanics_reference import (MechanicsReference, actions_spec,
+                                 double_pendulum_closed_form, effects_spec,
+                                 euler_closed_form,
+                                 free_body_spec, particle_pendulum_spec,
+                                 rod_double_pendulum_spec, spatial_chain_spec,
+                                 zxz_rotation)
 from modelgen.spec import CANONICAL_BASE, CANONICAL_POINT, TIME, speed_name
 
 RTOL = 1e-12
@@ -34,9 +38,10 @@ HAND_SPECS = {
     "particle_pendulum": particle_pendulum_spec,
     "rod_double_pendulum": rod_double_pendulum_spec,
     "free_body": free_body_spec,
-    "heavy_body": lambda: free_body_spec(gravity=True),
+    "heavy_body": lambda: free_body_spec(gravity=True, products=True),
     "actions": actions_spec,
-    **{f"spatial_chain_{n}": functools.partial(spatial_chain_spec, n) for n in (1, 2, 3, 4)},
+    "effects": effects_spec,
+    **{f"spatial_chain_{n}": functools.partial(spatial_chain_spec, n) for n in (1, 2, 3)},
 }
 
 
@@ -77,30 +82,6 @@ def test_particle_pendulum_matches_closed_form():
         assert_rel(out["r_G"][0], [L * np.sin(q[0]), -L * np.cos(q[0]), 0.0], "r_G", scale=L)
 
 
-def double_pendulum_closed_form(q, qd, p):
-    """Rods in a vertical plane, q1 absolute from E.x, q2 relative; gravity -y.
-
-    T = 1/2 m1 l1^2/3 q1'^2
-      + 1/2 m2 (l1^2 q1'^2 + l2^2/4 w2^2 + l1 l2 cos q2 q1' w2) + 1/2 m2 l2^2/12 w2^2,
-    with w2 = q1' + q2'.  V = g (m1 l1/2 sin q1 + m2 (l1 sin q1 + l2/2 sin(q1+q2))).
-    """
-    m1, m2, l1, l2, g = p
-    c2, s2 = np.cos(q[1]), np.sin(q[1])
-    A = np.array([
-        [m1 * l1**2 / 3 + m2 * (l1**2 + l2**2 / 3 + l1 * l2 * c2),
-         m2 * (l2**2 / 3 + l1 * l2 * c2 / 2)],
-        [m2 * (l2**2 / 3 + l1 * l2 * c2 / 2), m2 * l2**2 / 3]])
-    # h = dA/dt qd - dT/dq; only q2 enters A: dA/dq2 = -m2 l1 l2 s2 [[1, 1/2], [1/2, 0]]
-    k = m2 * l1 * l2 * s2 / 2
-    h = np.array([-k * (2 * qd[0] * qd[1] + qd[1] ** 2), k * qd[0] ** 2])
-    tau = -g * np.array([
-        m1 * l1 / 2 * np.cos(q[0]) + m2 * (l1 * np.cos(q[0]) + l2 / 2 * np.cos(q[0] + q[1])),
-        m2 * l2 / 2 * np.cos(q[0] + q[1])])
-    T = 0.5 * qd @ A @ qd
-    V = g * (m1 * l1 / 2 * np.sin(q[0]) + m2 * (l1 * np.sin(q[0]) + l2 / 2 * np.sin(q[0] + q[1])))
-    return dict(A=A, h=h, tau=tau, T=T, V=V)
-
-
 def test_rod_double_pendulum_matches_closed_form():
     ref = reference("rod_double_pendulum")
     rng = np.random.default_rng(2)
@@ -115,37 +96,6 @@ def test_rod_double_pendulum_matches_closed_form():
         assert_rel(out["tau"], want["tau"], "tau", scale=g * (m1 + m2) * (l1 + l2))
         assert_rel(out["T"], want["T"], "T")
         assert_rel(out["V"], want["V"], "V", scale=g * (m1 + m2) * (l1 + l2))
-
-
-def zxz_rotation(q):
-    phi, theta, psi = q
-    def rz(a):
-        return np.array([[np.cos(a), -np.sin(a), 0], [np.sin(a), np.cos(a), 0], [0, 0, 1]])
-    def rx(a):
-        return np.array([[1, 0, 0], [0, np.cos(a), -np.sin(a)], [0, np.sin(a), np.cos(a)]])
-    return rz(phi) @ rx(theta) @ rz(psi)
-
-
-def zxz_body_rate_matrix(q):
-    """J with omega_B = J(q) qd for ZXZ Euler angles (phi, theta, psi). Works for complex q."""
-    phi, theta, psi = q
-    s, c = np.sin, np.cos
-    return np.array([
-        [s(theta) * s(psi), c(psi), 0 * psi],
-        [s(theta) * c(psi), -s(psi), 0 * psi],
-        [c(theta), 0 * psi, 1 + 0 * psi]])
-
-
-def euler_closed_form(q, qd, inertia):
-    """A = J' I J and h = J' (I Jdot qd + w x I w) with Jdot qd by complex step."""
-    J = zxz_body_rate_matrix(q)
-    w = J @ qd
-    step = 1e-30
-    Jdot = zxz_body_rate_matrix(q + 1j * step * qd).imag / step
-    I = np.diag(inertia)
-    A = J.T @ I @ J
-    h = J.T @ (I @ Jdot @ qd + np.cross(w, I @ w))
-    return A, h, w
 
 
 def test_free_body_matches_euler_equations():
@@ -214,12 +164,61 @@ class LagrangeReference:
             T += b.mass * (v.T * v)[0] / 2 + (w.T * I_E * w)[0] / 2
             V -= b.mass * (g.T * rG)[0]
             bodies[b.name] = (Rb, rG, Jv, Jw)
-        tau += -sympy.Matrix([V]).jacobian(qv).T
-        for a in spec.actions:
-            Rb, rG, Jv, Jw = bodies[a.body]
+        def on_body(body, point, F, torque=None):
+            """Generalized force of F at the body-fixed point at ``point`` (+ a torque)."""
+            Rb, rG, Jv, Jw = bodies[body]
+            M = (r[point] - rG).cross(F)
+            if torque is not None:
+                M += torque
+            return Jv.T * F + Jw.T * M
+
+        def body_point_velocity(body, point):
+            Rb, rG, Jv, Jw = bodies[body]
+            return Jv * qdv + (Jw * qdv).cross(r[point] - rG)
+
+        for a in list(spec.actions) + [e for e in spec.effects if e.kind == "action"]:
             F = R[a.base] * sympy.Matrix(a.force)
-            M = R[a.base] * sympy.Matrix(a.torque) + (r[a.point] - rG).cross(F)
-            tau += Jv.T * F + Jw.T * M
+            tau += on_body(a.body, a.point, F, R[a.base] * sympy.Matrix(a.torque))
+        for e in spec.effects:
+            if e.kind == "gravity":
+                field = R[e.base] * sympy.Matrix(e.vector)
+                for b in spec.bodies:
+                    if e.base == CANONICAL_BASE:   # conservative: through V
+                        V -= b.mass * (field.T * r[b.G])[0]
+                    else:                          # a field turning with its base
+                        tau += on_body(b.name, b.G, b.mass * field)
+            elif e.kind in ("spring", "damper"):
+                d = r[e.point_b] - r[e.point_a]
+                length = sympy.sqrt((d.T * d)[0])
+                if e.kind == "spring":
+                    stretch = length - e.rest_length
+                    V += e.stiffness * stretch**2 / 2 + e.preload * length
+                else:   # tension c dl/dt along the line
+                    rate = (sympy.Matrix([length]).jacobian(qv) * qdv)[0]
+                    F_b = -e.damping * rate * d / length
+                    tau += (r[e.point_b].jacobian(qv).T - r[e.point_a].jacobian(qv).T) * F_b
+            elif e.kind == "torsion_spring":
+                qk = q[list(spec.coordinates).index(e.coordinate)]
+                V += e.stiffness * (qk - e.rest_angle) ** 2 / 2
+            elif e.kind == "joint_damping":
+                for c in e.coordinates:
+                    k = list(spec.coordinates).index(c)
+                    tau[k] += -e.damping * qd[k]
+            elif e.kind == "friction":
+                k = list(spec.coordinates).index(e.coordinate)
+                static = e.coulomb if e.static is None else e.static
+                level = e.coulomb + (static - e.coulomb) * sympy.exp(
+                    -(qd[k] / e.stribeck_speed) ** 2)
+                tau[k] += -level * sympy.tanh(qd[k] / e.smoothing_speed) - e.viscous * qd[k]
+            elif e.kind == "drag":
+                v = body_point_velocity(e.body, e.point)
+                speed = sympy.sqrt((v.T * v)[0])
+                tau += on_body(e.body, e.point,
+                               -e.density * e.drag_coefficient * e.area * speed * v / 2)
+            elif e.kind != "action":
+                raise NotImplementedError(e.kind)
+        # conservative loads (gravity fixed in E, springs): tau = -dV/dq
+        tau += -sympy.Matrix([V]).jacobian(qv).T
         dT_dqd = sympy.Matrix([T]).jacobian(qdv).T
         A = dT_dqd.jacobian(qdv)
         h = dT_dqd.jacobian(qv) * qdv - sympy.Matrix([T]).jacobian(qv).T
@@ -272,7 +271,7 @@ def test_offset_action_point_velocity_matters():
     ref = reference("actions")
     N, u = ref.N, ref.u
     Q, G = ref.points["Q"], ref.points["G"]
-    frame = ref.frames["B"]
+    frame = ref.frames["C"]
     F = next(a for a in ref.spec.actions if a.name == "wind").force
     to_dyn = {sympy.Symbol(c): qk for c, qk in zip(ref.spec.coordinates, ref.q)}
     to_dyn.update({sympy.Symbol(speed_name(c)): uk for c, uk in zip(ref.spec.coordinates, ref.u)})
