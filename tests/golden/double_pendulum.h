@@ -83,7 +83,8 @@ void double_pendulum_generalized_forces(double t, const double *q, const double 
 int double_pendulum_rhs(double t, const double *x, const double *u, const double *p, double *xdot);
 
 /* double_pendulum_energy:
- *   out[0] kinetic energy, out[1] potential energy of gravity (zero at O) [J].
+ *   out[0] kinetic energy, out[1] potential energy of gravity (zero at O)
+ *   and of springs [J].
  */
 
 void double_pendulum_energy(const double *q, const double *qd, const double *p, double *out);
