@@ -25,6 +25,50 @@ The YAML format (every top-level key except ``name`` is optional)::
     gravity: [0, -g, 0]                  # in base E
     actions:                             # torque and force at a point, in a base
       motor: {body: rod1, point: O, base: B1, torque: [0, 0, T1], force: [0, 0, 0]}
+    effects:                             # named physical effects (see below)
+      spring1: {type: spring, point_a: A, point_b: P1, stiffness: k, rest_length: L0}
+      hinges: {type: joint_damping, coordinates: [q1, q2], damping: c}
+
+Effects (``effects:``): each entry has ``type`` (the ``kind`` of one class of
+:data:`modelgen.spec.EFFECT_TYPES`, or ``action``) and that class's fields as
+keys; a field with a default in the dataclass is optional.
+
+=================== ================================================================
+type                keys (optional ones in brackets)
+=================== ================================================================
+``gravity``         vector, [base] (default E)
+``spring``          point_a, point_b, stiffness, rest_length, [preload] (default 0)
+``torsion_spring``  coordinate, stiffness, [rest_angle] (default 0)
+``damper``          point_a, point_b, damping
+``joint_damping``   coordinates (a list of one or more), damping
+``friction``        coordinate, coulomb, [viscous] (0), [static] (= coulomb),
+                    [stribeck_speed] (1), [smoothing_speed] (0.001)
+``drag``            body, point, density, drag_coefficient, area
+``action``          the keys of an ``actions:`` entry (body, point/base or frame,
+                    torque/force or vector)
+=================== ================================================================
+
+* Evaluated at the parameter defaults, ``stiffness``, ``rest_length``,
+  ``damping``, ``coulomb``, ``viscous``, ``static``, ``density``,
+  ``drag_coefficient`` and ``area`` must be >= 0 and ``stribeck_speed`` and
+  ``smoothing_speed`` > 0; ``preload`` and ``rest_angle`` may have any sign.
+* A spring or damper needs two different points; ``coordinates`` of a
+  joint damping lists each coordinate once.
+* Friction is regularised: the Coulomb level is multiplied by
+  ``tanh(v / smoothing_speed)`` (v the coordinate's speed), so it reaches
+  76% of its value at ``v = smoothing_speed``; see
+  :class:`~modelgen.spec.FrictionEffect` for the whole law.  Friction acts
+  on a coordinate, so a normal force belongs in ``coulomb`` (a block of
+  mass m on an incline: ``coulomb: mu*m*g*cos(alpha)``).
+* A gravity effect may use any base: the field is uniform and constant in
+  that base.  Its potential energy is only counted when ``base`` is E (a
+  field fixed in a moving base is not conservative), so give the vector in
+  E when energies matter.
+* The top-level ``gravity:`` is shorthand for a gravity effect in E named
+  ``gravity`` (the spec keeps it in ``ModelSpec.gravity``); with it, no
+  action or effect may be named ``gravity``.  Effects of type ``action`` are
+  the same as entries of ``actions:`` except that the spec lists them in
+  ``ModelSpec.effects``.
 
 Details:
 
@@ -58,12 +102,15 @@ key                                        allowed names
 ``bodies.*.mass``, ``bodies.*.inertia``    parameters (masses and inertias are constant)
 ``gravity``                                parameters, ``t``
 ``actions.*.torque/force/vector``          coordinates, speeds, parameters, inputs, ``t``
+``effects.*`` coefficients, lengths...     parameters (effect coefficients are constant)
+``effects.*.vector`` (gravity)             parameters, ``t``
+``effects.*`` of type action               as ``actions``
 ========================================== ==========================================
 
 ``pi`` and the functions of :mod:`modelgen.expr` may be used everywhere.
 
 Names (see :func:`check_name`): every coordinate, parameter, input, base,
-point, frame, body and action name shares one namespace and must be a C
+point, frame, body, action and effect name shares one namespace and must be a C
 identifier (``[A-Za-z_][A-Za-z0-9_]*``, at most 63 characters) that is not:
 
 * a C (C99, C11, C23) or C++ keyword, or a Python keyword;
@@ -81,6 +128,7 @@ leaves the model unchanged.
 """
 from __future__ import annotations
 
+import dataclasses
 import difflib
 import heapq
 import json
@@ -103,15 +151,16 @@ from modelgen.spec import (CANONICAL_BASE, CANONICAL_POINT, TIME, ActionSpec, Ba
 
 __all__ = [
     "TOP_LEVEL_KEYS", "ENTRY_KEYS", "REQUIRED_KEYS", "EXPRESSION_RULES", "API_FILE",
+    "EFFECT_KINDS", "EFFECT_FIELD_ROLES",
     "MAX_NAME_LENGTH", "C_KEYWORDS", "CPP_KEYWORDS", "PYTHON_KEYWORDS", "MODELGEN_RESERVED",
     "check_name", "load_model", "parse_model", "spec_to_yaml", "Model",
 ]
 
 #: Top-level keys of a model file, in the order they are processed and written.
-#: Any other key is an error; a stage adding a key (e.g. ``effects``) adds it
-#: here and reads it in ``_load_tree``.
+#: Any other key is an error; a stage adding a key adds it here and reads it
+#: in ``_load_context``.
 TOP_LEVEL_KEYS = ("name", "description", "coordinates", "parameters", "inputs",
-                  "bases", "points", "frames", "bodies", "gravity", "actions")
+                  "bases", "points", "frames", "bodies", "gravity", "actions", "effects")
 
 #: Keys of one entry of each mapping section.
 ENTRY_KEYS = {
@@ -129,6 +178,24 @@ REQUIRED_KEYS = {
     "frames": ("point", "base"),
     "bodies": ("mass", "G", "base"),
     "actions": ("body",),
+}
+
+#: Effect ``type`` -> the spec class it builds (``action`` builds an ActionSpec).
+EFFECT_KINDS = {**{cls.kind: cls for cls in specmod.EFFECT_TYPES}, "action": ActionSpec}
+
+#: How each effect field is read: a reference (``point``, ``body``, ``base``,
+#: ``coordinate``, ``coordinates``: a list of coordinates), a gravity vector
+#: (``vector``) or a parameters-only expression that must be ``nonnegative``,
+#: ``positive`` or may be ``signed`` at the parameter defaults.
+EFFECT_FIELD_ROLES = {
+    "point_a": "point", "point_b": "point", "point": "point", "body": "body",
+    "base": "base", "coordinate": "coordinate", "coordinates": "coordinates",
+    "vector": "vector",
+    "stiffness": "nonnegative", "rest_length": "nonnegative", "damping": "nonnegative",
+    "coulomb": "nonnegative", "viscous": "nonnegative", "static": "nonnegative",
+    "density": "nonnegative", "drag_coefficient": "nonnegative", "area": "nonnegative",
+    "stribeck_speed": "positive", "smoothing_speed": "positive",
+    "preload": "signed", "rest_angle": "signed",
 }
 
 #: ``file`` of the errors raised by the Python API.
@@ -189,16 +256,21 @@ EXPRESSION_RULES = {
     "action": _Rule(("coordinate", "speed", "parameter", "input", "time"),
                     "coordinates, speeds, parameters, inputs and t",
                     "'coordinates', 'parameters' or 'inputs'", ""),
+    "coefficient": _Rule(("parameter",), "parameters", "'parameters'",
+                         " (effect coefficients, lengths and speeds are constant)"),
 }
 
 _SECTION_KIND = {"bases": "base", "points": "point", "frames": "frame",
-                 "bodies": "body", "actions": "action"}
-_SECTION_OF = {kind: section for section, kind in _SECTION_KIND.items()}
+                 "bodies": "body", "actions": "action", "effects": "effect"}
+_SECTION_OF = {**{kind: section for section, kind in _SECTION_KIND.items()},
+               "coordinate": "coordinates"}
 _NAME_RE = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
 _NUMERIC_STRING = re.compile(r"\s*[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?\s*\Z")
 _NAME_FIX = "use ASCII letters, digits and '_', starting with a letter"
 _NAMESPACE_NOTE = ("coordinates, parameters, inputs, bases, points, frames, bodies and "
                    "actions share one namespace")
+_NAMESPACE_NOTE_EFFECTS = ("coordinates, parameters, inputs, bases, points, frames, bodies, "
+                           "actions and effects share one namespace")
 
 
 # -- small helpers -------------------------------------------------------------
@@ -355,11 +427,22 @@ class _Action(NamedTuple):
     key: str
 
 
+class _Effect(NamedTuple):
+    name: str
+    kind: str               # a key of EFFECT_KINDS
+    fields: dict            # field -> validated value (given fields only)
+    frame: Optional[str]    # action effects given a frame
+    key: str
+
+
 class _Context:
     """Accumulates validated declarations; :meth:`build` resolves them into a spec.
 
     Every ``add_*`` method validates completely before it changes anything.
     ``lines`` maps dotted keys to 1-based lines (empty for the Python API).
+    Keys under a prefix registered with :meth:`add_source` come from another
+    file (a scene adding parameters and effects to its model) and their
+    errors name that file.
     """
 
     def __init__(self, file: Optional[str], lines: Optional[dict] = None):
@@ -379,7 +462,9 @@ class _Context:
         self.frames: list = []
         self.bodies: list = []
         self.actions: list = []
+        self.effects: list = []
         self.gravity: Optional[tuple] = None
+        self.sources: list = []       # (key prefix, file, lines) of keys from other files
         self._allowed: dict = {}
 
     def clone(self) -> "_Context":
@@ -391,16 +476,38 @@ class _Context:
         return other
 
     # -- errors ------------------------------------------------------------
+    def add_source(self, prefix: str, file: Optional[str], lines: dict) -> None:
+        """Keys ``prefix`` and ``prefix.*`` come from ``file`` with line table ``lines``."""
+        self.sources.append((prefix, file, lines))
+
+    def _source(self, key: Optional[str]):
+        for prefix, file, lines in self.sources:
+            if key and (key == prefix or key.startswith((prefix + ".", prefix + "["))):
+                return file, lines
+        return self.file, self.lines
+
+    def file_of(self, key: Optional[str]) -> Optional[str]:
+        return self._source(key)[0]
+
     def line_of(self, key: Optional[str]) -> Optional[int]:
+        lines = self._source(key)[1]
         while key:
-            if key in self.lines:
-                return self.lines[key]
+            if key in lines:
+                return lines[key]
             cut = max(key.rfind("."), key.rfind("["))
             key = key[:cut] if cut > 0 else ""
         return None
 
+    def place(self, key: str, seen_from: Optional[str]) -> str:
+        """``key (line 3)``, or ``key (file:3)`` when ``key`` is in another file."""
+        line, file = self.line_of(key), self.file_of(key)
+        if file != self.file_of(seen_from) and file is not None:
+            return f"{key} ({file}" + (f":{line})" if line is not None else ")")
+        return key + (f" (line {line})" if line is not None else "")
+
     def error(self, problem: str, key: Optional[str], fix: Optional[str]) -> ModelError:
-        return ModelError(problem, file=self.file, line=self.line_of(key), key=key, fix=fix)
+        return ModelError(problem, file=self.file_of(key), line=self.line_of(key), key=key,
+                          fix=fix)
 
     # -- names -------------------------------------------------------------
     def kind_of(self, name: str) -> Optional[str]:
@@ -413,15 +520,15 @@ class _Context:
         return None
 
     def check_new_name(self, name, kind: str, key: str) -> str:
-        check_name(name, file=self.file, line=self.line_of(key), key=key, what=f"{kind} name")
+        check_name(name, file=self.file_of(key), line=self.line_of(key), key=key,
+                   what=f"{kind} name")
         if name in self.kinds:
             other_kind, other_key = self.kinds[name]
-            where = other_key
-            other_line = self.line_of(other_key)
-            if other_line is not None:
-                where += f" (line {other_line})"
-            raise self.error(f"duplicate name '{name}': already declared as a {other_kind} "
-                             f"at {where}", key, f"rename one of them; {_NAMESPACE_NOTE}")
+            note = _NAMESPACE_NOTE_EFFECTS if "effect" in (kind, other_kind) \
+                else _NAMESPACE_NOTE
+            raise self.error(f"duplicate name '{name}': already declared as "
+                             f"{_a(other_kind)} at {self.place(other_key, key)}", key,
+                             f"rename one of them; {note}")
         if name in self.speeds:
             raise self.error(f"'{name}' is the speed of coordinate '{self.speeds[name]}'",
                              key, "rename it; the speed of a coordinate q is named q_dot")
@@ -537,7 +644,7 @@ class _Context:
         if speed in self.kinds:
             other_kind, other_key = self.kinds[speed]
             raise self.error(f"the speed of coordinate '{name}' would be '{speed}', which "
-                             f"is already declared as a {other_kind} at {other_key}", key,
+                             f"is already declared as {_a(other_kind)} at {other_key}", key,
                              f"rename {other_kind} '{speed}' or coordinate '{name}'")
         self.register(name, "coordinate", key)
         self.coordinates.append(name)
@@ -683,6 +790,13 @@ class _Context:
     def add_action(self, name, body, point, base, frame, torque, force, vector,
                    key: str) -> None:
         self.check_new_name(name, "action", key)
+        parts = self.action_parts(body, point, base, frame, torque, force, vector, key)
+        self.register(name, "action", key)
+        self.actions.append(_Action(name, *parts, key))
+
+    def action_parts(self, body, point, base, frame, torque, force, vector,
+                     key: str) -> tuple:
+        """Validated (body, point, base, frame, torque, force) of an action."""
         body = self.reference(body, "body", f"{key}.body")
         if frame is not None:
             if point is not None or base is not None:
@@ -712,8 +826,94 @@ class _Context:
                 torque, f"{key}.torque", "action", example="[Mx, My, Mz]")
             force = zero if force is None else self.vector(
                 force, f"{key}.force", "action", example="[Fx, Fy, Fz]")
-        self.register(name, "action", key)
-        self.actions.append(_Action(name, body, point, base, frame, torque, force, key))
+        return body, point, base, frame, torque, force
+
+    def add_effect(self, name, kind, fields: Mapping, key: str) -> None:
+        """An effect of type ``kind`` with ``fields`` (None means not given)."""
+        self.check_new_name(name, "effect", key)
+        types = ", ".join(EFFECT_KINDS)
+        if not isinstance(kind, str):
+            raise self.error(f"expected an effect type but got {_describe(kind)}",
+                             f"{key}.type", f"write one of {types}")
+        if kind not in EFFECT_KINDS:
+            close = _closest(kind, EFFECT_KINDS)
+            fix = f"did you mean '{close}'? " if close else ""
+            raise self.error(f"unknown effect type '{kind}'", f"{key}.type",
+                             fix + f"effect types: {types}")
+        if kind == "action":
+            valid = ENTRY_KEYS["actions"]
+            required = REQUIRED_KEYS["actions"]
+        else:
+            valid = tuple(f.name for f in dataclasses.fields(EFFECT_KINDS[kind])
+                          if f.name != "name")
+            required = tuple(f.name for f in dataclasses.fields(EFFECT_KINDS[kind])
+                             if f.name != "name" and f.default is dataclasses.MISSING)
+        for field in fields:
+            if field not in valid:
+                close = _closest(field, valid)
+                fix = f"did you mean '{close}'? " if close else ""
+                raise self.error(f"unknown key '{field}' for {_a(kind)} effect",
+                                 f"{key}.{field}",
+                                 fix + "valid keys: " + ", ".join(("type",) + valid))
+        for field in required:
+            if field not in fields:
+                raise self.error(f"missing required key '{field}'", key,
+                                 f"add '{field}'; {_a(kind)} effect needs " + _and(required))
+        if kind == "action":
+            parts = self.action_parts(*(fields.get(f) for f in valid), key)
+            body, point, base, frame, torque, force = parts
+            values = {"body": body, "point": point, "base": base, "torque": torque,
+                      "force": force}
+        else:
+            frame = None
+            values = {field: self.effect_field(name, kind, field, fields[field],
+                                               f"{key}.{field}")
+                      for field in valid if fields.get(field) is not None
+                      or field in required}
+            if "point_a" in values and values["point_a"] == values.get("point_b"):
+                raise self.error(f"{kind} '{name}' joins point '{values['point_a']}' to "
+                                 "itself", f"{key}.point_b", f"give two different points "
+                                 f"({_a(kind)} acts along the line between them)")
+        self.register(name, "effect", key)
+        self.effects.append(_Effect(name, kind, values, frame, key))
+
+    def effect_field(self, name: str, kind: str, field: str, value, key: str):
+        """One validated field of an effect (see :data:`EFFECT_FIELD_ROLES`)."""
+        role = EFFECT_FIELD_ROLES[field]
+        if role in ("point", "body", "base", "coordinate"):
+            return self.reference(value, role, key)
+        if role == "coordinates":
+            items = _as_list(value)
+            if not isinstance(items, list) or not items:
+                raise self.error(f"expected a list of one or more coordinate names but got "
+                                 f"{_describe(value)}", key, "write e.g. [q1, q2]")
+            for i, item in enumerate(items):
+                self.reference(item, "coordinate", f"{key}[{i}]")
+                if item in items[:i]:
+                    raise self.error(f"coordinate '{item}' is listed twice", f"{key}[{i}]",
+                                     "list each coordinate once")
+            return tuple(items)
+        if role == "vector":
+            return self.vector(value, key, "gravity",
+                               example="[gx, gy, gz] (components in the effect's base)")
+        expr = self.expression(value, key, "coefficient")
+        if role == "signed":
+            return expr
+        shown = format_expression(expr)
+        at = self.at_defaults(expr)
+        bound = ">= 0" if role == "nonnegative" else "> 0"
+        fix = f"give {_a(field)} {bound}"
+        if field == "smoothing_speed":
+            fix += (" (the speed over which friction changes sign: tanh(v/smoothing_speed); "
+                    "e.g. 0.001)")
+        if at is None:
+            raise self.error(f"{field} of {kind} '{name}' is not a real number with the "
+                             f"default parameters: {shown}", key, fix)
+        if at < 0 or (role == "positive" and at == 0):
+            problem = "is negative" if at < 0 else "is not positive"
+            raise self.error(f"{field} of {kind} '{name}' {problem}: {shown} = {at!r} "
+                             "with the default parameters", key, fix)
+        return expr
 
     # -- resolution --------------------------------------------------------------
     def resolve(self, ref: str, kind: str, key: str, canonical: Optional[str] = None) -> str:
@@ -725,8 +925,8 @@ class _Context:
             [name for name, (k, _) in self.kinds.items() if k == kind]
         other = self.kind_of(ref)
         if other is not None:
-            raise self.error(f"'{ref}' is a {other}, not a {kind}", key,
-                             f"name a {kind} here (known {section}: {_listing(known)})")
+            raise self.error(f"'{ref}' is {_a(other)}, not {_a(kind)}", key,
+                             f"name {_a(kind)} here (known {section}: {_listing(known)})")
         close = _closest(ref, known)
         if close:
             fix = f"did you mean '{close}'? Otherwise declare '{ref}' under '{section}'"
@@ -786,6 +986,12 @@ class _Context:
                 self.resolve(a.point, "point", f"{a.key}.point", CANONICAL_POINT)
                 self.resolve(a.base, "base", f"{a.key}.base", CANONICAL_BASE)
             actions.append(a)
+        effects = [self.resolve_effect(e, frames) for e in self.effects]
+        if self.gravity is not None and self.kind_of("gravity") in ("action", "effect"):
+            kind, key = self.kinds["gravity"]
+            raise self.error(f"{_a(kind)} is named 'gravity', the name of the top-level "
+                             "gravity", key, f"rename the {kind}, or remove the top-level "
+                             "'gravity:' and declare it as an effect of type gravity")
         return ModelSpec(
             name=self.name,
             description=self.description,
@@ -801,9 +1007,31 @@ class _Context:
             gravity=self.gravity,
             actions=tuple(ActionSpec(a.name, a.body, a.point, a.base, a.torque, a.force)
                           for a in actions),
+            effects=tuple(effects),
             source=None if self.file == API_FILE else self.file,
             lines=tuple(self.lines.items()),
         )
+
+    def resolve_effect(self, e: _Effect, frames: dict):
+        """Check an effect's references and build its spec dataclass."""
+        values = dict(e.fields)
+        if e.frame is not None:
+            self.resolve(e.frame, "frame", f"{e.key}.frame")
+            values["point"], values["base"] = frames[e.frame].point, frames[e.frame].base
+        for field, value in values.items():
+            role = EFFECT_FIELD_ROLES.get(field)
+            where = f"{e.key}.{field}"
+            if e.frame is not None and field in ("point", "base"):
+                continue
+            if role in ("point", "base"):
+                self.resolve(value, role, where,
+                             CANONICAL_POINT if role == "point" else CANONICAL_BASE)
+            elif role in ("body", "coordinate"):
+                self.resolve(value, role, where)
+            elif role == "coordinates":
+                for i, item in enumerate(value):
+                    self.resolve(item, "coordinate", f"{where}[{i}]")
+        return EFFECT_KINDS[e.kind](name=e.name, **values)
 
     @staticmethod
     def _decl(items, name):
@@ -974,10 +1202,55 @@ _SECTION_EXAMPLES = {
     "frames": "F1: {point: P1, base: B1}",
     "bodies": "rod1: {mass: m1, G: G1, base: B1, inertia: [I1, I2, I3]}",
     "actions": "motor: {body: rod1, point: O, base: B1, torque: [0, 0, T1]}",
+    "effects": "spring1: {type: spring, point_a: A, point_b: P1, stiffness: k, "
+               "rest_length: L0}",
 }
 
 
+def _mapping_entries(ctx: _Context, value, section: str, key: str, kind: str):
+    """``(name, entry, key)`` of a mapping section whose entries are mappings."""
+    if value is None:
+        return
+    example = _SECTION_EXAMPLES[section]
+    if not isinstance(value, dict):
+        raise ctx.error(f"expected a mapping of {kind} names to definitions but got "
+                        f"{_describe(value)}", key,
+                        f"write one entry per line, e.g. '{example}'")
+    for name, entry in value.items():
+        entry_key = f"{key}.{name}"
+        if not isinstance(entry, dict):
+            raise ctx.error(f"expected a mapping but got {_describe(entry)}", entry_key,
+                            f"write it like '{example}'")
+        yield name, entry, entry_key
+
+
+def _load_effects(ctx: _Context, value, key: str = "effects") -> None:
+    """Add the entries of an ``effects:`` mapping (``key``: its dotted key)."""
+    for name, entry, entry_key in _mapping_entries(ctx, value, "effects", key, "effect"):
+        if "type" not in entry:
+            raise ctx.error("missing required key 'type'", entry_key,
+                            "add 'type: <effect type>', one of " + ", ".join(EFFECT_KINDS))
+        fields = {k: v for k, v in entry.items() if k != "type"}
+        ctx.add_effect(name, entry["type"], fields, entry_key)
+
+
+def _load_parameters(ctx: _Context, value, key: str = "parameters") -> None:
+    """Add the entries of a ``parameters:`` mapping (``key``: its dotted key)."""
+    if value is None:
+        return
+    if not isinstance(value, dict):
+        raise ctx.error(f"expected a mapping of parameter names to defaults but got "
+                        f"{_describe(value)}", key, f"write {key}: {{m: 1.0, g: 9.81}}")
+    for name, default in value.items():
+        ctx.add_parameter(name, default, f"{key}.{name}")
+
+
 def _load_tree(data, lines: dict, file: str) -> ModelSpec:
+    return _load_context(data, lines, file).build()
+
+
+def _load_context(data, lines: dict, file: str) -> _Context:
+    """The validated declarations of a parsed model file, not yet resolved."""
     ctx = _Context(file, lines)
     if data is None:
         raise ModelError("the model file is empty", file=file, line=1,
@@ -1010,30 +1283,13 @@ def _load_tree(data, lines: dict, file: str) -> ModelSpec:
 
     for i, name in enumerate(names_list("coordinates")):
         ctx.add_coordinate(name, f"coordinates[{i}]")
-    parameters = data.get("parameters")
-    if parameters is not None:
-        if not isinstance(parameters, dict):
-            raise ctx.error(f"expected a mapping of parameter names to defaults but got "
-                            f"{_describe(parameters)}", "parameters",
-                            "write parameters: {m: 1.0, g: 9.81}")
-        for name, default in parameters.items():
-            ctx.add_parameter(name, default, f"parameters.{name}")
+    _load_parameters(ctx, data.get("parameters"))
     for i, name in enumerate(names_list("inputs")):
         ctx.add_input(name, f"inputs[{i}]")
 
     def entries(section: str):
-        value = data.get(section)
-        if value is None:
-            return
-        if not isinstance(value, dict):
-            raise ctx.error(f"expected a mapping of {_SECTION_KIND[section]} names to "
-                            f"definitions but got {_describe(value)}", section,
-                            f"write one entry per line, e.g. '{_SECTION_EXAMPLES[section]}'")
-        for name, entry in value.items():
-            key = f"{section}.{name}"
-            if not isinstance(entry, dict):
-                raise ctx.error(f"expected a mapping but got {_describe(entry)}", key,
-                                f"write it like '{_SECTION_EXAMPLES[section]}'")
+        for name, entry, key in _mapping_entries(ctx, data.get(section), section, section,
+                                                 _SECTION_KIND[section]):
             _check_keys(ctx, entry, section, key)
             yield name, entry, key
 
@@ -1051,7 +1307,8 @@ def _load_tree(data, lines: dict, file: str) -> ModelSpec:
     for name, e, key in entries("actions"):
         ctx.add_action(name, e["body"], e.get("point"), e.get("base"), e.get("frame"),
                        e.get("torque"), e.get("force"), e.get("vector"), key)
-    return ctx.build()
+    _load_effects(ctx, data.get("effects"))
+    return ctx
 
 
 def parse_model(text: str, source: str = "<string>") -> ModelSpec:
@@ -1069,11 +1326,29 @@ def parse_model(text: str, source: str = "<string>") -> ModelSpec:
     >>> spec.points[0].coordinates
     (0, -L, 0)
     """
+    return _parse_context(text, source).build()
+
+
+def _parse_context(text: str, source: str) -> _Context:
     if not isinstance(text, str):
         raise ModelError(f"expected YAML text but got {_describe(text)}", file=source,
                          fix="pass the file's text, or use load_model(path)")
     data, lines = _compose(text, source)
-    return _load_tree(data, lines, source)
+    return _load_context(data, lines, source)
+
+
+def _read_text(path, what: str = "model") -> tuple:
+    """``(file name, text)`` of a UTF-8 file, or a ModelError naming the file."""
+    file = os.fspath(path)
+    try:
+        with open(file, encoding="utf-8") as handle:
+            return file, handle.read()
+    except OSError as exc:
+        raise ModelError(f"cannot read the {what} file: {exc.strerror or exc}", file=file,
+                         fix="check the path") from None
+    except UnicodeDecodeError as exc:
+        raise ModelError(f"the {what} file is not UTF-8 text ({exc.reason})", file=file,
+                         fix="save the file as UTF-8") from None
 
 
 def load_model(path) -> ModelSpec:
@@ -1083,16 +1358,7 @@ def load_model(path) -> ModelSpec:
     >>> spec.coordinates                                      # doctest: +SKIP
     ('q1', 'q2')
     """
-    file = os.fspath(path)
-    try:
-        with open(file, encoding="utf-8") as handle:
-            text = handle.read()
-    except OSError as exc:
-        raise ModelError(f"cannot read the model file: {exc.strerror or exc}", file=file,
-                         fix="check the path") from None
-    except UnicodeDecodeError as exc:
-        raise ModelError(f"the model file is not UTF-8 text ({exc.reason})", file=file,
-                         fix="save the file as UTF-8") from None
+    file, text = _read_text(path)
     return parse_model(text, source=file)
 
 
@@ -1185,7 +1451,67 @@ def spec_to_yaml(spec: ModelSpec) -> str:
         out += [f"  {name(a.name)}: {{body: {name(a.body)}, point: {name(a.point)}, "
                 f"base: {name(a.base)}, torque: {_yaml_vector(a.torque)}, "
                 f"force: {_yaml_vector(a.force)}}}" for a in spec.actions]
+    if spec.effects:
+        out.append("effects:")
+        out += [f"  {name(e.name)}: {{{_yaml_effect(e)}}}" for e in spec.effects]
     return "\n".join(out) + "\n"
+
+
+def _effect_fields(effect) -> dict:
+    """The fields of an effect spec that differ from the dataclass defaults."""
+    given = {}
+    for f in dataclasses.fields(effect):
+        value = getattr(effect, f.name)
+        if f.name == "name" or (f.default is not dataclasses.MISSING and value == f.default):
+            continue
+        given[f.name] = value
+    return given
+
+
+def _yaml_effect(effect) -> str:
+    """The inside of one ``effects:`` entry: ``type: spring, point_a: A, ...``."""
+    parts = [f"type: {effect.kind}"]
+    for field, value in _effect_fields(effect).items():
+        role = EFFECT_FIELD_ROLES.get(field, "vector")     # action torque/force: vectors
+        if role in ("point", "body", "base", "coordinate"):
+            text = _yaml_scalar(value)
+        elif role == "coordinates":
+            text = "[" + ", ".join(_yaml_scalar(c) for c in value) + "]"
+        elif role == "vector":
+            text = _yaml_vector(value)
+        else:
+            text = _yaml_expr(value)
+        parts.append(f"{field}: {text}")
+    return ", ".join(parts)
+
+
+def _replay(ctx: _Context, spec: ModelSpec, parameters=None) -> _Context:
+    """Declare everything of ``spec`` in ``ctx`` again (every check runs again).
+
+    ``parameters`` replaces the spec's ``(name, default)`` pairs if given.
+    Points are declared with their resolved from/base.
+    """
+    for c in spec.coordinates:
+        ctx.add_coordinate(c, f"coordinates[{len(ctx.coordinates)}]")
+    for p, value in (spec.parameters if parameters is None else parameters):
+        ctx.add_parameter(p, value, f"parameters.{p}")
+    for i in spec.inputs:
+        ctx.add_input(i, f"inputs[{len(ctx.inputs)}]")
+    for b in spec.bases:
+        ctx.add_base(b.name, b.parent, b.axis, b.angle, f"bases.{b.name}")
+    for p in spec.points:
+        ctx.add_point(p.name, p.parent, p.base, None, p.coordinates, f"points.{p.name}")
+    for f in spec.frames:
+        ctx.add_frame(f.name, f.point, f.base, f"frames.{f.name}")
+    for b in spec.bodies:
+        ctx.add_body(b.name, b.mass, b.G, b.base, b.inertia, f"bodies.{b.name}")
+    ctx.set_gravity(spec.gravity)
+    for a in spec.actions:
+        ctx.add_action(a.name, a.body, a.point, a.base, None, a.torque, a.force, None,
+                       f"actions.{a.name}")
+    for e in spec.effects:
+        ctx.add_effect(e.name, e.kind, _effect_fields(e), f"effects.{e.name}")
+    return ctx
 
 
 # -- Python API -----------------------------------------------------------------------
@@ -1365,6 +1691,23 @@ class Model:
         return self._apply(lambda c: c.add_action(name, body, point, base, frame, torque,
                                                   force, vector, f"actions.{name}"))
 
+    def add_effect(self, name: str, type: str, **fields) -> "Model":
+        """Add a named effect of kind ``type``; ``fields`` as in the YAML ``effects:``.
+
+        ``type`` is ``gravity``, ``spring``, ``torsion_spring``, ``damper``,
+        ``joint_damping``, ``friction``, ``drag`` or ``action``; the keyword
+        arguments are that effect's fields (omit the optional ones, or pass
+        None).  References to points, bases, bodies and coordinates are
+        checked by :meth:`spec`.
+
+        >>> m = Model("m").add_coordinate("x").add_parameters({"k": 10.0, "L": 1.0})
+        >>> _ = m.add_point("P", coordinates=["x", 0, 0])
+        >>> m.add_effect("s", "spring", point_a="O", point_b="P", stiffness="k",
+        ...              rest_length="L").spec().effects[0].stiffness
+        k
+        """
+        return self._apply(lambda c: c.add_effect(name, type, fields, f"effects.{name}"))
+
     def spec(self) -> ModelSpec:
         """Validate the whole model and return the frozen :class:`ModelSpec`.
 
@@ -1390,24 +1733,7 @@ class Model:
         True
         """
         m = cls(spec.name, spec.description)
-        m.add_coordinates(*spec.coordinates)
-        m.add_parameters(dict(spec.parameters))
-        m.add_inputs(*spec.inputs)
-
-        def change(c):
-            for b in spec.bases:
-                c.add_base(b.name, b.parent, b.axis, b.angle, f"bases.{b.name}")
-            for p in spec.points:
-                c.add_point(p.name, p.parent, p.base, None, p.coordinates, f"points.{p.name}")
-            for f in spec.frames:
-                c.add_frame(f.name, f.point, f.base, f"frames.{f.name}")
-            for b in spec.bodies:
-                c.add_body(b.name, b.mass, b.G, b.base, b.inertia, f"bodies.{b.name}")
-            c.set_gravity(spec.gravity)
-            for a in spec.actions:
-                c.add_action(a.name, a.body, a.point, a.base, None, a.torque, a.force, None,
-                             f"actions.{a.name}")
-        return m._apply(change)
+        return m._apply(lambda c: _replay(c, spec))
 
     @classmethod
     def from_yaml(cls, path) -> "Model":

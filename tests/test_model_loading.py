@@ -14,8 +14,8 @@ from modelgen.spec import (TIME, ActionSpec, BaseSpec, BodySpec, FrameSpec, Mode
 
 ROOT = Path(__file__).resolve().parent.parent
 MODEL_FILES = sorted((ROOT / "models").glob("*.yaml"))
-SHIPPED = ["arm7", "cart_pole", "double_pendulum", "heavy_top", "simple_pendulum",
-           "spherical_pendulum", "torque_free_body"]
+SHIPPED = ["arm7", "cart_pole", "double_pendulum", "heavy_top", "incline_block",
+           "simple_pendulum", "spherical_pendulum", "spring_chain", "torque_free_body"]
 Z = sympy.Integer(0)
 
 

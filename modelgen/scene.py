@@ -1,0 +1,632 @@
+"""The scene stage: a scene file and its model -> a validated :class:`SceneSpec`.
+
+A scene says what to simulate with a model: which effects are on, parameter
+overrides, the initial state, the time span, the integrator, the inputs and
+what to record.  :func:`load_scene` reads a scene file; :func:`parse_scene`
+reads scene text.  The format (YAML)::
+
+    scene: dp_damped                 # REQUIRED: a C identifier, the generated model's name
+    description: Double pendulum with damped hinges.   # optional (default: the model's)
+    model: ../double_pendulum.yaml   # REQUIRED: the model file, relative to the scene file
+    add_parameters: {c: 0.05}        # optional: parameters the added effects need
+    add_effects:                     # optional: effects defined here, as the model's effects:
+      hinge_damping: {type: joint_damping, coordinates: [q1, q2], damping: c}
+    effects: [gravity, hinge_damping]   # REQUIRED: the effects switched on ([] for none)
+    parameters: {m2: 2.0}            # optional: overrides, they become the defaults
+    initial: {q1: 1.0, q2: 0.5, q1_dot: 0.0, q2_dot: 0.0}   # REQUIRED: the whole state
+    time: {start: 0.0, end: 10.0, sample: 0.01}   # REQUIRED (start defaults to 0)
+    integrator: {method: rk4, step: 0.001}        # optional (these are the defaults)
+    inputs:                          # optional: inputs not listed are 0
+      T1: 0.5                                      # a constant, or samples in time:
+      T2: {times: [0, 1, 2], values: [0, 1, 0], interpolation: linear}
+    outputs:                         # optional: name -> one output kind and its options
+      tip:   {position: P1, from: O, base: E}      # r(P1) - r(O) in components of E
+      tip_v: {velocity: P1, base: E}               # velocity of P1 wrt E, in E
+      R2:    {orientation: B2, relative_to: E}     # 3x3 change of basis (row-major)
+      w2:    {angular_velocity: B2, relative_to: E, components: B2}
+      energy: {energy: total}                     # kinetic | potential | total
+      fd:    {generalized_force: hinge_damping}    # tau of one switched-on effect
+      pose2: {pose: rod2}                          # 4x4 pose of a body (row-major)
+
+Effects and names:
+
+* The effects a scene can switch on are the model's top-level ``gravity``
+  (named ``gravity``), its ``actions`` and its ``effects`` by name, and the
+  scene's ``add_effects``.  Everything not listed under ``effects`` is off and
+  is not generated.  Added effects and parameters share the model's
+  namespace, so they must not reuse a model name.
+* Selected effects whose kind is in :data:`modelgen.spec.STIFF_KINDS`
+  (springs, torsion springs, friction) are listed in
+  ``SceneSpec.stiff_effects``: they can make the problem stiff or non-smooth,
+  and the scene summary flags them.  The test is by kind only; it does not
+  estimate frequencies.
+
+The reduced model (``SceneSpec.model``):
+
+* is named after the scene and keeps only the selected effects (the
+  top-level gravity only if ``gravity`` is selected; actions and effects
+  filtered; added effects appended to ``effects``);
+* keeps only the parameters some expression of the reduced model still uses
+  (base angles, point coordinates, masses, inertias, gravity, actions,
+  effect fields), in declaration order, with the overrides as defaults;
+  the checks that depend on defaults (masses, inertias, effect
+  coefficients) run again with the overrides;
+* keeps every input of the model, so the inputs array of the generated C
+  has the same layout whichever effects are on.
+
+``SceneSpec.full_model`` is the model with the added parameters and effects
+and nothing removed.
+
+Rules (each broken one is a :class:`~modelgen.errors.ModelError` naming the
+scene file, line, key and a fix):
+
+* ``parameters`` may only override parameters the reduced model uses (an
+  override of a parameter of a switched-off effect would do nothing), and
+  ``inputs`` may only set inputs the switched-on effects use.
+* ``initial`` gives every coordinate and every speed (``<q>_dot``) a value.
+* ``time.end > time.start``, ``time.sample > 0``, ``integrator.step > 0``,
+  ``method`` one of :data:`METHODS`, and the sample interval is a whole
+  multiple of the step (relative tolerance 1e-9), since samples are taken at
+  steps.
+* A sampled input has one or more strictly increasing ``times`` and as many
+  ``values``.  ``interpolation`` is ``linear`` (default) or ``hold``
+  (zero-order hold: the value of the last sample at or before t); before the
+  first and after the last sample the end values are held.
+* Every number is finite (no ``.nan``/``.inf``).
+* Outputs name points, bases and bodies of the model (``O`` and ``E``
+  included), and ``generalized_force`` a switched-on effect.  Defaults:
+  ``from: O``, ``base: E``, ``relative_to: E``, ``components: E``.  An
+  ``energy`` output of ``potential`` or ``total`` is refused while a gravity
+  effect in a base other than E is on, because that potential is not
+  counted.  Output names are C identifiers (``E`` and ``O`` are allowed).
+"""
+from __future__ import annotations
+
+import os
+from dataclasses import replace
+
+from modelgen.errors import ModelError
+from modelgen.model import (_a, _closest, _compose, _Context, _describe, _listing,
+                            _load_effects, _load_parameters, _parse_context, _read_text, _replay,
+                            _yaml_float, check_name)
+from modelgen.spec import (CANONICAL_BASE, CANONICAL_POINT, OUTPUT_KINDS, STIFF_KINDS,
+                           InputSignal, ModelSpec, OutputSpec, SceneSpec, symbol)
+
+__all__ = ["METHODS", "TOP_LEVEL_KEYS", "INTERPOLATIONS", "ENERGIES", "OUTPUT_DEFAULTS",
+           "GRAVITY", "load_scene", "parse_scene"]
+
+#: Integration methods a scene may ask for.
+METHODS = ("rk4",)
+#: Default integrator settings.
+DEFAULT_METHOD, DEFAULT_STEP = "rk4", 1e-3
+#: Top-level keys of a scene file, in processing order.
+TOP_LEVEL_KEYS = ("scene", "description", "model", "add_parameters", "add_effects", "effects",
+                  "parameters", "initial", "time", "integrator", "inputs", "outputs")
+TIME_KEYS = ("start", "end", "sample")
+INTEGRATOR_KEYS = ("method", "step")
+SIGNAL_KEYS = ("times", "values", "interpolation")
+INTERPOLATIONS = ("linear", "hold")
+ENERGIES = ("kinetic", "potential", "total")
+#: Options of each output kind that may be omitted, with their defaults.
+OUTPUT_DEFAULTS = {
+    "position": {"from": CANONICAL_POINT, "base": CANONICAL_BASE},
+    "velocity": {"base": CANONICAL_BASE},
+    "orientation": {"relative_to": CANONICAL_BASE},
+    "angular_velocity": {"relative_to": CANONICAL_BASE, "components": CANONICAL_BASE},
+}
+#: What each output argument names.
+_ARG_ROLE = {"point": "point", "from": "point", "base": "base", "relative_to": "base",
+             "components": "base", "body": "body", "which": "energy", "effect": "effect"}
+#: Name of the top-level gravity as an effect.
+GRAVITY = "gravity"
+_REL_TOL = 1e-9
+
+
+def load_scene(path) -> SceneSpec:
+    """Load and validate a scene file and the model it names.
+
+    >>> scene = load_scene("models/scenes/dp_damped.yaml")     # doctest: +SKIP
+    >>> scene.effects, scene.model.parameter_names              # doctest: +SKIP
+    (('gravity', 'hinge_damping'), ('m1', 'm2', 'l1', 'l2', 'g', 'c'))
+    """
+    file, text = _read_text(path, "scene")
+    return parse_scene(text, source=file, base_dir=os.path.dirname(file))
+
+
+def parse_scene(text: str, source: str = "<string>", base_dir=None) -> SceneSpec:
+    """Parse and validate scene YAML text; ``source`` names it in errors.
+
+    The model path is relative to ``base_dir`` (default: the current
+    directory).
+
+    >>> scene = parse_scene('''
+    ... scene: swing
+    ... model: models/simple_pendulum.yaml
+    ... effects: [gravity]
+    ... initial: {q: 0.5, q_dot: 0.0}
+    ... time: {end: 2.0, sample: 0.01}
+    ... outputs: {bob: {position: P}}
+    ... ''')                                                      # doctest: +SKIP
+    >>> scene.outputs[0].args                                    # doctest: +SKIP
+    (('point', 'P'), ('from', 'O'), ('base', 'E'))
+    """
+    if not isinstance(text, str):
+        raise ModelError(f"expected YAML text but got {_describe(text)}", file=source,
+                         fix="pass the file's text, or use load_scene(path)")
+    data, lines = _compose(text, source)
+    base_dir = os.getcwd() if base_dir is None else os.fspath(base_dir)
+    return _SceneReader(data, lines, source, base_dir).read()
+
+
+class _SceneReader:
+    """Reads one scene; errors name the scene file (``self.ctx`` holds its lines)."""
+
+    def __init__(self, data, lines: dict, file: str, base_dir: str):
+        self.data = data
+        self.lines = lines
+        self.file = file
+        self.base_dir = base_dir
+        self.ctx = _Context(file, lines)     # errors, numbers and lines of the scene file
+
+    def error(self, problem: str, key, fix) -> ModelError:
+        return self.ctx.error(problem, key, fix)
+
+    def number(self, value, key: str, what: str) -> float:
+        return self.ctx.number(value, key, what)
+
+    def mapping(self, key: str, example: str) -> dict:
+        """The mapping at top-level ``key`` ({} if absent or null)."""
+        value = self.data.get(key)
+        if value is None:
+            return {}
+        if not isinstance(value, dict):
+            raise self.error(f"expected a mapping but got {_describe(value)}", key,
+                             f"write {key}: {example}")
+        return value
+
+    def missing(self, key: str, example: str) -> ModelError:
+        return ModelError(f"missing required key '{key}'", file=self.file, line=1,
+                          fix=f"add '{key}: {example}' at the top level")
+
+    def check_keys(self, entry: dict, valid: tuple, key: str, what: str) -> None:
+        for field in entry:
+            if field not in valid:
+                close = _closest(field, valid)
+                fix = f"did you mean '{close}'? " if close else ""
+                raise self.error(f"unknown key '{field}' in {what}", f"{key}.{field}",
+                                 fix + "valid keys: " + ", ".join(valid))
+
+    # -- the whole scene ---------------------------------------------------------
+    def read(self) -> SceneSpec:
+        data = self.data
+        if data is None:
+            raise ModelError("the scene file is empty", file=self.file, line=1,
+                             fix="start with 'scene: <scene name>' and 'model: <model file>'")
+        if not isinstance(data, dict):
+            raise ModelError(f"expected a mapping of scene keys but got {_describe(data)}",
+                             file=self.file, line=1, fix="start with 'scene: <scene name>' "
+                             "and use the keys " + ", ".join(TOP_LEVEL_KEYS))
+        for key in data:
+            if key not in TOP_LEVEL_KEYS:
+                close = _closest(key, TOP_LEVEL_KEYS)
+                fix = f"did you mean '{close}'? " if close else ""
+                raise self.error(f"unknown key '{key}'", key,
+                                 fix + "valid keys: " + ", ".join(TOP_LEVEL_KEYS))
+        if "scene" not in data:
+            raise self.missing("scene", "<scene name>")
+        name = check_name(data["scene"], file=self.file, line=self.ctx.line_of("scene"),
+                          key="scene", what="scene name", modelgen_reserved=False)
+        description = data.get("description")
+        if description is not None and not isinstance(description, str):
+            raise self.error(f"expected a string but got {_describe(description)}",
+                             "description", "write the description as text (quote it if "
+                             "needed)")
+        model_ctx = self.model_context()
+        full_ctx = model_ctx.clone()
+        for section in ("add_parameters", "add_effects"):
+            full_ctx.add_source(section, self.file, self.lines)
+        _load_parameters(full_ctx, data.get("add_parameters"), "add_parameters")
+        _load_effects(full_ctx, data.get("add_effects"), "add_effects")
+        full = full_ctx.build()
+        self.full, self.full_ctx = full, full_ctx
+
+        kinds = _effect_kinds(full)
+        selected = self.selected_effects(kinds)
+        reduced = self.reduced_model(name, description, selected)
+        initial = self.initial_state(full)
+        t_start, t_end, sample = self.time_span()
+        method, step = self.integrator(sample)
+        inputs = self.inputs(reduced, selected)
+        outputs = self.outputs(reduced, selected, kinds)
+        return SceneSpec(
+            name=name, model=reduced, full_model=full, effects=selected, initial=initial,
+            t_start=t_start, t_end=t_end, sample_dt=sample, method=method, step=step,
+            inputs=inputs, outputs=outputs,
+            stiff_effects=tuple(e for e in selected if kinds[e] in STIFF_KINDS),
+            source=self.file, lines=tuple(self.lines.items()))
+
+    # -- the model ----------------------------------------------------------------
+    def model_context(self) -> _Context:
+        value = self.data.get("model")
+        if value is None:
+            raise self.missing("model", "<model file, relative to the scene file>")
+        if not isinstance(value, str) or not value.strip():
+            raise self.error(f"expected the path of a model file but got {_describe(value)}",
+                             "model", "write the model file's path relative to the scene "
+                             "file, e.g. model: ../double_pendulum.yaml")
+        path = os.path.normpath(os.path.join(self.base_dir, value))
+        if not os.path.isfile(path):
+            folder = os.path.dirname(path)
+            known = sorted(f for f in os.listdir(folder) if f.endswith((".yaml", ".yml"))) \
+                if os.path.isdir(folder) else []
+            close = _closest(os.path.basename(path), known)
+            if close:
+                fix = f"did you mean '{os.path.join(os.path.dirname(value), close)}'?"
+            else:
+                fix = f"give the model's path relative to the scene file's folder " \
+                      f"{self.base_dir or '.'}"
+            raise self.error(f"model file '{path}' does not exist", "model", fix)
+        file, text = _read_text(path)
+        ctx = _parse_context(text, file)
+        ctx.build()                        # the model alone must be valid
+        return ctx
+
+    def selected_effects(self, kinds: dict) -> tuple:
+        known = f"effects of model '{self.full.name}': {_listing(kinds, 20)}"
+        if "effects" not in self.data:
+            raise self.missing("effects", "[" + ", ".join(kinds) + "]")
+        value = self.data["effects"]
+        if not isinstance(value, list):
+            raise self.error(f"expected a list of effect names but got {_describe(value)}",
+                             "effects", "list the effects to switch on, e.g. effects: ["
+                             + ", ".join(kinds) + "], or write effects: [] for none")
+        chosen = []
+        for i, item in enumerate(value):
+            key = f"effects[{i}]"
+            if not isinstance(item, str):
+                raise self.error(f"expected an effect name but got {_describe(item)}", key,
+                                 known)
+            if item not in kinds:
+                close = _closest(item, kinds)
+                fix = (f"did you mean '{close}'? " if close else "") + known
+                if not close:
+                    fix += " (define new ones under 'add_effects')"
+                raise self.error(f"unknown effect '{item}'", key, fix)
+            if item in chosen:
+                raise self.error(f"effect '{item}' is listed twice", key,
+                                 "list each effect once")
+            chosen.append(item)
+        return tuple(name for name in kinds if name in chosen)
+
+    def reduced_model(self, name: str, description, selected: tuple) -> ModelSpec:
+        full = self.full
+        on = set(selected)
+        kept = replace(full, gravity=full.gravity if GRAVITY in on else None,
+                       actions=tuple(a for a in full.actions if a.name in on),
+                       effects=tuple(e for e in full.effects if e.name in on))
+        used = _free_symbols(kept)
+        parameters = [(p, v) for p, v in full.parameters if symbol(p) in used]
+        used_names = {p for p, _ in parameters}
+        overrides = self.mapping("parameters", "{m2: 2.0}")
+        values = dict(parameters)
+        for p, value in overrides.items():
+            key = f"parameters.{p}"
+            if p not in full.parameter_names:
+                close = _closest(str(p), full.parameter_names)
+                fix = f"did you mean '{close}'? " if close else ""
+                raise self.error(f"unknown parameter '{p}'", key, fix + "parameters of "
+                                 f"model '{full.name}': {_listing(full.parameter_names, 20)}")
+            if p not in used_names:
+                users = [n for n in _effect_kinds(full) if n not in on
+                         and symbol(p) in _free_symbols(_only(full, n))]
+                fix = "remove the override" + (
+                    f", or switch on an effect that uses it: {_listing(users)}" if users
+                    else f" (no expression of model '{full.name}' uses it)")
+                raise self.error(f"parameter '{p}' is not used by the switched-on effects",
+                                 key, fix)
+            values[p] = self.number(value, key, f"the override of parameter '{p}'")
+        parameters = [(p, values[p]) for p, _ in parameters]
+
+        ctx = _Context(full.source, dict(full.lines))
+        ctx.set_name(name, "scene")
+        ctx.set_description(full.description if description is None else description)
+        try:
+            _replay(ctx, kept, parameters)
+            return ctx.build()
+        except ModelError as exc:
+            if not overrides:      # pragma: no cover - the full model was checked already
+                raise
+            where = f"{exc.file}:{exc.line}: {exc.key}" if exc.line else f"{exc.file}: {exc.key}"
+            raise self.error(f"with these overrides, {exc.problem} ({where})", "parameters",
+                             f"change the overrides ({exc.fix})") from None
+
+    # -- state, time and integrator ------------------------------------------------
+    def initial_state(self, full: ModelSpec) -> tuple:
+        state = full.coordinates + full.speeds
+        value = self.data.get("initial")
+        given: dict = {}
+
+        def template() -> str:
+            return "initial: {" + ", ".join(
+                f"{s}: {_yaml_float(given.get(s, 0.0))}" for s in state) + "}"
+
+        if "initial" not in self.data:
+            raise ModelError("missing required key 'initial'", file=self.file, line=1,
+                             fix=f"give every coordinate and speed a value, e.g. "
+                             f"{template()}")
+        if not isinstance(value, dict):
+            raise self.error(f"expected a mapping of coordinates and speeds to values but "
+                             f"got {_describe(value)}", "initial", f"write {template()}")
+        for s, v in value.items():
+            key = f"initial.{s}"
+            if s not in state:
+                close = _closest(str(s), state)
+                fix = f"did you mean '{close}'? " if close else ""
+                raise self.error(f"unknown coordinate or speed '{s}'", key,
+                                 fix + f"the state of model '{full.name}' is "
+                                 + ", ".join(state))
+            given[s] = self.number(v, key, f"the initial value of '{s}'")
+        missing = [s for s in state if s not in given]
+        if missing:
+            names = " and ".join(", ".join(f"'{m}'" for m in missing).rsplit(", ", 1))
+            plural = "s" if len(missing) > 1 else ""
+            raise self.error(f"missing initial value{plural} for {names}", "initial",
+                             f"every coordinate and speed needs one; write {template()}")
+        return tuple(given[s] for s in state)
+
+    def time_span(self) -> tuple:
+        if "time" not in self.data:
+            raise self.missing("time", "{start: 0.0, end: 10.0, sample: 0.01}")
+        time = self.mapping("time", "{start: 0.0, end: 10.0, sample: 0.01}")
+        self.check_keys(time, TIME_KEYS, "time", "time")
+        for field in ("end", "sample"):
+            if field not in time:
+                raise self.error(f"missing required key '{field}'", "time",
+                                 "write time: {start: 0.0, end: 10.0, sample: 0.01} "
+                                 "(start defaults to 0)")
+        start = self.number(time.get("start", 0.0), "time.start", "the start time")
+        end = self.number(time["end"], "time.end", "the end time")
+        sample = self.number(time["sample"], "time.sample", "the sample interval")
+        if not end > start:
+            raise self.error(f"the end time {end!r} is not after the start time {start!r}",
+                             "time.end", "make end greater than start")
+        if not sample > 0:
+            raise self.error(f"the sample interval must be positive but is {sample!r}",
+                             "time.sample", "give the time between recorded samples, "
+                             "e.g. sample: 0.01")
+        return start, end, sample
+
+    def integrator(self, sample: float) -> tuple:
+        settings = self.mapping("integrator", "{method: rk4, step: 0.001}")
+        self.check_keys(settings, INTEGRATOR_KEYS, "integrator", "integrator")
+        method = settings.get("method", DEFAULT_METHOD)
+        if not isinstance(method, str) or method not in METHODS:
+            shown = f"'{method}'" if isinstance(method, str) else _describe(method)
+            close = _closest(method, METHODS) if isinstance(method, str) else None
+            fix = f"did you mean '{close}'? " if close else ""
+            raise self.error(f"unknown integration method {shown}", "integrator.method",
+                             fix + "methods: " + ", ".join(METHODS))
+        step = self.number(settings.get("step", DEFAULT_STEP), "integrator.step", "the step")
+        if not step > 0:
+            raise self.error(f"the step must be positive but is {step!r}", "integrator.step",
+                             "give the integration step in seconds, e.g. step: 0.001")
+        every = round(sample / step)
+        if every < 1 or abs(every * step - sample) > _REL_TOL * sample:
+            nearest = float(f"{max(every, 1) * step:.12g}")
+            raise self.error(f"the sample interval {sample!r} is not a whole multiple of the "
+                             f"step {step!r}", "time.sample",
+                             f"samples are taken at steps: use e.g. sample: {nearest!r}, or "
+                             "change integrator.step")
+        return method, step
+
+    # -- inputs ------------------------------------------------------------------------
+    def inputs(self, reduced: ModelSpec, selected: tuple) -> tuple:
+        full = self.full
+        signals = {}
+        used = _free_symbols(reduced)
+        for name, value in self.mapping("inputs", "{T1: 0.5}").items():
+            key = f"inputs.{name}"
+            if name not in full.inputs:
+                close = _closest(str(name), full.inputs)
+                fix = f"did you mean '{close}'? " if close else ""
+                raise self.error(f"unknown input '{name}'", key,
+                                 fix + f"inputs of model '{full.name}': "
+                                 f"{_listing(full.inputs, 20)}")
+            if symbol(name) not in used:
+                users = [n for n in _effect_kinds(full) if n not in selected
+                         and symbol(name) in _free_symbols(_only(full, n))]
+                fix = "remove it" + (f", or switch on an effect that uses it: "
+                                     f"{_listing(users)}" if users else "")
+                raise self.error(f"input '{name}' is not used by the switched-on effects",
+                                 key, fix)
+            signals[name] = self.signal(name, value, key)
+        return tuple(signals.get(name, InputSignal(name, constant=0.0))
+                     for name in reduced.inputs)
+
+    def signal(self, name: str, value, key: str) -> InputSignal:
+        example = "{times: [0.0, 1.0], values: [0.0, 2.0], interpolation: linear}"
+        if not isinstance(value, dict):
+            if isinstance(value, (list, tuple)) or value is None:
+                raise self.error(f"expected a number or a mapping of samples but got "
+                                 f"{_describe(value)}", key,
+                                 f"write a constant such as {name}: 0.5, or {name}: {example}")
+            return InputSignal(name, constant=self.number(value, key, f"input '{name}'"))
+        self.check_keys(value, SIGNAL_KEYS, key, "a sampled input")
+        for field in ("times", "values"):
+            if field not in value:
+                raise self.error(f"missing required key '{field}'", key, f"write {example}")
+        lists = {}
+        for field in ("times", "values"):
+            items = value[field]
+            if not isinstance(items, list) or not items:
+                raise self.error(f"expected a list of one or more numbers but got "
+                                 f"{_describe(items)}", f"{key}.{field}", f"write {example}")
+            lists[field] = tuple(self.number(v, f"{key}.{field}[{i}]",
+                                             f"{field[:-1]} {i} of input '{name}'")
+                                 for i, v in enumerate(items))
+        times, values = lists["times"], lists["values"]
+        for i in range(1, len(times)):
+            if not times[i] > times[i - 1]:
+                raise self.error(f"sample times must increase, but times[{i}] = {times[i]!r} "
+                                 f"follows {times[i - 1]!r}", f"{key}.times[{i}]",
+                                 "list the times in increasing order, each once")
+        if len(values) != len(times):
+            raise self.error(f"{len(values)} values for {len(times)} times", f"{key}.values",
+                             "give one value per sample time")
+        interpolation = value.get("interpolation", "linear")
+        if interpolation not in INTERPOLATIONS:
+            shown = f"'{interpolation}'" if isinstance(interpolation, str) \
+                else _describe(interpolation)
+            close = _closest(interpolation, INTERPOLATIONS) \
+                if isinstance(interpolation, str) else None
+            fix = f"did you mean '{close}'? " if close else ""
+            raise self.error(f"unknown interpolation {shown}", f"{key}.interpolation",
+                             fix + "use linear or hold (zero-order hold)")
+        return InputSignal(name, times=times, values=values, interpolation=interpolation)
+
+    # -- outputs -----------------------------------------------------------------------
+    def outputs(self, reduced: ModelSpec, selected: tuple, kinds: dict) -> tuple:
+        result = []
+        example = "tip: {position: P1, from: O, base: E}"
+        for name, entry in self.mapping("outputs", "{" + example + "}").items():
+            key = f"outputs.{name}"
+            check_name(name, file=self.file, line=self.ctx.line_of(key), key=key,
+                       what="output name", modelgen_reserved=False)
+            if not isinstance(entry, dict):
+                raise self.error(f"expected a mapping but got {_describe(entry)}", key,
+                                 f"write it like '{example}'")
+            found = [k for k in entry if k in OUTPUT_KINDS]
+            kinds_text = "output kinds: " + ", ".join(OUTPUT_KINDS)
+            if not found:
+                options = {o for args in OUTPUT_KINDS.values() for o in args[1:]}
+                strange = [k for k in entry if k not in options]
+                if not strange:
+                    raise self.error(f"output '{name}' has no kind", key,
+                                     f"add one of the {kinds_text}")
+                close = _closest(strange[0], OUTPUT_KINDS)
+                fix = f"did you mean '{close}'? " if close else ""
+                raise self.error(f"unknown output kind '{strange[0]}'",
+                                 f"{key}.{strange[0]}", fix + kinds_text)
+            if len(found) > 1:
+                raise self.error(f"output '{name}' has two kinds, '{found[0]}' and "
+                                 f"'{found[1]}'", f"{key}.{found[1]}",
+                                 "give each output one kind (make two outputs)")
+            kind = found[0]
+            first, *options = OUTPUT_KINDS[kind]
+            for field in entry:
+                if field != kind and field not in options:
+                    close = _closest(field, options + list(OUTPUT_KINDS))
+                    fix = f"did you mean '{close}'? " if close else ""
+                    takes = "only '" + kind + "'" if not options else \
+                        f"{kind}, " + ", ".join(options)
+                    raise self.error(f"unknown key '{field}' for {_a(kind)} output",
+                                     f"{key}.{field}",
+                                     fix + f"{_a(kind)} output takes {takes}")
+            args = {first: (entry[kind], f"{key}.{kind}")}
+            for option in options:
+                default = OUTPUT_DEFAULTS.get(kind, {}).get(option)
+                args[option] = (entry[option], f"{key}.{option}") if option in entry \
+                    else (default, None)
+            values = tuple((arg, self.output_arg(arg, value, where, reduced, selected,
+                                                 kinds))
+                           for arg, (value, where) in args.items())
+            if kind == "energy" and dict(values)["which"] != "kinetic":
+                self.check_potential(name, f"{key}.{kind}", reduced)
+            result.append(OutputSpec(name, kind, values))
+        return tuple(result)
+
+    def output_arg(self, arg: str, value, key, model: ModelSpec, selected: tuple,
+                   kinds: dict):
+        if key is None:                  # a default
+            return value
+        role = _ARG_ROLE[arg]
+        if role == "energy":
+            if value not in ENERGIES:
+                shown = f"'{value}'" if isinstance(value, str) else _describe(value)
+                close = _closest(value, ENERGIES) if isinstance(value, str) else None
+                fix = f"did you mean '{close}'? " if close else ""
+                raise self.error(f"unknown energy {shown}", key,
+                                 fix + "write kinetic, potential or total")
+            return value
+        if not isinstance(value, str):
+            raise self.error(f"expected {_a(role)} name but got {_describe(value)}", key,
+                             f"write the name of {_a(role)}")
+        if role == "effect":
+            if value in selected:
+                return value
+            if value in kinds:
+                raise self.error(f"effect '{value}' is not switched on", key,
+                                 f"add it to 'effects', or record a switched-on effect: "
+                                 f"{_listing(selected)}")
+            close = _closest(value, selected)
+            fix = f"did you mean '{close}'? " if close else ""
+            raise self.error(f"unknown effect '{value}'", key,
+                             fix + f"switched-on effects: {_listing(selected)}")
+        known = {"point": [CANONICAL_POINT] + [p.name for p in model.points],
+                 "base": [CANONICAL_BASE] + [b.name for b in model.bases],
+                 "body": [b.name for b in model.bodies]}[role]
+        if value in known:
+            return value
+        plural = {"point": "points", "base": "bases", "body": "bodies"}[role]
+        listing = f"{plural} of model '{self.full.name}': {_listing(known, 20)}"
+        other = self.full_ctx.kind_of(value)
+        if other is not None:
+            raise self.error(f"'{value}' is {_a(other)}, not {_a(role)}", key,
+                             f"name {_a(role)} here ({listing})")
+        close = _closest(value, known)
+        fix = f"did you mean '{close}'? " if close else ""
+        raise self.error(f"unknown {role} '{value}'", key, fix + listing)
+
+    def check_potential(self, name: str, key: str, model: ModelSpec) -> None:
+        for e in model.effects:
+            if e.kind == "gravity" and e.base != CANONICAL_BASE:
+                raise self.error(f"the potential energy leaves out gravity effect '{e.name}' "
+                                 f"(its base is '{e.base}', not E)", key,
+                                 "give that gravity vector in base E, or record "
+                                 "energy: kinetic")
+
+
+# -- helpers -------------------------------------------------------------------------------
+
+def _effect_kinds(spec: ModelSpec) -> dict:
+    """Every effect a scene can switch on, in model order: name -> kind."""
+    kinds = {GRAVITY: "gravity"} if spec.gravity is not None else {}
+    kinds.update((a.name, "action") for a in spec.actions)
+    kinds.update((e.name, e.kind) for e in spec.effects)
+    return kinds
+
+
+def _only(spec: ModelSpec, effect: str) -> ModelSpec:
+    """``spec`` with nothing but the effect ``effect`` (for finding who uses a symbol)."""
+    return ModelSpec(name=spec.name, gravity=spec.gravity if effect == GRAVITY else None,
+                     actions=tuple(a for a in spec.actions if a.name == effect),
+                     effects=tuple(e for e in spec.effects if e.name == effect))
+
+
+def _expressions(spec: ModelSpec):
+    """Every expression of a spec."""
+    for b in spec.bases:
+        yield b.angle
+    for p in spec.points:
+        yield from p.coordinates
+    for b in spec.bodies:
+        yield b.mass
+        for row in b.inertia:
+            yield from row
+    yield from spec.gravity or ()
+    for a in spec.actions:
+        yield from a.torque
+        yield from a.force
+    for e in spec.effects:
+        for value in vars(e).values():
+            if isinstance(value, tuple):
+                yield from (v for v in value if not isinstance(v, str))
+            elif value is not None and not isinstance(value, str):
+                yield value
+
+
+def _free_symbols(spec: ModelSpec) -> set:
+    symbols: set = set()
+    for expr in _expressions(spec):
+        symbols |= getattr(expr, "free_symbols", set())
+    return symbols

@@ -1,0 +1,154 @@
+"""Scenes: only the chosen effects are generated, and the physics adds up.
+
+* switching an effect off removes its parameters and terms from the C and
+  lowers the operation count, with results identical to the full model with
+  that effect's parameters set to zero;
+* conservative scenes conserve energy; with dampers, the energy lost equals
+  the integrated damper power;
+* closed forms: the block on an incline stops at t* = v0 / (g (mu cos a - sin a)).
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.integrate import simpson
+
+import modelgen
+from modelgen.cli import main
+from modelgen.scene import load_scene as load_scene_spec
+
+from conftest import MODELS
+
+SCENES = MODELS / "scenes"
+
+
+@pytest.fixture(scope="module")
+def scene(build_root):
+    cache = {}
+
+    def get(name):
+        if name not in cache:
+            cache[name] = modelgen.load_scene(SCENES / f"{name}.yaml", build_root / f"scene_{name}")
+        return cache[name]
+    return get
+
+
+@pytest.mark.parametrize("name", sorted(p.stem for p in SCENES.glob("*.yaml")))
+def test_every_shipped_scene_runs(scene, name):
+    res = scene(name).run()
+    assert res.success, res.message
+    assert res.t[-1] == pytest.approx(scene(name).spec.t_end)
+    assert np.all(np.isfinite(res.x))
+
+
+def test_switching_an_effect_off_removes_its_parameters_and_terms(scene):
+    free, damped = scene("dp_free"), scene("dp_damped")
+    assert "c" in damped.model.parameters and "c" not in free.model.parameters
+    c_free = (free.generated.build.directory / "dp_free.c").read_text()
+    c_damped = (damped.generated.build.directory / "dp_damped.c").read_text()
+    assert "/* c */" in c_damped and "/* c */" not in c_free
+    ops_free = free.generated.manifest["ops"]["rhs"]["after_cse"]
+    ops_damped = damped.generated.manifest["ops"]["rhs"]["after_cse"]
+    assert ops_free < ops_damped
+    # the model's motor action is switched off in both: no input enters tau
+    tau = free.model.generalized_forces(0.0, [0.3, 0.2], [0.0, 0.0], u=[5.0])
+    assert np.array_equal(tau, free.model.generalized_forces(0.0, [0.3, 0.2], [0.0, 0.0]))
+
+
+def test_effect_off_equals_effect_with_zero_parameters(scene):
+    free, damped = scene("dp_free"), scene("dp_damped")
+    a = free.run()
+    b = damped.run(p={"c": 0.0})
+    assert np.allclose(a.x, b.x, rtol=0, atol=1e-12 * np.abs(a.x).max())
+
+
+def test_conservative_scene_conserves_energy(scene):
+    s = scene("dp_free")
+    assert s.conservative
+    res = s.run()
+    total = res.energy.sum(axis=1)
+    assert np.abs(total - total[0]).max() < 1e-6 * np.abs(res.energy).max()
+
+
+def test_energy_lost_equals_integrated_damper_power(scene):
+    s = scene("dp_damped")
+    assert not s.conservative
+    # sample every step so Simpson's rule is as accurate as the integration
+    res = s.model.simulate_rk4(s.spec.initial, (0.0, 5.0), 1e-3, every=2)
+    n = s.model.n
+    power = np.einsum("ij,ij->i", res["damping"], res.x[:, n:])
+    energy = res["energy"][:, 0]
+    lost = energy[-1] - energy[0]
+    assert lost < 0
+    assert lost == pytest.approx(simpson(power, x=res.t), rel=1e-6)
+
+
+def test_block_on_incline_stops_at_closed_form_time(scene):
+    s = scene("block_friction")
+    p = s.model.parameters
+    v0 = s.spec.initial[1]
+    a = p["g"] * (p["mu"] * np.cos(p["alpha"]) - np.sin(p["alpha"]))
+    t_star = v0 / a
+    res = s.run()
+    speed = res.x[:, 1]
+    # sliding: speed falls linearly at rate a until the smoothing band |v| ~ v_s
+    sliding = res.t < t_star - 0.05
+    assert np.allclose(speed[sliding], v0 - a * res.t[sliding], atol=1e-6)
+    # stuck afterwards: the regularised friction holds it within the band
+    assert np.all(np.abs(speed[res.t > t_star + 0.05]) < 2 * p["v_s"])
+
+
+def test_sampled_input_force_is_interpolated_linearly(scene):
+    s = scene("cart_pole_push")
+    sig = next(sig for sig in s.spec.inputs if sig.constant is None)
+    t = np.linspace(s.spec.t_start, s.spec.t_end, 7)
+    expected = np.interp(t, sig.times, sig.values)
+    u_index = s.model.inputs.index(sig.name)
+    times, values, interpolation = s._inputs()
+    assert interpolation == "linear"
+    assert np.allclose(np.interp(t, times, values[:, u_index]), expected, rtol=0, atol=1e-15)
+    # the C integrator sees the same force: compare with a Python RK4 on cm.rhs
+    cm, h = s.model, 1e-3
+    x = np.array(s.spec.initial, dtype=float)
+    u_at = lambda tt: np.interp(tt, sig.times, sig.values)   # noqa: E731
+    for k in range(500):
+        tk = k * h
+        k1 = cm.rhs(tk, x, u=[u_at(tk)])
+        k2 = cm.rhs(tk + h / 2, x + h / 2 * k1, u=[u_at(tk + h / 2)])
+        k3 = cm.rhs(tk + h / 2, x + h / 2 * k2, u=[u_at(tk + h / 2)])
+        k4 = cm.rhs(tk + h, x + h * k3, u=[u_at(tk + h)])
+        x = x + h / 6 * (k1 + 2 * (k2 + k3) + k4)
+    res = cm.simulate_rk4(s.spec.initial, (0.0, 0.5), h, every=500, u=s._inputs())
+    assert np.allclose(res.x[-1], x, rtol=0, atol=1e-12 * max(1.0, np.abs(x).max()))
+
+
+def test_stiff_and_non_smooth_effects_are_flagged(scene):
+    assert "STIFF" in scene("spring_chain_stiff").summary()
+    assert "friction" in scene("block_friction").spec.stiff_effects
+    assert "STIFF" not in scene("dp_free").summary()
+
+
+def test_failing_run_returns_what_it_computed(scene):
+    s = scene("dp_free")
+    res = s.run(p={"m1": 1.0, "m2": float("1e300"), "l2": 1e300})
+    assert not res.success
+    assert res.t.size >= 1 and res.t[-1] < s.spec.t_end
+    assert "t=" in res.message
+
+
+def test_simulate_cli_writes_csv_npz_png_for_a_scene(tmp_path, capsys):
+    argv = ["simulate", str(SCENES / "dp_damped.yaml"), "-o", str(tmp_path / "out"),
+            "--build-dir", str(tmp_path / "build")]
+    assert main(argv) == 0
+    out = capsys.readouterr().out
+    assert "effects on: gravity, hinge_damping" in out
+    assert "effects off (not generated): motor" in out
+    for ext in ("csv", "npz", "png"):
+        assert (tmp_path / "out" / f"dp_damped.{ext}").stat().st_size > 0
+    data = np.load(tmp_path / "out" / "dp_damped.npz")
+    assert data["x"].shape == (1001, 4) and data["output:elbow"].shape == (1001, 3)
+
+
+def test_scene_spec_reduced_model_is_named_after_the_scene():
+    spec = load_scene_spec(SCENES / "dp_free.yaml")
+    assert spec.model.name == "dp_free" and spec.full_model.name == "double_pendulum"
