@@ -1,5 +1,5 @@
 # Two commands set everything up on a fresh machine (Python >= 3.10 and a C compiler):
-#   make demo   -- venv, install, generate + simulate the double pendulum, write CSV and PNG to out/
+#   make demo   -- venv, install, generate the double pendulum and run its scene: out/dp_free.{csv,npz,png}
 #   make test   -- venv, install, run the test suite
 PYTHON ?= python3
 VENV   ?= .venv
@@ -19,7 +19,7 @@ install: $(VENV)/.installed
 
 demo: install
 	$(BIN)/modelgen generate models/double_pendulum.yaml
-	$(BIN)/modelgen simulate models/double_pendulum.yaml --init q1=1.5 --init q2=0.5 --t-end 10 --dt 1e-3 -o out
+	$(BIN)/modelgen simulate models/scenes/dp_free.yaml -o out
 
 test: install
 	$(BIN)/python -m pytest -q
