@@ -227,9 +227,10 @@ class CompiledModel:
     def simulate_rk4(self, x0, t_span, step, *, every: int = 1, u=None, p=None):
         """Fixed-step RK4 integrated in C; returns a :class:`~modelgen.simulate.SimulationResult`.
 
-        ``u`` is None (zeros), a constant vector or dict, or an
-        :class:`~modelgen.spec.InputSignal`-like tuple ``(times, values, interpolation)``
-        with ``values`` of shape (len(times), n_inputs).  The state is recorded
+        ``u`` is None (zeros), a constant vector or dict, a tuple
+        ``(times, values, interpolation)`` with ``values`` of shape
+        (len(times), n_inputs) and interpolation ``"linear"`` or ``"hold"``, or
+        a callable ``u(t, x)`` (feedback; the loop then runs in Python).  The state is recorded
         every ``every`` steps and after the last one.  A failure (mass matrix
         not positive definite, non-finite state) returns what was computed,
         with the time and the reason.
@@ -251,6 +252,8 @@ class CompiledModel:
             raise SimulationError(f"{self.name}: x0 must be finite")
         n_steps = int(np.ceil((t1 - t0) / step - 1e-9))
         step = (t1 - t0) / n_steps
+        if callable(u):
+            return self._simulate_feedback(x0, t0, t1, step, every, u, p)
         times, values, hold = self._input_samples(u)
         rows = n_steps // every + 2
         nx, ny = 2 * self.n, len(self.output_columns)
@@ -276,6 +279,21 @@ class CompiledModel:
                                 status=0 if status == 0 else (1 if status > 0 else 2),
                                 message=message, outputs=outputs,
                                 output_columns=dict(self.outputs))
+
+    def _simulate_feedback(self, x0, t0, t1, step, every, u, p):
+        """RK4 with inputs from a Python callable u(t, x): the loop runs in Python."""
+        from .simulate import rk4
+        res = rk4(self, x0, (t0, t1), step, u=u, p=p, record_energy=False)
+        keep = np.arange(0, len(res.t), every)
+        if keep[-1] != len(res.t) - 1:
+            keep = np.append(keep, len(res.t) - 1)
+        res.t, res.x = res.t[keep], res.x[keep]
+        if self.output_columns:
+            y = np.array([self.output_values(t, x, u(t, x), p) for t, x in zip(res.t, res.x)])
+            res.outputs = {name: y[:, [self.output_columns.index(c) for c in cols]]
+                           for name, cols in self.outputs.items()}
+            res.output_columns = dict(self.outputs)
+        return res
 
     def _input_samples(self, u):
         """(times, values (n, nu) C-ordered, hold) for the C integrator."""

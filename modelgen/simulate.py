@@ -116,6 +116,10 @@ class SimulationResult:
 def rk4(cm, x0, t_span, dt, *, u=None, p=None, record_energy=True) -> SimulationResult:
     """Integrate ``cm`` with classic fixed-step RK4 from ``x0`` over ``t_span``.
 
+    The loop runs in Python on the compiled rhs; ``u`` may be a constant
+    vector or dict, or a callable ``u(t, x)`` (feedback), which is why this
+    loop exists beside the C one (:meth:`CompiledModel.simulate_rk4`).
+
     >>> res = rk4(cm, [1.0, 0.0, 0.0, 0.0], (0.0, 10.0), 1e-3)   # doctest: +SKIP
     >>> res.t[-1], res.status                                      # doctest: +SKIP
     (10.0, 0)
@@ -135,7 +139,13 @@ def rk4(cm, x0, t_span, dt, *, u=None, p=None, record_energy=True) -> Simulation
     ts[-1] = t1
     xs = np.empty((steps + 1, x.size))
     xs[0] = x
-    f = cm.rhs_function(u=u, p=p)
+    if callable(u):        # feedback: u(t, x) evaluated at every stage
+        p_vec = cm.params(p)
+
+        def f(t, x):
+            return cm.rhs(t, x, u=u(t, x), p=p_vec)
+    else:
+        f = cm.rhs_function(u=u, p=p)
     status, message, last = 0, "success", steps
     for i in range(steps):
         t, h = ts[i], ts[i + 1] - ts[i]
@@ -237,8 +247,13 @@ class Scene:
                 values[:, j] = np.interp(grid, sig.times, sig.values)
         return (np.array(grid), values, "hold" if hold else "linear")
 
-    def run(self, p=None, x0=None) -> SimulationResult:
-        """Integrate the scene in C; energies are recorded for the plot."""
+    def run(self, p=None, x0=None, u=None) -> SimulationResult:
+        """Integrate the scene in C; energies are recorded for the plot.
+
+        ``p`` overrides parameters, ``x0`` the initial state, and ``u`` the
+        scene's inputs (anything :meth:`CompiledModel.simulate_rk4` accepts,
+        including a feedback callable ``u(t, x)``).
+        """
         s = self.spec
         every = max(1, int(round(s.sample_dt / s.step)))
         if abs(every * s.step - s.sample_dt) > 1e-9 * s.sample_dt:
@@ -249,7 +264,7 @@ class Scene:
                                   f"use rk4")
         x0 = np.array(s.initial if x0 is None else x0, dtype=float)
         res = self.model.simulate_rk4(x0, (s.t_start, s.t_end), s.step, every=every,
-                                      u=self._inputs(), p=p)
+                                      u=self._inputs() if u is None else u, p=p)
         n = self.model.n
         res.energy = np.array([self.model.energy(row[:n], row[n:], p) for row in res.x])
         return res
