@@ -31,20 +31,22 @@ def as_spec(source):
                     "give a YAML path, a modelgen.model.Model or a ModelSpec")
 
 
-def generate_model(source, out_dir=None, *, force: bool = False):
+def generate_model(source, out_dir=None, *, force: bool = False, jacobian: bool = False):
     """Generate and compile a model (or reuse the cache); returns the report."""
     from .pipeline import generate
-    return generate(as_spec(source), out_dir, force=force)
+    return generate(as_spec(source), out_dir, force=force, jacobian=jacobian)
 
 
-def load(source, out_dir=None, *, force: bool = False):
+def load(source, out_dir=None, *, force: bool = False, jacobian: bool = False):
     """Build (on first use) and import a model; returns a ``CompiledModel``.
 
     ``source`` is a YAML path, a :class:`modelgen.model.Model` or a ModelSpec.
-    Output goes to ``out_dir`` (default ``generated/<name>``).
+    Output goes to ``out_dir`` (default ``generated/<name>``).  With
+    ``jacobian=True`` the symbolic Jacobian ``<name>_jacobian`` is generated too
+    (for stiff integrators; it costs generation and compile time).
     """
     from .runtime import CompiledModel, check_mass_matrix
-    generated = generate_model(source, out_dir, force=force)
+    generated = generate_model(source, out_dir, force=force, jacobian=jacobian)
     cm = CompiledModel(generated.manifest, generated.build.module_path)
     if not generated.build.cached:
         check_mass_matrix(cm)

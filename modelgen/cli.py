@@ -24,7 +24,7 @@ def _generate(args) -> int:
     t0 = time.perf_counter()
     spec = as_spec(args.model)
     t_load = time.perf_counter() - t0
-    g = generate(spec, args.output, force=args.force)
+    g = generate(spec, args.output, force=args.force, jacobian=args.jacobian)
     b = g.build
     print(f"model      {spec.name}  ({args.model})")
     print(f"n          {spec.n} coordinates, {len(spec.parameters)} parameters, "
@@ -139,6 +139,8 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("-o", "--output", default=None,
                    help="output directory (default: generated/<name>)")
     g.add_argument("--force", action="store_true", help="rebuild even if cached")
+    g.add_argument("--jacobian", action="store_true",
+                   help="also generate <name>_jacobian, the symbolic d(xdot)/dx")
     g.set_defaults(func=_generate)
 
     s = sub.add_parser("simulate", help="run a scene (or a model) and write CSV, NPZ and PNG",

@@ -72,7 +72,8 @@ def render(template: str, context: dict) -> str:
 
 #: C parameter declaration of every input array name
 _PARAM = {"t": "double t", "q": "const double *q", "qd": "const double *qd",
-          "x": "const double *x", "u": "const double *u", "p": "const double *p"}
+          "x": "const double *x", "u": "const double *u", "p": "const double *p",
+          "a": "const double *a"}
 
 
 def _input_slots(routine: Routine) -> dict:
@@ -203,7 +204,7 @@ def _comment_safe(text: str) -> str:
 
 def template_context(*, name: str, description: str, model_hash: str, n: int,
                      coordinates, parameters, inputs, bodies,
-                     functions: dict, output_columns=()) -> dict:
+                     functions: dict, output_columns=(), has_jacobian=False) -> dict:
     """The plain dict every C template receives."""
     return {
         "name": name,
@@ -223,14 +224,16 @@ def template_context(*, name: str, description: str, model_hash: str, n: int,
         "bodies": list(bodies),
         "functions": {k: asdict(f) for k, f in functions.items()},
         "ny": len(output_columns),
+        "has_jacobian": bool(has_jacobian),
         "output_columns": list(output_columns),
         "api": public_api(name, n, len(parameters), len(inputs), len(bodies),
-                          len(output_columns)),
+                          len(output_columns), has_jacobian),
         "solve_lines": unrolled_ldlt(n, f"{name.upper()}_PIVOT_TOL") if n <= UNROLL_SOLVE else [],
     }
 
 
-def public_api(name: str, n: int, n_p: int, n_u: int, n_b: int, n_y: int = 0) -> list:
+def public_api(name: str, n: int, n_p: int, n_u: int, n_b: int, n_y: int = 0,
+               has_jacobian: bool = False) -> list:
     """Prototypes and documentation of every exported function.
 
     The header and the cffi ``cdef`` are both rendered from this one list.
@@ -243,6 +246,12 @@ def public_api(name: str, n: int, n_p: int, n_u: int, n_b: int, n_y: int = 0) ->
              "params": "double t, const double *x, const double *u, const double *p, double *y",
              "doc": [f"The scene's recorded outputs y[{n_y}] at state x[{2 * n}] (columns in",
                      "the order listed at the top of this file)."]})
+    if has_jacobian:
+        extra.append(
+            {"ret": "int", "name": f"{name}_jacobian",
+             "params": "double t, const double *x, const double *u, const double *p, double *J",
+             "doc": [f"Jacobian J[{2 * n}*{2 * n}] = d xdot / d x, row-major, derived symbolically",
+                     "(forward mode over the generated program). Returns the rhs status."]})
     extra.append(
         {"ret": "int", "name": f"{name}_simulate_rk4",
          "params": "double t0, double step, long n_steps, long every, const double *x0, "

@@ -17,6 +17,7 @@ from .cse import make_routines
 from .dynamics import Equations, derive_equations
 from .errors import ModelError
 from .emit import ABI_VERSION, emit_sources, print_routine, template_context, templates_digest
+from .jacobian import derive_jacobian_terms
 from .kinematics import derive_kinematics
 from .outputs import derive_outputs
 from .spec import ModelSpec
@@ -39,30 +40,31 @@ class Generated:
         return self.manifest["ops"]
 
 
-def model_hash(spec: ModelSpec, outputs=()) -> str:
+def model_hash(spec: ModelSpec, outputs=(), jacobian: bool = False) -> str:
     """Hash of what determines the generated C: the model, modelgen, the templates.
 
     The file the model came from and its line numbers are not part of it, so
     the same model gives the same C wherever it lies.
     """
     h = hashlib.sha256()
-    for part in (repr(replace(spec, source=None, lines=())), repr(tuple(outputs)),
+    for part in (repr(replace(spec, source=None, lines=())),
+                 repr(tuple(outputs)) + (" jacobian" if jacobian else ""),
                  __version__, str(ABI_VERSION), templates_digest()):
         h.update(part.encode())
         h.update(b"\0")
     return h.hexdigest()
 
 
-def build_hash(spec: ModelSpec, outputs=()) -> str:
+def build_hash(spec: ModelSpec, outputs=(), jacobian: bool = False) -> str:
     """Cache key of the compiled module: the model hash, the compiler and its flags."""
     h = hashlib.sha256()
-    for part in (model_hash(spec, outputs), " ".join(compiler()), os.environ.get("MODELGEN_CFLAGS", "")):
+    for part in (model_hash(spec, outputs, jacobian), " ".join(compiler()), os.environ.get("MODELGEN_CFLAGS", "")):
         h.update(part.encode())
         h.update(b"\0")
     return h.hexdigest()
 
 
-def routines_for(eqs: Equations, output_exprs=()):
+def routines_for(eqs: Equations, output_exprs=(), jacobian=None):
     """The C routines of a model: (name, inputs, outputs) for make_routines."""
     n = len(eqs.q)
     t = (("t", (eqs.t,)),)
@@ -77,7 +79,9 @@ def routines_for(eqs: Equations, output_exprs=()):
         ("rhs", t + (x, u, p), (("A", A_flat), ("b", b))),
         ("energy", (q, qd, p), (("out", (eqs.kinetic, eqs.potential)),)),
         ("body_poses", (q, p), (("T", tuple(e for pose in eqs.poses for e in pose)),)),
-    ] + ([("outputs", t + (x, u, p), (("y", tuple(output_exprs)),))] if output_exprs else [])
+    ] + ([("outputs", t + (x, u, p), (("y", tuple(output_exprs)),))] if output_exprs else []) \
+      + ([("jacobian_terms", t + (x, u, p, ("a", jacobian.a)),
+           (("D", tuple(e for row in jacobian.D for e in row)),))] if jacobian else [])
 
 
 def _check_generable(spec: ModelSpec) -> None:
@@ -92,12 +96,14 @@ def _check_generable(spec: ModelSpec) -> None:
                          fix="declare at least one body with a mass under 'bodies'")
 
 
-def generate(spec: ModelSpec, out_dir=None, *, force: bool = False, outputs=()) -> Generated:
+def generate(spec: ModelSpec, out_dir=None, *, force: bool = False, outputs=(),
+             jacobian: bool = False) -> Generated:
     """Generate, compile and cache the model; reuse an unchanged build.
 
     ``out_dir`` defaults to ``generated/<name>``.  ``outputs`` (a tuple of
     :class:`~modelgen.spec.OutputSpec`, from a scene) adds a
     ``<name>_outputs`` routine computing exactly those quantities.
+    ``jacobian=True`` adds ``<name>_jacobian``, the symbolic d(xdot)/dx.
 
     >>> g = generate(load_model("models/double_pendulum.yaml"))   # doctest: +SKIP
     >>> g.manifest["n"]                                             # doctest: +SKIP
@@ -105,7 +111,7 @@ def generate(spec: ModelSpec, out_dir=None, *, force: bool = False, outputs=()) 
     """
     _check_generable(spec)
     directory = Path(out_dir) if out_dir is not None else DEFAULT_OUTPUT / spec.name
-    key = build_hash(spec, outputs)
+    key = build_hash(spec, outputs, jacobian)
     if not force:
         hit = cached_build(directory, key)
         if hit is not None:
@@ -117,19 +123,23 @@ def generate(spec: ModelSpec, out_dir=None, *, force: bool = False, outputs=()) 
     eqs = derive_equations(kin)
     columns = derive_outputs(kin, eqs, outputs) if outputs else None
     graph = columns.graph if columns else eqs.graph
+    terms = derive_jacobian_terms(eqs, graph) if jacobian else None
+    graph = terms.graph if terms else graph
     t1 = time.perf_counter()
     seconds["derive"] = t1 - t0
-    routines = make_routines(graph, routines_for(eqs, columns.exprs if columns else ()))
+    routines = make_routines(graph, routines_for(eqs, columns.exprs if columns else (), terms))
     t2 = time.perf_counter()
     seconds["cse"] = t2 - t1
-    outputs_c = {"A": "A", "h": "h", "tau": "tau", "b": "b", "out": "out", "T": "T", "y": "y"}
+    outputs_c = {"A": "A", "h": "h", "tau": "tau", "b": "b", "out": "out", "T": "T", "y": "y",
+                 "D": "D"}
     functions = {r.name: print_routine(r, outputs_c) for r in routines}
     context = template_context(
-        name=spec.name, description=spec.description, model_hash=model_hash(spec, outputs)[:16],
+        name=spec.name, description=spec.description, model_hash=model_hash(spec, outputs, jacobian)[:16],
         n=spec.n,
         coordinates=spec.coordinates, parameters=spec.parameters, inputs=spec.inputs,
         bodies=eqs.bodies, functions=functions,
-        output_columns=[c for cols in columns.columns for c in cols] if columns else ())
+        output_columns=[c for cols in columns.columns for c in cols] if columns else (),
+        has_jacobian=bool(jacobian))
     sources = emit_sources(context)
     t3 = time.perf_counter()
     seconds["emit"] = t3 - t2
@@ -144,6 +154,7 @@ def generate(spec: ModelSpec, out_dir=None, *, force: bool = False, outputs=()) 
         "coordinates": list(spec.coordinates),
         "parameters": [[name, float(value)] for name, value in spec.parameters],
         "inputs": list(spec.inputs),
+        "jacobian": bool(jacobian),
         "bodies": list(eqs.bodies),
         "outputs": [{"name": name, "columns": list(cols)}
                     for name, cols in zip(columns.names, columns.columns)] if columns else [],

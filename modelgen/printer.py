@@ -18,7 +18,7 @@ class ModelPrinter(C99CodePrinter):
 
     >>> x, y = sympy.symbols("x y")
     >>> ModelPrinter({x: "q[0]", y: "p[1]"}).doprint(x**2 * y + sympy.pi)
-    'p[1]*(q[0]*q[0]) + 3.1415926535897931'
+    '3.1415926535897931 + p[1]*(q[0]*q[0])'
     """
 
     def __init__(self, slots: dict):

@@ -188,7 +188,9 @@ class Scene:
         self.spec = spec
         if progress:
             progress(f"{spec.name}: generating (or reusing) the model")
-        generated = generate(spec.model, out_dir, force=force, outputs=spec.outputs)
+        # stiff scenes get the symbolic Jacobian, for implicit integrators
+        generated = generate(spec.model, out_dir, force=force, outputs=spec.outputs,
+                             jacobian=bool(spec.stiff_effects) and spec.model.n <= 12)
         self.generated = generated
         self.model = CompiledModel(generated.manifest, generated.build.module_path)
         if not generated.build.cached:
