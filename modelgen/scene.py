@@ -603,30 +603,5 @@ def _only(spec: ModelSpec, effect: str) -> ModelSpec:
                      effects=tuple(e for e in spec.effects if e.name == effect))
 
 
-def _expressions(spec: ModelSpec):
-    """Every expression of a spec."""
-    for b in spec.bases:
-        yield b.angle
-    for p in spec.points:
-        yield from p.coordinates
-    for b in spec.bodies:
-        yield b.mass
-        for row in b.inertia:
-            yield from row
-    yield from spec.gravity or ()
-    for a in spec.actions:
-        yield from a.torque
-        yield from a.force
-    for e in spec.effects:
-        for value in vars(e).values():
-            if isinstance(value, tuple):
-                yield from (v for v in value if not isinstance(v, str))
-            elif value is not None and not isinstance(value, str):
-                yield value
-
-
 def _free_symbols(spec: ModelSpec) -> set:
-    symbols: set = set()
-    for expr in _expressions(spec):
-        symbols |= getattr(expr, "free_symbols", set())
-    return symbols
+    return spec.free_symbols()

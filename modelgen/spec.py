@@ -255,6 +255,35 @@ class ModelSpec:
     def speeds(self) -> tuple:
         return tuple(speed_name(c) for c in self.coordinates)
 
+    def expressions(self):
+        """Every expression of the model: angles, coordinates, masses, inertias,
+        gravity, action components and effect fields."""
+        for b in self.bases:
+            yield b.angle
+        for p in self.points:
+            yield from p.coordinates
+        for b in self.bodies:
+            yield b.mass
+            for row in b.inertia:
+                yield from row
+        yield from self.gravity or ()
+        for a in self.actions:
+            yield from a.torque
+            yield from a.force
+        for e in self.effects:
+            for value in vars(e).values():
+                if isinstance(value, tuple):
+                    yield from (v for v in value if not isinstance(v, str))
+                elif value is not None and not isinstance(value, str):
+                    yield value
+
+    def free_symbols(self) -> set:
+        """The symbols the model's expressions use."""
+        out: set = set()
+        for expr in self.expressions():
+            out |= getattr(expr, "free_symbols", set())
+        return out
+
     def line_of(self, key: str) -> Optional[int]:
         """Line of a dotted key in the source file, if known."""
         for k, line in self.lines:
