@@ -298,6 +298,74 @@ def public_api(name: str, n: int, n_p: int, n_u: int, n_b: int, n_y: int = 0,
          "doc": [f"Pose of every body: T[{n_b}*16], one row-major 4x4 matrix per body",
                  "[[R, r_G], [0, 0, 0, 1]]: R's columns are the body base's unit vectors",
                  "in E, r_G the centre of mass from O in E [m]."]},
+    ] + _integrator_api(name, n, n_p, n_u)
+
+
+# -- integrators (templates/integrators.c.j2) ----------------------------------------
+
+def _integrator_api(name: str, n: int, n_p: int, n_u: int) -> list:
+    """Prototypes and documentation of the integrators' exported functions.
+
+    The status codes, method numbers and statistics slots named here are
+    defined in templates/integrators.c.j2 and mirrored, with the messages, by
+    :mod:`modelgen.integrate`.
+    """
+    nx = 2 * n
+    return [
+        {"ret": "int", "name": f"{name}_jacobian_fd",
+         "params": "double t, const double *x, const double *u, const double *p, double *J",
+         "doc": [f"d xdot / d x by central differences of {name}_rhs (step cbrt(eps) max(1, |x_j|),",
+                 f"error about 1e-10 relative): J[{nx}*{nx}] row-major, J[i*{nx} + j] = d xdot_i / d x_j.",
+                 f"x[{nx}], u[{n_u}], p[{n_p}] as for {name}_rhs; returns its status."]},
+        {"ret": "int", "name": f"{name}_integrate",
+         "params": "int method, double t0, double t1, const double *x0, const double *p, "
+                   "long n_u, const double *u_times, const double *u_values, int u_hold, "
+                   "const double *rtol, const double *atol, double first_step, double max_step, "
+                   "double fixed_step, long max_steps, const double *resume, long n_out_max, "
+                   "const double *t_eval, "
+                   "double *t_out, double *x_out, long *n_out, int n_events, "
+                   "int (*events)(void *, double, const double *, double *), void *ctx, "
+                   "const int *direction, const int *terminal, long n_found_max, "
+                   "double *t_found, double *x_found, int *which_found, long *n_found, "
+                   "long *stats, double *stop",
+         "doc": [f"Integrates x' = xdot(t, x) from x0[{nx}] at t0 to t1 >= t0; nothing is allocated.",
+                 "method: 0 rk4, 1 dopri5, 2 dop853, 3 rodas4 (Rosenbrock, uses the Jacobian),",
+                 "4 implicit midpoint, 5 gauss4 (2-stage Gauss-Legendre).  fixed_step > 0 gives",
+                 "fixed steps of about that size (required by 0, 4 and 5; no error control);",
+                 f"else rtol[{nx}], atol[{nx}] set the error control, first_step (0: Hairer's",
+                 "hinit) and max_step (0: t1 - t0) its steps.  max_steps counts attempts.",
+                 "resume: NULL, or the stop array of a call that returned 2, to continue it",
+                 "exactly (from t0 = stop[0], x0 = stop + 9).",
+                 f"p, n_u, u_times, u_values, u_hold: as for {name}_simulate_rk4.",
+                 "Output: t_eval NULL records t0 and every accepted step into t_out[n_out_max],",
+                 f"x_out[n_out_max][{nx}]; else x_out[i] is x(t_eval[i]) for the n_out_max increasing",
+                 "times t_eval (from the dense output; t_out may be NULL).  *n_out rows written.",
+                 "Events (n_events <= 32, 0: no calls): events(ctx, t, x, g) writes g[n_events],",
+                 "returns nonzero to abort; a sign change of g[i] (direction[i] > 0 rising only,",
+                 "< 0 falling only) is located on the dense output and recorded in t_found,",
+                 f"x_found[][{nx}], which_found (capacity n_found_max, *n_found written); the",
+                 "integration stops at occurrence terminal[i] > 0 of event i.",
+                 "stats[8]: accepted, rejected steps, rhs, Jacobian evaluations, LU",
+                 "factorizations, Newton iterations, event function calls, failing pivot.",
+                 f"stop[9 + {nx}]: t reached, next step size, time of the failure, the step",
+                 "controller's memory (4), steps since the first t0, that t0; x at t from 9.",
+                 "Returns 0 (t1 reached), 1 (terminal event), 2 (an output buffer is full:",
+                 "continue from stop), -1 max_steps reached, -2 step size underflow, -3 mass",
+                 "matrix not positive definite, -4 NaN/Inf in the state, -5 implicit stage",
+                 "equations not solved, -6 event function aborted, -7 bad argument.",
+                 "Everything up to the stop is written."]},
+        {"ret": "int", "name": f"{name}_integrate_batch",
+         "params": "long n_runs, int method, double t0, double t1, const double *x0, "
+                   "const double *p, long p_stride, long n_u, const double *u_times, "
+                   "const double *u_values, int u_hold, const double *rtol, const double *atol, "
+                   "double first_step, double max_step, double fixed_step, long max_steps, "
+                   "long n_eval, const double *t_eval, double *x_out, long *n_out, int *status, "
+                   "long *stats, double *stop",
+         "doc": [f"{name}_integrate for n_runs initial states x0[n_runs][{nx}] with parameters",
+                 f"p + r * p_stride (p_stride 0: one parameter set, {n_p}: one per run), sampled",
+                 f"at t_eval[n_eval] (required) into x_out[n_runs][n_eval][{nx}]; no events.",
+                 f"n_out[n_runs], status[n_runs], stats[n_runs][8], stop[n_runs][9 + {nx}].",
+                 "Returns the number of runs that failed (status < 0)."]},
     ]
 
 

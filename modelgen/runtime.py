@@ -311,6 +311,48 @@ class CompiledModel:
             return times, values, u[2] == "hold"
         return np.zeros(1), self.input_vector(u).reshape(1, nu).copy(), False
 
+    # -- integration in C (modelgen/integrate.py) ------------------------------------
+    def simulate(self, x0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10,
+                 u=None, p=None, events=None, **options):
+        """Integrate in C with error control; returns a solve_ivp-shaped result.
+
+        Methods: ``rk4``, ``dopri5``, ``dop853``, ``rodas`` (stiff), ``midpoint``,
+        ``gauss4`` (the fixed-step ones need ``step=``); ``events`` are
+        ``g(t, x)`` callables with ``terminal``/``direction`` as in solve_ivp.
+        Options: ``step``, ``first_step``, ``max_step``, ``max_steps``, ``chunk``.
+        See :func:`modelgen.integrate.simulate`.
+
+        >>> res = cm.simulate([1.0, 0.0], (0, 10), t_eval=np.linspace(0, 10, 101))  # doctest: +SKIP
+        >>> res.y.shape, res.success                                                # doctest: +SKIP
+        ((2, 101), True)
+        """
+        from .integrate import simulate
+        return simulate(self, x0, t_span, t_eval, method, rtol, atol, u, p, events, **options)
+
+    def simulate_batch(self, X0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10,
+                       u=None, P=None, **options):
+        """Integrate many initial states / parameter sets in one C call (``threads=`` to split).
+
+        See :func:`modelgen.integrate.simulate_batch`.
+
+        >>> res = cm.simulate_batch(X0, (0, 5), P={"g": [9.81, 1.62]})           # doctest: +SKIP
+        >>> res.y.shape                                                           # doctest: +SKIP
+        (2, 4, 1)
+        """
+        from .integrate import simulate_batch
+        return simulate_batch(self, X0, t_span, t_eval, method, rtol, atol, u, P, **options)
+
+    def jac(self, t, x, u=None, p=None) -> np.ndarray:
+        """d xdot / d x at (t, x), shape (2n, 2n), for ``solve_ivp(..., jac=cm.jac)``.
+
+        The generated symbolic Jacobian when the model has one, else central
+        differences of the compiled rhs (see :func:`modelgen.integrate.jacobian_source`).
+
+        >>> scipy.integrate.solve_ivp(cm.rhs, (0, 1), x0, method="Radau", jac=cm.jac)  # doctest: +SKIP
+        """
+        from .integrate import jacobian
+        return jacobian(self, t, x, u, p)
+
     def body_poses(self, q, p=None) -> np.ndarray:
         """4x4 pose of every body, shape (n_bodies, 4, 4)."""
         q = self._vector(q, self.n, "q")

@@ -7,7 +7,7 @@ as C99 and as C++, it is deterministic, and the build around it is robust.
   (large enough that routines are cut into ``noinline`` parts) compile with
   ``cc -std=c99 -Wall -Wextra -Werror -pedantic`` and
   ``c++ -x c++ -std=c++11 -Wall -Wextra -Werror``, whole and as the two
-  ``MG_PART`` halves, and a small generated ``main`` calls every exported
+  ``MG_PART`` parts, and a small generated ``main`` calls every exported
   function of the header.
 * Golden files: ``tests/golden/double_pendulum.c`` and ``.h`` are the generated
   source, byte for byte.  The preamble holds the modelgen version and the
@@ -55,7 +55,8 @@ HASH_ENV = ("CC", "MODELGEN_CFLAGS")
 #: Every function a model exports, without the "<name>_" prefix; written out
 #: here rather than taken from modelgen.emit.public_api, which renders the header.
 EXPORTED = ("abi_version", "default_parameters", "mass_matrix", "velocity_terms",
-            "generalized_forces", "rhs", "energy", "body_poses", "simulate_rk4")
+            "generalized_forces", "rhs", "energy", "body_poses", "simulate_rk4",
+            "jacobian_fd", "integrate", "integrate_batch")
 C99 = ("cc", "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic")
 CXX11 = ("c++", "-x", "c++", "-std=c++11", "-Wall", "-Wextra", "-Werror")
 JOBS = max(2, os.cpu_count() or 2)
@@ -180,7 +181,7 @@ def test_embedded_example_builds_and_runs(generated, tmp_path):
 
 # -- compiling the C on its own -----------------------------------------------------
 
-PROTOTYPE = re.compile(r"^(int|void) (\w+)\(([^)]*)\);$", re.M)
+PROTOTYPE = re.compile(r"^(int|void) (\w+)\((.*)\);$", re.M)   # params may hold a function pointer
 
 
 def _prototypes(model_dir: Path, name: str) -> list:
@@ -202,6 +203,14 @@ def _checker(model_dir: Path, name: str) -> str:
            "const double *x": "x", "const double *u": "u", "const double *p": "p",
            "double *p": "p"}
     lines = [
+        f"static int event_{name}(void *ctx, double t, const double *x, double *g)",
+        "{",
+        "    (void)ctx;",
+        "    (void)x;",
+        "    g[0] = t - 0.004;",
+        "    return 0;",
+        "}",
+        "",
         f"static int check_{name}(void)",
         "{",
         f"    double p[{N}_NP + 1], x[{N}_NX], u[{N}_NU + 1];",
@@ -221,6 +230,46 @@ def _checker(model_dir: Path, name: str) -> str:
                 f"        if ({fn}(0.0, 1e-3, 10, 5, x, p, 0, 0, 0, 0, ts, xs, ys, &rows, "
                 "&t_stop) != 0) ++failures;",
                 "        if (rows != 3 || ts[2] != 10 * 1e-3 || t_stop != ts[2]) ++failures;",
+                "    }",
+                f'    printf("called {fn}\\n");']
+            continue
+        if fn == f"{name}_jacobian_fd":
+            lines += [
+                "    {",
+                f"        double J[{N}_NX * {N}_NX];",
+                f"        if ({fn}(0.25, x, u, p, J) != 0) ++failures;",
+                f"        for (i = 0; i < {N}_NX * {N}_NX; ++i) if (!(J[i] - J[i] == 0.0)) ++failures;",
+                "    }",
+                f'    printf("called {fn}\\n");']
+            continue
+        if fn == f"{name}_integrate":
+            # dopri5 over 10 ms sampled at 5 and 10 ms, one event at t = 4 ms
+            lines += [
+                "    {",
+                f"        double rt[{N}_NX], at[{N}_NX], te[2] = {{0.005, 0.01}}, to[2], xo[2 * {N}_NX];",
+                f"        double tf[4], xf[4 * {N}_NX], stop[9 + {N}_NX];",
+                "        long st[8], n_o = 0, n_f = 0;",
+                "        int dir = 1, term = 0, wh[4];",
+                f"        for (i = 0; i < {N}_NX; ++i) {{ rt[i] = 1e-8; at[i] = 1e-10; }}",
+                f"        if ({fn}(1, 0.0, 0.01, x, p, 0, 0, 0, 0, rt, at, 0.0, 0.0, 0.0, 1000, 0, 2, te, "
+                f"to, xo, &n_o, 1, event_{name}, 0, &dir, &term, 4, tf, xf, wh, &n_f, st, stop) != 0) ++failures;",
+                "        if (n_o != 2 || to[1] != 0.01 || n_f != 1 || wh[0] != 0) ++failures;",
+                "        if (!(tf[0] > 0.004 - 1e-12 && tf[0] < 0.004 + 1e-12) || stop[0] != 0.01) ++failures;",
+                "    }",
+                f'    printf("called {fn}\\n");']
+            continue
+        if fn == f"{name}_integrate_batch":
+            # two identical runs of rk4 (10 steps), final states only
+            lines += [
+                "    {",
+                f"        double X[2 * {N}_NX], te[1] = {{0.01}}, xo[2 * {N}_NX], stop[2 * (9 + {N}_NX)];",
+                f"        double rt[{N}_NX], at[{N}_NX];",
+                "        long n_o[2], st[16];",
+                "        int sts[2];",
+                f"        for (i = 0; i < {N}_NX; ++i) {{ rt[i] = 1e-8; at[i] = 1e-10; X[i] = X[{N}_NX + i] = x[i]; }}",
+                f"        if ({fn}(2, 0, 0.0, 0.01, X, p, 0, 0, 0, 0, 0, rt, at, 0.0, 0.0, 1e-3, 100, 1, te, "
+                "xo, n_o, sts, st, stop) != 0) ++failures;",
+                f"        if (n_o[0] != 1 || n_o[1] != 1 || sts[0] != 0 || xo[0] != xo[{N}_NX] || st[0] != 10) ++failures;",
                 "    }",
                 f'    printf("called {fn}\\n");']
             continue
@@ -283,16 +332,18 @@ def test_generated_c_compiles_warning_free_as_c99_and_cxx(generated, tmp_path):
         out.mkdir()
         (out / "main.c").write_text(_main_source({name: src}))
         inc = f"-I{src}"
-        for tag, flags in (("all", []), ("1", ["-DMG_PART=1"]), ("2", ["-DMG_PART=2"])):
+        for tag, flags in (("all", []), ("1", ["-DMG_PART=1"]), ("2", ["-DMG_PART=2"]),
+                           ("3", ["-DMG_PART=3"])):
             compiles.append(([*C99, *flags, "-c", src / f"{name}.c", "-o", f"c_{tag}.o"], out))
             compiles.append(([*CXX11, *flags, "-c", src / f"{name}.c", "-o", f"cxx_{tag}.o"], out))
         compiles.append(([*C99, inc, "-c", "main.c", "-o", "main_c.o"], out))
         compiles.append(([*CXX11, "-pedantic", inc, "-c", "main.c", "-o", "main_cxx.o"], out))
-        # C main + whole C file; C++ main + the two C halves (extern "C");
-        # C main + the two C++-compiled halves
+        # C main + whole C file; C++ main + the three C parts (extern "C");
+        # C main + the three C++-compiled parts
         for exe, cmd in (("c_all", ["cc", "main_c.o", "c_all.o"]),
-                         ("cxx_main_c_parts", ["c++", "main_cxx.o", "c_1.o", "c_2.o"]),
-                         ("c_main_cxx_parts", ["c++", "main_c.o", "cxx_1.o", "cxx_2.o"])):
+                         ("cxx_main_c_parts", ["c++", "main_cxx.o", "c_1.o", "c_2.o", "c_3.o"]),
+                         ("c_main_cxx_parts", ["c++", "main_c.o", "cxx_1.o", "cxx_2.o",
+                                               "cxx_3.o"])):
             links.append(([*cmd, "-o", exe, "-lm"], out))
             binaries[(name, exe)] = out / exe
 
@@ -310,8 +361,8 @@ def test_generated_c_compiles_warning_free_as_c99_and_cxx(generated, tmp_path):
         out = tmp_path / name
         exported = sorted(f"{name}_{s}" for s in EXPORTED)
         assert _defined_globals(out / "c_all.o") == exported, name
-        halves = _defined_globals(out / "c_1.o") + _defined_globals(out / "c_2.o")
-        assert sorted(halves) == exported, f"{name}: MG_PART halves overlap or miss symbols"
+        parts = [g for k in (1, 2, 3) for g in _defined_globals(out / f"c_{k}.o")]
+        assert sorted(parts) == exported, f"{name}: MG_PART parts overlap or miss symbols"
 
 
 def test_two_models_link_into_one_program_without_symbol_clashes(generated, tmp_path):

@@ -1,0 +1,515 @@
+"""The integrators generated into the model's C (templates/integrators.c.j2).
+
+References are independent of the code under test: the pendulum's closed form
+(Jacobi elliptic functions), its elliptic-integral period, scipy's solve_ivp,
+numpy finite differences, and conserved energy.
+"""
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+import scipy.integrate
+from scipy.special import ellipj, ellipk
+
+from modelgen import integrate
+from modelgen.errors import SimulationError
+
+MODELS = Path(__file__).resolve().parent.parent / "models"
+G = 9.81
+PERIOD_90 = 2.367841947576237          # L = 1, g = 9.81, released from horizontal
+ADAPTIVE = ("dopri5", "dop853", "rodas")
+ALL_METHODS = ("rk4", "dopri5", "dop853", "rodas", "midpoint", "gauss4")
+
+
+@pytest.fixture(scope="module")
+def sp(compiled):
+    return compiled("simple_pendulum")
+
+
+@pytest.fixture(scope="module")
+def dp(compiled):
+    return compiled("double_pendulum")
+
+
+@pytest.fixture(scope="module")
+def symbolic(build_root):
+    """The two pendulums generated with the symbolic Jacobian <name>_jacobian, which the
+    implicit methods then use instead of central differences."""
+    import modelgen
+    return {name: modelgen.load(MODELS / f"{name}.yaml", build_root / f"{name}_jacobian",
+                                jacobian=True)
+            for name in ("simple_pendulum", "double_pendulum")}
+
+
+DRIVEN = """\
+name: driven_pendulum
+description: Simple pendulum driven by the torque A sin(w t) about its hinge.
+coordinates: [q]
+parameters: {L: 1.0, m: 1.0, g: 9.81, A: 5.0, w: 3.0}
+bases:
+  B1: {parent: E, axis: 3, angle: q}
+points:
+  P: {from: O, base: B1, coordinates: [0, -L, 0]}
+bodies:
+  bob: {mass: m, G: P, base: B1}
+gravity: [0, -g, 0]
+actions:
+  drive: {body: bob, point: O, base: E, torque: [0, 0, A*sin(w*t)]}
+"""
+
+
+@pytest.fixture(scope="module")
+def driven(build_root):
+    """A non-autonomous model: xdot depends on t (Rosenbrock needs d xdot / d t)."""
+    import modelgen
+    path = build_root / "driven_pendulum.yaml"
+    path.write_text(DRIVEN)
+    return modelgen.load(path, build_root / "driven_pendulum")
+
+
+def pendulum_exact(q0, t):
+    """x(t) of the pendulum (L = 1) released at rest from q0:
+    q = 2 asin(k sn(K - w t)), qdot = -2 k w cn(K - w t), k = sin(q0/2)."""
+    w, k = np.sqrt(G), np.sin(q0 / 2)
+    sn, cn, _, _ = ellipj(ellipk(k * k) - w * np.asarray(t), k * k)
+    return np.array([2 * np.arcsin(k * sn), -2 * k * w * cn])
+
+
+def fixed_step(method):
+    return {} if method in ADAPTIVE else {"step": 1e-3}
+
+
+# -- the C and Python tables agree ---------------------------------------------------
+
+def test_status_codes_methods_and_stats_slots_of_the_c_match_the_python_tables(sp):
+    source = (sp.path.parent / f"{sp.name}.c").read_text()
+    N = sp.name.upper()
+
+    def defines(kind):
+        return {m[1]: int(m[2]) for m in re.finditer(rf"#define {N}_{kind}_(\w+) (-?\d+)", source)}
+    assert defines("ODE") == {name: code for code, (name, _) in integrate.STATUS.items()}
+    methods = {code: integrate.method_of(name).name for name, code in defines("METHOD").items()}
+    assert methods == {m.code: m.name for m in integrate.METHODS.values()}
+    stats = defines("STAT")
+    assert sorted(stats, key=stats.get) == [s.upper() for s in integrate.STATS]
+    assert f"#define {N}_MAX_EVENTS {integrate.MAX_EVENTS}\n" in source
+    assert f"#define {N}_STOP_X {integrate.STOP_X}\n" in source
+
+
+# -- order -----------------------------------------------------------------------------
+
+#: largest step of each method's sweep (then h/2, h/4, h/8): inside the asymptotic
+#: range and above round-off (dop853's smallest error is about 1e-14)
+SWEEP = {"rk4": 0.05, "dopri5": 0.05, "dop853": 0.25, "rodas": 0.05, "midpoint": 0.05,
+         "gauss4": 0.1}
+
+
+def _observed_order(sp, method, theta):
+    """Least-squares slope of log(RMS error) against log(h) over four fixed steps;
+    samples at fraction theta of each step (0: the step points themselves)."""
+    q0, T = 1.0, 2.0
+    hs = SWEEP[method] / 2.0 ** np.arange(4)
+    errors = []
+    for h in hs:
+        n = int(round(T / h))
+        t = (np.arange(n) + theta) * h if theta else np.linspace(0, T, 9)
+        res = sp.simulate([q0, 0.0], (0, T), t_eval=t, method=method, step=h)
+        assert res.success and res.naccept == n
+        errors.append(np.sqrt(np.mean((res.y - pendulum_exact(q0, t)) ** 2)))
+    return np.polyfit(np.log(hs), np.log(errors), 1)[0]
+
+
+@pytest.mark.parametrize("method", ALL_METHODS)
+def test_fixed_step_convergence_order_matches_the_nominal_order(sp, method):
+    """Adaptive methods run with fixed steps (step=) for this; error at t = 0, 0.25 .. 2."""
+    order = _observed_order(sp, method, 0.0)
+    assert abs(order - integrate.METHODS[method].order) <= 0.3, order
+
+
+@pytest.mark.parametrize("method", ["rk4", "dopri5", "rodas", "midpoint", "gauss4"])
+def test_fixed_step_order_holds_for_a_time_dependent_right_hand_side(driven, method):
+    """Stages at t + c_i h see the inputs of their own time, and rodas its
+    d xdot / d t term.  Reference: scipy's DOP853 at 1e-13.  (dop853 is left out:
+    on this problem it is still superconvergent, about 9, at the smallest steps
+    that stay above round-off.)"""
+    T, x0, t = 2.0, [1.0, 0.0], np.linspace(0, 2.0, 9)
+    ref = scipy.integrate.solve_ivp(driven.rhs, (0, T), x0, method="DOP853", rtol=1e-13,
+                                    atol=1e-13, t_eval=t)
+    hs = SWEEP[method] / 2.0 ** np.arange(4)
+    errors = [np.sqrt(np.mean((driven.simulate(x0, (0, T), t_eval=t, method=method,
+                                               step=h).y - ref.y) ** 2)) for h in hs]
+    order = np.polyfit(np.log(hs), np.log(errors), 1)[0]
+    assert abs(order - integrate.METHODS[method].order) <= 0.3, order
+
+
+@pytest.mark.parametrize("method", ALL_METHODS)
+def test_dense_output_converges_at_the_order_of_step_or_interpolant(sp, method):
+    """Samples at 37% of every step: the error is O(h^min(p, q + 1)) for a method of
+    order p with a continuous extension of order q (dopri5 4, dop853 7, the others 3)."""
+    m = integrate.METHODS[method]
+    order = _observed_order(sp, method, 0.37)
+    assert abs(order - min(m.order, m.dense_order + 1)) <= 0.3, order
+
+
+@pytest.mark.parametrize("method", ADAPTIVE)
+def test_adaptive_error_is_proportional_to_the_tolerance(sp, method):
+    """Tolerance sweep 1e-5 .. 1e-11: the global error follows tol^(1 +- 0.15) and stays
+    within [0.3, 100] x tol; the work grows as the tolerance tightens."""
+    q0, t = 1.0, np.linspace(0, 5, 51)
+    tols = 10.0 ** -np.arange(5, 11.5, 1.0)
+    errors, work = [], []
+    for tol in tols:
+        res = sp.simulate([q0, 0.0], (0, 5), t_eval=t, method=method, rtol=tol, atol=tol)
+        assert res.success
+        errors.append(np.max(np.abs(res.y - pendulum_exact(q0, t))))
+        work.append(res.nfev)
+    errors = np.array(errors)
+    slope = np.polyfit(np.log(tols), np.log(errors), 1)[0]
+    assert abs(slope - 1) <= 0.15, slope
+    assert np.all(errors < 100 * tols) and np.all(errors > 0.3 * tols), errors / tols
+    assert np.all(np.diff(work) > 0), work
+
+
+# -- events ------------------------------------------------------------------------------
+
+def _upward_zero(t, x):
+    return x[0]
+
+
+_upward_zero.direction = 1
+
+
+@pytest.mark.parametrize("method", ADAPTIVE + ("rodas, symbolic Jacobian",))
+def test_pendulum_period_by_event_detection_matches_the_elliptic_integral(sp, symbolic,
+                                                                          method):
+    """Released from horizontal, q passes 0 upwards at 3T/4 and 7T/4: rtol = 1e-10
+    gives T to 1e-9 relative (measured: 1e-10 dopri5, 5e-12 dop853, 6e-13 rodas)."""
+    assert 4 * np.sqrt(1 / G) * ellipk(0.5) == pytest.approx(PERIOD_90, rel=1e-15)
+    if method.endswith("symbolic Jacobian"):
+        sp, method = symbolic["simple_pendulum"], "rodas"
+        assert integrate.jacobian_source(sp) == "symbolic"
+    res = sp.simulate([np.pi / 2, 0.0], (0, 4.5), method=method, rtol=1e-10, atol=1e-10,
+                      events=_upward_zero)
+    assert res.status == 0 and res.success
+    t_up = res.t_events[0]
+    assert len(t_up) == 2
+    assert t_up[1] - t_up[0] == pytest.approx(PERIOD_90, rel=1e-9)
+    assert t_up[0] == pytest.approx(0.75 * PERIOD_90, rel=1e-9)
+    # the event state lies on the solution: q = 0 there, moving up at the energy's speed
+    q, qd = res.y_events[0][0]
+    assert abs(q) < 1e-9 and qd == pytest.approx(np.sqrt(2 * G), rel=1e-8)
+
+
+@pytest.mark.parametrize("method", ALL_METHODS)
+def test_terminal_event_stops_there_and_ends_the_result_with_the_event(sp, method):
+    def falling_through_zero(t, x):
+        return x[0]
+    falling_through_zero.terminal = True
+    falling_through_zero.direction = -1
+    res = sp.simulate([np.pi / 2, 0.0], (0, 10), method=method, events=falling_through_zero,
+                      rtol=1e-10, atol=1e-10, **fixed_step(method))
+    assert res.status == 1 and res.success
+    assert res.message == integrate.STATUS[1][1]
+    t_event = res.t_events[0][0]
+    # second order at h = 1e-3: the implicit midpoint rule is good to ~3e-7 here
+    assert t_event == pytest.approx(0.25 * PERIOD_90, rel=1e-6 if method == "midpoint" else 1e-8)
+    assert res.t[-1] == t_event and np.array_equal(res.y[:, -1], res.y_events[0][0])
+    # with t_eval: the samples stop at the event
+    t_eval = np.linspace(0, 10, 101)
+    res2 = sp.simulate([np.pi / 2, 0.0], (0, 10), t_eval=t_eval, method=method,
+                       events=falling_through_zero, rtol=1e-10, atol=1e-10,
+                       **fixed_step(method))
+    assert np.array_equal(res2.t, t_eval[t_eval <= res2.t_events[0][0]])
+
+
+def test_event_direction_selects_crossings_and_terminal_counts_occurrences(sp):
+    def zero(t, x):
+        return x[0]
+    both = sp.simulate([np.pi / 2, 0.0], (0, 5), events=zero, rtol=1e-10, atol=1e-10)
+    expected = np.array([0.25, 0.75, 1.25, 1.75]) * PERIOD_90
+    assert np.allclose(both.t_events[0], expected, rtol=1e-8)
+    zero.direction = 1
+    up = sp.simulate([np.pi / 2, 0.0], (0, 5), events=zero, rtol=1e-10, atol=1e-10)
+    assert np.allclose(up.t_events[0], expected[1::2], rtol=1e-8)
+    zero.direction, zero.terminal = 0, 3           # stop at the third crossing
+    third = sp.simulate([np.pi / 2, 0.0], (0, 5), events=zero, rtol=1e-10, atol=1e-10)
+    assert third.status == 1 and np.allclose(third.t_events[0], expected[:3], rtol=1e-8)
+    assert third.t[-1] == third.t_events[0][-1]
+
+
+@pytest.mark.parametrize("method", ALL_METHODS)
+def test_hundreds_of_events_are_all_found_across_output_buffers(dp, method):
+    """200 zeros of sin(40 pi t) in 5 s: more than the first event buffer holds, so
+    the C call is continued; each zero is found to round-off (at most one per step:
+    max_step keeps the steps shorter than the spacing of the zeros)."""
+    def ticks(t, x):
+        return np.sin(40 * np.pi * t)
+    res = dp.simulate([1.0, -0.5, 0, 0], (0, 5), events=ticks, max_step=0.01,
+                      **fixed_step(method))
+    assert res.success
+    assert np.allclose(res.t_events[0], np.arange(1, 201) / 40, rtol=0, atol=1e-13)
+    assert res.y_events[0].shape == (200, 4)
+
+
+def test_an_exception_in_an_event_function_propagates(sp):
+    def broken(t, x):
+        if t > 0.5:
+            raise ValueError("event function broke")
+        return 1.0
+    with pytest.raises(ValueError, match="event function broke"):
+        sp.simulate([1.0, 0.0], (0, 2), events=broken)
+
+
+# -- output --------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("method", ADAPTIVE)
+def test_dense_output_at_t_eval_agrees_with_stepping_exactly_to_those_times(dp, method):
+    """Sampling through the dense output (steps unchanged) against integrations whose
+    last step lands exactly on each time: both are within the tolerance of the truth."""
+    x0, tol = [1.0, -0.5, 0.0, 0.0], 1e-9
+    t_eval = np.array([0.0, 0.137, 0.5, 1.01, 1.5, 1.999])
+    dense = dp.simulate(x0, (0, 2), t_eval=t_eval, method=method, rtol=tol, atol=tol)
+    assert dense.success and np.array_equal(dense.t, t_eval)
+    for j, t in enumerate(t_eval[1:], start=1):
+        stepped = dp.simulate(x0, (0, t), method=method, rtol=tol, atol=tol)
+        assert stepped.t[-1] == t
+        assert np.max(np.abs(dense.y[:, j] - stepped.y[:, -1])) < 100 * tol, (method, t)
+    # and t_eval does not change the steps: the step points are reproduced bitwise
+    steps = dp.simulate(x0, (0, 2), method=method, rtol=tol, atol=tol)
+    again = dp.simulate(x0, (0, 2), t_eval=steps.t, method=method, rtol=tol, atol=tol)
+    assert np.array_equal(again.y, steps.y)
+
+
+@pytest.mark.parametrize("method", ["dop853", "rodas", "gauss4"])
+def test_recording_every_step_in_small_chunks_changes_nothing(dp, method):
+    """chunk=7 forces dozens of C calls, each continued from the last exactly."""
+    x0 = [1.0, -0.5, 0.0, 0.0]
+    whole = dp.simulate(x0, (0, 3), method=method, step=0.01 if method == "gauss4" else None)
+    chunked = dp.simulate(x0, (0, 3), method=method, chunk=7,
+                          step=0.01 if method == "gauss4" else None)
+    assert len(whole.t) > 30
+    assert np.array_equal(whole.t, chunked.t) and np.array_equal(whole.y, chunked.y)
+    assert whole.naccept == chunked.naccept and whole.nreject == chunked.nreject
+    assert np.all(np.diff(chunked.t) > 0)
+
+
+def test_result_is_shaped_like_solve_ivps(dp):
+    res = dp.simulate([1.0, -0.5, 0.0, 0.0], (0, 1))
+    ref = scipy.integrate.solve_ivp(dp.rhs, (0, 1), [1.0, -0.5, 0.0, 0.0], method="DOP853",
+                                    rtol=1e-12, atol=1e-12)
+    for key in ("t", "y", "sol", "t_events", "y_events", "nfev", "njev", "nlu", "status",
+                "message", "success"):
+        assert key in res and key in ref
+    assert res.y.shape == (4, len(res.t)) and res.t[0] == 0 and res.t[-1] == 1
+    assert res.sol is None and res.t_events is None
+    assert res.naccept + 1 == len(res.t) and res.nfev > 0 and res.njev == 0
+    assert np.max(np.abs(res.y[:, -1] - ref.y[:, -1])) < 1e-7
+    assert "naccept" in repr(res)
+
+
+@pytest.mark.parametrize("method", ["rodas", "midpoint", "gauss4"])
+def test_implicit_methods_count_jacobians_factorizations_and_newton_iterations(sp, method):
+    step = None if method == "rodas" else 0.01
+    res = sp.simulate([1.0, 0.0], (0, 1), method=method, step=step)
+    assert res.njev >= res.naccept > 0 and res.nlu >= res.naccept
+    if method != "rodas":
+        assert res.nnewton >= 2 * res.naccept
+    assert integrate.jacobian_source(sp) in ("symbolic", "finite differences")
+
+
+def test_symplectic_methods_keep_the_energy_bounded_where_rk4_drifts(sp):
+    """5000 steps of 0.2 s over 160 periods of a large swing: the Gauss methods'
+    energy error does not grow, RK4's does (tenfold)."""
+    def energy_error(method):
+        res = sp.simulate([2.5, 0.0], (0, 1000), t_eval=np.linspace(0, 1000, 2001),
+                          method=method, step=0.2)
+        assert res.success
+        e = np.array([sp.energy(y[:1], y[1:]).sum() for y in res.y.T])
+        err = np.abs(e - e[0]) / abs(e[0])
+        return err[:200].max(), err[-200:].max()
+    for method in ("midpoint", "gauss4"):
+        early, late = energy_error(method)
+        assert late < 1.5 * early, (method, early, late)
+    early, late = energy_error("rk4")
+    assert late > 5 * early
+
+
+# -- failures -------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("method", ALL_METHODS)
+def test_singular_mass_matrix_stops_with_the_pivot_and_keeps_the_start(dp, method):
+    res = dp.simulate([0.5, -0.3, 0, 0], (0, 2), method=method, p={"m1": 0.0, "m2": 0.0},
+                      **fixed_step(method))
+    assert res.status == -3 and not res.success
+    assert res.message.startswith("Mass matrix not positive definite at t=0.0: Cholesky pivot "
+                                  "1 (coordinate 'q1') failed; last good state at t=0.0: "
+                                  "x=[0.5, -0.3, 0.0, 0.0]")
+    assert np.array_equal(res.t, [0.0]) and np.array_equal(res.y[:, 0], [0.5, -0.3, 0, 0])
+
+
+@pytest.mark.parametrize("method", ALL_METHODS)
+def test_infinite_input_gives_non_finite_status_and_the_trajectory_before_it(dp, method):
+    """The input (held) jumps to +inf at t = 1: the state would become Inf/NaN."""
+    u = (np.array([0.0, 1.0]), np.array([[0.0], [np.inf]]), "hold")
+    x0 = [0.5, -0.3, 0.0, 0.0]
+    res = dp.simulate(x0, (0, 2), method=method, u=u, **fixed_step(method))
+    assert res.status == -4 and not res.success
+    assert re.match(r"NaN or Inf in the state at t=1\.0\d*; last finite state at t=0\.99\d*",
+                    res.message), res.message
+    assert 1.0 <= res.t_fail < 1.01
+    assert 0.99 <= res.t[-1] < 1.0 and len(res.t) > 10 and np.all(np.isfinite(res.y))
+    clean = dp.simulate(x0, (0, res.t[-1]), method=method, **fixed_step(method))
+    assert np.allclose(res.y[:, -1], clean.y[:, -1], atol=1e-6)
+
+
+@pytest.mark.parametrize("method", ALL_METHODS)
+def test_max_steps_returns_the_steps_taken(sp, method):
+    res = sp.simulate([1.0, 0.0], (0, 10), method=method, max_steps=10, **fixed_step(method))
+    assert res.status == -1 and not res.success
+    assert res.message.startswith("Maximum number of steps (10) reached at t=")
+    assert res.naccept + res.nreject == 10 and len(res.t) == res.naccept + 1
+    assert 0 < res.t[-1] < 10
+
+
+@pytest.mark.parametrize("method", ALL_METHODS)
+def test_step_size_underflow_when_t_is_too_large_to_resolve_the_step(sp, method):
+    """At t = 1e15 consecutive doubles are 0.125 apart: no step the pendulum needs
+    can advance t."""
+    res = sp.simulate([1.0, 0.0], (1e15, 1e15 + 10), method=method, **fixed_step(method))
+    assert res.status == -2
+    assert res.message.startswith("Step size underflow at t=1000000000000000.0")
+    assert np.array_equal(res.t, [1e15])
+
+
+@pytest.mark.parametrize("method", ["midpoint", "gauss4"])
+def test_newton_failure_of_a_too_large_implicit_step_is_reported(sp, method):
+    res = sp.simulate([1.0, 0.0], (0, 10), method=method, step=2.0)
+    assert res.status == -5
+    assert "implicit stage equations could not be solved in the step from t=0.0" in res.message
+    assert np.array_equal(res.t, [0.0])
+
+
+def test_singular_rosenbrock_matrix_halves_the_step_or_stops_a_fixed_step_run(symbolic):
+    """Inverted pendulum at rest: J = [[0, 1], [g, 0]] exactly (symbolic), so
+    1/(gamma h) - J is singular for h = 1/(gamma sqrt(g)), gamma = 1/4."""
+    sp = symbolic["simple_pendulum"]
+    h = 1 / (0.25 * np.sqrt(G))
+    fixed = sp.simulate([np.pi, 0.0], (0, 2 * h), method="rodas", step=h)
+    assert fixed.status == -5 and fixed.nlu == 1 and np.array_equal(fixed.t, [0.0])
+    assert "matrix is singular" in fixed.message
+    adaptive = sp.simulate([np.pi, 0.0], (0, 5), method="rodas", first_step=h)
+    assert adaptive.success and adaptive.nreject >= 1
+    assert adaptive.t[1] == pytest.approx(h / 2, rel=1e-15)     # the halved first step
+
+
+def test_c_rejects_bad_arguments_with_its_own_status(sp):
+    ffi, lib = sp.ffi, sp.lib
+    x0, p = np.array([1.0, 0.0]), sp.params()
+    tol = np.full(2, 1e-8)
+    t_out, x_out, stats, stop = np.empty(4), np.empty((4, 2)), np.empty(8, dtype="l"), np.empty(11)
+    n_out, n_found = ffi.new("long *"), ffi.new("long *")
+    ptr = sp._ptr
+    for method, fixed in ((99, 0.0), (0, 0.0)):       # unknown method; rk4 without a step
+        status = lib.simple_pendulum_integrate(
+            method, 0.0, 1.0, ptr(x0), ptr(p), 0, ffi.NULL, ffi.NULL, 0, ptr(tol), ptr(tol),
+            0.0, 0.0, fixed, 100, ffi.NULL, 4, ffi.NULL, ptr(t_out), ptr(x_out), n_out, 0,
+            ffi.NULL, ffi.NULL, ffi.NULL, ffi.NULL, 0, ffi.NULL, ffi.NULL, ffi.NULL, n_found,
+            ffi.from_buffer("long[]", stats), ptr(stop))
+        assert status == -7 and integrate.STATUS[status][0] == "BAD_ARGUMENT"
+
+
+@pytest.mark.parametrize("call, message", [
+    (lambda cm: cm.simulate([1, 0], (0, 1), method="rk45"), "unknown method 'rk45'"),
+    (lambda cm: cm.simulate([1, 0], (0, 1), method="gauss4"), "has a fixed step: give step="),
+    (lambda cm: cm.simulate([1, 0], (1, 0)), "t_span must be finite and increasing"),
+    (lambda cm: cm.simulate([1, 0], (0, 1), t_eval=[0.5, 2]), "t_eval must lie within"),
+    (lambda cm: cm.simulate([1, 0], (0, 1), t_eval=[0.5, 0.2]), "t_eval must be sorted"),
+    (lambda cm: cm.simulate([1, 0], (0, 1), rtol=-1), "rtol must be finite and >= 0"),
+    (lambda cm: cm.simulate([1, 0], (0, 1), u=lambda t, x: [0]), "not supported by the C"),
+    (lambda cm: cm.simulate([np.nan, 0], (0, 1)), "x0 must be finite"),
+])
+def test_nonsense_arguments_raise_clear_errors(sp, call, message):
+    with pytest.raises(SimulationError, match=message):
+        call(sp)
+
+
+# -- batches -----------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("threads", [1, 3])
+def test_batch_equals_one_run_per_state_and_parameter_set(dp, threads):
+    rng = np.random.default_rng(7)
+    X0 = np.column_stack([rng.uniform(-1, 1, (5, 2)), np.zeros((5, 2))])
+    g = rng.uniform(1.0, 10.0, 5)
+    t_eval = np.linspace(0, 2, 5)
+    batch = dp.simulate_batch(X0, (0, 2), t_eval, P={"g": g}, threads=threads, rtol=1e-9)
+    assert batch.y.shape == (5, 4, 5) and np.all(batch.success)
+    for r in range(5):
+        one = dp.simulate(X0[r], (0, 2), t_eval, p={"g": g[r]}, rtol=1e-9)
+        assert np.array_equal(batch.y[r], one.y)
+        assert batch.nfev[r] == one.nfev and batch.naccept[r] == one.naccept
+
+
+def test_batch_failure_of_one_run_leaves_the_others_alone(dp):
+    X0 = np.array([[0.5, -0.3, 0, 0], [0.1, 0.2, 0, 0], [1.0, 0.0, 0, 0]])
+    P = np.tile(dp.params(), (3, 1))
+    P[1, :2] = 0.0                                   # m1 = m2 = 0 in run 1
+    res = dp.simulate_batch(X0, (0, 1), method="rk4", step=1e-2, P=P)
+    assert list(res.status) == [0, -3, 0]
+    assert "coordinate 'q1'" in res.message[1] and res.message[0].startswith("The solver")
+    assert np.all(np.isnan(res.y[1])) and np.all(np.isfinite(res.y[[0, 2]]))
+    assert res.y.shape == (3, 4, 1)
+
+
+# -- the Jacobian ---------------------------------------------------------------------------------
+
+def test_jacobian_of_the_pendulum_matches_the_hand_derived_one(sp):
+    for q in (0.0, 0.7, 2.5):
+        J = sp.jac(0.0, [q, 0.3])
+        assert np.allclose(J, [[0.0, 1.0], [-G * np.cos(q), 0.0]], rtol=1e-9, atol=1e-9)
+
+
+def test_jacobian_of_the_double_pendulum_matches_numpy_differences_of_rhs(dp):
+    rng = np.random.default_rng(3)
+    x = rng.uniform(-1, 1, 4)
+    J = dp.jac(0.1, x, u=[0.3])
+    eps = 1e-6
+    ref = np.column_stack([(dp.rhs(0.1, x + eps * e, u=[0.3]) - dp.rhs(0.1, x - eps * e, u=[0.3]))
+                           / (2 * eps) for e in np.eye(4)])
+    assert J.shape == (4, 4)
+    assert np.allclose(J, ref, rtol=1e-7, atol=1e-7)
+
+
+def test_jac_is_the_symbolic_jacobian_when_generated_and_agrees_with_differences(dp, symbolic):
+    dps = symbolic["double_pendulum"]
+    assert integrate.jacobian_source(dps) == "symbolic"
+    assert integrate.jacobian_source(dp) == "finite differences"
+    x, u = np.array([0.3, -0.8, 1.2, 0.4]), np.array([0.7])
+    exact = np.empty((4, 4))
+    assert dps.lib.double_pendulum_jacobian(0.0, dps._ptr(x), dps._ptr(u), dps._ptr(dps.params()),
+                                            dps._ptr(exact)) == 0
+    assert np.array_equal(dps.jac(0.0, x, u=u), exact)
+    assert np.allclose(dp.jac(0.0, x, u=u), exact, rtol=1e-8, atol=1e-8)
+
+
+@pytest.mark.parametrize("method", ["rodas", "gauss4"])
+def test_implicit_methods_give_the_same_answer_with_either_jacobian(dp, symbolic, method):
+    """Central differences (error ~1e-9 here) or the symbolic Jacobian: the same
+    steps to within the tolerance, and the symbolic one saves 2 nx rhs calls each."""
+    step = None if method == "rodas" else 0.01
+    x0 = [1.0, -0.5, 0.0, 0.0]
+    fd = dp.simulate(x0, (0, 3), method=method, step=step, rtol=1e-9, atol=1e-9)
+    sym = symbolic["double_pendulum"].simulate(x0, (0, 3), method=method, step=step,
+                                               rtol=1e-9, atol=1e-9)
+    assert fd.success and sym.success
+    assert np.max(np.abs(fd.y[:, -1] - sym.y[:, -1])) < 1e-7
+    assert sym.nfev + 8 * sym.njev == pytest.approx(fd.nfev, rel=0.02)
+
+
+def test_rhs_and_jac_plug_into_solve_ivp_radau(sp):
+    res = scipy.integrate.solve_ivp(sp.rhs, (0, 2), [np.pi / 2, 0.0], method="Radau",
+                                    jac=sp.jac, rtol=1e-10, atol=1e-10, events=_upward_zero)
+    assert res.success and res.njev > 0
+    assert res.t_events[0][0] == pytest.approx(0.75 * PERIOD_90, rel=1e-8)
