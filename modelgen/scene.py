@@ -95,15 +95,19 @@ from modelgen.spec import (CANONICAL_BASE, CANONICAL_POINT, OUTPUT_KINDS, STIFF_
 __all__ = ["METHODS", "TOP_LEVEL_KEYS", "INTERPOLATIONS", "ENERGIES", "OUTPUT_DEFAULTS",
            "GRAVITY", "load_scene", "parse_scene"]
 
-#: Integration methods a scene may ask for.
-METHODS = ("rk4",)
+#: Integration methods a scene may ask for (see modelgen.integrate); rk4 runs
+#: the scene's own C loop, the others the adaptive/implicit C integrators.
+METHODS = ("rk4", "dopri5", "dop853", "rodas", "midpoint", "gauss4")
+#: Methods that take a fixed step (the others adapt theirs to rtol/atol).
+FIXED_STEP_METHODS = ("rk4", "midpoint", "gauss4")
 #: Default integrator settings.
 DEFAULT_METHOD, DEFAULT_STEP = "rk4", 1e-3
+DEFAULT_RTOL, DEFAULT_ATOL = 1e-8, 1e-10
 #: Top-level keys of a scene file, in processing order.
 TOP_LEVEL_KEYS = ("scene", "description", "model", "add_parameters", "add_effects", "effects",
                   "parameters", "initial", "time", "integrator", "inputs", "outputs")
 TIME_KEYS = ("start", "end", "sample")
-INTEGRATOR_KEYS = ("method", "step")
+INTEGRATOR_KEYS = ("method", "step", "rtol", "atol")
 SIGNAL_KEYS = ("times", "values", "interpolation")
 INTERPOLATIONS = ("linear", "hold")
 ENERGIES = ("kinetic", "potential", "total")
@@ -235,12 +239,13 @@ class _SceneReader:
         reduced = self.reduced_model(name, description, selected)
         initial = self.initial_state(full)
         t_start, t_end, sample = self.time_span()
-        method, step = self.integrator(sample)
+        method, step, rtol, atol = self.integrator(sample)
         inputs = self.inputs(reduced, selected)
         outputs = self.outputs(reduced, selected, kinds)
         return SceneSpec(
             name=name, model=reduced, full_model=full, effects=selected, initial=initial,
             t_start=t_start, t_end=t_end, sample_dt=sample, method=method, step=step,
+            rtol=rtol, atol=atol,
             inputs=inputs, outputs=outputs,
             stiff_effects=tuple(e for e in selected if kinds[e] in STIFF_KINDS),
             source=self.file, lines=tuple(self.lines.items()))
@@ -397,6 +402,7 @@ class _SceneReader:
         return start, end, sample
 
     def integrator(self, sample: float) -> tuple:
+        """(method, step, rtol, atol); fixed-step methods sample at whole steps."""
         settings = self.mapping("integrator", "{method: rk4, step: 0.001}")
         self.check_keys(settings, INTEGRATOR_KEYS, "integrator", "integrator")
         method = settings.get("method", DEFAULT_METHOD)
@@ -410,14 +416,22 @@ class _SceneReader:
         if not step > 0:
             raise self.error(f"the step must be positive but is {step!r}", "integrator.step",
                              "give the integration step in seconds, e.g. step: 0.001")
-        every = round(sample / step)
-        if every < 1 or abs(every * step - sample) > _REL_TOL * sample:
-            nearest = float(f"{max(every, 1) * step:.12g}")
-            raise self.error(f"the sample interval {sample!r} is not a whole multiple of the "
-                             f"step {step!r}", "time.sample",
-                             f"samples are taken at steps: use e.g. sample: {nearest!r}, or "
-                             "change integrator.step")
-        return method, step
+        tolerances = []
+        for key, default in (("rtol", DEFAULT_RTOL), ("atol", DEFAULT_ATOL)):
+            value = self.number(settings.get(key, default), f"integrator.{key}", f"the {key}")
+            if not value > 0:
+                raise self.error(f"{key} must be positive but is {value!r}", f"integrator.{key}",
+                                 f"give a relative/absolute tolerance, e.g. {key}: {default!r}")
+            tolerances.append(value)
+        if method in FIXED_STEP_METHODS:
+            every = round(sample / step)
+            if every < 1 or abs(every * step - sample) > _REL_TOL * sample:
+                nearest = float(f"{max(every, 1) * step:.12g}")
+                raise self.error(f"the sample interval {sample!r} is not a whole multiple of "
+                                 f"the step {step!r}", "time.sample",
+                                 f"samples are taken at steps: use e.g. sample: {nearest!r}, "
+                                 "or change integrator.step")
+        return (method, step, *tolerances)
 
     # -- inputs ------------------------------------------------------------------------
     def inputs(self, reduced: ModelSpec, selected: tuple) -> tuple:

@@ -170,6 +170,17 @@ def rk4(cm, x0, t_span, dt, *, u=None, p=None, record_energy=True) -> Simulation
     return SimulationResult(ts, xs, cm.coordinates, status, message, energy)
 
 
+def _inputs_at(u, t, cm):
+    """Input vector at time t for sampled inputs ``(times, values, interpolation)``."""
+    if u is None:
+        return None
+    times, values, interpolation = u
+    if interpolation == "hold":
+        k = int(np.clip(np.searchsorted(times, t, side="right") - 1, 0, len(times) - 1))
+        return values[k]
+    return np.array([np.interp(t, times, values[:, j]) for j in range(values.shape[1])])
+
+
 #: effect kinds whose forces derive from a potential (energy is then conserved)
 CONSERVATIVE_KINDS = ("gravity", "spring", "torsion_spring")
 
@@ -213,11 +224,13 @@ class Scene:
         lines.append(f"effects off (not generated): {', '.join(off) or 'none'}")
         if s.stiff_effects:
             lines.append(f"STIFF or non-smooth: {', '.join(s.stiff_effects)} -- a small step "
-                         f"or a stiff integrator is needed")
+                         f"or a stiff integrator (method: rodas) is needed")
         lines.append(f"outputs: {', '.join(o.name for o in s.outputs) or 'none'}")
         ops = self.generated.manifest["ops"]["rhs"]
         lines.append(f"rhs: {ops['after_cse']} operations after CSE")
-        lines.append(f"time {s.t_start:g} .. {s.t_end:g} s, {s.method} step {s.step:g} s, "
+        how = (f"{s.method} step {s.step:g} s" if s.method in ("rk4", "midpoint", "gauss4")
+               else f"{s.method} rtol {s.rtol:g} atol {s.atol:g}")
+        lines.append(f"time {s.t_start:g} .. {s.t_end:g} s, {how}, "
                      f"sampled every {s.sample_dt:g} s")
         return "\n".join(lines)
 
@@ -249,6 +262,29 @@ class Scene:
                 values[:, j] = np.interp(grid, sig.times, sig.values)
         return (np.array(grid), values, "hold" if hold else "linear")
 
+    def _run_integrator(self, x0, u, p) -> SimulationResult:
+        """Adaptive or implicit C integrators, sampled at the scene's times."""
+        s, cm = self.spec, self.model
+        if callable(u):
+            raise SimulationError(f"scene {s.name}: a feedback u(t, x) needs method rk4")
+        fixed = s.method in ("midpoint", "gauss4")
+        times = _scene_times(s.t_start, s.t_end, s.sample_dt)
+        res = cm.simulate(x0, (s.t_start, s.t_end), t_eval=times, method=s.method,
+                          rtol=s.rtol, atol=s.atol, u=u, p=p,
+                          step=s.step if fixed else None)
+        t, x = np.asarray(res.t), np.asarray(res.y).T
+        outputs = {}
+        if cm.output_columns:
+            u_vec = None if u is None or isinstance(u, tuple) else u
+            y = np.array([cm.output_values(ti, xi, u_vec if u_vec is not None
+                                           else _inputs_at(u, ti, cm), p)
+                          for ti, xi in zip(t, x)]).reshape(len(t), -1)
+            outputs = {name: y[:, [cm.output_columns.index(c) for c in cols]]
+                       for name, cols in cm.outputs.items()}
+        return SimulationResult(t, x, cm.coordinates, status=0 if res.success else 1,
+                                message=res.message, outputs=outputs,
+                                output_columns=dict(cm.outputs))
+
     def run(self, p=None, x0=None, u=None) -> SimulationResult:
         """Integrate the scene in C; energies are recorded for the plot.
 
@@ -257,19 +293,27 @@ class Scene:
         including a feedback callable ``u(t, x)``).
         """
         s = self.spec
-        every = max(1, int(round(s.sample_dt / s.step)))
-        if abs(every * s.step - s.sample_dt) > 1e-9 * s.sample_dt:
-            raise SimulationError(f"scene {s.name}: the sampling interval {s.sample_dt:g} s "
-                                  f"must be a multiple of the step {s.step:g} s")
-        if s.method != "rk4":
-            raise SimulationError(f"scene {s.name}: method {s.method!r} is not available; "
-                                  f"use rk4")
         x0 = np.array(s.initial if x0 is None else x0, dtype=float)
-        res = self.model.simulate_rk4(x0, (s.t_start, s.t_end), s.step, every=every,
-                                      u=self._inputs() if u is None else u, p=p)
+        u = self._inputs() if u is None else u
+        if s.method == "rk4":
+            every = max(1, int(round(s.sample_dt / s.step)))
+            if abs(every * s.step - s.sample_dt) > 1e-9 * s.sample_dt:
+                raise SimulationError(f"scene {s.name}: the sampling interval "
+                                      f"{s.sample_dt:g} s must be a multiple of the step "
+                                      f"{s.step:g} s")
+            res = self.model.simulate_rk4(x0, (s.t_start, s.t_end), s.step, every=every,
+                                          u=u, p=p)
+        else:
+            res = self._run_integrator(x0, u, p)
         n = self.model.n
         res.energy = np.array([self.model.energy(row[:n], row[n:], p) for row in res.x])
         return res
+
+
+def _scene_times(t0, t1, dt):
+    count = int(np.floor((t1 - t0) / dt * (1 + 1e-12))) + 1
+    times = t0 + dt * np.arange(count)
+    return times if times[-1] >= t1 - 1e-12 * abs(t1) else np.append(times, t1)
 
 
 def _effect_names(spec) -> list:

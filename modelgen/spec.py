@@ -351,7 +351,9 @@ class SceneSpec:
     t_end: float
     sample_dt: float
     method: str = "rk4"
-    step: float = 1e-3
+    step: float = 1e-3              # fixed-step methods (rk4, midpoint, gauss4)
+    rtol: float = 1e-8              # adaptive methods (dopri5, dop853, rodas)
+    atol: float = 1e-10
     inputs: tuple = ()              # tuple[InputSignal, ...] in model input order
     outputs: tuple = ()             # tuple[OutputSpec, ...]
     stiff_effects: tuple = ()       # names of selected effects in STIFF_KINDS

@@ -297,7 +297,7 @@ def test_potential_energy_is_refused_with_gravity_in_a_moving_base():
      "integration step in seconds, e.g. step: 0.001"),
     ({"integrator": "{method: rk45, step: 0.001}"},
      "s.yaml:9: integrator.method: unknown integration method 'rk45'; fix: did you mean "
-     "'rk4'? methods: rk4"),
+     "'rk4'? methods: rk4, dopri5, dop853, rodas, midpoint, gauss4"),
     ({"integrator": "{method: rk4, step: 0.003}"},
      "s.yaml:8: time.sample: the sample interval 0.01 is not a whole multiple of the step "
      "0.003; fix: samples are taken at steps: use e.g. sample: 0.009, or change "
