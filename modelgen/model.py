@@ -1245,6 +1245,23 @@ def _load_parameters(ctx: _Context, value, key: str = "parameters") -> None:
         ctx.add_parameter(name, default, f"{key}.{name}")
 
 
+def _check_top_level(data, ctx: "_Context", what: str, keys, start: str) -> None:
+    """A parsed file is a non-empty mapping whose keys are all in ``keys``.
+
+    Shared by model and scene files; ``start`` says how such a file begins.
+    """
+    if data is None:
+        raise ModelError(f"the {what} file is empty", file=ctx.file, line=1, fix=start)
+    if not isinstance(data, dict):
+        raise ModelError(f"expected a mapping of {what} keys but got {_describe(data)}",
+                         file=ctx.file, line=1, fix=f"{start} and use the keys " + ", ".join(keys))
+    for key in data:
+        if key not in keys:
+            close = _closest(key, keys)
+            fix = f"did you mean '{close}'? " if close else ""
+            raise ctx.error(f"unknown key '{key}'", key, fix + "valid keys: " + ", ".join(keys))
+
+
 def _load_tree(data, lines: dict, file: str) -> ModelSpec:
     return _load_context(data, lines, file).build()
 
@@ -1252,19 +1269,7 @@ def _load_tree(data, lines: dict, file: str) -> ModelSpec:
 def _load_context(data, lines: dict, file: str) -> _Context:
     """The validated declarations of a parsed model file, not yet resolved."""
     ctx = _Context(file, lines)
-    if data is None:
-        raise ModelError("the model file is empty", file=file, line=1,
-                         fix="start with 'name: <model name>'")
-    if not isinstance(data, dict):
-        raise ModelError(f"expected a mapping of model keys but got {_describe(data)}",
-                         file=file, line=1, fix="start with 'name: <model name>' and use "
-                         "the keys " + ", ".join(TOP_LEVEL_KEYS))
-    for key in data:
-        if key not in TOP_LEVEL_KEYS:
-            close = _closest(key, TOP_LEVEL_KEYS)
-            fix = f"did you mean '{close}'? " if close else ""
-            raise ctx.error(f"unknown key '{key}'", key,
-                            fix + "valid keys: " + ", ".join(TOP_LEVEL_KEYS))
+    _check_top_level(data, ctx, "model", TOP_LEVEL_KEYS, "start with 'name: <model name>'")
     if "name" not in data:
         raise ModelError("missing required key 'name'", file=file, line=1,
                          fix="add 'name: <model name>' (a C identifier) at the top level")

@@ -86,7 +86,7 @@ import os
 from dataclasses import replace
 
 from modelgen.errors import ModelError
-from modelgen.model import (_a, _closest, _compose, _Context, _describe, _listing,
+from modelgen.model import (_a, _check_top_level, _closest, _compose, _Context, _describe, _listing,
                             _load_effects, _load_parameters, _parse_context, _read_text, _replay,
                             _yaml_float, check_name)
 from modelgen.spec import (CANONICAL_BASE, CANONICAL_POINT, OUTPUT_KINDS, STIFF_KINDS,
@@ -206,16 +206,8 @@ class _SceneReader:
         if data is None:
             raise ModelError("the scene file is empty", file=self.file, line=1,
                              fix="start with 'scene: <scene name>' and 'model: <model file>'")
-        if not isinstance(data, dict):
-            raise ModelError(f"expected a mapping of scene keys but got {_describe(data)}",
-                             file=self.file, line=1, fix="start with 'scene: <scene name>' "
-                             "and use the keys " + ", ".join(TOP_LEVEL_KEYS))
-        for key in data:
-            if key not in TOP_LEVEL_KEYS:
-                close = _closest(key, TOP_LEVEL_KEYS)
-                fix = f"did you mean '{close}'? " if close else ""
-                raise self.error(f"unknown key '{key}'", key,
-                                 fix + "valid keys: " + ", ".join(TOP_LEVEL_KEYS))
+        _check_top_level(data, self.ctx, "scene", TOP_LEVEL_KEYS,
+                         "start with 'scene: <scene name>'")
         if "scene" not in data:
             raise self.missing("scene", "<scene name>")
         name = check_name(data["scene"], file=self.file, line=self.ctx.line_of("scene"),
