@@ -191,8 +191,9 @@ class CompiledModel:
 
         def f(t, x, out=None):
             x_buf[:] = x
-            if rhs(t, x_ptr, u_ptr, p_ptr, out_ptr):
-                fail(rhs(t, x_ptr, u_ptr, p_ptr, out_ptr), t)
+            status = rhs(t, x_ptr, u_ptr, p_ptr, out_ptr)
+            if status:
+                fail(status, t)
             if out is None:
                 return out_buf.copy()
             out[:] = out_buf

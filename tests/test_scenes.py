@@ -192,5 +192,4 @@ def test_stiff_scene_with_rodas_matches_scipy_radau_and_beats_dopri5(scene):
     explicit = cm.simulate(s.spec.initial, (0.0, 2.0), method="dopri5", rtol=1e-6, atol=1e-9,
                            max_steps=200_000)
     assert stiff.success and stiff.nfev < 2000
-    assert not explicit.success or explicit.nfev > 100 * stiff.nfev
     assert explicit.nfev > 100 * stiff.nfev
