@@ -7,7 +7,7 @@ Run from the repository root::
     .venv/bin/python bench/codegen_scaling.py --n 2 4 7 --json out.json
 
 Model
-    ``modelgen.chains.spatial_chain(n)``: n uniform rods hanging from the
+    ``modelgen.model.chains.spatial_chain(n)``: n uniform rods hanging from the
     origin, hinge axes alternating z (odd joints) and y (even joints).  If
     ``models/arm7.yaml`` exists (``--arm``), the 7-joint arm gets a row too;
     it is the official target of the per-call goals.
@@ -295,7 +295,7 @@ def build_rhs_harness(cm, x0, work: Path):
     ``<name>.c`` is compiled by the exact command modelgen's build used for the
     part holding the rhs (from the manifest), the harness itself at -O2.
     """
-    from modelgen.build import compile_flags, compiler
+    from modelgen.codegen.build import compile_flags, compiler
     name, manifest = cm.name, cm.manifest
     src_dir = Path(cm.path).parent
     work.mkdir(parents=True, exist_ok=True)
@@ -461,8 +461,8 @@ def child(kind: str, arg: str, work: Path, mj_harness, rounds: int) -> dict:
     import numpy as np
 
     import modelgen
-    from modelgen.chains import spatial_chain
-    from modelgen.model import load_model
+    from modelgen.model.chains import spatial_chain
+    from modelgen.model.api import load_model
     import_s = time.perf_counter() - t
 
     t = time.perf_counter()

@@ -6,7 +6,7 @@ Run from the repository root::
     .venv/bin/python bench/work_precision.py --quick         # whole decades, 2 repeats
     .venv/bin/python bench/work_precision.py --problems double_pendulum stiff_chain
 
-Problems (``modelgen.workprecision.STANDARD``)
+Problems (``modelgen.bench.workprecision.STANDARD``)
     * ``pendulum``: simple pendulum released from horizontal (L = 1, g = 9.81)
       over 4 periods of 2.367841947576237 s; closed-form reference (Jacobi sn
       in mpmath; after whole periods the state is the initial one).

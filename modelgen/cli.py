@@ -14,13 +14,13 @@ import sys
 import time
 from pathlib import Path
 
-from . import __version__
-from .errors import ModelgenError
+from modelgen.errors import ModelgenError
+from modelgen.version import __version__
 
 
 def _generate(args) -> int:
-    from . import as_spec
-    from .pipeline import generate
+    from modelgen.model import as_spec
+    from modelgen.codegen.pipeline import generate
     t0 = time.perf_counter()
     spec = as_spec(args.model)
     t_load = time.perf_counter() - t0
@@ -59,7 +59,7 @@ def _parse_assignments(items, what):
 
 
 def _simulate_scene(args) -> int:
-    from . import load_scene
+    from modelgen.sim.load import load_scene
 
     def progress(message):
         print(message, file=sys.stderr, flush=True)
@@ -91,8 +91,9 @@ def _simulate_scene(args) -> int:
 def _simulate(args) -> int:
     import numpy as np
 
-    from . import is_scene_file, load
-    from .simulate import rk4
+    from modelgen.model import is_scene_file
+    from modelgen.sim.load import load
+    from modelgen.sim.simulate import rk4
     if is_scene_file(args.model):
         return _simulate_scene(args)
     cm = load(args.model, args.build_dir)
@@ -124,7 +125,7 @@ def _simulate(args) -> int:
 
 
 def _bench(args) -> int:
-    from . import workprecision as wp
+    from modelgen.bench import workprecision as wp
 
     def progress(message):
         print(f"... {message}", file=sys.stderr, flush=True)

@@ -48,7 +48,7 @@ class ModelError(ModelgenError):
 class ExpressionError(ModelgenError):
     """An expression string could not be parsed.
 
-    Raised by :mod:`modelgen.expr`; the model loader re-raises it as a
+    Raised by :mod:`modelgen.model.expr`; the model loader re-raises it as a
     :class:`ModelError` carrying the file, line and key.
     """
 
@@ -82,3 +82,13 @@ class BuildError(ModelgenError):
 
 class SimulationError(ModelgenError):
     """Invalid arguments to a run-time call (wrong shapes, NaN parameters...)."""
+
+
+class MassMatrixError(SimulationError):
+    """The mass matrix is not positive definite at the given state."""
+
+    def __init__(self, pivot: int, coordinate: str, t, x):
+        self.pivot, self.coordinate, self.t, self.x = pivot, coordinate, t, x
+        super().__init__(
+            f"mass matrix not positive definite at t={t!r}: Cholesky pivot {pivot} "
+            f"(coordinate {coordinate!r}) failed; state x=[{', '.join(repr(float(v)) for v in x)}]")

@@ -1,12 +1,12 @@
 """An independent reference for modelgen's equations of motion.
 
-:class:`MechanicsReference` translates a validated :class:`~modelgen.spec.ModelSpec`
+:class:`MechanicsReference` translates a validated :class:`~modelgen.model.spec.ModelSpec`
 into :mod:`sympy.physics.mechanics` objects and derives the equations of motion
 with :class:`~sympy.physics.mechanics.KanesMethod`.  It shares nothing with
 modelgen's own kinematics/dynamics stages except the spec dataclasses, so the
 two can be compared number for number.
 
-Translation rules (the conventions of :mod:`modelgen.spec`):
+Translation rules (the conventions of :mod:`modelgen.model.spec`):
 
 * one :class:`ReferenceFrame` per base, ``orient_axis`` about the parent's
   x/y/z (axis 1/2/3) by the angle expression; ``E`` is the Newtonian frame;
@@ -18,7 +18,7 @@ Translation rules (the conventions of :mod:`modelgen.spec`):
 * loads: gravity ``m g`` at every G (``g`` in components of ``E``); for each
   action a torque on the body's frame and a force applied at the *body-fixed*
   point that coincides with the action point (``v2pt_theory`` from G);
-* effects (``spec.effects``, as documented in :mod:`modelgen.spec`): gravity
+* effects (``spec.effects``, as documented in :mod:`modelgen.model.spec`): gravity
   fields in any base; springs and dampers between two points, acting at the
   points themselves (their own velocities); drag at a body-fixed point;
   torsion springs, joint damping and friction as generalized forces added to
@@ -31,7 +31,7 @@ The symbolic results are lambdified once (with ``cse=True``); no ``simplify``.
 Example (a particle pendulum of length L, q measured from the downward vertical):
 
 >>> import sympy
->>> from modelgen.spec import ModelSpec, BaseSpec, PointSpec, BodySpec
+>>> from modelgen.model.spec import ModelSpec, BaseSpec, PointSpec, BodySpec
 >>> q, m, L, g = sympy.symbols("q m L g")
 >>> zero = sympy.Integer(0)
 >>> spec = ModelSpec(
@@ -61,7 +61,7 @@ from sympy.physics.mechanics import (KanesMethod, Particle, Point,
                                      msubs)
 from sympy.physics.vector import Vector
 
-from modelgen.spec import (CANONICAL_BASE, CANONICAL_POINT, TIME, ModelSpec,
+from modelgen.model.spec import (CANONICAL_BASE, CANONICAL_POINT, TIME, ModelSpec,
                            speed_name)
 
 __all__ = ["MechanicsReference", "ReferenceTimings"]
@@ -373,7 +373,7 @@ def particle_pendulum_spec():
     ``q`` is measured from the downward vertical (-E.y): the bob is at
     ``L (sin q, -cos q, 0)`` and ``A = m L^2``, ``tau = -m g L sin q``, ``h = 0``.
     """
-    from modelgen.spec import BaseSpec, BodySpec, PointSpec
+    from modelgen.model.spec import BaseSpec, BodySpec, PointSpec
     q, m, L, g = sympy.symbols("q m L g")
     z = sympy.Integer(0)
     return ModelSpec(
@@ -391,7 +391,7 @@ def rod_double_pendulum_spec():
     Rod i has mass ``mi``, length ``li``, lies along its base's x axis and has
     its centre at ``li/2``; gravity is ``-g E.y``.
     """
-    from modelgen.spec import BaseSpec, BodySpec, PointSpec
+    from modelgen.model.spec import BaseSpec, BodySpec, PointSpec
     q1, q2, m1, m2, l1, l2, g = sympy.symbols("q1 q2 m1 m2 l1 l2 g")
     z = sympy.Integer(0)
     rod = lambda m, l: _diag(z, m * l**2 / 12, m * l**2 / 12)
@@ -408,13 +408,13 @@ def rod_double_pendulum_spec():
 
 
 def spatial_chain_spec(n: int):
-    """The n-link spatial chain described for ``modelgen.chains.spatial_chain``.
+    """The n-link spatial chain described for ``modelgen.model.chains.spatial_chain``.
 
     Base ``Bi`` is rotated from ``B(i-1)`` (``B0 = E``) by ``qi`` about axis 3
     for odd i and axis 2 for even i; rod i of length ``li`` and mass ``mi`` lies
     along ``Bi.x`` from joint ``P(i-1)`` (``P0 = O``), G at ``li/2``; gravity -z.
     """
-    from modelgen.spec import BaseSpec, BodySpec, PointSpec
+    from modelgen.model.spec import BaseSpec, BodySpec, PointSpec
     z = sympy.Integer(0)
     g = sympy.Symbol("g")
     params, bases, points, bodies = [], [], [], []
@@ -442,7 +442,7 @@ def free_body_spec(gravity: bool = False, products: bool = False):
     body base (plus products of inertia ``I1/10, -I2/9, I3/8`` if ``products``);
     G is at ``a`` along the body's z axis (``a = 0``: torque-free).
     """
-    from modelgen.spec import BaseSpec, BodySpec, PointSpec
+    from modelgen.model.spec import BaseSpec, BodySpec, PointSpec
     phi, theta, psi, m, a, I1, I2, I3, g = sympy.symbols("phi theta psi m a I1 I2 I3 g")
     z = sympy.Integer(0)
     inertia = _diag(I1, I2, I3)
@@ -470,7 +470,7 @@ def actions_spec():
     applied at its tip (not at G), depending on the speeds, ``t`` and inputs;
     a force on the pendulum given in E at a point fixed in the cart frame.
     """
-    from modelgen.spec import ActionSpec, BaseSpec, BodySpec, PointSpec
+    from modelgen.model.spec import ActionSpec, BaseSpec, BodySpec, PointSpec
     x, th, x_dot, th_dot = sympy.symbols("x th x_dot th_dot")
     M, m, L, c, k, g, J, F, Tq = sympy.symbols("M m L c k g J F Tq")
     t = TIME
@@ -508,9 +508,9 @@ def effects_spec():
     damping on ``x`` and ``ph``; friction with a Stribeck peak on ``x``; drag
     on the bob at a point off its centre that is defined in the pendulum's
     base (so the body-fixed point matters); an action given as an effect.
-    Requires the effect dataclasses of :mod:`modelgen.spec`.
+    Requires the effect dataclasses of :mod:`modelgen.model.spec`.
     """
-    from modelgen.spec import (ActionSpec, BaseSpec, BodySpec, DamperEffect, DragEffect,
+    from modelgen.model.spec import (ActionSpec, BaseSpec, BodySpec, DamperEffect, DragEffect,
                                FrictionEffect, GravityEffect, JointDampingEffect,
                                PointSpec, SpringEffect, TorsionSpringEffect)
     x, th, ph = sympy.symbols("x th ph")

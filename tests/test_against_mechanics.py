@@ -1,7 +1,7 @@
 """modelgen's compiled C against independent references.
 
 Every model in ``models/*.yaml``, the spatial chains of
-``modelgen.chains.spatial_chain(n)`` (n = 1..6) and a few hand-built specs
+``modelgen.model.chains.spatial_chain(n)`` (n = 1..6) and a few hand-built specs
 (``hand_*``, see tests/mechanics_reference.py; they add ZXZ angles, products of
 inertia with gravity, forces at points other than G that depend on speeds,
 time and inputs, and every kind of effect) are compared with a
@@ -28,7 +28,7 @@ import numpy as np
 import pytest
 
 import modelgen
-import modelgen.spec
+import modelgen.model.spec
 from mechanics_reference import (MechanicsReference, actions_spec,
                                  double_pendulum_closed_form, effects_spec, free_body_spec,
                                  rigid_body_closed_form, zxz_body_rate_matrix,
@@ -56,7 +56,7 @@ HAND_SPECS = {
     # speeds, time and inputs; a particle and a body with a full tensor
     "hand_actions": lambda: _hand(actions_spec),
 }
-if hasattr(modelgen.spec, "EFFECT_TYPES"):
+if hasattr(modelgen.model.spec, "EFFECT_TYPES"):
     # every effect kind: gravity fields, spring, damper, torsion spring, joint
     # damping, friction, drag at a body-fixed point, an action as an effect
     HAND_SPECS["hand_effects"] = lambda: _hand(effects_spec)
@@ -71,9 +71,9 @@ def spec_of(case: str):
     if case in HAND_SPECS:
         return HAND_SPECS[case]()
     if case.startswith("spatial_chain_") and not (ROOT / "models" / f"{case}.yaml").exists():
-        from modelgen.chains import spatial_chain
+        from modelgen.model.chains import spatial_chain
         return spatial_chain(int(case.rsplit("_", 1)[1])).spec()
-    from modelgen.model import load_model
+    from modelgen.model.api import load_model
     return load_model(ROOT / "models" / f"{case}.yaml")
 
 

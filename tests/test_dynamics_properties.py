@@ -9,8 +9,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from modelgen.chains import spatial_chain
-from modelgen.simulate import rk4
+from modelgen.model.chains import spatial_chain
+from modelgen.sim.simulate import rk4
 
 from conftest import MODELS
 

@@ -1,4 +1,4 @@
-"""Tests of the restricted expression parser and printer (modelgen.expr)."""
+"""Tests of the restricted expression parser and printer (modelgen.model.expr)."""
 from __future__ import annotations
 
 import random
@@ -7,9 +7,9 @@ import pytest
 import sympy
 
 from modelgen.errors import ExpressionError
-from modelgen.expr import (FUNCTIONS, MAX_DEPTH, MAX_LENGTH, ExpressionParseError,
+from modelgen.model.expr import (FUNCTIONS, MAX_DEPTH, MAX_LENGTH, ExpressionParseError,
                            format_expression, parse_expression)
-from modelgen.spec import TIME, symbol
+from modelgen.model.spec import TIME, symbol
 
 x, y, z, m, l = (symbol(n) for n in ("x", "y", "z", "m", "l"))
 ALLOWED = {"x": x, "y": y, "z": z, "m": m, "l": l, "t": TIME}

@@ -38,8 +38,8 @@ import pytest
 import scipy.integrate
 
 import modelgen
-from modelgen.chains import spatial_chain
-from modelgen.emit import SINGLE_LIMIT
+from modelgen.model.chains import spatial_chain
+from modelgen.codegen.emit import SINGLE_LIMIT
 
 ROOT = Path(__file__).resolve().parent.parent
 MODELS = ROOT / "models"
@@ -53,7 +53,7 @@ LARGE_CHAIN = 12
 #: Environment variables that change the generated text (through the model hash).
 HASH_ENV = ("CC", "MODELGEN_CFLAGS")
 #: Every function a model exports, without the "<name>_" prefix; written out
-#: here rather than taken from modelgen.emit.public_api, which renders the header.
+#: here rather than taken from modelgen.codegen.emit.public_api, which renders the header.
 EXPORTED = ("abi_version", "default_parameters", "mass_matrix", "velocity_terms",
             "generalized_forces", "rhs", "energy", "body_poses", "simulate_rk4",
             "jacobian_fd", "integrate", "integrate_batch")
@@ -388,7 +388,7 @@ def test_two_models_link_into_one_program_without_symbol_clashes(generated, tmp_
 _GENERATE = """
 import sys
 import modelgen
-from modelgen.chains import spatial_chain
+from modelgen.model.chains import spatial_chain
 modelgen.generate_model(sys.argv[1], sys.argv[2] + "/double_pendulum", force=True)
 modelgen.generate_model(spatial_chain(3).spec(), sys.argv[2] + "/spatial_chain_3", force=True)
 """

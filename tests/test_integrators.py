@@ -14,7 +14,7 @@ import pytest
 import scipy.integrate
 from scipy.special import ellipj, ellipk
 
-from modelgen import integrate
+from modelgen.sim import integrate
 from modelgen.errors import SimulationError
 
 MODELS = Path(__file__).resolve().parent.parent / "models"

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 import modelgen
-from modelgen.jacobian import differentiate
+from modelgen.derive.jacobian import differentiate
 
 from conftest import MODELS
 
@@ -45,7 +45,7 @@ def test_generated_jacobian_matches_central_differences(build_root, name):
 
 def test_forward_mode_differentiates_through_named_intermediates():
     import sympy
-    from modelgen.graph import GraphBuilder
+    from modelgen.derive.graph import GraphBuilder
     x, y = sympy.symbols("x y")
     g = GraphBuilder()
     s = g.name(sympy.cos(x) * y)

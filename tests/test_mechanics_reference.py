@@ -24,7 +24,7 @@ from mechanics_reference import (MechanicsReference, actions_spec,
                                  free_body_spec, particle_pendulum_spec,
                                  rod_double_pendulum_spec, spatial_chain_spec,
                                  zxz_rotation)
-from modelgen.spec import CANONICAL_BASE, CANONICAL_POINT, TIME, speed_name
+from modelgen.model.spec import CANONICAL_BASE, CANONICAL_POINT, TIME, speed_name
 
 RTOL = 1e-12
 

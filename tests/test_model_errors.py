@@ -4,7 +4,7 @@ from __future__ import annotations
 import pytest
 
 from modelgen.errors import ModelError, ModelgenError
-from modelgen.model import Model, load_model, parse_model
+from modelgen.model.api import Model, load_model, parse_model
 
 # lines 1-5; the snippets below start at line 6
 HEADER = """name: m
@@ -532,7 +532,7 @@ def test_api_rejects_an_invalid_model_name():
 
 def test_api_rejects_expressions_outside_the_grammar():
     import sympy
-    from modelgen.spec import symbol
+    from modelgen.model.spec import symbol
     m = Model("m").add_coordinate("q")
     assert api_message(lambda: m.add_base(
         "B", parent="E", axis=1, angle=sympy.Function("f")(symbol("q")))) == (

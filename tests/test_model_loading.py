@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 import sympy
 
-from modelgen.chains import spatial_chain
-from modelgen.model import Model, load_model, parse_model, spec_to_yaml
-from modelgen.spec import (TIME, ActionSpec, BaseSpec, BodySpec, FrameSpec, ModelSpec,
+from modelgen.model.chains import spatial_chain
+from modelgen.model.api import Model, load_model, parse_model, spec_to_yaml
+from modelgen.model.spec import (TIME, ActionSpec, BaseSpec, BodySpec, FrameSpec, ModelSpec,
                            PointSpec, symbol)
 
 ROOT = Path(__file__).resolve().parent.parent

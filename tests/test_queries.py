@@ -10,8 +10,8 @@ import sympy
 from sympy.physics.mechanics import Point, ReferenceFrame, dynamicsymbols
 
 from modelgen.errors import ModelError
-from modelgen.model import load_model
-from modelgen.queries import Mechanism
+from modelgen.model.api import load_model
+from modelgen.derive.queries import Mechanism
 
 from conftest import MODELS
 

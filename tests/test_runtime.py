@@ -8,8 +8,8 @@ from scipy.special import ellipk
 
 import modelgen
 from modelgen.errors import DerivationError, SimulationError
-from modelgen.model import Model
-from modelgen.runtime import MassMatrixError
+from modelgen.model.api import Model
+from modelgen.sim.runtime import MassMatrixError
 
 
 @pytest.fixture(scope="module")

@@ -8,9 +8,9 @@ from pathlib import Path
 import pytest
 
 from modelgen.errors import ModelError
-from modelgen.model import load_model, parse_model, spec_to_yaml
-from modelgen.scene import load_scene, parse_scene
-from modelgen.spec import InputSignal, JointDampingEffect, OutputSpec, symbol
+from modelgen.model.api import load_model, parse_model, spec_to_yaml
+from modelgen.model.scene import load_scene, parse_scene
+from modelgen.model.spec import InputSignal, JointDampingEffect, OutputSpec, symbol
 
 ROOT = Path(__file__).resolve().parent.parent
 MODELS = ROOT / "models"

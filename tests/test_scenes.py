@@ -15,7 +15,7 @@ from scipy.integrate import simpson
 
 import modelgen
 from modelgen.cli import main
-from modelgen.scene import load_scene as load_scene_spec
+from modelgen.model.scene import load_scene as load_scene_spec
 
 from conftest import MODELS
 
@@ -165,7 +165,7 @@ def test_feedback_input_from_python_callable(compiled):
     res = cm.simulate_rk4(np.zeros(2 * n), (0.0, 3.0), 1e-3, every=100, u=controller)
     assert res.success and res.t.size == 31
     # the same feedback in a plain Python RK4 gives the same final state
-    from modelgen.simulate import rk4
+    from modelgen.sim.simulate import rk4
     ref = rk4(cm, np.zeros(2 * n), (0.0, 3.0), 1e-3, u=controller, record_energy=False)
     assert np.array_equal(res.x[-1], ref.x[-1])
     assert abs(res.x[-1, i_cart] - 0.5) < 0.05

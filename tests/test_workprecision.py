@@ -14,7 +14,7 @@ import pytest
 from scipy.linalg import expm
 from scipy.special import ellipj, ellipk
 
-from modelgen import workprecision as wp
+from modelgen.bench import workprecision as wp
 from modelgen.cli import main
 from modelgen.errors import SimulationError
 
@@ -171,7 +171,7 @@ def test_long_double_equations_and_integrators_match_the_model(compiled, pendulu
 
 
 def _spec(name):
-    from modelgen.model import load_model
+    from modelgen.model.api import load_model
     return load_model(MODELS / f"{name}.yaml")
 
 

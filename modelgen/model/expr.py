@@ -426,13 +426,13 @@ def parse_expression(text_or_number, allowed: Mapping[str, sympy.Symbol], *,
     it only uses the grammar and ``allowed``).  Booleans are rejected.
 
     ``allowed`` maps each name that may appear to its symbol; include
-    ``"t": modelgen.spec.TIME`` to allow time.  ``kinds`` describes the
+    ``"t": modelgen.model.spec.TIME`` to allow time.  ``kinds`` describes the
     allowed names for the "undefined name" message (e.g. ``"coordinates,
     parameters and t"``); without it the allowed names are listed.
 
     Raises :class:`ExpressionParseError` (an ``ExpressionError``).
 
-    >>> from modelgen.spec import symbol
+    >>> from modelgen.model.spec import symbol
     >>> parse_expression("m1*l1**2/12", {"m1": symbol("m1"), "l1": symbol("l1")})
     l1**2*m1/12
     >>> parse_expression(0.1, {})
@@ -523,7 +523,7 @@ def format_expression(expr) -> str:
     For an expression ``e`` returned by :func:`parse_expression`,
     ``parse_expression(format_expression(e), allowed) == e`` structurally.
 
-    >>> from modelgen.spec import symbol
+    >>> from modelgen.model.spec import symbol
     >>> m, l = symbol("m"), symbol("l")
     >>> format_expression(-m*l**2/12 + sympy.sqrt(2)*sympy.Abs(l))
     '-m*l**2/12 + sqrt(2)*abs(l)'

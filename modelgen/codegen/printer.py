@@ -10,7 +10,7 @@ import sympy
 from sympy.printing.c import C99CodePrinter
 from sympy.printing.precedence import precedence
 
-from .errors import DerivationError
+from modelgen.errors import DerivationError
 
 
 class ModelPrinter(C99CodePrinter):

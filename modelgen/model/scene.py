@@ -35,7 +35,7 @@ Effects and names:
   scene's ``add_effects``.  Everything not listed under ``effects`` is off and
   is not generated.  Added effects and parameters share the model's
   namespace, so they must not reuse a model name.
-* Selected effects whose kind is in :data:`modelgen.spec.STIFF_KINDS`
+* Selected effects whose kind is in :data:`modelgen.model.spec.STIFF_KINDS`
   (springs, torsion springs, friction) are listed in
   ``SceneSpec.stiff_effects``: they can make the problem stiff or non-smooth,
   and the scene summary flags them.  The test is by kind only; it does not
@@ -86,16 +86,16 @@ import os
 from dataclasses import replace
 
 from modelgen.errors import ModelError
-from modelgen.model import (_a, _check_top_level, _closest, _compose, _Context, _describe, _listing,
+from modelgen.model.api import (_a, _check_top_level, _closest, _compose, _Context, _describe, _listing,
                             _load_effects, _load_parameters, _parse_context, _read_text, _replay,
                             _yaml_float, check_name)
-from modelgen.spec import (CANONICAL_BASE, CANONICAL_POINT, OUTPUT_KINDS, STIFF_KINDS,
+from modelgen.model.spec import (CANONICAL_BASE, CANONICAL_POINT, OUTPUT_KINDS, STIFF_KINDS,
                            InputSignal, ModelSpec, OutputSpec, SceneSpec, symbol)
 
 __all__ = ["METHODS", "TOP_LEVEL_KEYS", "INTERPOLATIONS", "ENERGIES", "OUTPUT_DEFAULTS",
            "GRAVITY", "load_scene", "parse_scene"]
 
-#: Integration methods a scene may ask for (see modelgen.integrate); rk4 runs
+#: Integration methods a scene may ask for (see modelgen.sim.integrate); rk4 runs
 #: the scene's own C loop, the others the adaptive/implicit C integrators.
 METHODS = ("rk4", "dopri5", "dop853", "rodas", "midpoint", "gauss4")
 #: Methods that take a fixed step (the others adapt theirs to rtol/atol).

@@ -1,6 +1,6 @@
 """Outputs stage: the quantities a scene records, as expressions of the state.
 
-A scene asks for outputs by kind (see :data:`modelgen.spec.OUTPUT_KINDS`);
+A scene asks for outputs by kind (see :data:`modelgen.model.spec.OUTPUT_KINDS`);
 this stage turns each into expressions over the same named intermediates as
 the equations, so they share CSE with nothing else and cost nothing when no
 scene asks for them.  Each output has named columns, e.g. ``tip.x``.
@@ -11,9 +11,9 @@ from dataclasses import dataclass
 
 import sympy
 
-from .dynamics import Equations
-from .graph import Graph, GraphBuilder, sub
-from .kinematics import Kinematics
+from modelgen.derive.dynamics import Equations
+from modelgen.derive.graph import Graph, GraphBuilder, sub
+from modelgen.derive.kinematics import Kinematics
 
 AXES = ("x", "y", "z")
 

@@ -42,10 +42,10 @@ from typing import Any, Callable, NamedTuple
 
 import numpy as np
 
-from .errors import ModelgenError, SimulationError
+from modelgen.errors import ModelgenError, SimulationError
 
 #: where the standard set's scenes live (a source checkout)
-SCENES = Path(__file__).resolve().parent.parent / "models" / "scenes"
+SCENES = Path(__file__).resolve().parents[2] / "models" / "scenes"
 #: grid points of the dense error
 GRID_POINTS = 201
 #: errors below FLOOR_FACTOR x the reference's own disagreement are not resolved
@@ -265,7 +265,7 @@ def jacobian_function(cm, u=None, p=None):
         out = np.empty((nx, nx))
         status = fn(t, ptrs[0], ptrs[1], ptrs[2], ffi.from_buffer("double[]", out))
         if status:
-            from .runtime import MassMatrixError
+            from modelgen.sim.runtime import MassMatrixError
             raise MassMatrixError(status, cm.coordinates[status - 1], t, x_buf.copy())
         return out
     jac.buffers = (x_buf, u_arr, p_arr)
@@ -309,7 +309,7 @@ def c_method(name: str, *, label: str | None = None) -> Method:
     Adaptive methods take the tolerance (atol = rtol); fixed-step ones the step.
     """
     try:
-        from .integrate import method_of
+        from modelgen.sim.integrate import method_of
         fixed = not method_of(name).adaptive
     except ImportError:                               # an older runtime
         fixed = name in ("rk4", "midpoint", "gauss4", "gauss2")
@@ -767,15 +767,15 @@ def linear_reference(cm, x0, t, u=None, p=None, digits: int = 40) -> Reference:
 
 def extended_rhs(spec, p, u):
     """``f(t, x)`` in numpy long double (80-bit on x86: eps 1.1e-19) from the model's
-    closed-form equations (:class:`modelgen.queries.Mechanism`): A(q) qdd = tau - h.
+    closed-form equations (:class:`modelgen.derive.queries.Mechanism`): A(q) qdd = tau - h.
 
     For small models (the closed forms grow quickly with n); ``p`` and ``u`` are
     the parameter and input vectors of the compiled model.
     """
     import sympy
 
-    from .queries import Mechanism
-    from .spec import TIME
+    from modelgen.derive.queries import Mechanism
+    from modelgen.model.spec import TIME
     LD = np.longdouble
     mech = Mechanism(spec, simplify=False)
     A = mech.mass_matrix()
@@ -945,15 +945,15 @@ def extended_reference(spec, problem: Problem, tol: float = 1e-17) -> Reference:
 
 def _scene_model(scene_path, build_root):
     """(SceneSpec, CompiledModel built with the symbolic Jacobian)."""
-    from . import load
-    from .scene import load_scene
+    from modelgen.sim.load import load
+    from modelgen.model.scene import load_scene
     scene_path = Path(scene_path)
     if not scene_path.is_file():
         raise SimulationError(f"scene file {scene_path} not found (the standard set needs "
                               f"a source checkout with models/scenes)")
     spec = load_scene(scene_path)
     if build_root is None:
-        from .pipeline import DEFAULT_OUTPUT
+        from modelgen.codegen.pipeline import DEFAULT_OUTPUT
         build_root = DEFAULT_OUTPUT / "workprecision"
     cm = load(spec.model, Path(build_root) / spec.name, jacobian=spec.model.n <= 12)
     return spec, cm
@@ -1090,11 +1090,11 @@ def scene_problem(scene_path, build_dir=None, *, quick: bool = False,
     (:func:`reference_from_methods`).  Fixed steps go from 10x to 1/10 of the
     scene's integrator step.
     """
-    from . import load
-    from .scene import load_scene
+    from modelgen.sim.load import load
+    from modelgen.model.scene import load_scene
     spec = load_scene(scene_path)
     if build_dir is None:
-        from .pipeline import DEFAULT_OUTPUT
+        from modelgen.codegen.pipeline import DEFAULT_OUTPUT
         build_dir = DEFAULT_OUTPUT / "workprecision" / spec.name
     cm = load(spec.model, build_dir, jacobian=spec.model.n <= 12)
     t = _grid(spec.t_start, spec.t_end)

@@ -13,18 +13,10 @@ from pathlib import Path
 
 import numpy as np
 
-from .emit import ABI_VERSION
-from .errors import ModelgenError, SimulationError
-
-
-class MassMatrixError(ModelgenError):
-    """The mass matrix is not positive definite at the given state."""
-
-    def __init__(self, pivot: int, coordinate: str, t, x):
-        self.pivot, self.coordinate, self.t, self.x = pivot, coordinate, t, x
-        super().__init__(
-            f"mass matrix not positive definite at t={t!r}: Cholesky pivot {pivot} "
-            f"(coordinate {coordinate!r}) failed; state x={np.array2string(np.asarray(x))}")
+from modelgen.codegen.emit import ABI_VERSION
+from modelgen.errors import DerivationError, MassMatrixError, ModelgenError, SimulationError
+from modelgen.sim import integrate
+from modelgen.sim.simulate import SimulationResult, rk4
 
 
 def _import(module_name: str, path: Path):
@@ -226,7 +218,7 @@ class CompiledModel:
         return out
 
     def simulate_rk4(self, x0, t_span, step, *, every: int = 1, u=None, p=None):
-        """Fixed-step RK4 integrated in C; returns a :class:`~modelgen.simulate.SimulationResult`.
+        """Fixed-step RK4 integrated in C; returns a :class:`~modelgen.sim.simulate.SimulationResult`.
 
         ``u`` is None (zeros), a constant vector or dict, a tuple
         ``(times, values, interpolation)`` with ``values`` of shape
@@ -238,7 +230,6 @@ class CompiledModel:
 
         >>> res = cm.simulate_rk4([1.0, 0, 0, 0], (0, 10), 1e-3, every=10)   # doctest: +SKIP
         """
-        from .simulate import SimulationResult
         t0, t1 = map(float, t_span)
         step = float(step)
         if not (np.isfinite(step) and step > 0):
@@ -283,7 +274,6 @@ class CompiledModel:
 
     def _simulate_feedback(self, x0, t0, t1, step, every, u, p):
         """RK4 with inputs from a Python callable u(t, x): the loop runs in Python."""
-        from .simulate import rk4
         res = rk4(self, x0, (t0, t1), step, u=u, p=p, record_energy=False)
         keep = np.arange(0, len(res.t), every)
         if keep[-1] != len(res.t) - 1:
@@ -321,38 +311,35 @@ class CompiledModel:
         ``gauss4`` (the fixed-step ones need ``step=``); ``events`` are
         ``g(t, x)`` callables with ``terminal``/``direction`` as in solve_ivp.
         Options: ``step``, ``first_step``, ``max_step``, ``max_steps``, ``chunk``.
-        See :func:`modelgen.integrate.simulate`.
+        See :func:`modelgen.sim.integrate.simulate`.
 
         >>> res = cm.simulate([1.0, 0.0], (0, 10), t_eval=np.linspace(0, 10, 101))  # doctest: +SKIP
         >>> res.y.shape, res.success                                                # doctest: +SKIP
         ((2, 101), True)
         """
-        from .integrate import simulate
-        return simulate(self, x0, t_span, t_eval, method, rtol, atol, u, p, events, **options)
+        return integrate.simulate(self, x0, t_span, t_eval, method, rtol, atol, u, p, events, **options)
 
     def simulate_batch(self, X0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10,
                        u=None, P=None, **options):
         """Integrate many initial states / parameter sets in one C call (``threads=`` to split).
 
-        See :func:`modelgen.integrate.simulate_batch`.
+        See :func:`modelgen.sim.integrate.simulate_batch`.
 
         >>> res = cm.simulate_batch(X0, (0, 5), P={"g": [9.81, 1.62]})           # doctest: +SKIP
         >>> res.y.shape                                                           # doctest: +SKIP
         (2, 4, 1)
         """
-        from .integrate import simulate_batch
-        return simulate_batch(self, X0, t_span, t_eval, method, rtol, atol, u, P, **options)
+        return integrate.simulate_batch(self, X0, t_span, t_eval, method, rtol, atol, u, P, **options)
 
     def jac(self, t, x, u=None, p=None) -> np.ndarray:
         """d xdot / d x at (t, x), shape (2n, 2n), for ``solve_ivp(..., jac=cm.jac)``.
 
         The generated symbolic Jacobian when the model has one, else central
-        differences of the compiled rhs (see :func:`modelgen.integrate.jacobian_source`).
+        differences of the compiled rhs (see :func:`modelgen.sim.integrate.jacobian_source`).
 
         >>> scipy.integrate.solve_ivp(cm.rhs, (0, 1), x0, method="Radau", jac=cm.jac)  # doctest: +SKIP
         """
-        from .integrate import jacobian
-        return jacobian(self, t, x, u, p)
+        return integrate.jacobian(self, t, x, u, p)
 
     def body_poses(self, q, p=None) -> np.ndarray:
         """4x4 pose of every body, shape (n_bodies, 4, 4)."""
@@ -370,7 +357,6 @@ def check_mass_matrix(cm: CompiledModel, samples: int = 3, seed: int = 0) -> Non
     moves no mass or inertia (e.g. a body with zero inertia about a terminal
     joint axis, or an unused coordinate).
     """
-    from .errors import DerivationError
     rng = np.random.default_rng(seed)
     failing = None
     for _ in range(samples):

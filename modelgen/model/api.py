@@ -1,6 +1,6 @@
 """The model stage: YAML text or Python API calls -> a validated :class:`ModelSpec`.
 
-Two front ends build the same immutable :class:`~modelgen.spec.ModelSpec`:
+Two front ends build the same immutable :class:`~modelgen.model.spec.ModelSpec`:
 
 * :func:`load_model` / :func:`parse_model` read the YAML format below;
 * :class:`Model` is a Python API with one method per YAML entry.
@@ -30,7 +30,7 @@ The YAML format (every top-level key except ``name`` is optional)::
       hinges: {type: joint_damping, coordinates: [q1, q2], damping: c}
 
 Effects (``effects:``): each entry has ``type`` (the ``kind`` of one class of
-:data:`modelgen.spec.EFFECT_TYPES`, or ``action``) and that class's fields as
+:data:`modelgen.model.spec.EFFECT_TYPES`, or ``action``) and that class's fields as
 keys; a field with a default in the dataclass is optional.
 
 =================== ================================================================
@@ -57,7 +57,7 @@ type                keys (optional ones in brackets)
 * Friction is regularised: the Coulomb level is multiplied by
   ``tanh(v / smoothing_speed)`` (v the coordinate's speed), so it reaches
   76% of its value at ``v = smoothing_speed``; see
-  :class:`~modelgen.spec.FrictionEffect` for the whole law.  Friction acts
+  :class:`~modelgen.model.spec.FrictionEffect` for the whole law.  Friction acts
   on a coordinate, so a normal force belongs in ``coulomb`` (a block of
   mass m on an incline: ``coulomb: mu*m*g*cos(alpha)``).
 * A gravity effect may use any base: the field is uniform and constant in
@@ -107,7 +107,7 @@ key                                        allowed names
 ``effects.*`` of type action               as ``actions``
 ========================================== ==========================================
 
-``pi`` and the functions of :mod:`modelgen.expr` may be used everywhere.
+``pi`` and the functions of :mod:`modelgen.model.expr` may be used everywhere.
 
 Names (see :func:`check_name`): every coordinate, parameter, input, base,
 point, frame, body, action and effect name shares one namespace and must be a C
@@ -115,7 +115,7 @@ identifier (``[A-Za-z_][A-Za-z0-9_]*``, at most 63 characters) that is not:
 
 * a C (C99, C11, C23) or C++ keyword, or a Python keyword;
 * reserved by modelgen: ``t`` (time), ``pi``, ``E`` (canonical base), ``O``
-  (canonical point) and the function names of :mod:`modelgen.expr`;
+  (canonical point) and the function names of :mod:`modelgen.model.expr`;
 * the speed of a coordinate (``<coordinate>_dot``);
 * a name starting with ``_`` (C reserves ``__x`` and ``_X``; modelgen
   reserves ``_<digit>``) or with ``mg_`` in any case (generated code).
@@ -143,10 +143,10 @@ import numpy as np
 import sympy
 import yaml
 
-from modelgen import spec as specmod
+from modelgen.model import spec as specmod
 from modelgen.errors import ModelError
-from modelgen.expr import FUNCTIONS, ExpressionParseError, format_expression, parse_expression
-from modelgen.spec import (CANONICAL_BASE, CANONICAL_POINT, TIME, ActionSpec, BaseSpec,
+from modelgen.model.expr import FUNCTIONS, ExpressionParseError, format_expression, parse_expression
+from modelgen.model.spec import (CANONICAL_BASE, CANONICAL_POINT, TIME, ActionSpec, BaseSpec,
                            BodySpec, FrameSpec, ModelSpec, PointSpec)
 
 __all__ = [
@@ -1524,8 +1524,8 @@ def _replay(ctx: _Context, spec: ModelSpec, parameters=None) -> _Context:
 class Model:
     """Build a model in Python; :meth:`spec` returns the same ModelSpec as the YAML.
 
-    Expressions may be strings (parsed by :mod:`modelgen.expr`), ints, floats
-    or sympy expressions built from :func:`modelgen.spec.symbol`.  Declare
+    Expressions may be strings (parsed by :mod:`modelgen.model.expr`), ints, floats
+    or sympy expressions built from :func:`modelgen.model.spec.symbol`.  Declare
     coordinates, parameters and inputs before using them in expressions;
     bases, points, frames and bodies may be referenced before they are added
     (references are checked by :meth:`spec`).  Every method validates its

@@ -4,7 +4,7 @@ from __future__ import annotations
 import numbers
 
 from modelgen.errors import ModelError
-from modelgen.model import API_FILE, Model
+from modelgen.model.api import API_FILE, Model
 
 __all__ = ["spatial_chain"]
 

@@ -28,10 +28,10 @@ from dataclasses import dataclass
 
 import sympy
 
-from .graph import (ZERO, ZERO3, Graph, GraphBuilder, add, cross, dot, matvec,
+from modelgen.derive.graph import (ZERO, ZERO3, Graph, GraphBuilder, add, cross, dot, matvec,
                     scale, sub)
-from .kinematics import Kinematics
-from .spec import CANONICAL_BASE, TIME, symbol
+from modelgen.derive.kinematics import Kinematics
+from modelgen.model.spec import CANONICAL_BASE, TIME, symbol
 
 
 @dataclass(frozen=True)
@@ -199,7 +199,7 @@ def _warm(sums: _SetSums, sets):
 def derive_equations(kin: Kinematics) -> Equations:
     """Derive A, h and tau (and energies, poses) from the kinematics.
 
-    >>> from modelgen.model import load_model       # doctest: +SKIP
+    >>> from modelgen.model.api import load_model       # doctest: +SKIP
     >>> eqs = derive_equations(derive_kinematics(load_model("models/simple_pendulum.yaml")))  # doctest: +SKIP
     """
     spec = kin.spec

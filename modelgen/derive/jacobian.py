@@ -18,8 +18,8 @@ from dataclasses import dataclass
 
 import sympy
 
-from .dynamics import Equations
-from .graph import Graph, GraphBuilder
+from modelgen.derive.dynamics import Equations
+from modelgen.derive.graph import Graph, GraphBuilder
 
 
 @dataclass(frozen=True)
@@ -41,7 +41,7 @@ def differentiate(graph: Graph, outputs, wrt) -> tuple:
     Returns ``(graph', rows)`` with ``rows[i][j] = d outputs[i] / d wrt[j]``
     as expressions over ``graph'`` (which extends ``graph``).
 
-    >>> from modelgen.graph import GraphBuilder
+    >>> from modelgen.derive.graph import GraphBuilder
     >>> x, y = sympy.symbols("x y")
     >>> g = GraphBuilder(); s = g.name(sympy.sin(x) * y)
     >>> g2, rows = differentiate(g.freeze(), [s + x], [x, y])

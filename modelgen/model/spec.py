@@ -1,6 +1,6 @@
 """The validated model specification: plain, immutable data.
 
-This is what the loader (:mod:`modelgen.model`) produces from YAML or from the
+This is what the loader (:mod:`modelgen.model.api`) produces from YAML or from the
 Python API, and what every later stage consumes.  Nothing here parses or
 validates; by the time a :class:`ModelSpec` exists it is known to be valid:
 

@@ -9,7 +9,7 @@ Results are closed forms obtained by expanding the named intermediates, so
 they are meant for inspection, documentation and tests on small models; the
 generated C never expands them.
 
->>> from modelgen.model import load_model                       # doctest: +SKIP
+>>> from modelgen.model.api import load_model                       # doctest: +SKIP
 >>> m = Mechanism(load_model("models/double_pendulum.yaml"))     # doctest: +SKIP
 >>> m.angular_velocity("E", "B2", "B2")                          # doctest: +SKIP
 Matrix([[0], [0], [q1_dot + q2_dot]])
@@ -20,11 +20,11 @@ import functools
 
 import sympy
 
-from .dynamics import derive_equations
-from .errors import ModelError
-from .graph import add
-from .kinematics import derive_kinematics
-from .spec import ModelSpec, symbol
+from modelgen.derive.dynamics import derive_equations
+from modelgen.errors import ModelError
+from modelgen.derive.graph import add
+from modelgen.derive.kinematics import derive_kinematics
+from modelgen.model.spec import ModelSpec, symbol
 
 
 def acceleration_name(coordinate: str) -> str:

@@ -11,16 +11,16 @@ import time
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-from . import __version__
-from .build import BuildResult, build_module, cached_build, compiler
-from .cse import make_routines
-from .dynamics import Equations, derive_equations
-from .errors import ModelError
-from .emit import ABI_VERSION, emit_sources, print_routine, template_context, templates_digest
-from .jacobian import derive_jacobian_terms
-from .kinematics import derive_kinematics
-from .outputs import derive_outputs
-from .spec import ModelSpec
+from modelgen.version import __version__
+from modelgen.codegen.build import BuildResult, build_module, cached_build, compiler
+from modelgen.codegen.cse import make_routines
+from modelgen.derive.dynamics import Equations, derive_equations
+from modelgen.errors import ModelError
+from modelgen.codegen.emit import ABI_VERSION, emit_sources, print_routine, template_context, templates_digest
+from modelgen.derive.jacobian import derive_jacobian_terms
+from modelgen.derive.kinematics import derive_kinematics
+from modelgen.derive.outputs import derive_outputs
+from modelgen.model.spec import ModelSpec
 
 DEFAULT_OUTPUT = Path("generated")
 
@@ -101,7 +101,7 @@ def generate(spec: ModelSpec, out_dir=None, *, force: bool = False, outputs=(),
     """Generate, compile and cache the model; reuse an unchanged build.
 
     ``out_dir`` defaults to ``generated/<name>``.  ``outputs`` (a tuple of
-    :class:`~modelgen.spec.OutputSpec`, from a scene) adds a
+    :class:`~modelgen.model.spec.OutputSpec`, from a scene) adds a
     ``<name>_outputs`` routine computing exactly those quantities.
     ``jacobian=True`` adds ``<name>_jacobian``, the symbolic d(xdot)/dx.
 

@@ -27,7 +27,7 @@ from pathlib import Path
 
 import cffi
 
-from .errors import BuildError
+from modelgen.errors import BuildError
 
 #: Optimisation level: -O2, or -O1 above a statement count.  gcc's time grows
 #: faster than linearly with code size; at n = 30 links, part 2 (rhs, 3,800

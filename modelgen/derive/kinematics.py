@@ -1,7 +1,7 @@
 """Kinematics stage: frames, points, velocities and partial velocities.
 
 Every quantity is built recursively from its parent and named (see
-:mod:`modelgen.graph`), so the cost is linear in the size of the tree instead
+:mod:`modelgen.derive.graph`), so the cost is linear in the size of the tree instead
 of exponential.  All vectors are in components of the canonical base E.
 
 For base B obtained from parent P by angle theta about P's axis e:
@@ -32,10 +32,10 @@ from dataclasses import dataclass
 
 import sympy
 
-from .graph import (ZERO, ZERO3, Graph, GraphBuilder, add, cross, is_zero_vec,
+from modelgen.derive.graph import (ZERO, ZERO3, Graph, GraphBuilder, add, cross, is_zero_vec,
                     matvec, scale, sub)
-from .errors import ModelError
-from .spec import CANONICAL_BASE, CANONICAL_POINT, TIME, ModelSpec, symbol
+from modelgen.errors import ModelError
+from modelgen.model.spec import CANONICAL_BASE, CANONICAL_POINT, TIME, ModelSpec, symbol
 
 IDENTITY = ((sympy.S.One, ZERO, ZERO), (ZERO, sympy.S.One, ZERO), (ZERO, ZERO, sympy.S.One))
 
@@ -142,7 +142,7 @@ def _reject_explicit_time(spec: ModelSpec) -> None:
 def derive_kinematics(spec: ModelSpec, graph: Graph | None = None) -> Kinematics:
     """Build the kinematics of every base and point of ``spec``.
 
-    >>> from modelgen.spec import ModelSpec, BaseSpec, symbol
+    >>> from modelgen.model.spec import ModelSpec, BaseSpec, symbol
     >>> spec = ModelSpec("m", coordinates=("q1",),
     ...                  bases=(BaseSpec("B1", "E", 3, symbol("q1")),))
     >>> kin = derive_kinematics(spec)

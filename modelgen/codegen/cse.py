@@ -1,6 +1,6 @@
 """CSE stage: one common-subexpression pass per generated C function.
 
-Input: the program of named intermediates (:class:`modelgen.graph.Graph`) and
+Input: the program of named intermediates (:class:`modelgen.derive.graph.Graph`) and
 the outputs a function must write.  Output: a :class:`Routine`, the ordered
 statements that compute exactly those outputs (dead intermediates dropped),
 after one ``sympy.cse`` pass over all of them, with operation counts before
@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import sympy
 
-from .graph import Graph
+from modelgen.derive.graph import Graph
 
 
 @dataclass(frozen=True)
@@ -168,7 +168,7 @@ def make_routines(graph: Graph, routines, *, cse: bool = True) -> tuple:
     is ``((array name, (expr, ...)), ...)``.
 
     >>> import sympy
-    >>> from modelgen.graph import GraphBuilder
+    >>> from modelgen.derive.graph import GraphBuilder
     >>> x, y = sympy.symbols("x y")
     >>> g = GraphBuilder(); a = g.name(x*y + x); b = g.name((x*y + 1)**2)
     >>> (r,) = make_routines(g.freeze(), [("f", (("in", (x, y)),), (("out", (a, b)),))])

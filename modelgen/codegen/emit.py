@@ -2,7 +2,7 @@
 
 The templates get a plain dict of strings, ints and lists (see
 :func:`template_context`); every expression is printed here, by
-:class:`modelgen.printer.ModelPrinter`.
+:class:`modelgen.codegen.printer.ModelPrinter`.
 
 Large routines are cut into ``noinline`` parts of about ``CHUNK`` statements
 that share a work array ``w`` on the caller's stack.  gcc's time grows faster
@@ -20,10 +20,10 @@ from pathlib import Path
 import jinja2
 import sympy
 
-from . import __version__
-from .cse import Routine
-from .errors import TemplateError
-from .printer import ModelPrinter
+from modelgen.version import __version__
+from modelgen.codegen.cse import Routine
+from modelgen.errors import TemplateError
+from modelgen.codegen.printer import ModelPrinter
 
 #: Version of the generated C ABI, checked by the Python loader.
 ABI_VERSION = 1
@@ -308,7 +308,7 @@ def _integrator_api(name: str, n: int, n_p: int, n_u: int) -> list:
 
     The status codes, method numbers and statistics slots named here are
     defined in templates/integrators.c.j2 and mirrored, with the messages, by
-    :mod:`modelgen.integrate`.
+    :mod:`modelgen.sim.integrate`.
     """
     nx = 2 * n
     return [

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import SimulationError
+from modelgen.errors import MassMatrixError, SimulationError
 
 
 @dataclass(frozen=True)
@@ -149,7 +149,6 @@ def _lib_function(cm, suffix):
 def jacobian(cm, t, x, u=None, p=None) -> np.ndarray:
     """d xdot / d x at (t, x), shape (nx, nx): the generated symbolic Jacobian when
     the model has one, else central differences of the compiled rhs in C."""
-    from .runtime import MassMatrixError
     nx = 2 * cm.n
     x = cm._vector(x, nx, "x")
     out = np.empty((nx, nx))

@@ -1,0 +1,47 @@
+"""From a model source to a loaded :class:`CompiledModel` or :class:`Scene`: the front door.
+
+These are the functions ``modelgen.load``, ``modelgen.load_scene`` and
+``modelgen.generate_model`` re-export.
+"""
+from __future__ import annotations
+
+from modelgen.codegen.pipeline import Generated, generate
+from modelgen.model import as_spec
+from modelgen.model.scene import load_scene as load_scene_spec
+from modelgen.sim.runtime import CompiledModel, check_mass_matrix
+from modelgen.sim.scene import Scene
+
+
+def generate_model(source, out_dir=None, *, force: bool = False,
+                   jacobian: bool = False) -> Generated:
+    """Generate and compile a model (or reuse the cache); returns the report."""
+    return generate(as_spec(source), out_dir, force=force, jacobian=jacobian)
+
+
+def load(source, out_dir=None, *, force: bool = False, jacobian: bool = False) -> CompiledModel:
+    """Build (on first use) and import a model; returns a :class:`CompiledModel`.
+
+    ``source`` is a YAML path, a :class:`modelgen.model.Model` or a ModelSpec.
+    Output goes to ``out_dir`` (default ``generated/<name>``).  With
+    ``jacobian=True`` the symbolic Jacobian ``<name>_jacobian`` is generated too
+    (for stiff integrators; it costs generation and compile time).
+
+    >>> cm = load("models/double_pendulum.yaml")             # doctest: +SKIP
+    >>> cm.rhs(0.0, [0.1, 0.2, 0.0, 0.0])                    # doctest: +SKIP
+    """
+    generated = generate_model(source, out_dir, force=force, jacobian=jacobian)
+    cm = CompiledModel(generated.manifest, generated.build.module_path)
+    if not generated.build.cached:
+        check_mass_matrix(cm)
+    return cm
+
+
+def load_scene(path, out_dir=None, *, force: bool = False, progress=None) -> Scene:
+    """Load a scene file and build its reduced model; returns a :class:`Scene`.
+
+    Only the effects and outputs the scene selects are generated.  Output goes
+    to ``out_dir`` (default ``generated/<scene name>``).
+
+    >>> res = load_scene("models/scenes/dp_damped.yaml").run()   # doctest: +SKIP
+    """
+    return Scene(load_scene_spec(path), out_dir, force=force, progress=progress)
