@@ -7,6 +7,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
 MODELS = ROOT / "models"
+SCENES = MODELS / "scenes"
 
 
 @pytest.fixture(scope="session")

@@ -428,7 +428,7 @@ def test_c_rejects_bad_arguments_with_its_own_status(sp):
     (lambda cm: cm.simulate([1, 0], (0, 1), t_eval=[0.5, 2]), "t_eval must lie within"),
     (lambda cm: cm.simulate([1, 0], (0, 1), t_eval=[0.5, 0.2]), "t_eval must be sorted"),
     (lambda cm: cm.simulate([1, 0], (0, 1), rtol=-1), "rtol must be finite and >= 0"),
-    (lambda cm: cm.simulate([1, 0], (0, 1), u=lambda t, x: [0]), "not supported by the C"),
+    (lambda cm: cm.simulate([1, 0], (0, 1), u=lambda t, x: [0]), "needs method='rk4'"),
     (lambda cm: cm.simulate([np.nan, 0], (0, 1)), "x0 must be finite"),
 ])
 def test_nonsense_arguments_raise_clear_errors(sp, call, message):

@@ -31,11 +31,8 @@ def pendulum(build_root):
 def _methods(cm):
     methods = [wp.scipy_method("RK45"), wp.scipy_method("DOP853"),
                wp.scipy_method("Radau", jac=True)]
-    if hasattr(cm, "simulate"):
-        methods += [wp.c_method("dopri5"), wp.c_method("dop853"), wp.c_method("rodas"),
-                    wp.c_method("rk4")]
-    else:
-        methods.append(wp.c_rk4_loop())
+    methods += [wp.c_method("dopri5"), wp.c_method("dop853"), wp.c_method("rodas"),
+                wp.c_method("rk4")]
     return methods
 
 
@@ -74,8 +71,6 @@ def test_errors_fall_with_tolerance_and_step_for_every_method(sweep):
 
 
 def test_c_and_scipy_dop853_take_about_the_same_steps(sweep, pendulum):
-    if not hasattr(pendulum.model, "simulate"):
-        pytest.skip("this runtime has no CompiledModel.simulate")
     for rtol in (1e-4, 1e-6, 1e-8):
         c = wp.point_at(sweep, "C dop853", rtol)
         s = wp.point_at(sweep, "solve_ivp DOP853", rtol)
@@ -89,9 +84,7 @@ def test_failures_are_recorded_not_dropped(pendulum):
     def broken(problem, setting, budget):
         raise FloatingPointError("deliberately broken")
     broken.label = "broken"
-    methods = [wp.scipy_method("RK45"), broken]
-    if hasattr(pendulum.model, "simulate"):
-        methods.append(wp.c_method("dop853"))
+    methods = [wp.scipy_method("RK45"), broken, wp.c_method("dop853")]
     points = wp.run_sweep(pendulum, methods, tolerances=[1e-3, 1e-6, 1e-9], repeats=1,
                           budget=wp.Budget(max_nfev=400, max_steps=40), warmup=False)
     assert len(points) == 3 * len(methods)
@@ -101,9 +94,8 @@ def test_failures_are_recorded_not_dropped(pendulum):
     assert not rk45[2].ran and "not run" in rk45[2].message   # tighter: not run, but listed
     bad = [p for p in points if p.method == "broken"]
     assert all(p.failed and "deliberately broken" in p.message for p in bad)
-    if hasattr(pendulum.model, "simulate"):
-        c = [p for p in points if p.method == "C dop853"]
-        assert any(p.failed and p.status == -1 for p in c)    # MAX_STEPS from the C
+    c = [p for p in points if p.method == "C dop853"]
+    assert any(p.failed and p.status == -1 for p in c)    # MAX_STEPS from the C
     table = wp.markdown_table(points)
     assert table.count("**FAILED**") == sum(p.failed for p in points)
 

@@ -328,33 +328,15 @@ def c_method(name: str, *, label: str | None = None) -> Method:
     return Method(label or f"C {name}", run, name=name, fixed_step=fixed, family="C")
 
 
-def c_rk4_loop(label: str = "C rk4") -> Method:
-    """Fixed-step RK4 through ``CompiledModel.simulate_rk4`` (for models built
-    before ``simulate`` existed); the step must divide the grid spacing."""
-    def run(problem, step, budget):
-        cm = problem.model
-        spacing = problem.t_eval[1] - problem.t_eval[0]
-        every = int(round(spacing / step))
-        res = cm.simulate_rk4(problem.x0, problem.t_span, step, every=every, u=problem.u,
-                              p=problem.p)
-        return Outcome(res.t, res.x.T, 4 * every * (len(res.t) - 1),
-                       0, 0 if res.status == 0 else -res.status, res.message)
-    return Method(label, run, name="rk4", fixed_step=True, family="C")
-
-
-#: the C integrators a default diagram shows (when the model has ``simulate``)
+#: the C integrators a default diagram shows
 C_METHODS = ("dopri5", "dop853", "rodas", "rk4", "gauss4")
 #: solve_ivp methods on the same compiled rhs (Radau with the model's Jacobian)
 SCIPY_METHODS = (("RK45", False), ("DOP853", False), ("Radau", True))
 
 
 def default_methods(cm, c_names=C_METHODS, scipy_names=SCIPY_METHODS) -> list:
-    """The C methods (if ``cm`` has ``simulate``, else C RK4 alone) and the scipy ones."""
-    if hasattr(cm, "simulate"):
-        methods = [c_method(name) for name in c_names]
-    else:
-        methods = [c_rk4_loop()]
-    return methods + [scipy_method(name, jac=jac) for name, jac in scipy_names]
+    """The C methods and the scipy ones."""
+    return [c_method(name) for name in c_names] + [scipy_method(name, jac=jac) for name, jac in scipy_names]
 
 
 # -- running a sweep ---------------------------------------------------------------------
@@ -686,14 +668,10 @@ def reference_from_methods(problem: Problem, methods=None, tolerance: float = 1e
     the disagreement with the second method at the same tolerance.
 
     Default: C dop853 and C rodas (explicit order 8 against linearly implicit
-    order 4) when the model has ``simulate``, else solve_ivp DOP853 and Radau
-    (solve_ivp raises rtol to 2.2e-14 at least).
+    order 4).
     """
     if methods is None:
-        if hasattr(problem.model, "simulate"):
-            methods = [c_method("dop853"), c_method("rodas")]
-        else:
-            methods = [scipy_method("DOP853"), scipy_method("Radau", jac=True)]
+        methods = [c_method("dop853"), c_method("rodas")]
     sols = []
     for method in methods:
         out = method(problem, tolerance, budget)

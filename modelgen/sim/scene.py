@@ -10,19 +10,8 @@ import numpy as np
 from modelgen.codegen.pipeline import generate
 from modelgen.errors import SimulationError
 from modelgen.sim.runtime import CompiledModel, check_mass_matrix
-from modelgen.sim.simulate import SimulationResult
-
-
-def _inputs_at(u, t, cm):
-    """Input vector at time t for sampled inputs ``(times, values, interpolation)``."""
-    if u is None:
-        return None
-    times, values, interpolation = u
-    if interpolation == "hold":
-        k = int(np.clip(np.searchsorted(times, t, side="right") - 1, 0, len(times) - 1))
-        return values[k]
-    return np.array([np.interp(t, times, values[:, j]) for j in range(values.shape[1])])
-
+from modelgen.sim.integrate import method_of
+from modelgen.sim.result import Result
 
 
 #: effect kinds whose forces derive from a potential (energy is then conserved)
@@ -70,7 +59,7 @@ class Scene:
         lines.append(f"outputs: {', '.join(o.name for o in s.outputs) or 'none'}")
         ops = self.generated.manifest["ops"]["rhs"]
         lines.append(f"rhs: {ops['after_cse']} operations after CSE")
-        how = (f"{s.method} step {s.step:g} s" if s.method in ("rk4", "midpoint", "gauss4")
+        how = (f"{s.method} step {s.step:g} s" if not method_of(s.method).adaptive
                else f"{s.method} rtol {s.rtol:g} atol {s.atol:g}")
         lines.append(f"time {s.t_start:g} .. {s.t_end:g} s, {how}, "
                      f"sampled every {s.sample_dt:g} s")
@@ -104,52 +93,41 @@ class Scene:
                 values[:, j] = np.interp(grid, sig.times, sig.values)
         return (np.array(grid), values, "hold" if hold else "linear")
 
-    def _run_integrator(self, x0, u, p) -> SimulationResult:
-        """Adaptive or implicit C integrators, sampled at the scene's times."""
+    def run(self, p=None, x0=None, u=None) -> Result:
+        """Integrate the scene with its method, sampled at its times; energies recorded.
+
+        ``p`` overrides parameters, ``x0`` the initial state (an array, or a
+        mapping of coordinate and speed names to values, missing ones taken
+        from the scene), and ``u`` the scene's inputs (anything
+        :meth:`CompiledModel.simulate` accepts, including a feedback callable
+        ``u(t, x)``).  Returns a :class:`~modelgen.sim.result.Result`.
+        """
         s, cm = self.spec, self.model
-        if callable(u):
-            raise SimulationError(f"scene {s.name}: a feedback u(t, x) needs method rk4")
-        fixed = s.method in ("midpoint", "gauss4")
+        x0 = self.initial_state(x0)
+        u = self._inputs() if u is None else u
+        fixed = not method_of(s.method).adaptive
         times = _scene_times(s.t_start, s.t_end, s.sample_dt)
         res = cm.simulate(x0, (s.t_start, s.t_end), t_eval=times, method=s.method,
-                          rtol=s.rtol, atol=s.atol, u=u, p=p,
-                          step=s.step if fixed else None)
-        t, x = np.asarray(res.t), np.asarray(res.y).T
-        outputs = {}
-        if cm.output_columns:
-            u_vec = None if u is None or isinstance(u, tuple) else u
-            y = np.array([cm.output_values(ti, xi, u_vec if u_vec is not None
-                                           else _inputs_at(u, ti, cm), p)
-                          for ti, xi in zip(t, x)]).reshape(len(t), -1)
-            outputs = {name: y[:, [cm.output_columns.index(c) for c in cols]]
-                       for name, cols in cm.outputs.items()}
-        return SimulationResult(t, x, cm.coordinates, status=0 if res.success else 1,
-                                message=res.message, outputs=outputs,
-                                output_columns=dict(cm.outputs))
-
-    def run(self, p=None, x0=None, u=None) -> SimulationResult:
-        """Integrate the scene in C; energies are recorded for the plot.
-
-        ``p`` overrides parameters, ``x0`` the initial state, and ``u`` the
-        scene's inputs (anything :meth:`CompiledModel.simulate_rk4` accepts,
-        including a feedback callable ``u(t, x)``).
-        """
-        s = self.spec
-        x0 = np.array(s.initial if x0 is None else x0, dtype=float)
-        u = self._inputs() if u is None else u
-        if s.method == "rk4":
-            every = max(1, int(round(s.sample_dt / s.step)))
-            if abs(every * s.step - s.sample_dt) > 1e-9 * s.sample_dt:
-                raise SimulationError(f"scene {s.name}: the sampling interval "
-                                      f"{s.sample_dt:g} s must be a multiple of the step "
-                                      f"{s.step:g} s")
-            res = self.model.simulate_rk4(x0, (s.t_start, s.t_end), s.step, every=every,
-                                          u=u, p=p)
-        else:
-            res = self._run_integrator(x0, u, p)
-        n = self.model.n
-        res.energy = np.array([self.model.energy(row[:n], row[n:], p) for row in res.x])
+                          rtol=s.rtol, atol=s.atol, u=u, p=p, step=s.step if fixed else None)
+        res.energy = cm.energies(res, p)
+        res.info.update(scene=s.name, conservative=self.conservative)
         return res
+
+    def initial_state(self, x0=None) -> np.ndarray:
+        """The scene's initial state, or ``x0`` (an array, or names -> values over it)."""
+        s, cm = self.spec, self.model
+        if x0 is None:
+            return np.array(s.initial, dtype=float)
+        if isinstance(x0, dict):
+            x = np.array(s.initial, dtype=float)
+            for name, value in x0.items():
+                if name not in cm.state_names:
+                    raise SimulationError(
+                        f"scene {s.name}: x0 names unknown state {name!r}; states are "
+                        f"{', '.join(cm.state_names)}")
+                x[cm.state_names.index(name)] = float(value)
+            return x
+        return np.array(x0, dtype=float)
 
 
 def _scene_times(t0, t1, dt):
