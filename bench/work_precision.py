@@ -185,8 +185,6 @@ def main(argv=None) -> int:
         problem = wp.STANDARD[name](args.build_dir, quick=args.quick)
         t_ref = time.perf_counter() - t0
         methods = wp.default_methods(problem.model)
-        if not hasattr(problem.model, "simulate"):
-            progress(f"{name}: this runtime has no CompiledModel.simulate: C rk4 only")
         points = wp.run_sweep(problem, methods, repeats=repeats, time_budget=time_budget,
                               budget=budget, progress=progress)
         md, csv_path = wp.write_tables(points, out / name, problem)
