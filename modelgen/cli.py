@@ -28,11 +28,11 @@ from modelgen.version import __version__
 
 def _generate(args) -> int:
     from modelgen.model import as_spec
-    from modelgen.codegen.pipeline import generate
+    from modelgen.sim.load import generate_model
     t0 = time.perf_counter()
     spec = as_spec(args.model)
     t_load = time.perf_counter() - t0
-    g = generate(spec, args.output, force=args.force, jacobian=args.jacobian)
+    g = generate_model(spec, args.output, force=args.force, jacobian=args.jacobian)
     b = g.build
     print(f"model      {spec.name}  ({args.model})")
     print(f"n          {spec.n} coordinates, {len(spec.parameters)} parameters, "

@@ -169,3 +169,23 @@ def test_plot_returns_a_figure_and_leaves_pyplot_alone(dp, tmp_path):
     assert isinstance(fig, Figure) and len(fig.axes) == 3
     assert (tmp_path / "r.png").read_bytes()[:4] == b"\x89PNG"
     assert matplotlib.get_backend() == backend
+
+
+def test_everywhere_singular_model_is_refused_fresh_and_cached(tmp_path):
+    """A double pendulum whose second base turns with q1 too: q2 moves nothing.
+
+    Refused on the first load, on a second load from the same build cache,
+    by generate_model, and by `modelgen generate` (exit status 2)."""
+    from conftest import MODELS
+    from modelgen.cli import main
+    text = (MODELS / "double_pendulum.yaml").read_text()
+    assert "B2: {parent: B1, axis: 3, angle: q2}" in text
+    path = tmp_path / "stuck.yaml"
+    path.write_text(text.replace("B2: {parent: B1, axis: 3, angle: q2}",
+                                 "B2: {parent: B1, axis: 3, angle: q1}"))
+    for _ in range(2):
+        with pytest.raises(DerivationError, match="coordinate 'q2'"):
+            modelgen.load(path, tmp_path / "out")
+    with pytest.raises(DerivationError, match="coordinate 'q2'"):
+        modelgen.generate_model(path, tmp_path / "out")
+    assert main(["generate", str(path), "-o", str(tmp_path / "out")]) == 2

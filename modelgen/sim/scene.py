@@ -35,8 +35,7 @@ class Scene:
                              jacobian=bool(spec.stiff_effects) and spec.model.n <= 12)
         self.generated = generated
         self.model = CompiledModel(generated.manifest, generated.build.module_path)
-        if not generated.build.cached:
-            check_mass_matrix(self.model)
+        check_mass_matrix(self.model)          # on every load: the cache hides nothing
 
     @property
     def conservative(self) -> bool:
