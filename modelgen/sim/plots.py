@@ -9,6 +9,10 @@ from __future__ import annotations
 import numpy as np
 
 
+#: outputs with more columns than this (orientations, poses) are not drawn
+MAX_COLUMNS = 6
+
+
 def result_figure(res, *, title: str = "", conservative=None):
     """The figure :meth:`Result.plot` returns.
 
@@ -21,12 +25,14 @@ def result_figure(res, *, title: str = "", conservative=None):
 
     n_states = len(res.state_names)
     coords = res.state_names[: n_states // 2] if n_states else ()
-    panels = ["coordinates"] + [("output", name) for name in res.outputs]
+    plotted = [name for name, v in res.outputs.items() if np.shape(v)[-1] <= MAX_COLUMNS]
+    skipped = [name for name in res.outputs if name not in plotted]
+    panels = ["coordinates"] + [("output", name) for name in plotted]
     if res.energy is not None:
         panels.append("energy")
         if conservative:
             panels.append("energy_error")
-    fig = Figure(figsize=(8, 2.2 * len(panels) + 0.8))
+    fig = Figure(figsize=(8, 1.7 * len(panels) + 0.9), layout="constrained")
     axes = fig.subplots(len(panels), 1, sharex=True, squeeze=False)[:, 0]
     t = res.t
     for ax, panel in zip(axes, panels):
@@ -55,10 +61,12 @@ def result_figure(res, *, title: str = "", conservative=None):
                 ax.plot(t, values[:, j], label=column)
             ax.set_ylabel(name)
         if ax.get_legend_handles_labels()[0]:
-            ax.legend(loc="upper right", fontsize="small")
+            ax.legend(loc="upper left", bbox_to_anchor=(1.0, 1.0), fontsize="small")
         if not res.success and len(t):
             ax.axvline(t[-1], color="r", ls="--")
     axes[-1].set_xlabel("t [s]")
+    if skipped:
+        axes[-1].set_xlabel(f"t [s]        (not drawn: {', '.join(skipped)}, more than "
+                            f"{MAX_COLUMNS} columns; they are in the CSV and NPZ)")
     fig.suptitle(title or res.message)
-    fig.tight_layout()
     return fig
