@@ -189,3 +189,14 @@ def test_everywhere_singular_model_is_refused_fresh_and_cached(tmp_path):
     with pytest.raises(DerivationError, match="coordinate 'q2'"):
         modelgen.generate_model(path, tmp_path / "out")
     assert main(["generate", str(path), "-o", str(tmp_path / "out")]) == 2
+
+
+def test_compiled_model_pickles_and_runs_in_another_process(dp):
+    import concurrent.futures
+    import pickle
+    clone = pickle.loads(pickle.dumps(dp))
+    x = [0.3, -0.2, 1.0, 0.5]
+    assert np.array_equal(clone.rhs(0.0, x), dp.rhs(0.0, x))
+    with concurrent.futures.ProcessPoolExecutor(1) as pool:
+        remote = pool.submit(dp.rhs, 0.0, x).result()
+    assert np.array_equal(remote, dp.rhs(0.0, x))

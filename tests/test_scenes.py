@@ -202,3 +202,23 @@ def test_stiff_scene_with_rodas_matches_scipy_radau_and_beats_dopri5(scene):
                            max_steps=200_000)
     assert stiff.success and stiff.nfev < 2000
     assert explicit.nfev > 100 * stiff.nfev
+
+
+def test_stiffness_verdict_comes_from_the_jacobian_not_the_effect_kind(scene):
+    """Springs and friction are only stiff-prone: the summary says what |lambda|max implies
+    for the scene's method (the stiff chain is handled by rodas; the soft chain is not
+    stiff; RK4 beyond its stability limit is warned about)."""
+    from dataclasses import replace
+    stiff = scene("spring_chain_stiff")
+    assert stiff.stiffness() > 1e7
+    assert "handled by rodas" in stiff.summary()
+    soft = scene("spring_chain")
+    assert "not stiff for rk4" in soft.summary()
+    block = scene("block_friction")
+    lam, spec = block.stiffness(), block.spec
+    try:
+        block.spec = replace(spec, step=4.0 / lam)
+        summary = block.summary()
+    finally:
+        block.spec = spec
+    assert "WARNING the step" in summary and "beyond rk4's stability limit" in summary

@@ -67,6 +67,12 @@ class CompiledModel:
         self._p_default = np.array(list(self.parameters.values()), dtype=float)
         self._param_index = {name: i for i, name in enumerate(self.parameters)}
 
+    def __reduce__(self):
+        """Pickle as (manifest, module path): the unpickled model imports the same
+        compiled module, so it crosses process boundaries (multiprocessing,
+        concurrent.futures, joblib) on machines that share the build."""
+        return (CompiledModel, (self.manifest, str(self.path)))
+
     def __repr__(self):
         return (f"<CompiledModel {self.name}: n={self.n}, {len(self.parameters)} parameters, "
                 f"{len(self.inputs)} inputs, {len(self.bodies)} bodies>")

@@ -16,6 +16,11 @@ from modelgen.sim.result import Result
 
 #: effect kinds whose forces derive from a potential (energy is then conserved)
 CONSERVATIVE_KINDS = ("gravity", "spring", "torsion_spring")
+#: |h lambda| at which each explicit method's stability region ends on the negative
+#: real axis (Hairer & Wanner I, IV.2; RK4's is 2.79, on the imaginary axis 2.83)
+STABILITY_LIMIT = {"rk4": 2.78, "dopri5": 3.3, "dop853": 6.0}
+#: a run needing more steps than this for stability alone is called stiff
+STIFF_STEPS = 1e4
 
 
 class Scene:
@@ -53,8 +58,7 @@ class Scene:
         off = [name for name in _effect_names(s.full_model) if name not in s.effects]
         lines.append(f"effects off (not generated): {', '.join(off) or 'none'}")
         if s.stiff_effects:
-            lines.append(f"STIFF or non-smooth: {', '.join(s.stiff_effects)} -- a small step "
-                         f"or a stiff integrator (method: rodas) is needed")
+            lines.append(self._stiffness_line())
         lines.append(f"outputs: {', '.join(o.name for o in s.outputs) or 'none'}")
         ops = self.generated.manifest["ops"]["rhs"]
         lines.append(f"rhs: {ops['after_cse']} operations after CSE")
@@ -63,6 +67,46 @@ class Scene:
         lines.append(f"time {s.t_start:g} .. {s.t_end:g} s, {how}, "
                      f"sampled every {s.sample_dt:g} s")
         return "\n".join(lines)
+
+    def stiffness(self, x0=None, p=None) -> float:
+        """The largest |eigenvalue| of d xdot / d x at the scene's initial state, and at
+        the same configuration at rest (where smoothed friction is steepest) [1/s].
+
+        Explicit methods need steps below about 3/|lambda|max (their stability
+        limit); a run whose span holds many such steps is stiff.
+        """
+        s, cm = self.spec, self.model
+        x = self.initial_state(x0)
+        rest = np.concatenate([x[:cm.n], np.zeros(cm.n)])
+        u = self._constant_inputs()
+        return max(float(np.max(np.abs(np.linalg.eigvals(cm.jac(s.t_start, state, u, p)))))
+                   for state in (x, rest))
+
+    def _constant_inputs(self):
+        u = self._inputs()
+        return u if isinstance(u, dict) else None
+
+    def _stiffness_line(self) -> str:
+        """The summary's verdict on the stiff-prone effects, from |lambda|max."""
+        s = self.spec
+        method = method_of(s.method)
+        lam = self.stiffness()
+        span = s.t_end - s.t_start
+        stability_steps = lam * span / STABILITY_LIMIT.get(method.name, 3.0)
+        head = (f"stiff-prone effects: {', '.join(s.stiff_effects)}; |lambda|max = "
+                f"{lam:.3g} 1/s at the start (moving and at rest)")
+        if method.implicit:
+            stiff = "STIFF, " if stability_steps > STIFF_STEPS else ""
+            return f"{head} ({stiff}handled by {method.name}, which is implicit)"
+        if not method.adaptive and s.step * lam > STABILITY_LIMIT.get(method.name, 2.8):
+            return (f"{head}: WARNING the step {s.step:g} s is beyond {method.name}'s "
+                    f"stability limit ({STABILITY_LIMIT.get(method.name, 2.8):g}/|lambda|max "
+                    f"= {STABILITY_LIMIT.get(method.name, 2.8) / lam:.3g} s): the result "
+                    f"will be wrong; use a smaller step or method: rodas")
+        if stability_steps > STIFF_STEPS:
+            return (f"{head}: STIFF, {method.name} needs about {stability_steps:.2g} steps for "
+                    f"stability alone; use method: rodas")
+        return f"{head}: not stiff for {method.name} over {span:g} s"
 
     def _inputs(self):
         s = self.spec
