@@ -9,6 +9,7 @@ import numpy as np
 
 from modelgen.codegen.pipeline import generate
 from modelgen.errors import SimulationError
+from modelgen.model.spec import CONSERVATIVE_KINDS
 from modelgen.sim.runtime import CompiledModel, check_mass_matrix
 from modelgen.sim.simulate import SimulationResult
 
@@ -23,10 +24,6 @@ def _inputs_at(u, t, cm):
         return values[k]
     return np.array([np.interp(t, times, values[:, j]) for j in range(values.shape[1])])
 
-
-
-#: effect kinds whose forces derive from a potential (energy is then conserved)
-CONSERVATIVE_KINDS = ("gravity", "spring", "torsion_spring")
 
 
 class Scene:
