@@ -35,7 +35,7 @@ Effects and names:
   scene's ``add_effects``.  Everything not listed under ``effects`` is off and
   is not generated.  Added effects and parameters share the model's
   namespace, so they must not reuse a model name.
-* Selected effects whose kind is in :data:`modelgen.model.spec.STIFF_KINDS`
+* Selected effects whose class is flagged ``stiff`` (:data:`~modelgen.model.spec.STIFF_KINDS`:
   (springs, torsion springs, friction) are listed in
   ``SceneSpec.stiff_effects``: they can make the problem stiff or non-smooth,
   and the scene summary flags them.  The test is by kind only; it does not
@@ -92,7 +92,7 @@ from modelgen.model.names import check_name
 from modelgen.model.reader import compose, read_text
 from modelgen.model.sections import (builder_from_text, check_top_level, load_effects,
                                      load_parameters)
-from modelgen.model.spec import (CANONICAL_BASE, CANONICAL_POINT, OUTPUT_KINDS, STIFF_KINDS,
+from modelgen.model.spec import (CANONICAL_BASE, CANONICAL_POINT, EFFECT_KINDS, OUTPUT_KINDS,
                                  InputSignal, ModelSpec, OutputSpec, SceneSpec, symbol)
 from modelgen.model.writer import yaml_float
 
@@ -243,7 +243,7 @@ class _SceneReader:
             t_start=t_start, t_end=t_end, sample_dt=sample, method=method, step=step,
             rtol=rtol, atol=atol,
             inputs=inputs, outputs=outputs,
-            stiff_effects=tuple(e for e in selected if kinds[e] in STIFF_KINDS),
+            stiff_effects=tuple(e for e in selected if EFFECT_KINDS[kinds[e]].stiff),
             source=self.file, lines=tuple(self.lines.items()))
 
     # -- the model ----------------------------------------------------------------
