@@ -1,84 +1,18 @@
-"""The scene stage: a scene file and its model -> a validated :class:`SceneSpec`.
+"""The scene loader: a scene file and its model -> a validated :class:`SceneSpec`.
 
-A scene says what to simulate with a model: which effects are on, parameter
-overrides, the initial state, the time span, the integrator, the inputs and
-what to record.  :func:`load_scene` reads a scene file; :func:`parse_scene`
-reads scene text.  The format (YAML)::
+Input: scene YAML (a path for :func:`load_scene`, text for :func:`parse_scene`)
+naming a model file relative to itself.  Output: a frozen
+:class:`~modelgen.model.spec.SceneSpec`: the reduced model (only the switched-on
+effects and the parameters they use, overrides as defaults, named after the
+scene), the full model, the initial state, time span, integrator, input
+signals and resolved outputs; or a :class:`~modelgen.errors.ModelError` naming
+the scene file, line, key and a fix.
 
-    scene: dp_damped                 # REQUIRED: a C identifier, the generated model's name
-    description: Double pendulum with damped hinges.   # optional (default: the model's)
-    model: ../double_pendulum.yaml   # REQUIRED: the model file, relative to the scene file
-    add_parameters: {c: 0.05}        # optional: parameters the added effects need
-    add_effects:                     # optional: effects defined here, as the model's effects:
-      hinge_damping: {type: joint_damping, coordinates: [q1, q2], damping: c}
-    effects: [gravity, hinge_damping]   # REQUIRED: the effects switched on ([] for none)
-    parameters: {m2: 2.0}            # optional: overrides, they become the defaults
-    initial: {q1: 1.0, q2: 0.5, q1_dot: 0.0, q2_dot: 0.0}   # REQUIRED: the whole state
-    time: {start: 0.0, end: 10.0, sample: 0.01}   # REQUIRED (start defaults to 0)
-    integrator: {method: rk4, step: 0.001}        # optional (these are the defaults)
-    inputs:                          # optional: inputs not listed are 0
-      T1: 0.5                                      # a constant, or samples in time:
-      T2: {times: [0, 1, 2], values: [0, 1, 0], interpolation: linear}
-    outputs:                         # optional: name -> one output kind and its options
-      tip:   {position: P1, from: O, base: E}      # r(P1) - r(O) in components of E
-      tip_v: {velocity: P1, base: E}               # velocity of P1 wrt E, in E
-      R2:    {orientation: B2, relative_to: E}     # 3x3 change of basis (row-major)
-      w2:    {angular_velocity: B2, relative_to: E, components: B2}
-      energy: {energy: total}                     # kinetic | potential | total
-      fd:    {generalized_force: hinge_damping}    # tau of one switched-on effect
-      pose2: {pose: rod2}                          # 4x4 pose of a body (row-major)
-
-Effects and names:
-
-* The effects a scene can switch on are the model's top-level ``gravity``
-  (named ``gravity``), its ``actions`` and its ``effects`` by name, and the
-  scene's ``add_effects``.  Everything not listed under ``effects`` is off and
-  is not generated.  Added effects and parameters share the model's
-  namespace, so they must not reuse a model name.
-* Selected effects whose class is flagged ``stiff`` (:data:`~modelgen.model.spec.STIFF_KINDS`:
-  (springs, torsion springs, friction) are listed in
-  ``SceneSpec.stiff_effects``: they can make the problem stiff or non-smooth,
-  and the scene summary flags them.  The test is by kind only; it does not
-  estimate frequencies.
-
-The reduced model (``SceneSpec.model``):
-
-* is named after the scene and keeps only the selected effects (the
-  top-level gravity only if ``gravity`` is selected; actions and effects
-  filtered; added effects appended to ``effects``);
-* keeps only the parameters some expression of the reduced model still uses
-  (base angles, point coordinates, masses, inertias, gravity, actions,
-  effect fields), in declaration order, with the overrides as defaults;
-  the checks that depend on defaults (masses, inertias, effect
-  coefficients) run again with the overrides;
-* keeps every input of the model, so the inputs array of the generated C
-  has the same layout whichever effects are on.
-
-``SceneSpec.full_model`` is the model with the added parameters and effects
-and nothing removed.
-
-Rules (each broken one is a :class:`~modelgen.errors.ModelError` naming the
-scene file, line, key and a fix):
-
-* ``parameters`` may only override parameters the reduced model uses (an
-  override of a parameter of a switched-off effect would do nothing), and
-  ``inputs`` may only set inputs the switched-on effects use.
-* ``initial`` gives every coordinate and every speed (``<q>_dot``) a value.
-* ``time.end > time.start``, ``time.sample > 0``, ``integrator.step > 0``,
-  ``method`` one of :data:`METHODS`, and the sample interval is a whole
-  multiple of the step (relative tolerance 1e-9), since samples are taken at
-  steps.
-* A sampled input has one or more strictly increasing ``times`` and as many
-  ``values``.  ``interpolation`` is ``linear`` (default) or ``hold``
-  (zero-order hold: the value of the last sample at or before t); before the
-  first and after the last sample the end values are held.
-* Every number is finite (no ``.nan``/``.inf``).
-* Outputs name points, bases and bodies of the model (``O`` and ``E``
-  included), and ``generalized_force`` a switched-on effect.  Defaults:
-  ``from: O``, ``base: E``, ``relative_to: E``, ``components: E``.  An
-  ``energy`` output of ``potential`` or ``total`` is refused while a gravity
-  effect in a base other than E is on, because that potential is not
-  counted.  Output names are C identifiers (``E`` and ``O`` are allowed).
+The format (every key, rule and output kind, with examples) is documented in
+``docs/model-format.md``, section "Scenes".  Selected effects whose class is
+flagged ``stiff`` (:data:`~modelgen.model.spec.STIFF_KINDS`) are listed in
+``SceneSpec.stiff_effects``; the test is by kind only, it does not estimate
+frequencies.
 """
 from __future__ import annotations
 
