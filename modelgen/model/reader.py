@@ -12,6 +12,7 @@ is a :class:`~modelgen.errors.ModelError` naming the file and line.
 from __future__ import annotations
 
 import os
+import unicodedata
 from typing import Optional
 
 import yaml
@@ -39,6 +40,11 @@ class _YamlProblem(Exception):
         self.problem, self.line, self.fix, self.key = problem, line, fix, key
 
 
+#: integers beyond this cannot become doubles (float() would overflow)
+MAX_INTEGER = 10 ** 308
+#: deepest nesting of YAML collections accepted (models need 4 or 5 levels)
+MAX_NESTING = 64
+
 _SCALAR_TAGS = {"tag:yaml.org,2002:" + t for t in ("str", "int", "float", "bool", "null")}
 _MAP_TAG = "tag:yaml.org,2002:map"
 _SEQ_TAG = "tag:yaml.org,2002:seq"
@@ -49,6 +55,9 @@ def _plain(node, path: str, lines: dict, loader: _Loader):
     line = node.start_mark.line + 1
     if path not in lines:
         lines[path] = line
+    if path.count(".") + path.count("[") >= MAX_NESTING:
+        raise _YamlProblem(f"YAML nested more than {MAX_NESTING} levels deep", line,
+                           "flatten the document: models need a few levels only", path or None)
     if isinstance(node, yaml.MappingNode):
         if node.tag != _MAP_TAG:
             raise _YamlProblem(f"unsupported YAML tag '{node.tag}'", line,
@@ -90,7 +99,18 @@ def _plain(node, path: str, lines: dict, loader: _Loader):
                                path or None)
         raise _YamlProblem(f"unsupported YAML tag '{node.tag}'", line, "remove the tag",
                            path or None)
-    return loader.construct_object(node, deep=True)
+    try:
+        value = loader.construct_object(node, deep=True)
+    except (ValueError, KeyError, TypeError, OverflowError, yaml.YAMLError) as exc:
+        raise _YamlProblem(f"cannot read the value {node.value[:40]!r} as "
+                           f"{node.tag.rsplit(':', 1)[-1]} ({type(exc).__name__})", line,
+                           "write a plain number, true/false, or a quoted string",
+                           path or None) from None
+    if isinstance(value, int) and not isinstance(value, bool) and abs(value) > MAX_INTEGER:
+        raise _YamlProblem(f"the integer {node.value[:20]}... is beyond the range of a double "
+                           f"(more than {len(str(MAX_INTEGER))} digits)", line,
+                           "write a number below 1e308 (as a float: 1.5e300)", path or None)
+    return value
 
 
 def compose(text: str, file: str) -> tuple:
@@ -99,7 +119,15 @@ def compose(text: str, file: str) -> tuple:
     >>> compose("a: {b: [1, x]}", "<doc>")
     ({'a': {'b': [1, 'x']}}, {'a': 1, 'a.b': 1, 'a.b[0]': 1, 'a.b[1]': 1})
     """
-    loader = _Loader(text)
+    try:
+        loader = _Loader(text)       # the reader checks every character here
+    except yaml.reader.ReaderError as exc:
+        line = text.count("\n", 0, exc.position) + 1 if isinstance(text, str) else None
+        code = exc.character if isinstance(exc.character, int) else ord(exc.character)
+        raise ModelError(f"the file contains the character U+{code:04X} "
+                         f"({unicodedata.name(chr(code), 'a control character or non-character')}), which "
+                         "YAML does not allow", file=file, line=line,
+                         fix="remove it (a pasted terminal colour code or a binary file?)") from None
     try:
         try:
             node = loader.get_single_node()
@@ -124,6 +152,9 @@ def compose(text: str, file: str) -> tuple:
     except yaml.YAMLError as exc:
         raise ModelError(f"invalid YAML: {exc}", file=file,
                          fix="correct the YAML syntax") from None
+    except RecursionError:
+        raise ModelError("YAML nested too deeply to read", file=file,
+                         fix=f"flatten the document (at most {MAX_NESTING} levels)") from None
 
 
 def read_text(path, what: str = "model") -> tuple:
@@ -136,5 +167,7 @@ def read_text(path, what: str = "model") -> tuple:
         raise ModelError(f"cannot read the {what} file: {exc.strerror or exc}", file=file,
                          fix="check the path") from None
     except UnicodeDecodeError as exc:
-        raise ModelError(f"the {what} file is not UTF-8 text ({exc.reason})", file=file,
+        line = exc.object[:exc.start].count(b"\n") + 1
+        raise ModelError(f"the {what} file is not UTF-8 text ({exc.reason} at byte "
+                         f"{exc.start})", file=file, line=line,
                          fix="save the file as UTF-8") from None
