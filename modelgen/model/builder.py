@@ -20,6 +20,13 @@ import numpy as np
 import sympy
 
 from modelgen.errors import ModelError
+
+#: the symmetry of an inertia matrix is checked numerically, at the default parameters
+#: and at SYMMETRY_SAMPLES - 1 seeded random scalings of them, to this relative tolerance
+#: of the matrix's largest entry (a tensor from R diag(d) R^T differs by ulps across the
+#: diagonal; an exact comparison refused most real tensors, a symbolic one could hang)
+SYMMETRY_SAMPLES = 3
+SYMMETRY_RTOL = 1e-9
 from modelgen.model import spec as specmod
 from modelgen.model.expr import ExpressionParseError, format_expression, parse_expression
 from modelgen.model.messages import (article, as_list, closest, describe, join_and,
@@ -403,17 +410,44 @@ class ModelBuilder:
                                  f"{describe(row)}, not a list of 3 items", key, shape)
         matrix = [[self.expression(item, f"{key}[{i}][{j}]", "constant")
                    for j, item in enumerate(row)] for i, row in enumerate(rows)]
+        samples = [self.sample_values(matrix, k) for k in range(SYMMETRY_SAMPLES)]
         for i in range(3):
             for j in range(i + 1, 3):
                 upper, lower = matrix[i][j], matrix[j][i]
-                if upper != lower and sympy.expand(upper - lower) != 0:
-                    raise self.error(
-                        f"inertia of body '{body}' is not symmetric: entry [{i}][{j}] is "
-                        f"{format_expression(upper)} but entry [{j}][{i}] is "
-                        f"{format_expression(lower)}", key,
-                        f"make entries [{i}][{j}] and [{j}][{i}] equal")
-                matrix[j][i] = upper
+                if upper == lower:
+                    continue
+                for values in samples:
+                    if values is None:
+                        continue
+                    scale = max(abs(v) for row in values for v in row) or 1.0
+                    if not abs(values[i][j] - values[j][i]) <= SYMMETRY_RTOL * scale:
+                        raise self.error(
+                            f"inertia of body '{body}' is not symmetric: entry [{i}][{j}] is "
+                            f"{format_expression(upper)} but entry [{j}][{i}] is "
+                            f"{format_expression(lower)}", key,
+                            f"make entries [{i}][{j}] and [{j}][{i}] equal")
+                # equal to rounding (a tensor computed as R diag(d) R^T): keep their mean
+                matrix[i][j] = matrix[j][i] = (
+                    (upper + lower) / 2 if upper.is_Number and lower.is_Number else upper)
         return tuple(tuple(row) for row in matrix)
+
+    def sample_values(self, matrix, k: int):
+        """The 3x3 ``matrix`` evaluated numerically (never expanded): at the defaults for
+        ``k = 0``, else with every parameter scaled by a seeded factor in [0.5, 2].
+        None when it is not real there."""
+        if k == 0:
+            values = self.defaults
+        else:
+            rng = np.random.default_rng(k)
+            values = {s: sympy.Float(float(v) * rng.uniform(0.5, 2.0))
+                      for s, v in self.defaults.items()}
+        out = []
+        for row in matrix:
+            try:
+                out.append([float(item.xreplace(values)) for item in row])
+            except (TypeError, ValueError, OverflowError):
+                return None
+        return out if all(math.isfinite(v) for row in out for v in row) else None
 
     def check_physical_inertia(self, body: str, inertia: tuple, key: str) -> None:
         values = [[self.at_defaults(item) for item in row] for row in inertia]
