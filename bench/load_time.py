@@ -18,7 +18,11 @@ Measures, beside the figures of today (before the "One house" work) and the targ
     apart).  *load* is the YAML read into a ModelSpec; derive, cse, emit and
     compile are modelgen's own timers (``cm.manifest["seconds"]``); *other* is
     the rest of the total (hashing, cache look-up, import of the extension,
-    the mass-matrix check).  Min and median of each column over the rounds.
+    the mass-matrix check); *py cpu* and *cc cpu* are the CPU time of this
+    process and of the compilers over the round (less sensitive to a busy
+    machine than wall time; the compilers run in parallel, so on an idle
+    machine the wall time of compile is below *cc cpu*).
+    Min and median of each column over the rounds.
 (b) **generate the 6-link chain.**  ``modelgen.model.chains.spatial_chain(6)``
     through ``modelgen.generate_model`` into a fresh directory every round;
     the stage total is the sum of ``Generated.seconds``.  Min over the rounds.
@@ -28,7 +32,7 @@ Measures, beside the figures of today (before the "One house" work) and the targ
     model's own C means yes); "n/a" when neither says.
 
 (d) **what the compiler spends**: each compile command of the last builds
-    (from the manifest) rerun alone, serially, min of 3.
+    (from the manifest) rerun alone, serially, min of 3, wall and CPU time.
 
 A shared machine is noisy: compare the minimum, and rerun when the load
 average (printed) is high.
@@ -40,6 +44,7 @@ import cProfile
 import os
 import pstats
 import re
+import resource
 import shutil
 import statistics
 import subprocess
@@ -86,19 +91,27 @@ def integrators_recompiled(manifest: dict) -> str:
     return "n/a"
 
 
+def compiler_cpu() -> float:
+    """CPU time of this process's finished children (the compilers), s."""
+    children = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return children.ru_utime + children.ru_stime
+
+
 def edit_round(path: Path, text: str, value: float, out_dir: Path) -> dict:
     """Write the edit, load it; returns the total and the stage seconds."""
     path.write_text(edited(text, value))
-    t0 = time.perf_counter()
+    p0, c0, t0 = time.process_time(), compiler_cpu(), time.perf_counter()
     spec = modelgen.as_spec(path)
     t1 = time.perf_counter()
     cm = modelgen.load(spec, out_dir)
     total = time.perf_counter() - t0
+    py_cpu, cc_cpu = time.process_time() - p0, compiler_cpu() - c0
     row = {"load": t1 - t0, **{s: cm.manifest["seconds"].get(s, 0.0) for s in STAGES}}
     if abs(cm.parameters["m2"] - value) > 1e-12:
         raise SystemExit(f"the loaded model has m2 = {cm.parameters['m2']}, not {value}")
     row["other"] = total - sum(row.values())
     row["total"] = total
+    row["py cpu"], row["cc cpu"] = py_cpu, cc_cpu
     row["integrators"] = integrators_recompiled(cm.manifest)
     return row
 
@@ -127,14 +140,15 @@ def compile_breakdown(cm_or_generated, repeats: int = 3) -> list:
         for command in manifest.get("compile_commands", ()):
             argv = command.split()
             argv[argv.index("-o") + 1] = str(Path(scratch) / "part.o")
-            times = []
+            times, cpus = [], []
             for _ in range(repeats):
-                t0 = time.perf_counter()
+                c0, t0 = compiler_cpu(), time.perf_counter()
                 subprocess.run(argv, cwd=directory, check=True, capture_output=True)
                 times.append(time.perf_counter() - t0)
+                cpus.append(compiler_cpu() - c0)
             part = next((a for a in argv if a.startswith("-DMG_PART=")), "-")
             level = next((a for a in argv if a.startswith("-O")), "-")
-            rows.append((part.removeprefix("-D"), level, min(times)))
+            rows.append((part.removeprefix("-D"), level, min(times), min(cpus)))
     return rows
 
 
@@ -179,7 +193,7 @@ def main(argv=None) -> int:
               f"{sys.version.split()[0]}, load average {load_avg})\n")
         print(f"## (a) edited double pendulum (m2's default changed) -> loaded CompiledModel, "
               f"in a running Python, ms\n")
-        columns = ["load", *STAGES, "other", "total"]
+        columns = ["load", *STAGES, "other", "total", "py cpu", "cc cpu"]
         print("\n".join(table(rows, columns, (("min", min), ("median", statistics.median)))))
         print(f"\nfirst load of the process (lazy imports included): "
               f"{first['total'] * 1e3:.0f} ms")
@@ -198,12 +212,12 @@ def main(argv=None) -> int:
         print("## (c) a changed model recompiles the integrators?\n")
         print(f"{rows[-1]['integrators']}\n")
         print("## (d) the compile commands of the builds, each alone (serial), min of 3, ms\n")
-        print("| model | part | flags | ms |\n|---|---|---|---|")
+        print("| model | part | flags | wall ms | cpu ms |\n|---|---|---|---|---|")
         dp = modelgen.load(path, out_dir)
         chain = modelgen.generate_model(spatial_chain(CHAIN_LINKS), root / "chain0")
         for name, built in (("double pendulum", dp), (f"chain {CHAIN_LINKS}", chain)):
-            for part, level, seconds in compile_breakdown(built):
-                print(f"| {name} | {part} | {level} | {seconds * 1e3:.0f} |")
+            for part, level, seconds, cpu in compile_breakdown(built):
+                print(f"| {name} | {part} | {level} | {seconds * 1e3:.0f} | {cpu * 1e3:.0f} |")
         print("\n(the builds run these and the cffi wrapper in parallel, then link)")
         if args.profile:
             profile(lambda: edit_round(path, text, 2.0, out_dir), args.profile,
