@@ -178,14 +178,14 @@ def _simulate(args) -> int:
 
 
 def _bench(args) -> int:
-    from modelgen.bench import workprecision as wp
+    import modelgen.bench as wp
 
     def progress(message):
         print(f"... {message}", file=sys.stderr, flush=True)
     t0 = time.perf_counter()
     progress(f"{args.scene}: building the model and the reference (two methods at 1e-14)")
     problem = wp.scene_problem(args.scene, args.build_dir, quick=args.quick)
-    points = wp.run_sweep(problem, wp.default_methods(problem.model),
+    points = wp.run_sweep(problem, wp.default_methods(),
                           repeats=2 if args.quick else 5, time_budget=0.3 if args.quick else 1.0,
                           budget=wp.Budget(max_nfev=1_000_000, max_seconds=20.0),
                           progress=progress if args.verbose else None)
@@ -255,8 +255,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     b = sub.add_parser("bench", help="work-precision diagram of a scene: the C integrators "
                                      "against scipy's solve_ivp",
-                       description="Integrate a scene with every C integrator (dopri5, dop853, "
-                                   "rodas over tolerances; rk4, gauss4 over steps) and with "
+                       description="Integrate a scene with every C integrator (the adaptive "
+                                   "ones over tolerances, the fixed-step ones over steps) and with "
                                    "solve_ivp (RK45, DOP853, Radau) on the same compiled rhs; "
                                    "measure the final-time and dense L2 errors of the positions "
                                    "against a reference by two high-order methods at 1e-14, the "
