@@ -105,6 +105,8 @@ def _report(result, out: Path, name: str, args, title: str, conservative) -> int
         label = "relative energy error" if conservative else "relative energy change"
         print(f"{label} {change:.3e} (against the initial energies); {len(result.t)} samples "
               f"to t = {result.t[-1]:g} s")
+    if result.info.get("stability_warning"):
+        print(f"modelgen: warning: {result.info['stability_warning']}", file=sys.stderr)
     if not result.success:
         print(f"modelgen: simulation stopped: {result.message}", file=sys.stderr)
         return EXIT["simulation"]

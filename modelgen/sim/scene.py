@@ -12,12 +12,9 @@ from modelgen.errors import SimulationError
 from modelgen.model.spec import CONSERVATIVE_KINDS
 from modelgen.sim.integrate import method_of
 from modelgen.sim.result import Result
-from modelgen.sim.runtime import CompiledModel, check_mass_matrix
+from modelgen.sim.runtime import STABILITY_LIMIT, CompiledModel, check_mass_matrix
 
 
-#: |h lambda| at which each explicit method's stability region ends on the negative
-#: real axis (Hairer & Wanner I, IV.2; RK4's is 2.79, on the imaginary axis 2.83)
-STABILITY_LIMIT = {"rk4": 2.78, "dopri5": 3.3, "dop853": 6.0}
 #: a run needing more steps than this for stability alone is called stiff
 STIFF_STEPS = 1e4
 
