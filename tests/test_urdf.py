@@ -16,6 +16,7 @@ import pytest
 from modelgen.cli import main
 from modelgen.errors import ModelError
 from modelgen.model import as_spec, load_model
+from modelgen.model.spec import symbol
 from modelgen.model.urdf import import_urdf, import_urdf_text, urdf_to_yaml
 from modelgen.sim.load import load
 
@@ -139,3 +140,119 @@ def test_unaligned_axes_rpy_welds_and_mimic_match_pinocchio(pin, tmp_path):
     path = tmp_path / "exotic.urdf"
     path.write_text(EXOTIC)
     _compare_with_pinocchio(pin, path, tmp_path / "build")
+
+
+# -- files, entry points ----------------------------------------------------------
+
+def test_import_names_coordinates_inputs_and_effects_in_depth_first_order():
+    spec = import_urdf_text(EXOTIC, "exotic.urdf").model.spec()
+    # j2-slide before j3 (its subtree), then j4; j5 is a mimic (no coordinate)
+    assert spec.coordinates == ("j1", "j2_slide", "j3", "j4")
+    assert spec.inputs == ("tau_j1", "tau_j2_slide", "tau_j3", "tau_j4")
+    assert spec.parameters == (("g", 9.81),)
+    assert spec.gravity == (0, 0, -symbol("g"))
+    assert [e.name for e in spec.effects] == ["damping_j1"]
+    # tool and frame_only are welded to b: one body for the three links
+    assert sorted(b.name for b in spec.bodies) == ["a", "b", "c", "d", "e"]
+
+
+def test_cli_import_writes_a_model_file_that_loads_to_the_same_spec(tmp_path):
+    out = tmp_path / "ur5.yaml"
+    assert main(["import", str(DATA / "ur5_robot.urdf"), "-o", str(out)]) == 0
+    text = out.read_text()
+    assert "#   shoulder_pan_joint: -6.28318530718 6.28318530718 3.15 150.0" in text
+    assert load_model(out) == as_spec(DATA / "ur5_robot.urdf")
+
+
+def test_modelgen_load_takes_a_urdf_path(tmp_path):
+    cm = load(str(DATA / "double_pendulum.urdf"), tmp_path)
+    assert cm.coordinates == ("joint1", "joint2")
+    assert cm.inputs == ("tau_joint1", "tau_joint2")
+
+
+def test_inertial_parameters_give_the_same_mass_matrix(tmp_path):
+    numbers = load(import_urdf(DATA / "double_pendulum.urdf").model, tmp_path / "n")
+    params = import_urdf(DATA / "double_pendulum.urdf", inertial_parameters=True).model
+    spec = params.spec()
+    assert "m_link1" in spec.parameter_names and "I_link1_xx" in spec.parameter_names
+    cm = load(params, tmp_path / "p")
+    q = np.array([0.3, -1.1])
+    assert np.allclose(cm.mass_matrix(q), numbers.mass_matrix(q), rtol=1e-12, atol=0)
+
+
+# -- errors -------------------------------------------------------------------------
+
+def _robot(body: str) -> str:
+    return f'<?xml version="1.0"?>\n<robot name="r">\n{body}\n</robot>\n'
+
+
+LINKS = '<link name="a"/>\n<link name="b"/>'
+
+
+def _joint(name="j", kind="revolute", parent="a", child="b", extra=""):
+    return (f'<joint name="{name}" type="{kind}"><parent link="{parent}"/>'
+            f'<child link="{child}"/>{extra}</joint>')
+
+
+@pytest.mark.parametrize("body, line, key, words", [
+    (LINKS + "\n" + _joint() + "\n" + _joint("k", child="b"), 6, "joint[k].child",
+     "has two parents"),
+    (LINKS + "\n" + _joint(child="nowhere"), 5, "joint[j].child", "unknown link 'nowhere'"),
+    (LINKS + '\n<joint type="revolute"/>', 5, "joint", "without a name"),
+    ('<link/>', 3, "link", "without a name"),
+    (LINKS + "\n" + _joint(kind="planar"), 5, "joint[j].type",
+     "unsupported joint type 'planar'"),
+    (LINKS + "\n" + _joint(extra='<origin xyz="0 0.1x 0"/>'), 5, "joint[j].origin.xyz",
+     "malformed number '0.1x'"),
+    (LINKS + "\n" + _joint(extra='<axis xyz="0 1"/>'), 5, "joint[j].axis", "needs 3 numbers"),
+    (LINKS + "\n" + _joint(extra='<axis xyz="0 0 0"/>'), 5, "joint[j].axis", "axis is zero"),
+    ('<link name="a"/>\n<link name="b"><inertial><mass value="1"/>\n'
+     '<inertia ixx="1" iyy="1" izz="3" ixy="0" ixz="0" iyz="0"/></inertial></link>\n'
+     + _joint(), 5, "link[b].inertial.inertia", "not positive"),
+    ('<link name="a"/>\n<link name="b"><inertial><mass value="-1"/>'
+     '<inertia ixx="1" iyy="1" izz="1" ixy="0" ixz="0" iyz="0"/></inertial></link>\n'
+     + _joint(), 4, "link[b].inertial.mass", "negative mass"),
+    (LINKS + "\n" + _joint(kind="floating"), 5, "joint[j].type",
+     "floating joints are not supported yet"),
+    (LINKS + "\n" + _joint(extra='<mimic joint="ghost"/>'), 5, "joint[j].mimic",
+     "mimic of unknown joint 'ghost'"),
+    (LINKS + '\n<link name="c"/>\n' + _joint(), 5, "robot", "2 root links"),
+    (LINKS + "\n" + _joint(parent="b", child="a") + "\n" + _joint("k", parent="a", child="b"),
+     2, "robot", "loop: every link has a parent joint"),
+    (LINKS + '\n<link name="c"/>\n<link name="d"/>\n' + _joint() + "\n"
+     + _joint("k", parent="c", child="d") + "\n" + _joint("l", parent="d", child="c"),
+     8, "joint[k]", "cycle not connected to the root link 'a'"),
+])
+def test_bad_urdf_names_file_line_and_key(body, line, key, words):
+    with pytest.raises(ModelError) as err:
+        import_urdf_text(_robot(body), "bad.urdf")
+    e = err.value
+    assert (e.file, e.line, e.key) == ("bad.urdf", line, key), str(e)
+    assert words in e.problem and e.fix
+
+
+def test_floating_root_can_be_imported_fixed_with_a_note():
+    text = _robot(LINKS + '\n<link name="c"/>\n' + _joint("free", kind="floating")
+                  + _joint("k", parent="b", child="c", extra='<axis xyz="0 0 1"/>'))
+    imp = import_urdf_text(text, "f.urdf", fix_floating_root=True)
+    assert imp.model.spec().coordinates == ("k",)
+    assert "floating joint 'free' at the root was imported as fixed" in imp.model.description
+    assert imp.notes and "floating joint 'free'" in urdf_to_yaml(imp)
+
+
+def test_malformed_xml_and_entity_expansion_are_refused_with_a_line():
+    with pytest.raises(ModelError, match=r"bad.urdf:3: malformed XML"):
+        import_urdf_text('<robot name="r">\n<link name="a">\n</robot>', "bad.urdf")
+    laughs = ('<?xml version="1.0"?>\n<!DOCTYPE r [\n<!ENTITY a "aaaaaaaaaa">\n'
+              '<!ENTITY b "&a;&a;&a;&a;&a;&a;&a;&a;&a;&a;">\n]>\n<robot name="&b;"/>')
+    with pytest.raises(ModelError, match=r"bad.urdf:3: entity declaration 'a' refused"):
+        import_urdf_text(laughs, "bad.urdf")
+    with pytest.raises(ModelError, match="cannot read the URDF file"):
+        import_urdf(DATA / "missing.urdf")
+
+
+def test_meshes_are_not_opened():
+    text = _robot('<link name="a"><visual><geometry><mesh filename="/nonexistent/x.stl"/>'
+                  '</geometry></visual></link>\n<link name="b"/>\n'
+                  + _joint(extra='<axis xyz="0 0 1"/>'))
+    assert import_urdf_text(text).model.spec().coordinates == ("j",)

@@ -13,6 +13,7 @@ from modelgen.model.api import (API_FILE, EFFECT_FIELD_ROLES, EFFECT_KINDS, Mode
                                 load_model, parse_model, spec_to_yaml)
 from modelgen.model.scene import load_scene, parse_scene
 from modelgen.model.spec import ModelSpec
+from modelgen.model.urdf import load_urdf
 
 __all__ = ["Model", "ModelSpec", "load_model", "parse_model", "spec_to_yaml", "check_name",
            "load_scene", "parse_scene", "as_spec", "is_scene_file", "API_FILE",
@@ -20,10 +21,13 @@ __all__ = ["Model", "ModelSpec", "load_model", "parse_model", "spec_to_yaml", "c
 
 
 def as_spec(source) -> ModelSpec:
-    """A :class:`ModelSpec` from a path, a :class:`Model` or a spec."""
+    """A :class:`ModelSpec` from a path (YAML, or URDF by its ``.urdf`` suffix), a
+    :class:`Model` or a spec."""
     if isinstance(source, ModelSpec):
         return source
     if isinstance(source, (str, Path)):
+        if Path(source).suffix.lower() == ".urdf":
+            return load_urdf(source).spec()
         return load_model(source)
     if isinstance(source, Model):
         return source.spec()

@@ -7,8 +7,8 @@ applies.  What becomes what:
 
 * The root link is the ground (base ``E``, point ``O``).  Gravity is
   ``[0, 0, -g]`` in E with parameter ``g = 9.81``.
-* A joint's ``origin`` is a point ``J_<joint>`` (from the parent link's
-  origin, in its base) and constant rotations ``B_<joint>_rz``, ``_ry``,
+* A joint's ``origin`` is a point ``J_<joint>`` (``P_<link>`` for a fixed
+  joint: the child link's origin; from the parent link's origin, in its base) and constant rotations ``B_<joint>_rz``, ``_ry``,
   ``_rx`` for ``rpy`` (R = Rz(yaw) Ry(pitch) Rx(roll): yaw about z first,
   moving axes); zero offsets and angles are left out.
 * ``revolute`` and ``continuous`` joints are one angle coordinate; an axis
@@ -202,8 +202,9 @@ class _Builder:
         parent_base, parent_point = self.base[joint.parent], self.point[joint.parent]
         jname = sanitize(joint.name)
         point = parent_point
-        if any(joint.xyz):
-            point = self.add_point(f"J_{jname}", parent_point, parent_base,
+        if any(joint.xyz):      # a welded link's origin is named after the link
+            wanted = f"J_{jname}" if joint.type in _MOVING else f"P_{sanitize(joint.child)}"
+            point = self.add_point(wanted, parent_point, parent_base,
                                    [_num(x) for x in joint.xyz])
         base = parent_base
         for axis, angle, tag in ((3, joint.rpy[2], "rz"), (2, joint.rpy[1], "ry"),
