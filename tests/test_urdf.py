@@ -256,3 +256,8 @@ def test_meshes_are_not_opened():
                   '</geometry></visual></link>\n<link name="b"/>\n'
                   + _joint(extra='<axis xyz="0 0 1"/>'))
     assert import_urdf_text(text).model.spec().coordinates == ("j",)
+
+
+def test_shipped_ur5_model_is_the_import_of_its_urdf():
+    shipped = Path(__file__).parent.parent / "models" / "robots" / "ur5.yaml"
+    assert load_model(shipped) == as_spec(DATA / "ur5_robot.urdf")
