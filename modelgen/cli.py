@@ -53,6 +53,23 @@ def _generate(args) -> int:
     return 0
 
 
+def _import(args) -> int:
+    from modelgen.model.urdf import import_urdf, urdf_to_yaml
+    imported = import_urdf(args.urdf, fix_floating_root=args.fix_floating_root,
+                           inertial_parameters=args.inertial_parameters)
+    spec = imported.model.spec()
+    out = Path(args.output) if args.output else Path(args.urdf).with_suffix(".yaml")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(urdf_to_yaml(imported))
+    print(f"model      {spec.name}  ({args.urdf})")
+    print(f"n          {spec.n} coordinates, {len(spec.bodies)} bodies, "
+          f"{len(spec.inputs)} inputs, {len(spec.effects)} joint effects")
+    for note in imported.notes:
+        print(f"note       {note}")
+    print(f"wrote      {out}")
+    return 0
+
+
 def _parse_assignments(items, what):
     out = {}
     for item in items or ():
@@ -254,6 +271,21 @@ def build_parser() -> argparse.ArgumentParser:
                    help="override a parameter (repeatable)")
     s.add_argument("--no-plot", action="store_true", help="do not write the PNG")
     s.set_defaults(func=_simulate)
+
+    i = sub.add_parser("import", help="import a URDF robot (fixed base) as a model file",
+                       description="Read a URDF file and write a model file in modelgen's "
+                                   "YAML: bases, points, bodies, gravity, one input "
+                                   "tau_<joint> per joint and the joints' damping and "
+                                   "friction as effects. Meshes are not read.")
+    i.add_argument("urdf", help="URDF file")
+    i.add_argument("-o", "--output", default=None,
+                   help="model file to write (default: the URDF path with .yaml)")
+    i.add_argument("--fix-floating-root", action="store_true",
+                   help="weld a floating joint at the root to the ground (floating bases "
+                        "are not supported yet)")
+    i.add_argument("--inertial-parameters", action="store_true",
+                   help="make masses and inertias parameters instead of numbers")
+    i.set_defaults(func=_import)
 
     b = sub.add_parser("bench", help="work-precision diagram of a scene: the C integrators "
                                      "against scipy's solve_ivp",
