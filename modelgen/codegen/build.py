@@ -44,7 +44,12 @@ from modelgen.errors import BuildError
 #: at n = 10 part 1 alone takes 1.1 s at -O2 and 0.66 s at -O1 while the whole
 #: build waits for it.  Part 1 (not the integration hot path) therefore drops
 #: to -O1 as soon as its routines are cut into parts.
-O1_ABOVE = {1: 400, 2: 4000}
+O1_ABOVE = {0: 400, 1: 400, 2: 4000}
+#: Models whose largest routine has more statements are compiled as two parts
+#: in parallel (MG_PART 1 and 2); smaller ones in one process (part 0: the
+#: whole file), which beside the cffi wrapper's compile keeps both cores busy
+#: without a third process.
+SPLIT_ABOVE = 400
 BASE_FLAGS = ("-std=c99", "-fPIC", "-Wall", "-Wextra")
 #: Flags of mg_integrate.c (compiled once, on the integration hot path).
 INTEGRATOR_FLAGS = ("-O2", *BASE_FLAGS, "-Werror")
@@ -200,12 +205,14 @@ def build_module(directory: Path, name: str, sources: dict, manifest: dict,
 
         cc = compiler()
         py_include = sysconfig.get_paths()["include"]
-        model_objs = [[*cc, *compile_flags(statements, part), "-Werror", f"-DMG_PART={part}", "-c", f"{name}.c",
-                       "-o", f"{name}_{part}.o"] for part in (1, 2)]
+        parts = (1, 2) if statements > SPLIT_ABOVE else (0,)
+        model_objs = [[*cc, *compile_flags(statements, part), "-Werror",
+                       *([f"-DMG_PART={part}"] if part else []), "-c", f"{name}.c",
+                       "-o", f"{name}_{part}.o"] for part in parts]
         wrap_obj = [*cc, "-O1", "-fPIC", "-w", f"-I{py_include}", "-I.", "-c",
                     f"{module_name}.c", "-o", f"{module_name}.o"]
         _run([*model_objs, wrap_obj], tmp)
-        link = [*cc, "-shared", f"{module_name}.o", f"{name}_1.o", f"{name}_2.o",
+        link = [*cc, "-shared", f"{module_name}.o", *(f"{name}_{part}.o" for part in parts),
                 str(integrator_obj), "-o", module_file, "-lm"]
         _run([link], tmp)
 
