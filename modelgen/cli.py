@@ -6,6 +6,12 @@ module and prints n, the operation counts and the time of each stage.
 ``modelgen simulate SCENE.yaml [-o OUT]``  builds (or reuses) the scene's
 reduced model, integrates it in C and writes CSV, NPZ and PNG; given a model
 file instead of a scene, integrates it with RK4 from ``--init`` values.
+
+Exit status (:data:`EXIT`): 0 success; 2 bad input (a model, scene or
+command-line mistake); 3 a build error (compiler missing or failing); 4 a
+simulation that failed (its partial results are still written); 1 an
+unexpected internal error; 130 interrupted.  Errors print one line,
+``modelgen: error: ...``, with the fix; ``--debug`` shows the traceback.
 """
 from __future__ import annotations
 
@@ -14,17 +20,19 @@ import sys
 import time
 from pathlib import Path
 
-from modelgen.errors import ModelgenError
+import numpy as np
+
+from modelgen.errors import (BuildError, ModelgenError, SimulationError, TemplateError)
 from modelgen.version import __version__
 
 
 def _generate(args) -> int:
     from modelgen.model import as_spec
-    from modelgen.codegen.pipeline import generate
+    from modelgen.sim.load import generate_model
     t0 = time.perf_counter()
     spec = as_spec(args.model)
     t_load = time.perf_counter() - t0
-    g = generate(spec, args.output, force=args.force, jacobian=args.jacobian)
+    g = generate_model(spec, args.output, force=args.force, jacobian=args.jacobian)
     b = g.build
     print(f"model      {spec.name}  ({args.model})")
     print(f"n          {spec.n} coordinates, {len(spec.parameters)} parameters, "
@@ -58,81 +66,128 @@ def _parse_assignments(items, what):
     return out
 
 
+def _state_overrides(names, items) -> dict:
+    init = _parse_assignments(items, "init")
+    for key in init:
+        if key not in names:
+            raise ModelgenError(f"--init {key}: unknown state; the state is {', '.join(names)}")
+    return init
+
+
+def _parameter_overrides(parameters, items) -> dict:
+    values = _parse_assignments(items, "set")
+    for key in values:
+        if key not in parameters:
+            raise ModelgenError(f"--set {key}: unknown parameter; parameters are "
+                                f"{', '.join(parameters) or 'none'}")
+    return values
+
+
+def _check_times(args) -> None:
+    for flag, value in (("--t-end", args.t_end), ("--dt", args.dt), ("--sample", args.sample)):
+        if value is not None and not (value > 0 and value < float("inf")):
+            raise ModelgenError(f"{flag} must be a positive number of seconds, got {value!r}")
+
+
+def _report(result, out: Path, name: str, args, title: str, conservative) -> int:
+    """Write CSV, NPZ and PNG of a result; print the energy balance; the exit status."""
+    out.mkdir(parents=True, exist_ok=True)
+    print(f"wrote {result.to_csv(out / f'{name}.csv')}")
+    print(f"wrote {result.to_npz(out / f'{name}.npz')}")
+    if not args.no_plot:
+        png = out / f"{name}.png"
+        result.plot(png, title=title, conservative=conservative)
+        print(f"wrote {png}")
+    if result.energy is not None and len(result.t):
+        total = result.energy.sum(axis=1)
+        scale = max(float(np.max(np.abs(result.energy[0]))), 1e-300)
+        change = (total[-1] - total[0]) / scale
+        label = "relative energy error" if conservative else "relative energy change"
+        print(f"{label} {change:.3e} (against the initial energies); {len(result.t)} samples "
+              f"to t = {result.t[-1]:g} s")
+    if result.info.get("stability_warning"):
+        print(f"modelgen: warning: {result.info['stability_warning']}", file=sys.stderr)
+    if not result.success:
+        print(f"modelgen: simulation stopped: {result.message}", file=sys.stderr)
+        return EXIT["simulation"]
+    return 0
+
+
+def _method(name):
+    """The integration method named on the command line (an input error if unknown)."""
+    from modelgen.sim.integrate import method_of
+    try:
+        return method_of(name)
+    except SimulationError as exc:
+        raise ModelgenError(f"--method: {exc}") from None
+
+
 def _simulate_scene(args) -> int:
-    from modelgen.sim.load import load_scene
+    from dataclasses import replace
+
+    from modelgen.model.scene import load_scene
+    from modelgen.sim.scene import Scene
 
     def progress(message):
         print(message, file=sys.stderr, flush=True)
     t0 = time.perf_counter()
-    scene = load_scene(args.model, args.build_dir, progress=progress)
+    spec = load_scene(args.model)
+    # every override is checked before anything is built
+    states = list(spec.model.coordinates) + [f"{c}_dot" for c in spec.model.coordinates]
+    init = _state_overrides(states, args.init)
+    p = _parameter_overrides([name for name, _ in spec.model.parameters], args.set) or None
+    changes = {k: v for k, v in (("t_end", args.t_end), ("step", args.dt),
+                                 ("sample_dt", args.sample)) if v is not None}
+    if args.method is not None:
+        method = _method(args.method)
+        changes["method"] = method.name
+        if not method.adaptive and args.dt is None and spec.step is None:
+            raise ModelgenError(f"--method {method.name} has a fixed step; fix: give --dt")
+    if changes.get("t_end", spec.t_end) <= spec.t_start:
+        raise ModelgenError(f"--t-end must be after the scene's start {spec.t_start:g} s")
+    spec = replace(spec, **changes)
+    scene = Scene(spec, args.build_dir, progress=progress)
+    x0 = scene.initial_state(init)
     print(scene.summary())
-    progress(f"{scene.spec.name}: integrating ({time.perf_counter() - t0:.2f} s so far)")
-    result = scene.run()
-    out = Path(args.output)
-    out.mkdir(parents=True, exist_ok=True)
-    name = scene.spec.name
-    print(f"wrote {result.to_csv(out / f'{name}.csv')}")
-    print(f"wrote {result.to_npz(out / f'{name}.npz')}")
-    if not args.no_plot:
-        png = result.plot(out / f"{name}.png", title=f"scene {name}",
-                          energy_error=scene.conservative)
-        print(f"wrote {png}")
-    total = result.energy.sum(axis=1)
-    change = (total[-1] - total[0]) / max(abs(result.energy).max(), 1e-300)
-    label = "relative energy error" if scene.conservative else "relative energy change"
-    print(f"{label} {change:.3e}; {len(result.t)} samples to t = {result.t[-1]:g} s "
-          f"in {time.perf_counter() - t0:.2f} s")
-    if not result.success:
-        print(f"simulation stopped: {result.message}", file=sys.stderr)
-        return 1
-    return 0
+    progress(f"{spec.name}: integrating ({time.perf_counter() - t0:.2f} s so far)")
+    result = scene.run(p=p, x0=x0)
+    return _report(result, Path(args.output), spec.name, args, f"scene {spec.name}",
+                   scene.conservative)
 
 
 def _simulate(args) -> int:
-    import numpy as np
-
     from modelgen.model import is_scene_file
     from modelgen.sim.load import load
-    from modelgen.sim.simulate import rk4
+    _check_times(args)
     if is_scene_file(args.model):
         return _simulate_scene(args)
     cm = load(args.model, args.build_dir)
-    init = _parse_assignments(args.init, "init")
-    names = list(cm.coordinates) + [c + "_dot" for c in cm.coordinates]
     x0 = np.zeros(2 * cm.n)
-    for key, value in init.items():
-        if key not in names:
-            raise ModelgenError(f"--init {key}: unknown state; the state is {', '.join(names)}")
-        x0[names.index(key)] = value
-    p = _parse_assignments(args.set, "set")
-    result = rk4(cm, x0, (0.0, args.t_end), args.dt, p=p or None)
-    out = Path(args.output)
-    out.mkdir(parents=True, exist_ok=True)
-    csv_path = result.to_csv(out / f"{cm.name}.csv")
-    print(f"{cm.name}: RK4, dt={args.dt}, t=0..{result.t[-1]:g} s, {len(result.t)} samples")
-    print(f"wrote {csv_path}")
-    if not args.no_plot:
-        png = result.plot(out / f"{cm.name}.png", title=f"{cm.name}: RK4, dt = {args.dt} s")
-        print(f"wrote {png}")
-    if result.energy is not None:
-        total = result.energy.sum(axis=1)
-        drift = abs(total[-1] - total[0]) / max(abs(result.energy).max(), 1e-300)
-        print(f"relative energy change {drift:.3e}")
-    if not result.success:
-        print(f"simulation stopped: {result.message}", file=sys.stderr)
-        return 1
-    return 0
+    for key, value in _state_overrides(cm.state_names, args.init).items():
+        x0[cm.state_names.index(key)] = value
+    p = _parameter_overrides(cm.parameters, args.set) or None
+    method = _method(args.method or "rk4")
+    t_end, dt = args.t_end or 10.0, args.dt or 1e-3
+    sample = args.sample or dt
+    times = np.linspace(0.0, t_end, int(round(t_end / sample)) + 1)
+    result = cm.simulate(x0, (0.0, t_end), t_eval=times, method=method.name,
+                         step=None if method.adaptive else dt, p=p)
+    result.energy = cm.energies(result, p)
+    how = f"step {dt:g} s" if not method.adaptive else "rtol 1e-8"
+    print(f"{cm.name}: {method.name}, {how}, t = 0..{t_end:g} s, {len(result.t)} samples")
+    return _report(result, Path(args.output), cm.name, args, f"{cm.name}: {method.name}, {how}",
+                   conservative=None)
 
 
 def _bench(args) -> int:
-    from modelgen.bench import workprecision as wp
+    import modelgen.bench as wp
 
     def progress(message):
         print(f"... {message}", file=sys.stderr, flush=True)
     t0 = time.perf_counter()
     progress(f"{args.scene}: building the model and the reference (two methods at 1e-14)")
     problem = wp.scene_problem(args.scene, args.build_dir, quick=args.quick)
-    points = wp.run_sweep(problem, wp.default_methods(problem.model),
+    points = wp.run_sweep(problem, wp.default_methods(),
                           repeats=2 if args.quick else 5, time_budget=0.3 if args.quick else 1.0,
                           budget=wp.Budget(max_nfev=1_000_000, max_seconds=20.0),
                           progress=progress if args.verbose else None)
@@ -156,6 +211,8 @@ def build_parser() -> argparse.ArgumentParser:
         prog="modelgen",
         description="Generate fast C code for the equations of motion of multibody models.")
     parser.add_argument("--version", action="version", version=f"modelgen {__version__}")
+    parser.add_argument("--debug", action="store_true",
+                        help="show the Python traceback of an error")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
 
@@ -180,8 +237,16 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("-o", "--output", default="out", help="output directory (default: out)")
     s.add_argument("--build-dir", default=None,
                    help="where the model is built (default: generated/<name>)")
-    s.add_argument("--t-end", type=float, default=10.0, help="final time [s] (default 10)")
-    s.add_argument("--dt", type=float, default=1e-3, help="RK4 step [s] (default 1e-3)")
+    s.add_argument("--t-end", type=float, default=None,
+                   help="final time [s] (default: the scene's, or 10 for a model)")
+    s.add_argument("--dt", type=float, default=None,
+                   help="step of a fixed-step method [s] (default: the scene's, or 1e-3)")
+    s.add_argument("--sample", type=float, default=None,
+                   help="sampling interval of the output [s] (default: the scene's, or "
+                        "the step)")
+    s.add_argument("--method", default=None,
+                   help="integration method: rk4, dopri5, dop853, rodas, midpoint, gauss4 "
+                        "(default: the scene's, or rk4 for a model)")
     s.add_argument("--init", action="append", metavar="NAME=VALUE",
                    help="initial coordinate or speed, e.g. q1=1.2 or q1_dot=0 (repeatable; "
                         "default 0)")
@@ -192,8 +257,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     b = sub.add_parser("bench", help="work-precision diagram of a scene: the C integrators "
                                      "against scipy's solve_ivp",
-                       description="Integrate a scene with every C integrator (dopri5, dop853, "
-                                   "rodas over tolerances; rk4, gauss4 over steps) and with "
+                       description="Integrate a scene with every C integrator (the adaptive "
+                                   "ones over tolerances, the fixed-step ones over steps) and with "
                                    "solve_ivp (RK45, DOP853, Radau) on the same compiled rhs; "
                                    "measure the final-time and dense L2 errors of the positions "
                                    "against a reference by two high-order methods at 1e-14, the "
@@ -210,14 +275,43 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+#: exit status of each outcome (documented in the module docstring and the README)
+EXIT = {"ok": 0, "internal": 1, "input": 2, "build": 3, "simulation": 4, "interrupted": 130}
+
+
+def exit_status(exc: BaseException) -> int:
+    """The exit status for an error that ends a command."""
+    if isinstance(exc, (BuildError, TemplateError)):
+        return EXIT["build"]
+    if isinstance(exc, SimulationError):
+        return EXIT["simulation"]
+    if isinstance(exc, (ModelgenError, OSError)):
+        return EXIT["input"]
+    return EXIT["internal"]
+
+
 def main(argv=None) -> int:
-    """Entry point; returns the exit status (0 ok, 1 simulation failed, 2 error)."""
-    args = build_parser().parse_args(argv)
+    """Entry point; returns the exit status (see :data:`EXIT`)."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
     try:
         return args.func(args)
-    except ModelgenError as exc:
-        print(f"modelgen: error: {exc}", file=sys.stderr)
-        return 2
+    except KeyboardInterrupt:
+        print("modelgen: interrupted", file=sys.stderr)
+        return EXIT["interrupted"]
+    except (ModelgenError, OSError) as exc:
+        if args.debug:
+            raise
+        text = str(exc) if isinstance(exc, ModelgenError) else \
+            f"{exc.strerror or exc}: {exc.filename!r}; fix: check the path and its permissions"
+        print(f"modelgen: error: {text}", file=sys.stderr)
+        return exit_status(exc)
+    except Exception as exc:            # a bug: say so, briefly, unless --debug
+        if args.debug:
+            raise
+        print(f"modelgen: internal error: {type(exc).__name__}: {exc} (please report it; "
+              f"--debug shows the traceback)", file=sys.stderr)
+        return EXIT["internal"]
 
 
 if __name__ == "__main__":   # pragma: no cover

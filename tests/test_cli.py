@@ -62,3 +62,57 @@ def test_help_lists_subcommands(capsys):
     assert exc.value.code == 0
     out = capsys.readouterr().out
     assert "generate" in out and "simulate" in out
+
+
+def _modelgen(*argv, cwd=None):
+    """The real entry point, in a subprocess (``python -m modelgen``)."""
+    import subprocess
+    import sys
+    return subprocess.run([sys.executable, "-m", "modelgen", *map(str, argv)], cwd=cwd,
+                          capture_output=True, text=True, timeout=300)
+
+
+def test_python_dash_m_modelgen_prints_the_version():
+    from modelgen.version import __version__
+    proc = _modelgen("--version")
+    assert proc.returncode == 0 and proc.stdout.strip() == f"modelgen {__version__}"
+
+
+@pytest.mark.parametrize("flags, message", [
+    (["--set", "gg=1"], "--set gg: unknown parameter"),
+    (["--set", "g=abc"], "'abc' is not a number"),
+    (["--dt", "-1"], "--dt must be a positive number"),
+    (["--init", "q9=1"], "--init q9: unknown state"),
+    (["--method", "rk45"], "unknown method 'rk45'"),
+])
+def test_scene_overrides_are_checked_with_exit_status_2(tmp_path, flags, message):
+    from conftest import SCENES
+    proc = _modelgen("simulate", SCENES / "dp_free.yaml", "-o", tmp_path / "out",
+                     "--build-dir", tmp_path / "b", "--no-plot", *flags)
+    assert proc.returncode == 2, proc.stderr
+    assert proc.stderr.startswith("modelgen: error: ") and message in proc.stderr
+    assert "Traceback" not in proc.stderr
+
+
+def test_scene_overrides_change_the_run(tmp_path):
+    from conftest import SCENES
+    out = tmp_path / "out"
+    argv = ["simulate", str(SCENES / "dp_free.yaml"), "-o", str(out), "--build-dir",
+            str(tmp_path / "b"), "--no-plot", "--t-end", "2", "--init", "q1=0.25",
+            "--set", "g=1.62"]
+    assert main(argv) == 0
+    with np.load(out / "dp_free.npz") as npz:
+        data = dict(npz)
+    assert data["t"][-1] == 2.0 and data["y"][0, 0] == 0.25
+    # the lunar gravity is used: the same run with the scene's own g differs
+    assert main(argv[:-2]) == 0
+    assert not np.allclose(np.load(out / "dp_free.npz")["y"][:, -1], data["y"][:, -1])
+
+
+def test_failed_simulation_exits_4_and_keeps_its_partial_results(tmp_path):
+    proc = _modelgen("simulate", MODELS / "double_pendulum.yaml", "--init", "q1=1.5",
+                     "--init", "q2=0.5", "--dt", "0.5", "--t-end", "100", "--no-plot",
+                     "--build-dir", tmp_path / "b", "-o", tmp_path / "out")
+    assert proc.returncode == 4, proc.stderr
+    assert "simulation stopped" in proc.stderr and "np.float64" not in proc.stderr
+    assert (tmp_path / "out" / "double_pendulum.csv").stat().st_size > 0

@@ -10,7 +10,6 @@ import numpy as np
 import pytest
 
 from modelgen.model.chains import spatial_chain
-from modelgen.sim.simulate import rk4
 
 from conftest import MODELS
 
@@ -58,9 +57,9 @@ def test_rhs_solves_the_equations_of_motion(compiled, name):
 
 
 def _energy_drift(cm, x0, dt, p):
-    res = rk4(cm, x0, (0.0, 1.0), dt, p=p)
+    res = cm.simulate(x0, (0.0, 1.0), method="rk4", step=dt, p=p)
     assert res.success, res.message
-    total = res.energy.sum(axis=1)
+    total = cm.energies(res, p).sum(axis=1)
     return abs(total[-1] - total[0])
 
 

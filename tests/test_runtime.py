@@ -9,7 +9,7 @@ from scipy.special import ellipk
 import modelgen
 from modelgen.errors import DerivationError, SimulationError
 from modelgen.model.api import Model
-from modelgen.sim.runtime import MassMatrixError
+from modelgen.errors import MassMatrixError
 
 
 @pytest.fixture(scope="module")
@@ -112,3 +112,91 @@ def test_model_without_coordinates_or_bodies_is_refused(tmp_path, text, key, pro
     with pytest.raises(modelgen.ModelError, match=problem) as exc:
         modelgen.load(path, tmp_path / "out")
     assert exc.value.key == key and exc.value.file == str(path)
+
+
+@pytest.mark.parametrize("call, message", [
+    (lambda cm: cm.rhs_function()(0.0, 1.0), r"x must have shape \(4,\), got \(\)"),
+    (lambda cm: cm.rhs_function()(0.0, np.zeros((1, 4))), r"x must have shape \(4,\), got \(1, 4\)"),
+    (lambda cm: cm.rhs(0.0, np.zeros(4) + 0.5j), "x must be real"),
+    (lambda cm: cm.rhs_function()(0.0, np.zeros(4) + 0.5j), "x must be real"),
+    (lambda cm: cm.rhs(0.0, np.zeros(4), u={"T1": np.nan}), r"inputs must be finite; got \['T1'\]"),
+    (lambda cm: cm.rhs(0.0, np.zeros(4), u=[np.inf]), r"inputs must be finite"),
+    (lambda cm: cm.rhs(np.nan, np.zeros(4)), "t must be finite"),
+    (lambda cm: cm.generalized_forces(np.inf, [0, 0], [0, 0]), "t must be finite"),
+    (lambda cm: cm.rhs(0.0, ["a", "b", "c", "d"]), "x must be numbers"),
+])
+def test_runtime_refuses_what_it_would_silently_get_wrong(dp, call, message):
+    """No broadcasting, no dropped imaginary part, no NaN input or time passed to the C."""
+    with pytest.raises(SimulationError, match=message):
+        call(dp)
+
+
+def test_simulate_result_names_states_and_outputs(dp):
+    res = dp.simulate([1.0, 0.5, 0.0, 0.0], (0.0, 1.0), t_eval=np.linspace(0, 1, 11),
+                      dense_output=True)
+    assert res.success and res.y.shape == (4, 11)
+    assert np.array_equal(res["q1"], res.y[0]) and np.array_equal(res["q2_dot"], res.y[3])
+    assert "q1" in res and "nfev" in res and res["nfev"] == res.nfev
+    with pytest.raises(KeyError, match="neither a state"):
+        res["elbow"]
+    # sol is the method's own dense output: it agrees with t_eval sampling anywhere
+    assert np.allclose(res.sol(res.t), res.y, rtol=0, atol=1e-12)
+    between = np.linspace(0.0, 1.0, 37)
+    sampled = dp.simulate([1.0, 0.5, 0.0, 0.0], (0.0, 1.0), t_eval=between)
+    assert np.allclose(res.sol(between), sampled.y, rtol=0, atol=1e-11)
+    assert res.sol(0.55).shape == (4,)
+
+
+def test_result_tables_round_trip(dp, tmp_path):
+    import csv
+    res = dp.simulate([1.0, 0.5, 0.0, 0.0], (0.0, 0.5), t_eval=np.linspace(0, 0.5, 6))
+    res.energy = dp.energies(res)
+    with open(res.to_csv(tmp_path / "r.csv")) as fh:
+        rows = list(csv.reader(fh))
+    assert rows[0] == ["t", "q1", "q2", "q1_dot", "q2_dot", "kinetic", "potential", "total"]
+    assert np.array_equal(np.array(rows[1:], dtype=float)[:, 1:5], res.y.T)
+    with np.load(res.to_npz(tmp_path / "r.npz")) as npz:
+        assert np.array_equal(npz["y"], res.y) and list(npz["state_names"]) == list(dp.state_names)
+
+
+def test_plot_returns_a_figure_and_leaves_pyplot_alone(dp, tmp_path):
+    import matplotlib
+    backend = matplotlib.get_backend()
+    res = dp.simulate([1.0, 0.5, 0.0, 0.0], (0.0, 0.5), t_eval=np.linspace(0, 0.5, 6))
+    res.energy = dp.energies(res)
+    fig = res.plot(tmp_path / "r.png", conservative=True)
+    from matplotlib.figure import Figure
+    assert isinstance(fig, Figure) and len(fig.axes) == 3
+    assert (tmp_path / "r.png").read_bytes()[:4] == b"\x89PNG"
+    assert matplotlib.get_backend() == backend
+
+
+def test_everywhere_singular_model_is_refused_fresh_and_cached(tmp_path):
+    """A double pendulum whose second base turns with q1 too: q2 moves nothing.
+
+    Refused on the first load, on a second load from the same build cache,
+    by generate_model, and by `modelgen generate` (exit status 2)."""
+    from conftest import MODELS
+    from modelgen.cli import main
+    text = (MODELS / "double_pendulum.yaml").read_text()
+    assert "B2: {parent: B1, axis: 3, angle: q2}" in text
+    path = tmp_path / "stuck.yaml"
+    path.write_text(text.replace("B2: {parent: B1, axis: 3, angle: q2}",
+                                 "B2: {parent: B1, axis: 3, angle: q1}"))
+    for _ in range(2):
+        with pytest.raises(DerivationError, match="coordinate 'q2'"):
+            modelgen.load(path, tmp_path / "out")
+    with pytest.raises(DerivationError, match="coordinate 'q2'"):
+        modelgen.generate_model(path, tmp_path / "out")
+    assert main(["generate", str(path), "-o", str(tmp_path / "out")]) == 2
+
+
+def test_compiled_model_pickles_and_runs_in_another_process(dp):
+    import concurrent.futures
+    import pickle
+    clone = pickle.loads(pickle.dumps(dp))
+    x = [0.3, -0.2, 1.0, 0.5]
+    assert np.array_equal(clone.rhs(0.0, x), dp.rhs(0.0, x))
+    with concurrent.futures.ProcessPoolExecutor(1) as pool:
+        remote = pool.submit(dp.rhs, 0.0, x).result()
+    assert np.array_equal(remote, dp.rhs(0.0, x))

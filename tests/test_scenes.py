@@ -38,7 +38,7 @@ def test_every_shipped_scene_runs(scene, name):
     res = scene(name).run()
     assert res.success, res.message
     assert res.t[-1] == pytest.approx(scene(name).spec.t_end)
-    assert np.all(np.isfinite(res.x))
+    assert np.all(np.isfinite(res.y))
 
 
 def test_switching_an_effect_off_removes_its_parameters_and_terms(scene):
@@ -59,7 +59,7 @@ def test_effect_off_equals_effect_with_zero_parameters(scene):
     free, damped = scene("dp_free"), scene("dp_damped")
     a = free.run()
     b = damped.run(p={"c": 0.0})
-    assert np.allclose(a.x, b.x, rtol=0, atol=1e-12 * np.abs(a.x).max())
+    assert np.allclose(a.y, b.y, rtol=0, atol=1e-12 * np.abs(a.y).max())
 
 
 def test_conservative_scene_conserves_energy(scene):
@@ -74,9 +74,10 @@ def test_energy_lost_equals_integrated_damper_power(scene):
     s = scene("dp_damped")
     assert not s.conservative
     # sample every step so Simpson's rule is as accurate as the integration
-    res = s.model.simulate_rk4(s.spec.initial, (0.0, 5.0), 1e-3, every=2)
+    res = s.model.simulate(s.spec.initial, (0.0, 5.0), t_eval=np.linspace(0.0, 5.0, 2501),
+                           method="rk4", step=1e-3)
     n = s.model.n
-    power = np.einsum("ij,ij->i", res["damping"], res.x[:, n:])
+    power = np.einsum("ij,ij->i", res.outputs["damping"], res.y[n:].T)
     energy = res["energy"][:, 0]
     lost = energy[-1] - energy[0]
     assert lost < 0
@@ -90,7 +91,7 @@ def test_block_on_incline_stops_at_closed_form_time(scene):
     a = p["g"] * (p["mu"] * np.cos(p["alpha"]) - np.sin(p["alpha"]))
     t_star = v0 / a
     res = s.run()
-    speed = res.x[:, 1]
+    speed = res.y[1]
     # sliding: speed falls linearly at rate a until the smoothing band |v| ~ v_s
     sliding = res.t < t_star - 0.05
     assert np.allclose(speed[sliding], v0 - a * res.t[sliding], atol=1e-6)
@@ -118,8 +119,8 @@ def test_sampled_input_force_is_interpolated_linearly(scene):
         k3 = cm.rhs(tk + h / 2, x + h / 2 * k2, u=[u_at(tk + h / 2)])
         k4 = cm.rhs(tk + h, x + h * k3, u=[u_at(tk + h)])
         x = x + h / 6 * (k1 + 2 * (k2 + k3) + k4)
-    res = cm.simulate_rk4(s.spec.initial, (0.0, 0.5), h, every=500, u=s._inputs())
-    assert np.allclose(res.x[-1], x, rtol=0, atol=1e-12 * max(1.0, np.abs(x).max()))
+    res = cm.simulate(s.spec.initial, (0.0, 0.5), method="rk4", step=h, u=s._inputs())
+    assert np.allclose(res.y[:, -1], x, rtol=0, atol=1e-12 * max(1.0, np.abs(x).max()))
 
 
 def test_stiff_and_non_smooth_effects_are_flagged(scene):
@@ -162,13 +163,21 @@ def test_feedback_input_from_python_callable(compiled):
 
     def controller(t, x):
         return [-40.0 * (x[i_cart] - 0.5) - 12.0 * x[n + i_cart]]
-    res = cm.simulate_rk4(np.zeros(2 * n), (0.0, 3.0), 1e-3, every=100, u=controller)
+    res = cm.simulate(np.zeros(2 * n), (0.0, 3.0), t_eval=np.linspace(0.0, 3.0, 31),
+                      method="rk4", step=1e-3, u=controller)
     assert res.success and res.t.size == 31
-    # the same feedback in a plain Python RK4 gives the same final state
-    from modelgen.sim.simulate import rk4
-    ref = rk4(cm, np.zeros(2 * n), (0.0, 3.0), 1e-3, u=controller, record_energy=False)
-    assert np.array_equal(res.x[-1], ref.x[-1])
-    assert abs(res.x[-1, i_cart] - 0.5) < 0.05
+    # the same feedback in a plain Python RK4 on cm.rhs gives the same final state
+    x, h = np.zeros(2 * n), 1e-3
+    f = lambda t, x: cm.rhs(t, x, u=controller(t, x))   # noqa: E731
+    for k in range(3000):
+        t = k * h
+        k1 = f(t, x)
+        k2 = f(t + h / 2, x + h / 2 * k1)
+        k3 = f(t + h / 2, x + h / 2 * k2)
+        k4 = f(t + h, x + h * k3)
+        x = x + h / 6 * (k1 + 2 * (k2 + k3) + k4)
+    assert np.allclose(res.y[:, -1], x, rtol=0, atol=1e-12)
+    assert abs(res["x"][-1] - 0.5) < 0.05
 
 
 def test_stiff_scene_with_rodas_matches_scipy_radau_and_beats_dopri5(scene):
@@ -187,9 +196,51 @@ def test_stiff_scene_with_rodas_matches_scipy_radau_and_beats_dopri5(scene):
     ref = solve_ivp(cm.rhs, (s.spec.t_start, s.spec.t_end), s.spec.initial, method="Radau",
                     jac=cm.jac, rtol=1e-10, atol=1e-12, t_eval=res.t)
     assert ref.success
-    assert np.allclose(res.x, ref.y.T, rtol=0, atol=1e-5)
+    assert np.allclose(res.y, ref.y, rtol=0, atol=1e-5)
     stiff = cm.simulate(s.spec.initial, (0.0, 2.0), method="rodas", rtol=1e-6, atol=1e-9)
     explicit = cm.simulate(s.spec.initial, (0.0, 2.0), method="dopri5", rtol=1e-6, atol=1e-9,
                            max_steps=200_000)
     assert stiff.success and stiff.nfev < 2000
     assert explicit.nfev > 100 * stiff.nfev
+
+
+def test_stiffness_verdict_comes_from_the_jacobian_not_the_effect_kind(scene):
+    """Springs and friction are only stiff-prone: the summary says what |lambda|max implies
+    for the scene's method (the stiff chain is handled by rodas; the soft chain is not
+    stiff; RK4 beyond its stability limit is warned about)."""
+    from dataclasses import replace
+    stiff = scene("spring_chain_stiff")
+    assert stiff.stiffness() > 1e7
+    assert "handled by rodas" in stiff.summary()
+    soft = scene("spring_chain")
+    assert "not stiff for rk4" in soft.summary()
+    block = scene("block_friction")
+    lam, spec = block.stiffness(), block.spec
+    try:
+        block.spec = replace(spec, step=4.0 / lam)
+        summary = block.summary()
+    finally:
+        block.spec = spec
+    assert "WARNING the step" in summary and "beyond rk4's stability limit" in summary
+
+
+def test_rk4_beyond_its_stability_limit_is_warned_not_silent(scene, tmp_path):
+    """The friction block with a step 2x beyond RK4's limit at rest: the run 'succeeds'
+    but its message, and the CLI, say the result is unreliable; within it, no warning."""
+    block = scene("block_friction")
+    lam = block.stiffness()
+    x0 = block.initial_state()
+    x0[block.model.n:] = 0.0          # at rest, where the smoothed friction is steepest
+    bad = block.model.simulate(x0, (0.0, 0.5), method="rk4", step=2 * 2.785 / lam)
+    assert "WARNING: the step" in bad.message and "stability limit" in bad.message
+    good = block.model.simulate(x0, (0.0, 0.5), method="rk4", step=0.5 * 2.785 / lam)
+    assert "WARNING" not in good.message and good.success
+    from modelgen.cli import main
+    import subprocess
+    import sys
+    proc = subprocess.run([sys.executable, "-m", "modelgen", "simulate",
+                           str(SCENES / "block_friction.yaml"), "--dt", str(2 * 2.785 / lam),
+                           "--init", f"{block.model.state_names[-1]}=0",
+                           "--t-end", "0.5", "--no-plot", "-o", str(tmp_path / "o"),
+                           "--build-dir", str(tmp_path / "b")], capture_output=True, text=True)
+    assert "modelgen: warning: the step" in proc.stderr, proc.stderr

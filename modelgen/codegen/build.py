@@ -105,8 +105,9 @@ def integrator_hash(sources: dict) -> str:
     return h.hexdigest()
 
 
-def integrator_object(sources: dict) -> Path:
-    """The compiled ``mg_integrate.o`` for these sources, from the cache or compiled now.
+def integrator_object(sources: dict) -> tuple:
+    """(path, cached): the compiled ``mg_integrate.o`` for these sources, from the
+    cache or compiled now.
 
     Compiled in a private temporary directory and moved into the cache with
     ``os.replace``, so concurrent builds never see a partial object.
@@ -114,7 +115,7 @@ def integrator_object(sources: dict) -> Path:
     directory = cache_dir()
     target = directory / f"mg_integrate-{integrator_hash(sources)[:20]}.o"
     if target.is_file():
-        return target
+        return target, True
     directory.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=".mg-", dir=directory))
     try:
@@ -125,7 +126,7 @@ def integrator_object(sources: dict) -> Path:
         os.replace(tmp / "mg_integrate.o", target)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
-    return target
+    return target, False
 
 
 def manifest_path(directory: Path) -> Path:
@@ -193,7 +194,7 @@ def build_module(directory: Path, name: str, sources: dict, manifest: dict,
 
     tmp = Path(tempfile.mkdtemp(prefix=".build-", dir=directory))
     try:
-        integrator_obj = integrator_object(integrator)
+        integrator_obj, integrator_cached = integrator_object(integrator)
         for fname in (f"{name}.c", f"{name}.h"):
             (tmp / fname).write_text(sources[fname])
         (tmp / "mg_integrate.h").write_text(integrator["mg_integrate.h"])
@@ -217,7 +218,8 @@ def build_module(directory: Path, name: str, sources: dict, manifest: dict,
         _run([link], tmp)
 
         manifest = dict(manifest, module_name=module_name, module_file=module_file,
-                        compile_commands=[" ".join(c) for c in model_objs])
+                        compile_commands=[" ".join(c) for c in model_objs],
+                        integrators={"path": str(integrator_obj), "cached": integrator_cached})
         _write_if_changed(directory / f"{name}.c", sources[f"{name}.c"], tmp)
         _write_if_changed(directory / f"{name}.h", sources[f"{name}.h"], tmp)
         for fname in ("mg_integrate.h", "mg_integrate.c"):

@@ -278,20 +278,6 @@ def public_api(name: str, n: int, n_p: int, n_u: int, n_b: int, n_y: int = 0,
              "params": "double t, const double *x, const double *u, const double *p, double *J",
              "doc": [f"Jacobian J[{2 * n}*{2 * n}] = d xdot / d x, row-major, derived symbolically",
                      "(forward mode over the generated program). Returns the rhs status."]})
-    extra.append(
-        {"ret": "int", "name": f"{name}_simulate_rk4",
-         "params": "double t0, double step, long n_steps, long every, const double *x0, "
-                   "const double *p, long n_u, const double *u_times, const double *u_values, "
-                   "int u_hold, double *t_out, double *x_out, double *y_out, long *n_out, "
-                   "double *t_stop",
-         "doc": ["Classic RK4 from x0 at t0 for n_steps steps of size step, recording t, x",
-                 f"(and the {n_y} outputs) every `every` steps and after the last step:",
-                 "t_out[], x_out[][NX], y_out[][NY] need n_steps/every + 2 rows.",
-                 f"Inputs: n_u samples u_times[n_u] (increasing), u_values[n_u][{n_u}],",
-                 "interpolated linearly (u_hold = 0) or held (u_hold = 1), ends held;",
-                 "n_u = 0 means all inputs are zero.  Returns 0; or k > 0 when pivot k",
-                 "of A failed, -1 when the state became non-finite.  *n_out rows were",
-                 "written either way, *t_stop is the time of the last good state."]})
     return extra + [
         {"ret": "int", "name": f"{name}_abi_version", "params": "void",
          "doc": [f"Returns the ABI version ({ABI_VERSION}) this file was generated for."]},

@@ -14,8 +14,25 @@ from modelgen.sim.scene import Scene
 
 def generate_model(source, out_dir=None, *, force: bool = False,
                    jacobian: bool = False) -> Generated:
-    """Generate and compile a model (or reuse the cache); returns the report."""
-    return generate(as_spec(source), out_dir, force=force, jacobian=jacobian)
+    """Generate and compile a model (or reuse the cache); returns the report.
+
+    Like :func:`load`, it refuses (:class:`~modelgen.errors.DerivationError`)
+    a model whose mass matrix is singular for every configuration, cached or not.
+    """
+    generated = generate(as_spec(source), out_dir, force=force, jacobian=jacobian)
+    _loaded(generated)
+    return generated
+
+
+def _loaded(generated: Generated) -> CompiledModel:
+    """The compiled model of a build, checked for a mass matrix singular by construction.
+
+    The check runs on every load, cached build or not (three evaluations of A:
+    microseconds), so a build cache never hides a model that cannot be solved.
+    """
+    cm = CompiledModel(generated.manifest, generated.build.module_path)
+    check_mass_matrix(cm)
+    return cm
 
 
 def load(source, out_dir=None, *, force: bool = False, jacobian: bool = False) -> CompiledModel:
@@ -29,11 +46,7 @@ def load(source, out_dir=None, *, force: bool = False, jacobian: bool = False) -
     >>> cm = load("models/double_pendulum.yaml")             # doctest: +SKIP
     >>> cm.rhs(0.0, [0.1, 0.2, 0.0, 0.0])                    # doctest: +SKIP
     """
-    generated = generate_model(source, out_dir, force=force, jacobian=jacobian)
-    cm = CompiledModel(generated.manifest, generated.build.module_path)
-    if not generated.build.cached:
-        check_mass_matrix(cm)
-    return cm
+    return _loaded(generate(as_spec(source), out_dir, force=force, jacobian=jacobian))
 
 
 def load_scene(path, out_dir=None, *, force: bool = False, progress=None) -> Scene:

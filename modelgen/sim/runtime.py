@@ -16,7 +16,7 @@ import numpy as np
 from modelgen.codegen.emit import ABI_VERSION
 from modelgen.errors import DerivationError, MassMatrixError, ModelgenError, SimulationError
 from modelgen.sim import integrate
-from modelgen.sim.simulate import SimulationResult, rk4
+from modelgen.sim.result import DenseOutput, Result, make_result
 
 
 def _import(module_name: str, path: Path):
@@ -45,6 +45,8 @@ class CompiledModel:
         self.inputs = tuple(manifest["inputs"])
         self.bodies = tuple(manifest["bodies"])
         self.n = len(self.coordinates)
+        #: names of the state x = [q, qd]: the coordinates, then their speeds
+        self.state_names = self.coordinates + tuple(f"{c}_dot" for c in self.coordinates)
         self.path = Path(module_path)
         module = _import(manifest["module_name"], self.path)
         self.ffi, self.lib = module.ffi, module.lib
@@ -59,12 +61,17 @@ class CompiledModel:
         self._rhs = fn("rhs")
         self._energy = fn("energy")
         self._body_poses = fn("body_poses")
-        self._simulate_rk4 = fn("simulate_rk4")
         self.outputs = {o["name"]: tuple(o["columns"]) for o in manifest.get("outputs", [])}
         self.output_columns = tuple(c for cols in self.outputs.values() for c in cols)
         self._outputs = fn("outputs") if self.output_columns else None
         self._p_default = np.array(list(self.parameters.values()), dtype=float)
         self._param_index = {name: i for i, name in enumerate(self.parameters)}
+
+    def __reduce__(self):
+        """Pickle as (manifest, module path): the unpickled model imports the same
+        compiled module, so it crosses process boundaries (multiprocessing,
+        concurrent.futures, joblib) on machines that share the build."""
+        return (CompiledModel, (self.manifest, str(self.path)))
 
     def __repr__(self):
         return (f"<CompiledModel {self.name}: n={self.n}, {len(self.parameters)} parameters, "
@@ -75,10 +82,25 @@ class CompiledModel:
         return self.ffi.from_buffer("double[]", a)
 
     def _vector(self, value, size, what):
-        a = np.ascontiguousarray(value, dtype=float)
+        """``value`` as a contiguous float vector of ``size``; never broadcast, never
+        silently drop an imaginary part."""
+        if np.iscomplexobj(value):
+            raise SimulationError(f"{self.name}: {what} must be real, got a complex value")
+        try:
+            a = np.asarray(value, dtype=float)
+        except (TypeError, ValueError) as exc:
+            raise SimulationError(f"{self.name}: {what} must be numbers: {exc}") from None
         if a.shape != (size,):
             raise SimulationError(f"{self.name}: {what} must have shape ({size},), got {a.shape}")
-        return a
+        return np.ascontiguousarray(a)
+
+    def _time(self, t) -> float:
+        if np.iscomplexobj(t) or np.ndim(t) != 0:
+            raise SimulationError(f"{self.name}: t must be a real number, got {t!r}")
+        t = float(t)
+        if not np.isfinite(t):
+            raise SimulationError(f"{self.name}: t must be finite, got {t!r}")
+        return t
 
     def params(self, p=None) -> np.ndarray:
         """Full parameter vector from None (defaults), a dict of overrides or an array.
@@ -112,9 +134,13 @@ class CompiledModel:
                 if key not in self.inputs:
                     raise SimulationError(f"{self.name}: unknown input {key!r}; inputs are "
                                           f"{', '.join(self.inputs) or 'none'}")
-                out[self.inputs.index(key)] = float(value)
-            return out
-        return self._vector(u, len(self.inputs), "u")
+                out[self.inputs.index(key)] = self._vector([value], 1, f"input {key}")[0]
+        else:
+            out = self._vector(u, len(self.inputs), "u")
+        if not np.all(np.isfinite(out)):
+            bad = [name for name, v in zip(self.inputs, out) if not np.isfinite(v)]
+            raise SimulationError(f"{self.name}: inputs must be finite; got {bad}")
+        return out
 
     # -- model functions ---------------------------------------------------------
     def mass_matrix(self, q, p=None) -> np.ndarray:
@@ -136,7 +162,7 @@ class CompiledModel:
         """tau(t, q, qd, u, p), shape (n,)."""
         q, qd = self._vector(q, self.n, "q"), self._vector(qd, self.n, "qd")
         out = np.empty(self.n)
-        self._generalized_forces(float(t), self._ptr(q), self._ptr(qd),
+        self._generalized_forces(self._time(t), self._ptr(q), self._ptr(qd),
                                  self._ptr(self.input_vector(u)), self._ptr(self.params(p)),
                                  self._ptr(out))
         return out
@@ -148,7 +174,7 @@ class CompiledModel:
         """
         x = self._vector(x, 2 * self.n, "x")
         out = np.empty(2 * self.n)
-        status = self._rhs(float(t), self._ptr(x), self._ptr(self.input_vector(u)),
+        status = self._rhs(self._time(t), self._ptr(x), self._ptr(self.input_vector(u)),
                            self._ptr(self.params(p)), self._ptr(out))
         if status:
             raise MassMatrixError(status, self.coordinates[status - 1], t, x)
@@ -182,6 +208,8 @@ class CompiledModel:
             raise MassMatrixError(status, coordinates[status - 1], t, x_buf.copy())
 
         def f(t, x, out=None):
+            if np.shape(x) != (nx,) or np.iscomplexobj(x):
+                x = self._vector(x, nx, "x")     # raises the clear error
             x_buf[:] = x
             status = rhs(t, x_ptr, u_ptr, p_ptr, out_ptr)
             if status:
@@ -213,78 +241,9 @@ class CompiledModel:
             raise SimulationError(f"{self.name}: this model was generated without outputs")
         x = self._vector(x, 2 * self.n, "x")
         out = np.empty(len(self.output_columns))
-        self._outputs(float(t), self._ptr(x), self._ptr(self.input_vector(u)),
+        self._outputs(self._time(t), self._ptr(x), self._ptr(self.input_vector(u)),
                       self._ptr(self.params(p)), self._ptr(out))
         return out
-
-    def simulate_rk4(self, x0, t_span, step, *, every: int = 1, u=None, p=None):
-        """Fixed-step RK4 integrated in C; returns a :class:`~modelgen.sim.simulate.SimulationResult`.
-
-        ``u`` is None (zeros), a constant vector or dict, a tuple
-        ``(times, values, interpolation)`` with ``values`` of shape
-        (len(times), n_inputs) and interpolation ``"linear"`` or ``"hold"``, or
-        a callable ``u(t, x)`` (feedback; the loop then runs in Python).  The state is recorded
-        every ``every`` steps and after the last one.  A failure (mass matrix
-        not positive definite, non-finite state) returns what was computed,
-        with the time and the reason.
-
-        >>> res = cm.simulate_rk4([1.0, 0, 0, 0], (0, 10), 1e-3, every=10)   # doctest: +SKIP
-        """
-        t0, t1 = map(float, t_span)
-        step = float(step)
-        if not (np.isfinite(step) and step > 0):
-            raise SimulationError(f"{self.name}: step must be positive, got {step!r}")
-        if not t1 > t0:
-            raise SimulationError(f"{self.name}: t_span must be increasing, got {t_span!r}")
-        every = int(every)
-        if every < 1:
-            raise SimulationError(f"{self.name}: every must be >= 1, got {every}")
-        x0 = self._vector(x0, 2 * self.n, "x0")
-        if not np.all(np.isfinite(x0)):
-            raise SimulationError(f"{self.name}: x0 must be finite")
-        n_steps = int(np.ceil((t1 - t0) / step - 1e-9))
-        step = (t1 - t0) / n_steps
-        if callable(u):
-            return self._simulate_feedback(x0, t0, t1, step, every, u, p)
-        times, values, hold = self._input_samples(u)
-        rows = n_steps // every + 2
-        nx, ny = 2 * self.n, len(self.output_columns)
-        t_out, x_out = np.empty(rows), np.empty((rows, nx))
-        y_out = np.empty((rows, max(ny, 1)))
-        n_out = self.ffi.new("long *")
-        t_stop = self.ffi.new("double *")
-        status = self._simulate_rk4(
-            t0, step, n_steps, every, self._ptr(x0), self._ptr(self.params(p)),
-            len(times), self._ptr(times), self._ptr(values), int(hold),
-            self._ptr(t_out), self._ptr(x_out), self._ptr(y_out), n_out, t_stop)
-        k = n_out[0]
-        if status == 0:
-            message = "success"
-        elif status > 0:
-            message = (f"mass matrix not positive definite after t={t_stop[0]!r}: Cholesky "
-                       f"pivot {status} (coordinate {self.coordinates[status - 1]!r}) failed")
-        else:
-            message = f"non-finite state after t={t_stop[0]!r}"
-        outputs = {name: y_out[:k, [self.output_columns.index(c) for c in cols]]
-                   for name, cols in self.outputs.items()}
-        return SimulationResult(t_out[:k].copy(), x_out[:k].copy(), self.coordinates,
-                                status=0 if status == 0 else (1 if status > 0 else 2),
-                                message=message, outputs=outputs,
-                                output_columns=dict(self.outputs))
-
-    def _simulate_feedback(self, x0, t0, t1, step, every, u, p):
-        """RK4 with inputs from a Python callable u(t, x): the loop runs in Python."""
-        res = rk4(self, x0, (t0, t1), step, u=u, p=p, record_energy=False)
-        keep = np.arange(0, len(res.t), every)
-        if keep[-1] != len(res.t) - 1:
-            keep = np.append(keep, len(res.t) - 1)
-        res.t, res.x = res.t[keep], res.x[keep]
-        if self.output_columns:
-            y = np.array([self.output_values(t, x, u(t, x), p) for t, x in zip(res.t, res.x)])
-            res.outputs = {name: y[:, [self.output_columns.index(c) for c in cols]]
-                           for name, cols in self.outputs.items()}
-            res.output_columns = dict(self.outputs)
-        return res
 
     def _input_samples(self, u):
         """(times, values (n, nu) C-ordered, hold) for the C integrator."""
@@ -302,22 +261,111 @@ class CompiledModel:
             return times, values, u[2] == "hold"
         return np.zeros(1), self.input_vector(u).reshape(1, nu).copy(), False
 
-    # -- integration in C (modelgen/integrate.py) ------------------------------------
+    # -- integration (modelgen/sim/integrate.py) -------------------------------------
     def simulate(self, x0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10,
-                 u=None, p=None, events=None, **options):
-        """Integrate in C with error control; returns a solve_ivp-shaped result.
+                 u=None, p=None, events=None, *, step=None, first_step=None, max_step=None,
+                 max_steps=None, dense_output=False, outputs=True, **options) -> Result:
+        """Integrate from ``x0`` over ``t_span`` in C; returns a :class:`~modelgen.sim.result.Result`.
 
-        Methods: ``rk4``, ``dopri5``, ``dop853``, ``rodas`` (stiff), ``midpoint``,
-        ``gauss4`` (the fixed-step ones need ``step=``); ``events`` are
-        ``g(t, x)`` callables with ``terminal``/``direction`` as in solve_ivp.
-        Options: ``step``, ``first_step``, ``max_step``, ``max_steps``, ``chunk``.
-        See :func:`modelgen.sim.integrate.simulate`.
+        The one way to integrate a model.  ``method``: ``rk4``, ``dopri5``,
+        ``dop853`` (default), ``rodas`` (stiff, uses the Jacobian), ``midpoint``,
+        ``gauss4`` (see :data:`modelgen.sim.integrate.METHODS`); the fixed-step
+        ones need ``step``, which also runs the adaptive ones with fixed steps.
+        ``t_eval`` samples through each method's dense output (otherwise every
+        step is recorded); ``events`` are ``g(t, x)`` callables with
+        ``terminal``/``direction`` attributes, as in ``solve_ivp``.  ``u`` is None
+        (zeros), a vector or dict of constant inputs, a tuple ``(times, values,
+        "linear" | "hold")`` of samples, or a callable ``u(t, x)`` (feedback).
+        ``p`` overrides parameters.  ``max_steps`` defaults to 100,000 (a run
+        that hits it stops with status -1 and says so).  ``dense_output=True``
+        sets ``res.sol`` (:class:`~modelgen.sim.result.DenseOutput`), the method's
+        own continuous extension on every step (it costs a second run).
+        With ``outputs=True`` a scene's outputs are recorded at each time.
+        Other ``options`` go to :func:`modelgen.sim.integrate.simulate` (``chunk``).
+
+        A failure returns what was computed up to it, with ``status < 0``,
+        ``t_fail`` and the reason in ``message``.
 
         >>> res = cm.simulate([1.0, 0.0], (0, 10), t_eval=np.linspace(0, 10, 101))  # doctest: +SKIP
-        >>> res.y.shape, res.success                                                # doctest: +SKIP
-        ((2, 101), True)
+        >>> res.y.shape, res.success, res["q"][-1]                                  # doctest: +SKIP
         """
-        return integrate.simulate(self, x0, t_span, t_eval, method, rtol, atol, u, p, events, **options)
+        options.update(step=step, first_step=first_step, max_step=max_step)
+        if max_steps is not None:
+            options["max_steps"] = max_steps
+        def run(times):
+            return integrate.simulate(self, x0, t_span, times, method, rtol, atol, u, p,
+                                      events, **options)
+        res = make_result(state_names=self.state_names, **run(t_eval))
+        if step is not None:
+            warning = self.stability_warning(method, step, t_span[0], x0, u, p)
+            if warning:
+                res.message = f"{res.message} WARNING: {warning}"
+                res.info["stability_warning"] = warning
+        if dense_output:
+            steps = res if t_eval is None else make_result(state_names=self.state_names,
+                                                           **run(None))
+            res.sol = self._dense(steps, run)
+        if outputs and self.output_columns:
+            self._record_outputs(res, u, p)
+        return res
+
+    @staticmethod
+    def _dense(steps, run) -> DenseOutput | None:
+        """Sample the method's own dense output inside every accepted step (a second,
+        identical run with those times as t_eval) and wrap it as ``sol``."""
+        keep = np.concatenate([[True], np.diff(steps.t) > 0])
+        ts, ys = steps.t[keep], steps.y[:, keep]
+        if len(ts) < 2:
+            return None
+        inner = DenseOutput.NODES[1:-1]
+        times = (ts[:-1, None] + np.diff(ts)[:, None] * inner[None, :]).ravel()
+        times = np.minimum(np.maximum.accumulate(times), ts[-1])
+        sampled = run(times)
+        nx = ys.shape[0]
+        values = np.empty((len(ts) - 1, len(DenseOutput.NODES), nx))
+        values[:, 0], values[:, -1] = ys[:, :-1].T, ys[:, 1:].T
+        got = np.asarray(sampled["y"]).T.reshape(-1, nx)
+        if got.shape[0] != times.size:      # the second run stopped early: no sol
+            return None
+        values[:, 1:-1] = got.reshape(len(ts) - 1, len(inner), nx)
+        return DenseOutput(ts, values)
+
+    def stability_warning(self, method, step, t0, x0, u=None, p=None) -> str | None:
+        """Why a fixed ``step`` of an explicit ``method`` is unstable at (t0, x0), or None.
+
+        Explicit Runge-Kutta methods are stable only while h |lambda| stays inside
+        their stability region; with h |lambda|max beyond it (lambda the eigenvalues
+        of d xdot / d x at the start) the run "succeeds" with a wrong answer.
+        """
+        name = integrate.method_of(method).name
+        limit = STABILITY_LIMIT.get(name)
+        if limit is None:            # implicit methods: A-stable
+            return None
+        x = self._vector(x0, 2 * self.n, "x0")
+        try:
+            J = self.jac(t0, x, _input_at(self, u, t0, x), p)
+            lam = float(np.max(np.abs(np.linalg.eigvals(J))))
+        except (SimulationError, np.linalg.LinAlgError):
+            return None
+        if float(step) * lam <= limit:
+            return None
+        return (f"the step {float(step):g} s is beyond {name}'s stability limit: "
+                f"h |lambda|max = {float(step) * lam:.3g} > {limit:g} (|lambda|max = "
+                f"{lam:.3g} 1/s at the start), so the result is unreliable; use a step "
+                f"below {limit / lam:.3g} s or an implicit method (rodas, gauss4)")
+
+    def _record_outputs(self, res, u, p) -> None:
+        """The scene's outputs at every recorded time (res.outputs, res.output_columns)."""
+        y = np.array([self.output_values(t, x, _input_at(self, u, t, x), p)
+                      for t, x in zip(res.t, res.y.T)]).reshape(len(res.t), -1)
+        res.outputs = {name: y[:, [self.output_columns.index(c) for c in cols]]
+                       for name, cols in self.outputs.items()}
+        res.output_columns = dict(self.outputs)
+
+    def energies(self, res, p=None) -> np.ndarray:
+        """Kinetic and potential energy at every time of a result, shape (n_times, 2)."""
+        n = self.n
+        return np.array([self.energy(x[:n], x[n:], p) for x in res.y.T]).reshape(-1, 2)
 
     def simulate_batch(self, X0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10,
                        u=None, P=None, **options):
@@ -329,7 +377,9 @@ class CompiledModel:
         >>> res.y.shape                                                           # doctest: +SKIP
         (2, 4, 1)
         """
-        return integrate.simulate_batch(self, X0, t_span, t_eval, method, rtol, atol, u, P, **options)
+        raw = integrate.simulate_batch(self, X0, t_span, t_eval, method, rtol, atol, u, P,
+                                       **options)
+        return make_result(state_names=self.state_names, **raw)
 
     def jac(self, t, x, u=None, p=None) -> np.ndarray:
         """d xdot / d x at (t, x), shape (2n, 2n), for ``solve_ivp(..., jac=cm.jac)``.
@@ -386,3 +436,25 @@ def _cholesky_pivot(A, tol=1e-13):
         L[j, j] = np.sqrt(d)
         L[j + 1:, j] = (A[j + 1:, j] - L[j + 1:, :j] @ L[j, :j]) / L[j, j]
     return None
+
+
+#: |h lambda| where each explicit method's stability region ends on the negative real
+#: axis (Hairer & Wanner, Solving ODEs I, IV.2: RK4 2.785, DOPRI5 3.31, DOP853 6.0);
+#: on the imaginary axis RK4's is 2.83
+STABILITY_LIMIT = {"rk4": 2.785, "dopri5": 3.31, "dop853": 6.0}
+
+
+def _input_at(cm, u, t, x):
+    """The input vector at (t, x) for any input form ``simulate`` accepts."""
+    if u is None:
+        return None
+    if callable(u):
+        return u(t, x)
+    if isinstance(u, tuple) and len(u) == 3 and isinstance(u[2], str):
+        times, values, how = u
+        values = np.asarray(values, dtype=float).reshape(len(times), -1)
+        if how == "hold":
+            k = int(np.clip(np.searchsorted(times, t, side="right") - 1, 0, len(times) - 1))
+            return values[k]
+        return np.array([np.interp(t, times, values[:, j]) for j in range(values.shape[1])])
+    return u

@@ -9,24 +9,14 @@ import numpy as np
 
 from modelgen.codegen.pipeline import generate
 from modelgen.errors import SimulationError
-from modelgen.sim.runtime import CompiledModel, check_mass_matrix
-from modelgen.sim.simulate import SimulationResult
+from modelgen.model.spec import CONSERVATIVE_KINDS
+from modelgen.sim.integrate import method_of
+from modelgen.sim.result import Result
+from modelgen.sim.runtime import STABILITY_LIMIT, CompiledModel, check_mass_matrix
 
 
-def _inputs_at(u, t, cm):
-    """Input vector at time t for sampled inputs ``(times, values, interpolation)``."""
-    if u is None:
-        return None
-    times, values, interpolation = u
-    if interpolation == "hold":
-        k = int(np.clip(np.searchsorted(times, t, side="right") - 1, 0, len(times) - 1))
-        return values[k]
-    return np.array([np.interp(t, times, values[:, j]) for j in range(values.shape[1])])
-
-
-
-#: effect kinds whose forces derive from a potential (energy is then conserved)
-CONSERVATIVE_KINDS = ("gravity", "spring", "torsion_spring")
+#: a run needing more steps than this for stability alone is called stiff
+STIFF_STEPS = 1e4
 
 
 class Scene:
@@ -34,7 +24,7 @@ class Scene:
 
     >>> scene = modelgen.load_scene("models/scenes/dp_damped.yaml")   # doctest: +SKIP
     >>> res = scene.run()                                             # doctest: +SKIP
-    >>> res.t, res.x, res["tip"]                                      # doctest: +SKIP
+    >>> res.t, res.y, res["q1"], res["elbow"]                         # doctest: +SKIP
     """
 
     def __init__(self, spec, out_dir=None, *, force: bool = False, progress=None):
@@ -46,8 +36,7 @@ class Scene:
                              jacobian=bool(spec.stiff_effects) and spec.model.n <= 12)
         self.generated = generated
         self.model = CompiledModel(generated.manifest, generated.build.module_path)
-        if not generated.build.cached:
-            check_mass_matrix(self.model)
+        check_mass_matrix(self.model)          # on every load: the cache hides nothing
 
     @property
     def conservative(self) -> bool:
@@ -65,16 +54,55 @@ class Scene:
         off = [name for name in _effect_names(s.full_model) if name not in s.effects]
         lines.append(f"effects off (not generated): {', '.join(off) or 'none'}")
         if s.stiff_effects:
-            lines.append(f"STIFF or non-smooth: {', '.join(s.stiff_effects)} -- a small step "
-                         f"or a stiff integrator (method: rodas) is needed")
+            lines.append(self._stiffness_line())
         lines.append(f"outputs: {', '.join(o.name for o in s.outputs) or 'none'}")
         ops = self.generated.manifest["ops"]["rhs"]
         lines.append(f"rhs: {ops['after_cse']} operations after CSE")
-        how = (f"{s.method} step {s.step:g} s" if s.method in ("rk4", "midpoint", "gauss4")
+        how = (f"{s.method} step {s.step:g} s" if not method_of(s.method).adaptive
                else f"{s.method} rtol {s.rtol:g} atol {s.atol:g}")
         lines.append(f"time {s.t_start:g} .. {s.t_end:g} s, {how}, "
                      f"sampled every {s.sample_dt:g} s")
         return "\n".join(lines)
+
+    def stiffness(self, x0=None, p=None) -> float:
+        """The largest |eigenvalue| of d xdot / d x at the scene's initial state, and at
+        the same configuration at rest (where smoothed friction is steepest) [1/s].
+
+        Explicit methods need steps below about 3/|lambda|max (their stability
+        limit); a run whose span holds many such steps is stiff.
+        """
+        s, cm = self.spec, self.model
+        x = self.initial_state(x0)
+        rest = np.concatenate([x[:cm.n], np.zeros(cm.n)])
+        u = self._constant_inputs()
+        return max(float(np.max(np.abs(np.linalg.eigvals(cm.jac(s.t_start, state, u, p)))))
+                   for state in (x, rest))
+
+    def _constant_inputs(self):
+        u = self._inputs()
+        return u if isinstance(u, dict) else None
+
+    def _stiffness_line(self) -> str:
+        """The summary's verdict on the stiff-prone effects, from |lambda|max."""
+        s = self.spec
+        method = method_of(s.method)
+        lam = self.stiffness()
+        span = s.t_end - s.t_start
+        stability_steps = lam * span / STABILITY_LIMIT.get(method.name, 3.0)
+        head = (f"stiff-prone effects: {', '.join(s.stiff_effects)}; |lambda|max = "
+                f"{lam:.3g} 1/s at the start (moving and at rest)")
+        if method.implicit:
+            stiff = "STIFF, " if stability_steps > STIFF_STEPS else ""
+            return f"{head} ({stiff}handled by {method.name}, which is implicit)"
+        if not method.adaptive and s.step * lam > STABILITY_LIMIT.get(method.name, 2.8):
+            return (f"{head}: WARNING the step {s.step:g} s is beyond {method.name}'s "
+                    f"stability limit ({STABILITY_LIMIT.get(method.name, 2.8):g}/|lambda|max "
+                    f"= {STABILITY_LIMIT.get(method.name, 2.8) / lam:.3g} s): the result "
+                    f"will be wrong; use a smaller step or method: rodas")
+        if stability_steps > STIFF_STEPS:
+            return (f"{head}: STIFF, {method.name} needs about {stability_steps:.2g} steps for "
+                    f"stability alone; use method: rodas")
+        return f"{head}: not stiff for {method.name} over {span:g} s"
 
     def _inputs(self):
         s = self.spec
@@ -104,52 +132,41 @@ class Scene:
                 values[:, j] = np.interp(grid, sig.times, sig.values)
         return (np.array(grid), values, "hold" if hold else "linear")
 
-    def _run_integrator(self, x0, u, p) -> SimulationResult:
-        """Adaptive or implicit C integrators, sampled at the scene's times."""
+    def run(self, p=None, x0=None, u=None) -> Result:
+        """Integrate the scene with its method, sampled at its times; energies recorded.
+
+        ``p`` overrides parameters, ``x0`` the initial state (an array, or a
+        mapping of coordinate and speed names to values, missing ones taken
+        from the scene), and ``u`` the scene's inputs (anything
+        :meth:`CompiledModel.simulate` accepts, including a feedback callable
+        ``u(t, x)``).  Returns a :class:`~modelgen.sim.result.Result`.
+        """
         s, cm = self.spec, self.model
-        if callable(u):
-            raise SimulationError(f"scene {s.name}: a feedback u(t, x) needs method rk4")
-        fixed = s.method in ("midpoint", "gauss4")
+        x0 = self.initial_state(x0)
+        u = self._inputs() if u is None else u
+        fixed = not method_of(s.method).adaptive
         times = _scene_times(s.t_start, s.t_end, s.sample_dt)
         res = cm.simulate(x0, (s.t_start, s.t_end), t_eval=times, method=s.method,
-                          rtol=s.rtol, atol=s.atol, u=u, p=p,
-                          step=s.step if fixed else None)
-        t, x = np.asarray(res.t), np.asarray(res.y).T
-        outputs = {}
-        if cm.output_columns:
-            u_vec = None if u is None or isinstance(u, tuple) else u
-            y = np.array([cm.output_values(ti, xi, u_vec if u_vec is not None
-                                           else _inputs_at(u, ti, cm), p)
-                          for ti, xi in zip(t, x)]).reshape(len(t), -1)
-            outputs = {name: y[:, [cm.output_columns.index(c) for c in cols]]
-                       for name, cols in cm.outputs.items()}
-        return SimulationResult(t, x, cm.coordinates, status=0 if res.success else 1,
-                                message=res.message, outputs=outputs,
-                                output_columns=dict(cm.outputs))
-
-    def run(self, p=None, x0=None, u=None) -> SimulationResult:
-        """Integrate the scene in C; energies are recorded for the plot.
-
-        ``p`` overrides parameters, ``x0`` the initial state, and ``u`` the
-        scene's inputs (anything :meth:`CompiledModel.simulate_rk4` accepts,
-        including a feedback callable ``u(t, x)``).
-        """
-        s = self.spec
-        x0 = np.array(s.initial if x0 is None else x0, dtype=float)
-        u = self._inputs() if u is None else u
-        if s.method == "rk4":
-            every = max(1, int(round(s.sample_dt / s.step)))
-            if abs(every * s.step - s.sample_dt) > 1e-9 * s.sample_dt:
-                raise SimulationError(f"scene {s.name}: the sampling interval "
-                                      f"{s.sample_dt:g} s must be a multiple of the step "
-                                      f"{s.step:g} s")
-            res = self.model.simulate_rk4(x0, (s.t_start, s.t_end), s.step, every=every,
-                                          u=u, p=p)
-        else:
-            res = self._run_integrator(x0, u, p)
-        n = self.model.n
-        res.energy = np.array([self.model.energy(row[:n], row[n:], p) for row in res.x])
+                          rtol=s.rtol, atol=s.atol, u=u, p=p, step=s.step if fixed else None)
+        res.energy = cm.energies(res, p)
+        res.info.update(scene=s.name, conservative=self.conservative)
         return res
+
+    def initial_state(self, x0=None) -> np.ndarray:
+        """The scene's initial state, or ``x0`` (an array, or names -> values over it)."""
+        s, cm = self.spec, self.model
+        if x0 is None:
+            return np.array(s.initial, dtype=float)
+        if isinstance(x0, dict):
+            x = np.array(s.initial, dtype=float)
+            for name, value in x0.items():
+                if name not in cm.state_names:
+                    raise SimulationError(
+                        f"scene {s.name}: x0 names unknown state {name!r}; states are "
+                        f"{', '.join(cm.state_names)}")
+                x[cm.state_names.index(name)] = float(value)
+            return x
+        return np.array(x0, dtype=float)
 
 
 def _scene_times(t0, t1, dt):

@@ -1,0 +1,213 @@
+"""The one result type of every simulation: scipy's ``OdeResult`` layout, plus names.
+
+Every way to integrate (``CompiledModel.simulate`` with any method, scenes,
+the CLI) returns a :class:`Result`:
+
+* ``t`` (n_times,), ``y`` (n_states, n_times) as in ``solve_ivp``;
+* ``sol`` (a callable ``sol(t) -> y`` when ``dense_output=True``, else None),
+  ``t_events``, ``y_events``;
+* ``status`` (0 reached the end, 1 a terminal event, negative a failure; see
+  :data:`modelgen.sim.integrate.STATUS`), ``message``, ``success``;
+* statistics ``nfev``, ``njev``, ``nlu``, ``naccept``, ``nreject``, ``nnewton``;
+* names: ``res["q1"]`` is a state's time series, ``res["elbow"]`` a recorded
+  output (n_times, columns).
+
+A failed run keeps everything computed up to the failure; ``t_fail`` is the
+time of the failure and ``message`` says why.
+
+>>> res = cm.simulate([1.0, 0.0, 0.0, 0.0], (0, 10), t_eval=np.linspace(0, 10, 101))  # doctest: +SKIP
+>>> res["q1"].shape, res.success, res.to_csv("dp.csv")                                   # doctest: +SKIP
+"""
+from __future__ import annotations
+
+import csv
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Optional
+
+import numpy as np
+
+
+@dataclass
+class Result:
+    """A trajectory in scipy's layout (see the module docstring)."""
+    t: np.ndarray
+    y: np.ndarray
+    state_names: tuple = ()
+    status: int = 0
+    message: str = "The solver successfully reached the end of the integration interval."
+    method: str = ""
+    sol: Optional[Callable] = None
+    t_events: Optional[list] = None
+    y_events: Optional[list] = None
+    t_fail: Optional[float] = None
+    nfev: int = 0
+    njev: int = 0
+    nlu: int = 0
+    naccept: int = 0
+    nreject: int = 0
+    nnewton: int = 0
+    #: recorded outputs: name -> (n_times, columns), and their column names
+    outputs: dict = field(default_factory=dict)
+    output_columns: dict = field(default_factory=dict)
+    #: kinetic and potential energy at each time (n_times, 2), when recorded
+    energy: Optional[np.ndarray] = None
+    #: what else the run knows (scene name, parameters...)
+    info: dict = field(default_factory=dict)
+
+    @property
+    def success(self) -> bool:
+        """True when the run reached the end or a terminal event (``status >= 0``)."""
+        return self.status >= 0
+
+    # -- access by name -----------------------------------------------------------
+    def __getitem__(self, name: str):
+        """A state's time series (``res["q1"]``, ``res["q1_dot"]``), a recorded output
+        (``res["elbow"]``, shape (n_times, columns)), or else a field (``res["nfev"]``),
+        as scipy's OdeResult allows.  Names of states and outputs come first."""
+        if name in self.state_names:
+            return self.y[self.state_names.index(name)]
+        if name in self.outputs:
+            return self.outputs[name]
+        if name in _FIELDS:
+            return getattr(self, name)
+        raise KeyError(f"{name!r} is neither a state, a recorded output nor a field; states "
+                       f"and outputs: {', '.join(self.names()) or 'none'}")
+
+    def __contains__(self, name) -> bool:
+        return name in self.state_names or name in self.outputs or name in _FIELDS
+
+    def names(self) -> list:
+        """The states, then the recorded outputs."""
+        return list(self.state_names) + list(self.outputs)
+
+    def keys(self) -> list:
+        """Everything ``res[...]`` accepts: states, outputs, then the fields."""
+        return self.names() + [f for f in _FIELDS if f not in self.names()]
+
+    # -- tables ---------------------------------------------------------------------
+    def columns(self) -> list:
+        """Column names of :meth:`table`: t, the states, the outputs' columns, energies."""
+        names = ["t", *self.state_names]
+        for name in self.outputs:
+            names += list(self.output_columns.get(name, [name]))
+        if self.energy is not None:
+            names += ["kinetic", "potential", "total"]
+        return names
+
+    def table(self) -> np.ndarray:
+        """One row per time: the columns of :meth:`columns`."""
+        parts = [self.t[:, None], self.y.T]
+        parts += [np.asarray(v).reshape(len(self.t), -1) for v in self.outputs.values()]
+        if self.energy is not None:
+            parts += [self.energy, self.energy.sum(axis=1, keepdims=True)]
+        return np.hstack(parts)
+
+    def to_csv(self, path) -> Path:
+        """Write :meth:`table` with a header line; floats round-trip exactly."""
+        path = Path(path)
+        with path.open("w", newline="") as fh:
+            writer = csv.writer(fh)
+            writer.writerow(self.columns())
+            for row in self.table():
+                writer.writerow([repr(float(v)) for v in row])
+        return path
+
+    def to_npz(self, path) -> Path:
+        """t, y, the state names, every output (``output:<name>``) and the energies."""
+        path = Path(path)
+        arrays = {"t": self.t, "y": self.y, "x": self.y.T,
+                  **{f"output:{k}": v for k, v in self.outputs.items()}}
+        if self.energy is not None:
+            arrays["energy"] = self.energy
+        np.savez(path, status=self.status, message=self.message,
+                 state_names=np.array(self.state_names), **arrays)
+        return path
+
+    def to_dataframe(self):
+        """A pandas DataFrame indexed by t with the columns of :meth:`columns` (needs pandas)."""
+        try:
+            import pandas
+        except ImportError as exc:   # optional dependency
+            raise ImportError("Result.to_dataframe needs pandas: pip install pandas") from exc
+        columns = self.columns()
+        return pandas.DataFrame(self.table()[:, 1:], index=pandas.Index(self.t, name="t"),
+                                columns=columns[1:])
+
+    def plot(self, path=None, *, title: str = "", conservative: Optional[bool] = None):
+        """A matplotlib Figure of the states, the outputs and the energy.
+
+        Never touches pyplot's global state or backend: the figure is a
+        ``matplotlib.figure.Figure``; with ``path`` it is also saved there.
+        """
+        from modelgen.sim.plots import result_figure
+        fig = result_figure(self, title=title, conservative=conservative)
+        if path is not None:
+            fig.savefig(path, dpi=110)
+        return fig
+
+    def __repr__(self) -> str:
+        """One line per field, as scipy prints an OdeResult (arrays by their shape)."""
+        shown = [f for f in _FIELDS if f != "energy" or self.energy is not None]
+        shown += ["state_names"] + (["outputs"] if self.outputs else [])
+        width = max(map(len, shown)) + 1
+        lines = []
+        for name in shown:
+            value = getattr(self, name)
+            if isinstance(value, np.ndarray):
+                text = f"array{value.shape}"
+            elif name == "outputs":
+                text = "{" + ", ".join(f"{k!r}: array{np.shape(v)}" for k, v in value.items()) + "}"
+            else:
+                text = repr(value)
+            lines.append(f"{name.rjust(width)}: {text}")
+        return "\n".join(lines)
+
+
+class DenseOutput:
+    """``sol(t)`` of a run: on each accepted step, the polynomial through the method's
+    own dense output sampled at 8 Chebyshev-Lobatto points of the step.
+
+    Degree 7 reproduces the continuous extensions of every method exactly
+    (dop853's is of degree 7, dopri5's 4, rodas's and the Hermite of the
+    fixed-step methods 3), so ``sol`` is as accurate as ``t_eval`` sampling.
+    ``sol(t)`` returns shape (n_states,) for a scalar t, else (n_states, len(t)).
+    """
+
+    #: interpolation nodes on [0, 1] and their barycentric weights
+    NODES = (1.0 - np.cos(np.pi * np.arange(8) / 7)) / 2
+    WEIGHTS = np.array([0.5, -1, 1, -1, 1, -1, 1, -0.5])
+
+    def __init__(self, t_steps: np.ndarray, values: np.ndarray):
+        self.t = np.asarray(t_steps, dtype=float)        # (n_steps + 1,)
+        self.values = np.asarray(values, dtype=float)    # (n_steps, 8, n_states)
+        self.t_min, self.t_max = float(self.t[0]), float(self.t[-1])
+
+    def __call__(self, t):
+        ts = np.atleast_1d(np.asarray(t, dtype=float))
+        k = np.clip(np.searchsorted(self.t, ts, side="right") - 1, 0, len(self.t) - 2)
+        h = self.t[k + 1] - self.t[k]
+        s = (ts - self.t[k]) / h
+        diff = s[:, None] - self.NODES[None, :]                  # (n_t, 8)
+        exact = diff == 0.0
+        with np.errstate(divide="ignore", invalid="ignore"):
+            c = self.WEIGHTS[None, :] / diff
+        c = np.where(exact.any(axis=1, keepdims=True), exact.astype(float), c)
+        c /= c.sum(axis=1, keepdims=True)
+        out = np.einsum("tj,tjn->nt", c, self.values[k])
+        return out[:, 0] if np.ndim(t) == 0 else out
+
+
+#: the fields of a result, as scipy's OdeResult has them (plus modelgen's own)
+_FIELDS = (*(name for name in Result.__dataclass_fields__
+             if name not in ("state_names", "outputs", "output_columns", "info")), "success")
+
+
+def make_result(**fields: Any) -> Result:
+    """A :class:`Result` from keyword fields (unknown keys go to ``info``)."""
+    known = Result.__dataclass_fields__
+    fields.pop("success", None)          # derived from status
+    info = {k: v for k, v in fields.items() if k not in known}
+    kwargs = {k: v for k, v in fields.items() if k in known}
+    kwargs.setdefault("info", {}).update(info)
+    return Result(**kwargs)
