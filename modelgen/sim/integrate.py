@@ -40,8 +40,8 @@ BUFFER_FULL = STATUS_BY_NAME["BUFFER_FULL"].code
 INTERRUPTED = STATUS_BY_NAME["INTERRUPTED"].code
 #: numpy's C long (the counters of the C API)
 _LONG = np.dtype("l")
-#: a fixed step count from here on does not fit the C integrator's counter
-_MAX_FIXED_STEPS = 4e18
+#: fixed step counts from here on do not fit the C integrator's counter (a C long)
+_MAX_FIXED_STEPS = float(np.iinfo(_LONG).max)
 
 
 class IntegrationResult(dict):
