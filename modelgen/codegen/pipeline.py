@@ -12,11 +12,13 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 from modelgen.version import __version__
-from modelgen.codegen.build import BuildResult, build_module, cached_build, compiler
+from modelgen.codegen.build import (BuildResult, build_module, cached_build, compiler,
+                                    integrator_hash)
 from modelgen.codegen.cse import make_routines
 from modelgen.derive.dynamics import Equations, derive_equations
 from modelgen.errors import ModelError
-from modelgen.codegen.emit import ABI_VERSION, emit_sources, print_routine, template_context, templates_digest
+from modelgen.codegen.emit import (ABI_VERSION, emit_sources, integrator_sources, print_routine,
+                                   template_context, templates_digest)
 from modelgen.derive.jacobian import derive_jacobian_terms
 from modelgen.derive.kinematics import derive_kinematics
 from modelgen.derive.outputs import derive_outputs
@@ -41,7 +43,8 @@ class Generated:
 
 
 def model_hash(spec: ModelSpec, outputs=(), jacobian: bool = False) -> str:
-    """Hash of what determines the generated C: the model, modelgen, the templates.
+    """Hash of what determines the model's generated C: the model, modelgen, the
+    model templates (not the integrators', which every model shares).
 
     The file the model came from and its line numbers are not part of it, so
     the same model gives the same C wherever it lies.
@@ -56,9 +59,11 @@ def model_hash(spec: ModelSpec, outputs=(), jacobian: bool = False) -> str:
 
 
 def build_hash(spec: ModelSpec, outputs=(), jacobian: bool = False) -> str:
-    """Cache key of the compiled module: the model hash, the compiler and its flags."""
+    """Cache key of the compiled module: the model hash, the compiler and its flags,
+    and the integrators it links (so a changed mg_integrate rebuilds every module)."""
     h = hashlib.sha256()
-    for part in (model_hash(spec, outputs, jacobian), " ".join(compiler()), os.environ.get("MODELGEN_CFLAGS", "")):
+    for part in (model_hash(spec, outputs, jacobian), " ".join(compiler()),
+                 os.environ.get("MODELGEN_CFLAGS", ""), integrator_hash(integrator_sources())):
         h.update(part.encode())
         h.update(b"\0")
     return h.hexdigest()
@@ -162,7 +167,7 @@ def generate(spec: ModelSpec, out_dir=None, *, force: bool = False, outputs=(),
                          "statements": f.statements} for f in functions.values()},
     }
     build = build_module(directory, spec.name, sources, dict(manifest, seconds=seconds),
-                         statements)
+                         statements, integrator_sources())
     seconds["compile"] = build.seconds
     manifest = dict(build.manifest, seconds=seconds)
     return Generated(build, manifest)
