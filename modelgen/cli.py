@@ -249,7 +249,7 @@ def build_parser() -> argparse.ArgumentParser:
                                    "unchanged model reuses the cached build.")
     g.add_argument("model", help="model YAML file")
     g.add_argument("-o", "--output", default=None,
-                   help="output directory (default: generated/<name>)")
+                   help="output directory (default: the per-user cache, see modelgen.codegen.pipeline.default_output)")
     g.add_argument("--force", action="store_true", help="rebuild even if cached")
     g.add_argument("--jacobian", action="store_true",
                    help="also generate <name>_jacobian, the symbolic d(xdot)/dx")
@@ -263,7 +263,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("model", help="scene YAML file (or model YAML file)")
     s.add_argument("-o", "--output", default="out", help="output directory (default: out)")
     s.add_argument("--build-dir", default=None,
-                   help="where the model is built (default: generated/<name>)")
+                   help="where the model is built (default: the per-user cache)")
     s.add_argument("--t-end", type=float, default=None,
                    help="final time [s] (default: the scene's, or 10 for a model)")
     s.add_argument("--dt", type=float, default=None,
@@ -320,7 +320,7 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--quick", action="store_true",
                    help="whole-decade tolerances, half-decade steps, 2 repeats")
     b.add_argument("--build-dir", default=None,
-                   help="where the model is built (default: generated/workprecision/<scene>)")
+                   help="where the model is built (default: the per-user cache)")
     b.add_argument("-v", "--verbose", action="store_true", help="report every run on stderr")
     b.set_defaults(func=_bench)
     return parser

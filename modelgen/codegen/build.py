@@ -81,8 +81,10 @@ def compile_flags(statements: int, part: int = 2) -> list:
 
 
 def cache_dir() -> Path:
-    """The per-user cache of compiled integrators: ``$MODELGEN_CACHE_DIR``, else
-    ``$XDG_CACHE_HOME/modelgen``, else ``~/.cache/modelgen``."""
+    """The per-user build cache: ``$MODELGEN_CACHE_DIR``, else
+    ``$XDG_CACHE_HOME/modelgen``, else ``~/.cache/modelgen``.  It holds the
+    compiled integrators (``integrators/``) and every model built without an
+    explicit output directory (``models/<name>/``)."""
     if os.environ.get("MODELGEN_CACHE_DIR"):
         return Path(os.environ["MODELGEN_CACHE_DIR"])
     if os.environ.get("XDG_CACHE_HOME"):

@@ -12,8 +12,8 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 from modelgen.version import __version__
-from modelgen.codegen.build import (BuildResult, build_module, cached_build, compiler,
-                                    integrator_hash)
+from modelgen.codegen.build import (BuildResult, build_module, cache_dir, cached_build,
+                                    compiler, integrator_hash)
 from modelgen.codegen.cse import make_routines
 from modelgen.derive.dynamics import Equations, derive_equations
 from modelgen.errors import ModelError
@@ -24,7 +24,11 @@ from modelgen.derive.kinematics import derive_kinematics
 from modelgen.derive.outputs import derive_outputs
 from modelgen.model.spec import ModelSpec
 
-DEFAULT_OUTPUT = Path("generated")
+def default_output(name: str) -> Path:
+    """Where a model is built when no output directory is given: the per-user cache
+    (``models/<name>`` under :func:`modelgen.codegen.build.cache_dir`), never the
+    current directory."""
+    return cache_dir() / "models" / name
 
 
 @dataclass(frozen=True)
@@ -105,7 +109,7 @@ def generate(spec: ModelSpec, out_dir=None, *, force: bool = False, outputs=(),
              jacobian: bool = False) -> Generated:
     """Generate, compile and cache the model; reuse an unchanged build.
 
-    ``out_dir`` defaults to ``generated/<name>``.  ``outputs`` (a tuple of
+    ``out_dir`` defaults to :func:`default_output` (the per-user cache).  ``outputs`` (a tuple of
     :class:`~modelgen.model.spec.OutputSpec`, from a scene) adds a
     ``<name>_outputs`` routine computing exactly those quantities.
     ``jacobian=True`` adds ``<name>_jacobian``, the symbolic d(xdot)/dx.
@@ -115,7 +119,7 @@ def generate(spec: ModelSpec, out_dir=None, *, force: bool = False, outputs=(),
     2
     """
     _check_generable(spec)
-    directory = Path(out_dir) if out_dir is not None else DEFAULT_OUTPUT / spec.name
+    directory = Path(out_dir) if out_dir is not None else default_output(spec.name)
     key = build_hash(spec, outputs, jacobian)
     if not force:
         hit = cached_build(directory, key)
