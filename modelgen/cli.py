@@ -22,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
+from modelgen.codegen.capi import STATUS_BY_NAME
 from modelgen.errors import (BuildError, ModelgenError, SimulationError, TemplateError)
 from modelgen.version import __version__
 
@@ -135,7 +136,7 @@ def _report(result, out: Path, name: str, args, title: str, conservative,
         print(f"modelgen: warning: {result.info['stability_warning']}", file=sys.stderr)
     if not result.success:
         print(f"modelgen: simulation stopped: {result.message}", file=sys.stderr)
-        return EXIT["simulation"]
+        return EXIT["interrupted" if result.status == INTERRUPTED else "simulation"]
     return 0
 
 
@@ -326,6 +327,8 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+#: the C integrators' status for a run stopped by Ctrl-C
+INTERRUPTED = STATUS_BY_NAME["INTERRUPTED"].code
 #: exit status of each outcome (documented in the module docstring and the README)
 EXIT = {"ok": 0, "internal": 1, "input": 2, "build": 3, "simulation": 4, "interrupted": 130}
 

@@ -23,14 +23,17 @@ its); :func:`c_constants` reads the same constants back from a compiled model.
 from __future__ import annotations
 
 import concurrent.futures
+import signal
+import threading
 
 import numpy as np
 
 from modelgen.codegen.capi import (ALIASES, LIMITS, MAX_EVENTS, METHODS, STAT_NAMES, STATUS,
                                    STATUS_BY_NAME, STOP_X, Method, define_values, work_size)
 from modelgen.errors import MassMatrixError, SimulationError
+from modelgen.sim.result import Result, make_result
 
-__all__ = ["METHODS", "ALIASES", "STATUS", "Method", "IntegrationResult", "method_of",
+__all__ = ["METHODS", "ALIASES", "STATUS", "Method", "method_of",
            "status_message", "jacobian", "jacobian_source", "simulate", "simulate_batch",
            "c_constants"]
 
@@ -42,35 +45,6 @@ INTERRUPTED = STATUS_BY_NAME["INTERRUPTED"].code
 _LONG = np.dtype("l")
 #: fixed step counts from here on do not fit the C integrator's counter (a C long)
 _MAX_FIXED_STEPS = float(np.iinfo(_LONG).max)
-
-
-class IntegrationResult(dict):
-    """The result of :func:`simulate`: a dict with attribute access, like scipy's OdeResult.
-
-    Fields: ``t`` (n_points,), ``y`` (n_states, n_points), ``sol`` (None),
-    ``t_events`` and ``y_events`` (one array per event function, or None),
-    ``nfev``, ``njev``, ``nlu``, ``naccept``, ``nreject``, ``nnewton``,
-    ``status`` (0 end reached, 1 terminal event, < 0 failure: see
-    :data:`STATUS`), ``message``, ``success``, ``method``, ``t_fail`` (time of
-    the failure, else None).
-    """
-
-    def __getattr__(self, name):
-        try:
-            return self[name]
-        except KeyError as exc:
-            raise AttributeError(name) from exc
-
-    __setattr__ = dict.__setitem__
-    __delattr__ = dict.__delitem__
-
-    def __dir__(self):
-        return list(self.keys())
-
-    def __repr__(self):
-        width = max(map(len, self.keys())) + 1 if self else 0
-        return "\n".join(f"{k.rjust(width)}: {v!r}" if not isinstance(v, np.ndarray) else
-                         f"{k.rjust(width)}: array{v.shape}" for k, v in self.items())
 
 
 def method_of(name: str) -> Method:
@@ -184,7 +158,8 @@ class _Inputs:
     ``u`` is None (zeros), a constant vector or dict, samples ``(times,
     values, "linear" | "hold")``, or a callable ``u(t, x)`` called from the C
     through a cffi callback (feedback; works with every method).  An exception
-    in the callable stops the integration and is re-raised.
+    in the callable stops the integration with status INPUT_ERROR; the
+    trajectory up to it is kept and the exception is named in the message.
     """
 
     def __init__(self, cm, u):
@@ -217,9 +192,9 @@ class _Inputs:
         self.struct.values = ffi.from_buffer("double[]", values)
         self.struct.hold = LIMITS["INPUT_HOLD" if hold else "INPUT_LINEAR"][0]
 
-    def raise_errors(self):
-        if self.errors:
-            raise self.errors[0]
+    def error(self):
+        """The first exception the callable raised, or None."""
+        return self.errors[0] if self.errors else None
 
 
 def _events(events):
@@ -285,7 +260,7 @@ def c_constants(cm) -> dict:
 
 def simulate(cm, x0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10, u=None,
              p=None, events=None, *, step=None, first_step=None, max_step=None,
-             max_steps=100_000, chunk=2048, interrupt=None) -> IntegrationResult:
+             max_steps=100_000, chunk=2048, interrupt=None) -> Result:
     """Integrate the compiled model ``cm`` in C from ``x0`` over ``t_span``.
 
     ``t_eval`` samples the solution through each method's dense output (the
@@ -330,7 +305,11 @@ def simulate(cm, x0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10
         def call_events(ctx, t, x_ptr, g_ptr):
             xs = np.frombuffer(ffi.buffer(x_ptr, 8 * nx), dtype=float).copy()
             for i, ev in enumerate(events):
-                g_ptr[i] = float(ev(t, xs))
+                value = float(ev(t, xs))
+                if not np.isfinite(value):   # a NaN never changes sign: it would never fire
+                    raise ValueError(f"event function {i} ({getattr(ev, '__name__', ev)!s}) "
+                                     f"returned {value!r}")
+                g_ptr[i] = value
             return 0
 
         def on_error(exc_type, exc_value, tb):
@@ -346,7 +325,8 @@ def simulate(cm, x0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10
         if not (isinstance(interrupt, np.ndarray) and interrupt.dtype == np.intc
                 and interrupt.size == 1 and interrupt.flags.writeable):
             raise SimulationError("interrupt must be a writable numpy intc array of one element")
-        opt.interrupt = ffi.from_buffer("int[]", interrupt)
+    flag = interrupt if interrupt is not None else np.zeros(1, dtype=np.intc)
+    opt.interrupt = ffi.from_buffer("int[]", flag)
 
     fn = getattr(cm.lib, f"{cm.name}_integrate")
     ptr = cm._ptr
@@ -379,10 +359,8 @@ def simulate(cm, x0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10
         out.which_events = ffi.from_buffer("int[]", which)
         opt.max_steps = steps_left
         opt.resume = ffi.NULL if resume is None else ptr(resume)
-        status = fn(t0, t1, ptr(x), ptr(p_vec), inputs.struct, opt, out, stats, ptr(work))
-        if errors:
-            raise errors[0]
-        inputs.raise_errors()
+        status = _interruptible(fn, (t0, t1, ptr(x), ptr(p_vec), inputs.struct, opt, out, stats,
+                                     ptr(work)), flag)
         rows, k = out.n, out.n_events
         skip = 1 if (times is None and t_parts) else 0   # a continuation repeats its start
         t_parts.append(t_out[skip:rows].copy())
@@ -409,32 +387,55 @@ def simulate(cm, x0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10
                 terminal[i] -= int(np.count_nonzero(ev_i[-1] == i))
         ev_capacity = min(ev_capacity * 2, 1 << 16)
 
-    t_all = np.concatenate(t_parts)
-    x_all = np.concatenate(x_parts).reshape(-1, nx)
-    res = IntegrationResult()
-    res.t = t_all
-    res.y = np.ascontiguousarray(x_all.T)
-    res.sol = None
-    if n_ev:
-        et, ex, ei = np.concatenate(ev_t), np.concatenate(ev_x).reshape(-1, nx), np.concatenate(ev_i)
-        res.t_events = [et[ei == i] for i in range(n_ev)]
-        res.y_events = [ex[ei == i] for i in range(n_ev)]
-    else:
-        res.t_events = None
-        res.y_events = None
-    for name in STAT_NAMES:
-        if name != "pivot":
-            res[name] = int(stats_total[name])
-    res.status = int(status)
     pivot = int(stats_total["pivot"])
-    res.t_fail = float(stop[2]) if status < 0 else None
-    res.message = status_message(
+    failure = errors[0] if errors else inputs.error()
+    message = status_message(
         int(status), t=float(stop[0]), h=float(stop[1]), t_fail=float(stop[2]),
         x=_vector_text(stop[STOP_X:]), pivot=pivot,
         coordinate=cm.coordinates[pivot - 1] if 0 < pivot <= cm.n else "?", max_steps=max_steps)
-    res.success = status >= 0
-    res.method = m.name
+    if failure is not None:
+        message = f"{message[:-1]}: {type(failure).__name__}: {failure}"
+    et, ex, ei = (np.concatenate(ev_t), np.concatenate(ev_x).reshape(-1, nx),
+                  np.concatenate(ev_i))
+    res = make_result(
+        t=np.concatenate(t_parts), y=np.ascontiguousarray(np.concatenate(x_parts)
+                                                          .reshape(-1, nx).T),
+        state_names=cm.state_names, status=int(status), message=message, method=m.name,
+        t_events=[et[ei == i] for i in range(n_ev)] if n_ev else None,
+        y_events=[ex[ei == i] for i in range(n_ev)] if n_ev else None,
+        t_fail=float(stop[2]) if status < 0 else None,
+        **{name: int(stats_total[name]) for name in STAT_NAMES if name != "pivot"})
+    if failure is not None:
+        res.info["exception"] = failure
     return res
+
+
+def _interruptible(fn, args, flag):
+    """``fn(*args)``, a C integration loop that polls ``flag``, stopped by Ctrl-C.
+
+    In the main thread, with Python's default SIGINT handler in place, the C
+    call runs in a worker thread while the main thread waits in short joins;
+    Ctrl-C then sets ``flag`` (the C returns INTERRUPTED within a step and the
+    trajectory so far is kept) instead of raising KeyboardInterrupt after the
+    whole run.  Elsewhere (another thread, a custom handler) it is a plain call.
+    """
+    if (threading.current_thread() is not threading.main_thread()
+            or signal.getsignal(signal.SIGINT) is not signal.default_int_handler):
+        return fn(*args)
+    box = []
+
+    def on_sigint(signum, frame):
+        flag[0] = 1
+
+    worker = threading.Thread(target=lambda: box.append(fn(*args)), daemon=True)
+    previous = signal.signal(signal.SIGINT, on_sigint)
+    try:
+        worker.start()
+        while worker.is_alive():
+            worker.join(0.05)
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    return box[0]
 
 
 # -- batches ---------------------------------------------------------------------------
@@ -467,7 +468,7 @@ def _parameter_rows(cm, P, n_runs):
 
 def simulate_batch(cm, X0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10,
                    u=None, P=None, *, step=None, first_step=None, max_step=None,
-                   max_steps=100_000, threads=1) -> IntegrationResult:
+                   max_steps=100_000, threads=1) -> Result:
     """Integrate many initial states (rows of ``X0``), each with its own parameters.
 
     One C call loops over the runs (``threads`` > 1 splits them between Python
@@ -520,15 +521,8 @@ def simulate_batch(cm, X0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol
     else:
         with concurrent.futures.ThreadPoolExecutor(threads) as pool:
             list(pool.map(run, bounds[:-1], bounds[1:]))
-    inputs.raise_errors()
-
     for r in range(n_runs):    # rows after a failure stay NaN
         x_out[r, n_out[r]:] = np.nan
-    res = IntegrationResult()
-    res.t = times
-    res.y = np.ascontiguousarray(x_out.transpose(0, 2, 1))
-    res.status = status.astype(int)
-    res.success = status >= 0
     messages = []
     for r in range(n_runs):
         pivot = int(stats[r].pivot)
@@ -537,9 +531,11 @@ def simulate_batch(cm, X0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol
             x=_vector_text(stop[r, STOP_X:]), pivot=pivot,
             coordinate=cm.coordinates[pivot - 1] if 0 < pivot <= cm.n else "?",
             max_steps=max_steps))
-    res.message = messages
-    for name in STAT_NAMES:
-        if name != "pivot":
-            res[name] = np.array([getattr(stats[r], name) for r in range(n_runs)], dtype=_LONG)
-    res.method = m.name
+    res = make_result(
+        t=times, y=np.ascontiguousarray(x_out.transpose(0, 2, 1)), state_names=cm.state_names,
+        status=status.astype(int), message=messages, method=m.name,
+        **{name: np.array([getattr(stats[r], name) for r in range(n_runs)], dtype=_LONG)
+           for name in STAT_NAMES if name != "pivot"})
+    if inputs.error() is not None:
+        res.info["exception"] = inputs.error()
     return res

@@ -16,7 +16,7 @@ import numpy as np
 from modelgen.codegen.emit import ABI_VERSION
 from modelgen.errors import DerivationError, MassMatrixError, ModelgenError, SimulationError
 from modelgen.sim import integrate
-from modelgen.sim.result import DenseOutput, Result, make_result
+from modelgen.sim.result import DenseOutput, Result
 
 
 def _import(module_name: str, path: Path):
@@ -295,15 +295,14 @@ class CompiledModel:
         def run(times):
             return integrate.simulate(self, x0, t_span, times, method, rtol, atol, u, p,
                                       events, **options)
-        res = make_result(state_names=self.state_names, **run(t_eval))
+        res = run(t_eval)
         if step is not None:
             warning = self.stability_warning(method, step, t_span[0], x0, u, p)
             if warning:
                 res.message = f"{res.message} WARNING: {warning}"
                 res.info["stability_warning"] = warning
         if dense_output:
-            steps = res if t_eval is None else make_result(state_names=self.state_names,
-                                                           **run(None))
+            steps = res if t_eval is None else run(None)
             res.sol = self._dense(steps, run)
         if outputs and self.output_columns:
             self._record_outputs(res, u, p)
@@ -324,7 +323,7 @@ class CompiledModel:
         nx = ys.shape[0]
         values = np.empty((len(ts) - 1, len(DenseOutput.NODES), nx))
         values[:, 0], values[:, -1] = ys[:, :-1].T, ys[:, 1:].T
-        got = np.asarray(sampled["y"]).T.reshape(-1, nx)
+        got = np.asarray(sampled.y).T.reshape(-1, nx)
         if got.shape[0] != times.size:      # the second run stopped early: no sol
             return None
         values[:, 1:-1] = got.reshape(len(ts) - 1, len(inner), nx)
@@ -377,9 +376,8 @@ class CompiledModel:
         >>> res.y.shape                                                           # doctest: +SKIP
         (2, 4, 1)
         """
-        raw = integrate.simulate_batch(self, X0, t_span, t_eval, method, rtol, atol, u, P,
-                                       **options)
-        return make_result(state_names=self.state_names, **raw)
+        return integrate.simulate_batch(self, X0, t_span, t_eval, method, rtol, atol, u, P,
+                                        **options)
 
     def jac(self, t, x, u=None, p=None) -> np.ndarray:
         """d xdot / d x at (t, x), shape (2n, 2n), for ``solve_ivp(..., jac=cm.jac)``.
