@@ -7,8 +7,8 @@ import pytest
 import sympy
 
 from modelgen.errors import ExpressionError
-from modelgen.model.expr import (FUNCTIONS, MAX_DEPTH, MAX_LENGTH, ExpressionParseError,
-                           format_expression, parse_expression)
+from modelgen.model.expr import (FUNCTIONS, MAX_DEPTH, MAX_LENGTH, MAX_NUMBER_CHARS,
+                                 ExpressionParseError, format_expression, parse_expression)
 from modelgen.model.spec import TIME, symbol
 
 x, y, z, m, l = (symbol(n) for n in ("x", "y", "z", "m", "l"))
@@ -253,7 +253,9 @@ def test_power_towers_are_refused_before_computing_them():
 
 
 def test_huge_number_literals_are_refused():
-    assert message("9" * 101).startswith("number literal is 101 characters long at column 1")
+    too_long = MAX_NUMBER_CHARS + 1
+    assert message("9" * too_long).startswith(
+        f"number literal is {too_long} characters long at column 1")
     assert message("1e401") == ("exponent of '1e401' is out of range at column 1 of '1e401'; "
                                 "use exponents between -400 and 400")
 
