@@ -30,12 +30,32 @@ gives ``2*x`` and ``(x + y)/2`` gives ``x/2 + y/2``.  One visible
 consequence of building products in one call: ``2*(x + y)*z`` stays
 ``2*z*(x + y)`` (Python's pairwise ``*`` would give ``z*(2*x + 2*y)``).
 
-Hostile input is bounded: at most :data:`MAX_LENGTH` characters, nesting
-depth :data:`MAX_DEPTH`, number literals of at most :data:`MAX_NUMBER_CHARS`
-characters with exponents up to :data:`MAX_EXPONENT`, and exact powers of
-numbers whose result would exceed :data:`MAX_POWER_BITS` bits are refused.
-Results that are not finite and real (``1/0``, ``log(0)``, ``sqrt(-1)``)
-are refused too.
+Limits (model files are untrusted input; every limit is checked while
+parsing, before sympy evaluates anything expensive, and a violation is an
+:class:`ExpressionParseError`, which the loader reports with file, line and key):
+
+* text: at most :data:`MAX_LENGTH` characters, ASCII only (``x²``, ``١`` and
+  other non-ASCII characters are refused by name);
+* nesting depth (parentheses, signs, powers, function calls, operands) at most
+  :data:`MAX_DEPTH`;
+* number literals: at most :data:`MAX_NUMBER_CHARS` characters, decimal
+  exponents from -:data:`MAX_EXPONENT` to :data:`MAX_EXPONENT` (``1e-400`` to
+  ``1e400``); the same holds for the numerator and denominator of every
+  number in the result, and for YAML numbers;
+* values: every number and every constant subexpression (``sqrt(2)``,
+  ``sin(1)``, ``2**(1/3)``) must be a finite real double: at most about
+  1.8e308 in magnitude, not so small that it becomes 0 (subnormals down to
+  5e-324 are fine), not complex (``(-1)**(1/3)``, ``acos(2)``) and not
+  undefined (``1/0``, ``log(0)``).  Constants are evaluated in double
+  precision before sympy sees them, so ``tanh(tan(sinh(1e99)))`` is refused
+  at once (sinh overflows) instead of sending sympy into an unbounded search.
+  Intermediate exact values may exceed the double range (``1e400/1e300`` is
+  ``1e100``);
+* exact powers: sympy computes powers of the numbers in a base exactly (also
+  in ``(2*x)**(10**9)``), so such a power may need at most
+  :data:`MAX_POWER_BITS` bits;
+* a constant argument of sin, cos or tan is at most
+  :data:`MAX_PERIODIC_ARGUMENT` in magnitude.
 
 :func:`format_expression` writes a sympy expression back in this grammar, so
 that ``parse_expression(format_expression(e), allowed) == e``.  To make that
@@ -67,7 +87,7 @@ __all__ = [
 #: Longest expression text accepted, in characters.
 MAX_LENGTH = 10_000
 #: Deepest nesting accepted (parentheses, unary signs, powers, calls, operands).
-MAX_DEPTH = 60
+MAX_DEPTH = 32
 #: Longest number literal accepted, in characters (also the most digits of the
 #: numerator or denominator of a number in a parsed expression).
 MAX_NUMBER_CHARS = 400
@@ -834,9 +854,9 @@ def _fmt_mul(e) -> tuple:
     numerator, denominator = [], []
     if coefficient.is_Rational:
         if coefficient.p != 1:
-            numerator.append((str(coefficient.p), _PREC_ATOM))
+            numerator.append((_fmt_integer(coefficient.p), _PREC_ATOM))
         if coefficient.q != 1:
-            denominator.append((str(coefficient.q), _PREC_ATOM))
+            denominator.append((_fmt_integer(coefficient.q), _PREC_ATOM))
     elif coefficient != 1:  # a Float coefficient
         numerator.append(_fmt(coefficient))
     for factor in factors:
