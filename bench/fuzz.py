@@ -177,7 +177,7 @@ def main(argv=None) -> int:
         label = {"clean": "clean error", "after_validation": "  refused after validation",
                  "build_error": "BUILD ERROR (compiler refused)", "other": "OTHER EXCEPTION",
                  "hang": "HANG", "crash": "CRASH"}[kind]
-        print(f"{label + ': ' + site:58} {k:7d}"[:80])
+        print(f"{(label + ': ' + site)[:58]:58} {k:7d}")
     print(f"{'other exceptions (not ModelgenError)':58} {counts['other']:7d}")
     print(f"{'hangs (> %g s)' % args.hang:58} {counts['hang']:7d}")
     print(f"{'crashes':58} {counts['crash']:7d}")

@@ -136,3 +136,11 @@ def test_description_cannot_change_the_meaning_of_the_c(tmp_path, ending):
     spec = parse_model(_slider("q", description="trailing " + ending))
     cm = modelgen.load(spec, tmp_path / "desc")   # model parts compile with -Werror
     assert cm.mass_matrix([0.0])[0, 0] == pytest.approx(2.0)
+
+
+def test_constants_whose_products_overflow_are_refused_before_the_compiler(tmp_path):
+    # 1e200 is a double, but the mass matrix holds m*(1e200)**2
+    spec = parse_model(_slider("1e200*q"))
+    with pytest.raises(DerivationError, match="about 1e400 in routine mass_matrix is beyond the "
+                                              "range of a double"):
+        modelgen.load(spec, tmp_path / "overflow")

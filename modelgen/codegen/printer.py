@@ -66,8 +66,12 @@ class ModelPrinter(C99CodePrinter):
         except OverflowError:
             value = math.inf
         if not math.isfinite(value):
-            raise DerivationError(f"the number {_shorten(str(expr))} is beyond the range "
-                                  f"of a double (routine {self.routine or '?'})")
+            magnitude = round(math.log10(abs(expr.p)) - math.log10(expr.q))
+            where = f" in routine {self.routine}" if self.routine else ""
+            raise DerivationError(
+                f"a constant of about 1e{magnitude}{where} is beyond the range of a double: "
+                "the model's constants are in range but their products (e.g. a mass times "
+                "a length squared) are not; use units that keep constants near 1")
         return repr(value)
 
     def _print_Symbol(self, expr):

@@ -482,17 +482,9 @@ _MATH = {
     "sin": math.sin, "cos": math.cos, "tan": math.tan, "asin": math.asin,
     "acos": math.acos, "atan": math.atan, "atan2": math.atan2, "sinh": math.sinh,
     "cosh": math.cosh, "tanh": math.tanh, "exp": math.exp, "sqrt": math.sqrt,
-    "abs": abs, "sign": lambda v: float((v > 0) - (v < 0)), "**": math.pow,
+    "log": math.log, "abs": abs, "sign": lambda v: float((v > 0) - (v < 0)),
+    "**": math.pow,
 }
-
-
-def _log(value: float) -> float:
-    if value <= 0:
-        raise ValueError("log of a non-positive number")
-    return math.log(value)
-
-
-_MATH["log"] = _log
 
 
 class _NotADouble(Exception):
@@ -517,16 +509,15 @@ def _float_call(name: str, values) -> Optional[float]:
 
 def _rational_float(e) -> float:
     """The double nearest to a sympy Rational, or _NotADouble."""
-    shown = _fmt(e)[0]
     try:
         value = e.p / e.q
     except OverflowError:
         value = math.inf
     if abs(value) > _DOUBLE_MAX:
-        raise _NotADouble(f"the number {_shorten(shown)} is beyond the range of a double",
+        raise _NotADouble(f"the number {_shorten(_fmt(e)[0])} is beyond the range of a double",
                           "use numbers of magnitude at most 1.7e308")
     if value == 0 and e.p != 0:
-        raise _NotADouble(f"the number {_shorten(shown)} is too small for a double (it "
+        raise _NotADouble(f"the number {_shorten(_fmt(e)[0])} is too small for a double (it "
                           "would be 0)", "use numbers of magnitude at least 5e-324, or 0")
     return value
 
