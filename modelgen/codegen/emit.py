@@ -157,7 +157,7 @@ def print_routine(routine: Routine, outputs_c: dict) -> CFunction:
             work += 1
         else:
             slots[sym] = f"v{i}"
-    printer = ModelPrinter(slots)
+    printer = ModelPrinter(slots, routine.name)
 
     parts = [[] for _ in range(n_parts)]
     for i, (sym, expr) in enumerate(statements):
@@ -223,8 +223,25 @@ def unrolled_ldlt(n: int, tol: str) -> list:
 
 
 def _comment_safe(text: str) -> str:
-    """Text that cannot close or nest a C comment, nor smuggle a line break."""
-    return "".join(ch if ch.isprintable() else " " for ch in text).replace("*/", "* /").replace("/*", "/ *")
+    r"""Text that cannot close or nest a C comment, nor smuggle a line break.
+
+    Non-printable characters become spaces; ``*/`` and ``/*`` are split; ``??``
+    is split so that no trigraph (``??/`` is a backslash in C99) survives; a
+    trailing backslash, which would splice the comment with the next line, is
+    followed by a full stop.
+
+    >>> _comment_safe("ends in ??/")
+    'ends in ? ?/'
+    >>> _comment_safe("a */ b\\")
+    'a * / b\\.'
+    """
+    text = "".join(ch if ch.isprintable() else " " for ch in text)
+    text = text.replace("*/", "* /").replace("/*", "/ *")
+    while "??" in text:
+        text = text.replace("??", "? ?")
+    if text.rstrip().endswith("\\"):
+        text = text.rstrip() + "."
+    return text
 
 
 def template_context(*, name: str, description: str, model_hash: str, n: int,
