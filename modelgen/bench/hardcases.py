@@ -277,7 +277,7 @@ def energy_long_run(ctx: Context) -> CaseResult:
     for dopri5."""
     cm = ctx.model(hm.DOUBLE_PENDULUM)
     t1 = 1e3 if ctx.quick else 1e4
-    x0 = np.array([1.0, 0.5, 0.0, 0.0])
+    x0 = np.array([-1.07, 0.3, 0.0, 0.0])    # 0.5 rad from hanging: regular motion
     E0 = float(np.sum(cm.energy(x0[:2], x0[2:])))
     t = np.linspace(0.0, t1, 401)
     series, figures, ok = [], [], True
@@ -285,19 +285,24 @@ def energy_long_run(ctx: Context) -> CaseResult:
                          ("dopri5", {"rtol": 1e-6, "atol": 1e-8})):
         res = cm.simulate(x0, (0.0, t1), t_eval=t, method=method, max_steps=10 ** 7, **opts)
         dE = np.abs(np.sum(cm.energies(res), axis=1) - E0) / abs(E0)
-        n = len(dE)
-        early, late = np.max(dE[1:n // 10 + 1]), np.max(dE[n // 2:]) if n > 2 else math.nan
-        figures.append(f"{method} {late:.1e} (late/early {late / early:.2g})")
+        # mean |dE| late in the run against early: about 1 when bounded, about
+        # 0.95 / 0.15 = 6 for a drift linear in t
+        early = np.mean(dE[(res.t >= t1 / 10) & (res.t <= t1 / 5)])
+        late = np.mean(dE[res.t >= 0.9 * t1])
+        ratio = float(late / early)
+        figures.append(f"{method}: max {np.max(dE):.1e}, late/early {ratio:.2f}")
         series.append((method, res.t[1:], np.maximum(dE[1:], 1e-17)))
         if method == "dopri5":
-            ok &= bool(res.success and late / early > 3.0)
+            ok &= bool(res.success and ratio > 3.0)
         else:
-            ok &= bool(res.success and late / early < 3.0 and late < 1e-2)
+            ok &= bool(res.success and ratio < 2.0 and np.max(dE) < 1e-2)
     return CaseResult(
-        "energy_long_run", f"double pendulum from (1, 0.5) rad over {t1:.0e} s: gauss4 "
+        "energy_long_run", f"double pendulum 0.5 rad from hanging (q = (-1.07, 0.3)) over "
+        f"{t1:.0e} s: gauss4 "
         "h = 0.01, midpoint h = 0.005, dopri5 rtol 1e-6",
         f"energy conservation (E0 = {E0:.6g} J)",
-        "gauss4/midpoint: late/early |dE| < 3 and < 1e-2; dopri5: late/early > 3 (secular)",
+        "mean |dE| over [0.9, 1] T / over [0.1, 0.2] T: gauss4, midpoint < 2 (bounded) "
+        "and |dE| < 1e-2; dopri5 > 3 (secular)",
         "; ".join(figures), ok,
         curves=(Curve("energy error over a long run", "t (s)", "|E - E0| / |E0|",
                       tuple(series)),))
@@ -405,7 +410,7 @@ def fixed_step_implicit(ctx: Context) -> CaseResult:
     solve: no failure over the run, and the error over the first 2 s against dop853."""
     cm = ctx.model(hm.DOUBLE_PENDULUM)
     x0 = np.array([2.0, 1.0, 0.0, 0.0])
-    t1 = 60.0 if ctx.quick else 600.0
+    t1 = 30.0 if ctx.quick else 150.0
     t_chk = np.linspace(0.0, 2.0, 21)
     ref = cm.simulate(x0, (0.0, 2.0), t_eval=t_chk, method="dop853", rtol=1e-13,
                       atol=1e-13).y

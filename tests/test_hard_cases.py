@@ -1,0 +1,69 @@
+"""The hard-case suite (modelgen/bench/hardcases.py): a fast subset in CI, and the defects it found.
+
+The full suite is the benchmark script ``bench/hard_cases.py``; here every
+case runs in its quick form except the slow ones (the 1e6-step singular run,
+the 100-link chain), and each defect the suite found has a test of its own.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from modelgen.bench import hardcase_models as hm
+from modelgen.bench.hardcases import CASES, Context, markdown, run_cases
+
+
+@pytest.fixture(scope="module")
+def ctx(tmp_path_factory):
+    return Context(tmp_path_factory.mktemp("hard_cases"), quick=True)
+
+
+@pytest.mark.parametrize("name", ["pendulum_near_top", "lagrange_top_separatrix",
+                                  "sleeping_top", "stiff_springs", "mass_ratios",
+                                  "singular_at_start", "singular_everywhere",
+                                  "energy_long_run", "friction_stop", "tennis_racket",
+                                  "fixed_step_implicit", "rk4_beyond_stability"])
+def test_quick_hard_case_passes(ctx, name):
+    result = CASES[name](ctx)
+    assert result.passed, f"{name}: {result.figure} ({result.note})"
+
+
+def test_closed_forms_match_the_notes():
+    # DYNAMICS-NOTES: T(90 deg) = 2.367841947576237 s, T(179 deg) = 7.825796837537810 s
+    assert hm.pendulum_period(math.pi / 2) == pytest.approx(2.367841947576237, rel=1e-14)
+    assert hm.pendulum_period(math.radians(179)) == pytest.approx(7.825796837537810, rel=1e-13)
+    gamma, _ = hm.separatrix_start()
+    assert hm.separatrix_cos_theta(hm.separatrix_time_to(0.3, gamma), gamma) == \
+        pytest.approx(math.cos(0.3), rel=1e-14)
+
+
+def test_flip_period_against_eulers_equations():
+    from scipy.integrate import solve_ivp
+    I = np.array([1.0, 2.0, 3.0])
+
+    def euler(t, w):
+        return [(I[1] - I[2]) * w[1] * w[2] / I[0], (I[2] - I[0]) * w[2] * w[0] / I[1],
+                (I[0] - I[1]) * w[0] * w[1] / I[2]]
+    for w0 in ([0.05, 1.0, 0.0], [0.0, 1.0, 0.05]):      # M^2 < 2EI2 and M^2 > 2EI2
+        T = hm.flip_period(*I, w0)
+        ev = lambda t, w: w[1]                            # noqa: E731
+        sol = solve_ivp(euler, (0, 4.5 * T), w0, rtol=1e-12, atol=1e-12, events=ev)
+        assert np.diff(sol.t_events[0]) == pytest.approx(T, rel=1e-7)
+
+
+def test_table_names_every_case_with_its_verdict(ctx):
+    results = run_cases(["singular_at_start"], quick=True, build_root=ctx.build_root)
+    table = markdown(results)
+    assert "`singular_at_start`" in table and "**pass**" in table
+
+
+def test_gauss4_keeps_a_newton_iteration_that_converges(ctx):
+    """Defect 2: the second correction slightly larger than the first (then a rate
+    about 0.05) made gauss4 give up: status -5 at t = 2.45 with h = 0.05."""
+    cm = ctx.model(hm.DOUBLE_PENDULUM)
+    for method, step in (("gauss4", 0.05), ("gauss4", 0.03), ("midpoint", 0.01)):
+        res = cm.simulate([2.0, 1.0, 0.0, 0.0], (0.0, 30.0), method=method, step=step)
+        assert res.status == 0, (method, step, res.message)
+        assert np.all(np.isfinite(res.y))
