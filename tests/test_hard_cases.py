@@ -13,6 +13,7 @@ import pytest
 
 from modelgen.bench import hardcase_models as hm
 from modelgen.bench.hardcases import CASES, Context, markdown, run_cases
+from modelgen.errors import MassMatrixError
 
 
 @pytest.fixture(scope="module")
@@ -67,3 +68,28 @@ def test_gauss4_keeps_a_newton_iteration_that_converges(ctx):
         res = cm.simulate([2.0, 1.0, 0.0, 0.0], (0.0, 30.0), method=method, step=step)
         assert res.status == 0, (method, step, res.message)
         assert np.all(np.isfinite(res.y))
+
+
+def test_tiny_mass_ratio_is_solved_not_refused(ctx):
+    """Defect 3: A_jj <= 1e-13 max A_ii refused m2/m1 = 1e-15, whose q'' is well defined."""
+    cm = ctx.model(hm.DOUBLE_PENDULUM)
+    x = np.array([0.3, -0.7, 0.5, 1.1])
+    p = {"m2": 1e-15, "J2": 1e-15 / 12}
+    ref = hm.double_pendulum_qdd(x[:2], x[2:], 1.0, p["m2"], 1.0, 1.0, 1 / 12, p["J2"])
+    assert cm.rhs(0.0, x, p=p)[2:] == pytest.approx(ref, rel=1e-12)
+    res = cm.simulate(x, (0.0, 1.0), p=p)
+    assert res.status == 0, res.message
+
+
+def test_singular_and_indefinite_mass_matrices_are_worded_apart(ctx):
+    """Defect 3: the top below theta ~ 3e-7 is singular to working precision, not
+    'not positive definite'; a negative inertia is not positive definite."""
+    top = ctx.model(hm.HEAVY_TOP)
+    x = [0.0, 1e-7, 0.0, 0.0, 0.0, 50.0]
+    with pytest.raises(MassMatrixError, match="mass matrix singular to working precision"):
+        top.rhs(0.0, x)
+    assert top.simulate(x, (0.0, 1.0)).message.startswith(
+        "Mass matrix singular to working precision at t=0.0: Cholesky pivot 3 (coordinate 'psi')")
+    dp = ctx.model(hm.DOUBLE_PENDULUM)
+    with pytest.raises(MassMatrixError, match="mass matrix not positive definite"):
+        dp.rhs(0.0, [0.3, -0.7, 0.0, 0.0], p={"J1": -1.0})

@@ -24,6 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from modelgen.errors import MassMatrixError, SimulationError
+from modelgen.sim.conditioning import failure_kind
 
 
 @dataclass(frozen=True)
@@ -50,7 +51,7 @@ ALIASES = {"rodas4": "rodas", "implicit_midpoint": "midpoint", "gauss_legendre4"
 
 #: C status code -> (name of the C constant {NAME}_ODE_<name>, message template).
 #: The templates are formatted with t (reached), h (step size), t_fail, x,
-#: pivot, coordinate and max_steps.
+#: pivot, coordinate, kind (of a mass matrix failure) and max_steps.
 STATUS = {
     0: ("SUCCESS", "The solver successfully reached the end of the integration interval."),
     1: ("EVENT", "A termination event occurred."),
@@ -58,7 +59,7 @@ STATUS = {
     -1: ("MAX_STEPS", "Maximum number of steps ({max_steps}) reached at t={t!r}."),
     -2: ("STEP_UNDERFLOW", "Step size underflow at t={t!r}: the step {h:.3g} s is too small "
                            "to advance t in double precision."),
-    -3: ("MASS_MATRIX", "Mass matrix not positive definite at t={t_fail!r}: Cholesky pivot "
+    -3: ("MASS_MATRIX", "Mass matrix {kind} at t={t_fail!r}: Cholesky pivot "
                         "{pivot} (coordinate {coordinate!r}) failed; last good state at "
                         "t={t!r}: x={x}."),
     -4: ("NON_FINITE", "NaN or Inf in the state at t={t_fail!r}; last finite state at "
@@ -156,7 +157,8 @@ def jacobian(cm, t, x, u=None, p=None) -> np.ndarray:
     status = fn(float(t), cm._ptr(x), cm._ptr(cm.input_vector(u)), cm._ptr(cm.params(p)),
                 cm._ptr(out))
     if status:
-        raise MassMatrixError(status, cm.coordinates[status - 1], t, x)
+        raise MassMatrixError(status, cm.coordinates[status - 1], t, x,
+                              failure_kind(cm.mass_matrix(x[:cm.n], p), status - 1))
     return out
 
 
@@ -281,6 +283,7 @@ def simulate(cm, x0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10
     x = cm._vector(x0, nx, "x0").copy()
     if not np.all(np.isfinite(x)):
         raise SimulationError(f"{cm.name}: x0 must be finite")
+    x_start = x.copy()
     times = None if t_eval is None else _times(t_eval, t0, t1)
     u_times, u_values, hold = _inputs(cm, u)
     p_vec = cm.params(p).copy()
@@ -382,10 +385,22 @@ def simulate(cm, x0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10
     res.message = status_message(
         int(status), t=float(stop[0]), h=float(stop[1]), t_fail=float(stop[2]),
         x=_vector_text(stop[STOP_X:]), pivot=pivot,
-        coordinate=cm.coordinates[pivot - 1] if 0 < pivot <= cm.n else "?", max_steps=max_steps)
+        coordinate=cm.coordinates[pivot - 1] if 0 < pivot <= cm.n else "?", max_steps=max_steps,
+        kind=_mass_matrix_kind(cm, status, pivot, p_vec, x_start, res.naccept == 0))
     res.success = status >= 0
     res.method = m.name
     return res
+
+
+def _mass_matrix_kind(cm, status, pivot, p_vec, x_start, at_start) -> str:
+    """How the mass matrix failed: classified exactly at the start; later in a run A
+    was positive definite at the last accepted state and is continuous in q, so a
+    failing pivot is A becoming singular to working precision."""
+    if status != -3 or not 0 < pivot <= cm.n:
+        return "not positive definite"
+    if at_start:
+        return failure_kind(cm.mass_matrix(x_start[:cm.n], p_vec), pivot - 1)
+    return "singular to working precision"
 
 
 # -- batches ---------------------------------------------------------------------------
@@ -485,7 +500,9 @@ def simulate_batch(cm, X0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol
             int(status[r]), t=float(stop[r, 0]), h=float(stop[r, 1]), t_fail=float(stop[r, 2]),
             x=_vector_text(stop[r, STOP_X:]), pivot=pivot,
             coordinate=cm.coordinates[pivot - 1] if 0 < pivot <= cm.n else "?",
-            max_steps=max_steps))
+            max_steps=max_steps,
+            kind=_mass_matrix_kind(cm, int(status[r]), pivot,
+                                   P_rows[r] if p_stride else P_rows, X0[r], stats[r, 0] == 0)))
     res.message = messages
     for i, name in enumerate(STATS):
         if name != "pivot":
