@@ -56,6 +56,22 @@ def failing_pivot(A, tol: float = PIVOT_TOL):
     return None
 
 
+def negligible_diagonal(A, tol: float = PIVOT_TOL):
+    """0-based index of the first diagonal entry ``A_jj <= tol * max_i A_ii``, or None.
+
+    Not a run-time test (a mass ratio of 1e-15 is well defined): the load-time
+    check of a mass matrix singular by construction uses it, because a
+    coordinate that moves no mass leaves a diagonal that is zero only up to
+    rounding, which the pivot test alone can let through.
+    """
+    diag = np.diag(np.asarray(A, dtype=float))
+    largest = max(float(np.max(diag)), 0.0)
+    for j, a in enumerate(diag):
+        if not a > tol * largest:
+            return j
+    return None
+
+
 def failure_kind(A, pivot: int, tol: float = PIVOT_TOL) -> str:
     """Why pivot ``pivot`` (0-based) of A fails: 'singular to working precision'
     (|d_j| <= tol A_jj) or 'not positive definite' (below that, or NaN)."""
