@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from modelgen.errors import MassMatrixError, SimulationError
-from modelgen.sim.conditioning import failure_kind
+from modelgen.sim.conditioning import condition_number, failure_kind, growth_note
 
 
 @dataclass(frozen=True)
@@ -387,6 +387,8 @@ def simulate(cm, x0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10
         x=_vector_text(stop[STOP_X:]), pivot=pivot,
         coordinate=cm.coordinates[pivot - 1] if 0 < pivot <= cm.n else "?", max_steps=max_steps,
         kind=_mass_matrix_kind(cm, status, pivot, p_vec, x_start, res.naccept == 0))
+    if status < 0:
+        res.message += _conditioning_note(cm, p_vec, x_start, stop[STOP_X:])
     res.success = status >= 0
     res.method = m.name
     return res
@@ -401,6 +403,15 @@ def _mass_matrix_kind(cm, status, pivot, p_vec, x_start, at_start) -> str:
     if at_start:
         return failure_kind(cm.mass_matrix(x_start[:cm.n], p_vec), pivot - 1)
     return "singular to working precision"
+
+
+def _conditioning_note(cm, p_vec, x_start, x_last) -> str:
+    """Why a run failed when A's condition number grew by orders of magnitude between
+    its start and its last good state (a singular configuration ahead), else ''."""
+    if not (np.all(np.isfinite(x_start)) and np.all(np.isfinite(x_last))):
+        return ""
+    return growth_note(condition_number(cm.mass_matrix(x_start[:cm.n], p_vec)),
+                       condition_number(cm.mass_matrix(x_last[:cm.n], p_vec)))
 
 
 # -- batches ---------------------------------------------------------------------------
@@ -503,6 +514,9 @@ def simulate_batch(cm, X0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol
             max_steps=max_steps,
             kind=_mass_matrix_kind(cm, int(status[r]), pivot,
                                    P_rows[r] if p_stride else P_rows, X0[r], stats[r, 0] == 0)))
+        if status[r] < 0:
+            messages[-1] += _conditioning_note(cm, P_rows[r] if p_stride else P_rows, X0[r],
+                                               stop[r, STOP_X:])
     res.message = messages
     for i, name in enumerate(STATS):
         if name != "pivot":
