@@ -108,3 +108,13 @@ def test_a_run_failing_near_a_singular_configuration_says_so(ctx):
     dp = ctx.model(hm.DOUBLE_PENDULUM)
     res = dp.simulate([0.5, 0.3, 0.0, 0.0], (0.0, 10.0), max_steps=10)
     assert res.status == -1 and "condition number" not in res.message
+
+
+def test_cli_runs_named_cases_and_writes_the_table_and_figure(tmp_path, capsys):
+    from modelgen.cli import main
+    assert main(["hard-cases", "--quick", "--cases", "singular_at_start", "-o",
+                 str(tmp_path / "out"), "--build-dir", str(tmp_path / "build")]) == 0
+    assert "`singular_at_start`" in (tmp_path / "out" / "hard_cases.md").read_text()
+    assert (tmp_path / "out" / "hard_cases.png").stat().st_size > 0
+    assert main(["hard-cases", "--cases", "no_such_case", "-o", str(tmp_path)]) == 2
+    assert "unknown hard case(s) no_such_case" in capsys.readouterr().err

@@ -26,7 +26,7 @@ from scipy.linalg import expm
 
 from modelgen.bench import hardcase_models as hm
 from modelgen.codegen.pipeline import DEFAULT_OUTPUT
-from modelgen.errors import DerivationError
+from modelgen.errors import DerivationError, ModelgenError
 from modelgen.model.api import parse_model
 from modelgen.model.chains import spatial_chain
 from modelgen.sim.load import load
@@ -462,6 +462,10 @@ def run_cases(names=None, *, quick=False, build_root=None, progress=None) -> lis
 
     A case that raises is reported as failed with the exception, never dropped.
     """
+    unknown = [name for name in names or () if name not in CASES]
+    if unknown:
+        raise ModelgenError(f"unknown hard case(s) {', '.join(unknown)}; the cases are "
+                            f"{', '.join(CASES)}")
     ctx = Context(Path(build_root) if build_root else DEFAULT_OUTPUT / "hard_cases", quick)
     results = []
     for name in names or CASES:
