@@ -10,7 +10,7 @@ exponential, and the MJCF of ``spatial_chain(n)`` for MuJoCo.
 
 >>> round(pendulum_period(math.pi / 2), 12)
 2.367841947576
->>> round(separatrix_cos_theta(0.0, 9.0), 12)
+>>> float(separatrix_cos_theta(0.0, 9.0))
 0.5
 """
 from __future__ import annotations
