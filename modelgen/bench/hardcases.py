@@ -407,29 +407,28 @@ def tennis_racket(ctx: Context) -> CaseResult:
 
 def fixed_step_implicit(ctx: Context) -> CaseResult:
     """gauss4 and midpoint on the double pendulum at steps their Newton iteration can
-    solve: no failure over the run, and the error over the first 2 s against dop853."""
+    solve: no failure over the run, and the error at t = 0.6 s (a grid point of every
+    step) against dop853 at rtol 1e-13."""
     cm = ctx.model(hm.DOUBLE_PENDULUM)
     x0 = np.array([2.0, 1.0, 0.0, 0.0])
-    t1 = 30.0 if ctx.quick else 150.0
-    t_chk = np.linspace(0.0, 2.0, 21)
-    ref = cm.simulate(x0, (0.0, 2.0), t_eval=t_chk, method="dop853", rtol=1e-13,
-                      atol=1e-13).y
+    t1, t_chk = (30.0 if ctx.quick else 150.0), 0.6
+    ref = cm.simulate(x0, (0.0, t_chk), method="dop853", rtol=1e-13, atol=1e-13).y[:, -1]
     figures, ok = [], True
     for method, step in (("gauss4", 0.05), ("gauss4", 0.03), ("gauss4", 0.02),
                          ("gauss4", 0.015), ("midpoint", 0.01)):
         res = cm.simulate(x0, (0.0, t1), method=method, step=step, t_eval=[t1],
                           max_steps=10 ** 7)
-        short = cm.simulate(x0, (0.0, 2.0), method=method, step=step, t_eval=t_chk)
-        err = float(np.max(np.abs(short.y - ref))) if short.success else math.nan
+        short = cm.simulate(x0, (0.0, t_chk), method=method, step=step)
+        err = float(np.max(np.abs(short.y[:2, -1] - ref[:2]))) if short.success else math.nan
         figures.append(f"{method} h={step}: " + ("ok" if res.success else
                                                   f"status {res.status} at {res.t_fail:.4g}")
-                       + f", err(2 s) {err:.1e}")
-        ok &= bool(res.success and short.success and err < 0.5)
+                       + f", error {err:.1e}")
+        ok &= bool(res.success and short.success and err < 1e-3)
     return CaseResult(
         "fixed_step_implicit", f"double pendulum from (2, 1) rad over {t1:g} s, gauss4 h = "
-        "0.05 .. 0.015, midpoint h = 0.01", "dop853 rtol 1e-13 on [0, 2] s (error); "
-        "the run must not fail", "every run reaches the end; error at 2 s < 0.5 rad",
-        "; ".join(figures), ok)
+        "0.05 .. 0.015, midpoint h = 0.01 (the steps that stopped with status -5)",
+        "dop853 rtol 1e-13 at t = 0.6 s; the run must reach the end",
+        "every run reaches the end; angle error at 0.6 s < 1e-3 rad", "; ".join(figures), ok)
 
 
 def rk4_beyond_stability(ctx: Context) -> CaseResult:
