@@ -17,19 +17,23 @@ from modelgen.model.names import check_name
 from modelgen.model.scene import load_scene, parse_scene
 from modelgen.model.spec import (CONSERVATIVE_KINDS, EFFECT_FIELD_ROLES, EFFECT_KINDS,
                                  EFFECT_TYPES, STIFF_KINDS, ModelSpec, SceneSpec)
+from modelgen.model.urdf import load_urdf
 from modelgen.model.writer import spec_to_yaml
 
 __all__ = ["Model", "ModelSpec", "SceneSpec", "load_model", "parse_model", "spec_to_yaml",
            "check_name", "load_scene", "parse_scene", "as_spec", "is_scene_file", "API_FILE",
            "EFFECT_TYPES", "EFFECT_KINDS", "EFFECT_FIELD_ROLES", "STIFF_KINDS",
-           "CONSERVATIVE_KINDS"]
+           "CONSERVATIVE_KINDS", "load_urdf"]
 
 
 def as_spec(source) -> ModelSpec:
-    """A :class:`ModelSpec` from a path, a :class:`Model` or a spec."""
+    """A :class:`ModelSpec` from a path (YAML, or URDF by its ``.urdf`` suffix), a
+    :class:`Model` or a spec."""
     if isinstance(source, ModelSpec):
         return source
     if isinstance(source, (str, Path)):
+        if Path(source).suffix.lower() == ".urdf":
+            return load_urdf(source).spec()
         return load_model(source)
     if isinstance(source, Model):
         return source.spec()

@@ -10,6 +10,7 @@ import numpy as np
 from modelgen.codegen.pipeline import generate
 from modelgen.errors import SimulationError
 from modelgen.model.spec import CONSERVATIVE_KINDS
+from modelgen.sim.animate import animate
 from modelgen.sim.integrate import method_of
 from modelgen.sim.result import Result
 from modelgen.sim.runtime import STABILITY_LIMIT, CompiledModel, check_mass_matrix
@@ -151,6 +152,15 @@ class Scene:
         res.energy = cm.energies(res, p)
         res.info.update(scene=s.name, conservative=self.conservative)
         return res
+
+    def animate(self, res: Result, path, **options):
+        """Write the animation of a run of this scene to ``path`` (``.gif``, ``.mp4`` or
+        ``.html``); ``options`` as :func:`modelgen.sim.animate.motion` (pass the run's
+        ``p`` if it overrode parameters).
+
+        >>> scene.animate(scene.run(), "out/dp_free.html")       # doctest: +SKIP
+        """
+        return animate(res, self.spec.model, path, compiled=self.model, **options)
 
     def initial_state(self, x0=None) -> np.ndarray:
         """The scene's initial state, or ``x0`` (an array, or names -> values over it)."""
