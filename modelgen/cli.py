@@ -270,7 +270,7 @@ def build_parser() -> argparse.ArgumentParser:
                                    "unchanged model reuses the cached build.")
     g.add_argument("model", help="model YAML file")
     g.add_argument("-o", "--output", default=None,
-                   help="output directory (default: generated/<name>)")
+                   help="output directory (default: the per-user cache, see modelgen.codegen.pipeline.default_output)")
     g.add_argument("--force", action="store_true", help="rebuild even if cached")
     g.add_argument("--jacobian", action="store_true",
                    help="also generate <name>_jacobian, the symbolic d(xdot)/dx")
@@ -284,7 +284,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("model", help="scene YAML file (or model YAML file)")
     s.add_argument("-o", "--output", default="out", help="output directory (default: out)")
     s.add_argument("--build-dir", default=None,
-                   help="where the model is built (default: generated/<name>)")
+                   help="where the model is built (default: the per-user cache)")
     s.add_argument("--t-end", type=float, default=None,
                    help="final time [s] (default: the scene's, or 10 for a model)")
     s.add_argument("--dt", type=float, default=None,
@@ -341,7 +341,7 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--quick", action="store_true",
                    help="whole-decade tolerances, half-decade steps, 2 repeats")
     b.add_argument("--build-dir", default=None,
-                   help="where the model is built (default: generated/workprecision/<scene>)")
+                   help="where the model is built (default: the per-user cache)")
     b.add_argument("-v", "--verbose", action="store_true", help="report every run on stderr")
     b.set_defaults(func=_bench)
 
@@ -357,7 +357,7 @@ def build_parser() -> argparse.ArgumentParser:
     h.add_argument("--cases", nargs="+", metavar="NAME", default=None,
                    help="run only these cases")
     h.add_argument("--build-dir", default=None,
-                   help="where the models are built (default: generated/hard_cases)")
+                   help="where the models are built (default: the per-user build cache)")
     h.set_defaults(func=_hard_cases)
     return parser
 

@@ -25,7 +25,7 @@ from matplotlib.figure import Figure
 from scipy.linalg import expm
 
 from modelgen.bench import hardcase_models as hm
-from modelgen.codegen.pipeline import DEFAULT_OUTPUT
+from modelgen.codegen.pipeline import default_output
 from modelgen.errors import DerivationError, ModelgenError
 from modelgen.model.api import parse_model
 from modelgen.model.chains import spatial_chain
@@ -465,7 +465,7 @@ def run_cases(names=None, *, quick=False, build_root=None, progress=None) -> lis
     if unknown:
         raise ModelgenError(f"unknown hard case(s) {', '.join(unknown)}; the cases are "
                             f"{', '.join(CASES)}")
-    ctx = Context(Path(build_root) if build_root else DEFAULT_OUTPUT / "hard_cases", quick)
+    ctx = Context(Path(build_root) if build_root else default_output("hard_cases"), quick)
     results = []
     for name in names or CASES:
         if progress:

@@ -299,8 +299,6 @@ class CompiledModel:
         if max_steps is not None:
             options["max_steps"] = max_steps
         def run(times):
-            if callable(u):
-                return _feedback_rk4(self, x0, t_span, times, method, u, p, step, options)
             return integrate.simulate(self, x0, t_span, times, method, rtol, atol, u, p,
                                       events, **options)
         res = make_result(state_names=self.state_names, **run(t_eval))
@@ -459,47 +457,3 @@ def _input_at(cm, u, t, x):
             return values[k]
         return np.array([np.interp(t, times, values[:, j]) for j in range(values.shape[1])])
     return u
-
-
-def _feedback_rk4(cm, x0, t_span, t_eval, method, u, p, step, options) -> dict:
-    """Fixed-step RK4 with a feedback ``u(t, x)`` evaluated at every stage.
-
-    The path for callables until the C integrators take an input callback.
-    """
-    if integrate.method_of(method).name != "rk4" or step is None:
-        raise SimulationError(f"{cm.name}: a feedback input u(t, x) needs method='rk4' "
-                              "and step=")
-    t0, t1 = (float(v) for v in t_span)
-    x = cm._vector(x0, 2 * cm.n, "x0").copy()
-    steps = int(np.ceil((t1 - t0) / float(step) - 1e-9))
-    h = (t1 - t0) / steps
-    p_vec = cm.params(p)
-
-    def f(t, x):
-        return cm.rhs(t, x, u=u(t, x), p=p_vec)
-    ts, xs = [t0], [x.copy()]
-    status, message, t_fail = 0, integrate.STATUS[0][1], None
-    for i in range(steps):
-        t = t0 + i * h
-        try:
-            k1 = f(t, x)
-            k2 = f(t + h / 2, x + h / 2 * k1)
-            k3 = f(t + h / 2, x + h / 2 * k2)
-            k4 = f(t + h, x + h * k3)
-        except MassMatrixError as exc:
-            status, message, t_fail = -3, str(exc), t
-            break
-        x = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
-        if not np.all(np.isfinite(x)):
-            status, message, t_fail = -4, f"NaN or Inf in the state at t={t + h!r}", t + h
-            break
-        ts.append(t0 + (i + 1) * h if i + 1 < steps else t1)
-        xs.append(x.copy())
-    t_all, y_all = np.array(ts), np.array(xs).T
-    if t_eval is not None:
-        t_eval = np.asarray(t_eval, dtype=float)
-        t_eval = t_eval[t_eval <= t_all[-1]]
-        y_all = np.array([np.interp(t_eval, t_all, row) for row in y_all])
-        t_all = t_eval
-    return dict(t=t_all, y=y_all, status=status, message=message, t_fail=t_fail,
-                method="rk4", nfev=4 * (len(ts) - 1))
