@@ -234,6 +234,27 @@ def _bench(args) -> int:
     return 0
 
 
+def _hard_cases(args) -> int:
+    import modelgen.bench.hardcases as hc
+
+    def progress(name):
+        print(f"... {name}", file=sys.stderr, flush=True)
+    results = hc.run_cases(args.cases, quick=args.quick, build_root=args.build_dir,
+                           progress=progress)
+    table = hc.markdown(results)
+    print(table)
+    out = Path(args.output)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "hard_cases.md").write_text(table)
+    hc.figure(results).savefig(out / "hard_cases.png", dpi=80)
+    print(f"wrote {out / 'hard_cases.md'} and {out / 'hard_cases.png'}")
+    failed = [r.name for r in results if r.passed is False]
+    if failed:
+        print(f"modelgen: error: hard cases failed: {', '.join(failed)}", file=sys.stderr)
+        return EXIT["simulation"]
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="modelgen",
@@ -324,6 +345,21 @@ def build_parser() -> argparse.ArgumentParser:
                    help="where the model is built (default: the per-user cache)")
     b.add_argument("-v", "--verbose", action="store_true", help="report every run on stderr")
     b.set_defaults(func=_bench)
+
+    h = sub.add_parser("hard-cases", help="run the hard-case suite: each case against an "
+                                          "independent reference, a table and a figure",
+                       description="Run the named hard cases (pendulum near the top, Lagrange "
+                                   "top, stiff springs, mass ratios, singular mass matrices, "
+                                   "long-run energy, friction, chains against MuJoCo, tennis "
+                                   "racket, ...) and write OUT/hard_cases.md and .png. Exit "
+                                   "status 4 when a case fails.")
+    h.add_argument("-o", "--output", default="out", help="output directory (default: out)")
+    h.add_argument("--quick", action="store_true", help="the short version of each case")
+    h.add_argument("--cases", nargs="+", metavar="NAME", default=None,
+                   help="run only these cases")
+    h.add_argument("--build-dir", default=None,
+                   help="where the models are built (default: the per-user build cache)")
+    h.set_defaults(func=_hard_cases)
     return parser
 
 

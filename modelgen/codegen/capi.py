@@ -53,8 +53,9 @@ ALIASES = {alias: m.name for m in METHOD_LIST for alias in m.aliases}
 class Status(NamedTuple):
     """A return code of ``mg_integrate``: 0 end reached, 1 terminal event, 2 buffer
     full (continue from the stop array), negative a failure.  ``message`` is
-    formatted with t (reached), h (step size), t_fail, x, pivot, coordinate
-    and max_steps."""
+    formatted with t (reached), h (step size), t_fail, x, pivot, coordinate,
+    kind (of a mass-matrix failure: 'singular to working precision' or 'not
+    positive definite') and max_steps."""
     code: int
     name: str           # MG_STATUS_<name>
     message: str
@@ -67,7 +68,7 @@ STATUSES = (
     Status(-1, "MAX_STEPS", "Maximum number of steps ({max_steps}) reached at t={t!r}."),
     Status(-2, "STEP_UNDERFLOW", "Step size underflow at t={t!r}: the step {h:.3g} s is too small "
                                  "to advance t in double precision."),
-    Status(-3, "MASS_MATRIX", "Mass matrix not positive definite at t={t_fail!r}: Cholesky pivot "
+    Status(-3, "MASS_MATRIX", "Mass matrix {kind} at t={t_fail!r}: Cholesky pivot "
                               "{pivot} (coordinate {coordinate!r}) failed; last good state at "
                               "t={t!r}: x={x}."),
     Status(-4, "NON_FINITE", "NaN or Inf in the state at t={t_fail!r}; last finite state at "

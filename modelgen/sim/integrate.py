@@ -31,6 +31,7 @@ import numpy as np
 from modelgen.codegen.capi import (ALIASES, LIMITS, MAX_EVENTS, METHODS, STAT_NAMES, STATUS,
                                    STATUS_BY_NAME, STOP_X, Method, define_values, work_size)
 from modelgen.errors import MassMatrixError, SimulationError
+from modelgen.sim.conditioning import condition_number, failure_kind, growth_note
 from modelgen.sim.result import Result, make_result
 
 __all__ = ["METHODS", "ALIASES", "STATUS", "Method", "method_of",
@@ -94,7 +95,8 @@ def jacobian(cm, t, x, u=None, p=None) -> np.ndarray:
     status = fn(float(t), cm._ptr(x), cm._ptr(cm.input_vector(u)), cm._ptr(cm.params(p)),
                 cm._ptr(out))
     if status:
-        raise MassMatrixError(status, cm.coordinates[status - 1], t, x)
+        raise MassMatrixError(status, cm.coordinates[status - 1], t, x,
+                              failure_kind(cm.mass_matrix(x[:cm.n], p), status - 1))
     return out
 
 
@@ -291,6 +293,7 @@ def simulate(cm, x0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10
     x = cm._vector(x0, nx, "x0").copy()
     if not np.all(np.isfinite(x)):
         raise SimulationError(f"{cm.name}: x0 must be finite")
+    x_start = x.copy()
     times = None if t_eval is None else _times(t_eval, t0, t1)
     inputs = _Inputs(cm, u)
     p_vec = cm.params(p).copy()
@@ -392,9 +395,13 @@ def simulate(cm, x0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10
     message = status_message(
         int(status), t=float(stop[0]), h=float(stop[1]), t_fail=float(stop[2]),
         x=_vector_text(stop[STOP_X:]), pivot=pivot,
-        coordinate=cm.coordinates[pivot - 1] if 0 < pivot <= cm.n else "?", max_steps=max_steps)
+        coordinate=cm.coordinates[pivot - 1] if 0 < pivot <= cm.n else "?", max_steps=max_steps,
+        kind=_mass_matrix_kind(cm, status, pivot, p_vec, x_start,
+                               stats_total["naccept"] == 0))
     if failure is not None:
-        message = f"{message[:-1]}: {type(failure).__name__}: {failure}"
+        message = f"{message.rstrip('.')}: {type(failure).__name__}: {failure}."
+    if status < 0:
+        message += _conditioning_note(cm, p_vec, x_start, stop[STOP_X:])
     et, ex, ei = (np.concatenate(ev_t), np.concatenate(ev_x).reshape(-1, nx),
                   np.concatenate(ev_i))
     res = make_result(
@@ -436,6 +443,26 @@ def _interruptible(fn, args, flag):
     finally:
         signal.signal(signal.SIGINT, previous)
     return box[0]
+
+
+def _mass_matrix_kind(cm, status, pivot, p_vec, x_start, at_start) -> str:
+    """How the mass matrix failed: classified exactly at the start; later in a run A
+    was positive definite at the last accepted state and is continuous in q, so a
+    failing pivot is A becoming singular to working precision."""
+    if status != -3 or not 0 < pivot <= cm.n:
+        return "not positive definite"
+    if at_start:
+        return failure_kind(cm.mass_matrix(x_start[:cm.n], p_vec), pivot - 1)
+    return "singular to working precision"
+
+
+def _conditioning_note(cm, p_vec, x_start, x_last) -> str:
+    """Why a run failed when A's condition number grew by orders of magnitude between
+    its start and its last good state (a singular configuration ahead), else ''."""
+    if not (np.all(np.isfinite(x_start)) and np.all(np.isfinite(x_last))):
+        return ""
+    return growth_note(condition_number(cm.mass_matrix(x_start[:cm.n], p_vec)),
+                       condition_number(cm.mass_matrix(x_last[:cm.n], p_vec)))
 
 
 # -- batches ---------------------------------------------------------------------------
@@ -530,7 +557,13 @@ def simulate_batch(cm, X0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol
             int(status[r]), t=float(stop[r, 0]), h=float(stop[r, 1]), t_fail=float(stop[r, 2]),
             x=_vector_text(stop[r, STOP_X:]), pivot=pivot,
             coordinate=cm.coordinates[pivot - 1] if 0 < pivot <= cm.n else "?",
-            max_steps=max_steps))
+            max_steps=max_steps,
+            kind=_mass_matrix_kind(cm, int(status[r]), pivot,
+                                   P_rows[r] if p_stride else P_rows, X0[r],
+                                   stats[r].naccept == 0)))
+        if status[r] < 0:
+            messages[-1] += _conditioning_note(cm, P_rows[r] if p_stride else P_rows, X0[r],
+                                               stop[r, STOP_X:])
     res = make_result(
         t=times, y=np.ascontiguousarray(x_out.transpose(0, 2, 1)), state_names=cm.state_names,
         status=status.astype(int), message=messages, method=m.name,

@@ -16,6 +16,8 @@ import numpy as np
 from modelgen.codegen.emit import ABI_VERSION
 from modelgen.errors import DerivationError, MassMatrixError, ModelgenError, SimulationError
 from modelgen.sim import integrate
+from modelgen.sim.conditioning import (PIVOT_TOL, failing_pivot, failure_kind,
+                                       negligible_diagonal)
 from modelgen.sim.result import DenseOutput, Result
 
 
@@ -177,8 +179,13 @@ class CompiledModel:
         status = self._rhs(self._time(t), self._ptr(x), self._ptr(self.input_vector(u)),
                            self._ptr(self.params(p)), self._ptr(out))
         if status:
-            raise MassMatrixError(status, self.coordinates[status - 1], t, x)
+            raise self._mass_matrix_error(status, t, x, p)
         return out
+
+    def _mass_matrix_error(self, pivot: int, t, x, p=None) -> MassMatrixError:
+        """The error of a failing pivot at x, worded by the kind of failure."""
+        kind = failure_kind(self.mass_matrix(x[:self.n], p), pivot - 1)
+        return MassMatrixError(pivot, self.coordinates[pivot - 1], t, x, kind)
 
     def rhs_function(self, u=None, p=None):
         """Low-overhead ``f(t, x) -> xdot`` with parameters and inputs bound.
@@ -202,10 +209,9 @@ class CompiledModel:
         p_ptr, u_ptr = ffi.from_buffer("double[]", p_arr), ffi.from_buffer("double[]", u_arr)
         x_ptr, out_ptr = ffi.from_buffer("double[]", x_buf), ffi.from_buffer("double[]", out_buf)
         rhs = self._rhs
-        coordinates = self.coordinates
 
         def fail(status, t):
-            raise MassMatrixError(status, coordinates[status - 1], t, x_buf.copy())
+            raise self._mass_matrix_error(status, t, x_buf.copy(), p_arr)
 
         def f(t, x, out=None):
             if np.shape(x) != (nx,) or np.iscomplexobj(x):
@@ -411,6 +417,8 @@ def check_mass_matrix(cm: CompiledModel, samples: int = 3, seed: int = 0) -> Non
         A = cm.mass_matrix(rng.uniform(-np.pi, np.pi, cm.n))
         pivot = _cholesky_pivot(A)
         if pivot is None:
+            pivot = negligible_diagonal(A)    # zero up to rounding
+        if pivot is None:
             return
         failing = pivot
     name = cm.coordinates[failing]
@@ -421,19 +429,10 @@ def check_mass_matrix(cm: CompiledModel, samples: int = 3, seed: int = 0) -> Non
         f"axis, or remove the coordinate")
 
 
-def _cholesky_pivot(A, tol=1e-13):
-    """Index of the first failing pivot of a Cholesky factorisation, or None."""
-    A = np.array(A, dtype=float)
-    n = A.shape[0]
-    L = np.zeros_like(A)
-    largest = max(np.max(np.diag(A)), 0.0)
-    for j in range(n):
-        d = A[j, j] - L[j, :j] @ L[j, :j]
-        if not (d > tol * A[j, j] and A[j, j] > tol * largest):
-            return j
-        L[j, j] = np.sqrt(d)
-        L[j + 1:, j] = (A[j + 1:, j] - L[j + 1:, :j] @ L[j, :j]) / L[j, j]
-    return None
+def _cholesky_pivot(A, tol=PIVOT_TOL):
+    """Index of the first failing pivot of the generated solve's test, or None
+    (see :mod:`modelgen.sim.conditioning`)."""
+    return failing_pivot(A, tol)
 
 
 #: |h lambda| where each explicit method's stability region ends on the negative real
