@@ -36,7 +36,12 @@ def pivot_ratios(A) -> np.ndarray:
     n = A.shape[0]
     L, d = np.eye(n), np.zeros(n)
     ratios = np.full(n, np.nan)
-    for j in range(n):
+    with np.errstate(invalid="ignore", over="ignore", divide="ignore"):   # inf or NaN in A
+        return _ratios(A, L, d, ratios)
+
+
+def _ratios(A, L, d, ratios) -> np.ndarray:
+    for j in range(A.shape[0]):
         d[j] = A[j, j] - (L[j, :j] * L[j, :j]) @ d[:j]
         # a diagonal that is zero, negative or NaN: the coordinate moves no mass (or
         # the parameters are not physical): not positive definite
