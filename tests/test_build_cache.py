@@ -226,11 +226,6 @@ def test_a_read_only_output_directory_is_a_build_error(tmp_path):
         ro.chmod(stat.S_IRWXU)
 
 
-def test_a_missing_parent_directory_is_created(pristine, tmp_path):
-    g = modelgen.generate_model(PENDULUM, tmp_path / "a" / "b" / "c")
-    assert g.build.module_path.is_file()
-
-
 def test_a_killed_builds_temporary_directory_is_removed_after_an_hour(pristine, tmp_path):
     out, _ = _copy(pristine, tmp_path)
     old, recent = out / ".build-killed", out / ".build-running"
