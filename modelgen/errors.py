@@ -62,19 +62,33 @@ class TemplateError(ModelgenError):
 
 
 class BuildError(ModelgenError):
-    """The C compiler failed.
+    """The module could not be built: no usable compiler, a compiler that failed,
+    an output directory that cannot be written, or a damaged build.
 
-    ``command`` is the full command line and ``output`` the compiler's complete
-    output; both are part of the message.
+    ``command`` is the full command line, ``returncode`` its exit status (None
+    when it never ran), ``output`` the compiler's complete output and ``fix``
+    what to do; all of them are part of the message.
+
+    >>> print(BuildError("C compiler not found", ["cc", "-c", "m.c"],
+    ...                  fix="install a C compiler or set CC"))
+    C compiler not found; fix: install a C compiler or set CC
+    command: cc -c m.c
     """
 
     def __init__(self, message: str, command: list[str] | None = None,
-                 output: str = ""):
+                 output: str = "", *, returncode: int | None = None,
+                 fix: str | None = None):
         self.command = list(command or [])
         self.output = output
+        self.returncode = returncode
+        self.fix = fix
         text = message
+        if fix:
+            text += f"; fix: {fix}"
         if self.command:
             text += "\ncommand: " + " ".join(self.command)
+        if returncode is not None:
+            text += f"\nexit status: {returncode}"
         if output:
             text += "\ncompiler output:\n" + output
         super().__init__(text)

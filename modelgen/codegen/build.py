@@ -13,9 +13,23 @@ copied next to the model's ``.c``/``.h``, so a C user compiles the output
 directory and nothing else.
 
 Everything is written to a private temporary directory first and moved into
-place with ``os.replace``; ``manifest.json`` is moved last and marks a
+place with ``os.replace`` under an exclusive lock on the output directory
+(``fcntl.flock`` on the directory itself, so no lock file lies about; no lock
+where ``fcntl`` is missing); ``manifest.json`` is moved last and marks a
 complete build.  Two processes building the same model at once therefore
 both succeed and leave one valid build.
+
+The cache is verified, not trusted (:func:`cache_lookup`): the manifest
+records its own SHA-256 and the size and SHA-256 of the library, and a
+manifest that is not a complete, well-typed dict, was edited, or describes a
+missing, truncated or altered library is a cache miss (the build says why in
+``BuildResult.rebuilt_because``); the damaged library is never imported.
+
+Housekeeping: a build removes ``.build-*`` directories older than an hour (a
+killed build's leftovers); the last :data:`KEEP_BUILDS` modules of a model
+name are kept, each with its manifest (``manifest.json`` for the newest,
+``manifest-<hash16>.json`` for the others), so two variants of one model
+built into one directory do not rebuild each other; older ones are deleted.
 """
 from __future__ import annotations
 
@@ -24,6 +38,7 @@ import hashlib
 import io
 import json
 import os
+import re
 import shlex
 import shutil
 import subprocess
@@ -34,6 +49,11 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import cffi
+
+try:
+    import fcntl
+except ImportError:   # not POSIX: builds are not serialised
+    fcntl = None
 
 from modelgen.errors import BuildError
 
@@ -53,6 +73,19 @@ SPLIT_ABOVE = 400
 BASE_FLAGS = ("-std=c99", "-fPIC", "-Wall", "-Wextra")
 #: Flags of mg_integrate.c (compiled once, on the integration hot path).
 INTEGRATOR_FLAGS = ("-O2", *BASE_FLAGS, "-Werror")
+#: Modules of one model name kept in a directory (the newest built; a cache hit
+#: changes no file, so build time is the order).
+KEEP_BUILDS = 3
+#: Age in seconds after which a ``.build-*`` temporary directory is a dead build's.
+STALE_SECONDS = 3600
+#: Keys every manifest holds, with their types (checked before any import).
+MANIFEST_KEYS = {"name": str, "build_hash": str, "abi_version": int, "n": int,
+                 "coordinates": list, "parameters": list, "inputs": list, "bodies": list,
+                 "outputs": list, "module_name": str, "module_file": str,
+                 "module_size": int, "module_sha256": str, "manifest_sha256": str}
+FIX_COMPILER = "install a C compiler (e.g. apt install gcc) or set CC to one"
+FIX_PYTHON_H = ("install the Python development headers (e.g. apt install python3-dev, "
+                "dnf install python3-devel)")
 
 
 @dataclass(frozen=True)
@@ -63,11 +96,28 @@ class BuildResult:
     manifest: dict
     cached: bool
     seconds: float
+    #: why an existing build was not reused ("" if there was none or it was)
+    rebuilt_because: str = ""
+
+
+def _split_env(variable: str, default: str) -> list:
+    """``$variable`` split as a shell would; BuildError if it cannot be."""
+    value = os.environ.get(variable, default)
+    try:
+        return shlex.split(value)
+    except ValueError as exc:
+        raise BuildError(f"${variable}={value!r} cannot be split into arguments ({exc})",
+                         fix=f"quote {variable} as in a shell, e.g. "
+                             f"{variable}='-DNAME=\\\"text\\\"'") from None
 
 
 def compiler() -> list:
     """The C compiler command: ``$CC`` if set, else ``cc``."""
-    return shlex.split(os.environ.get("CC", "cc"))
+    command = _split_env("CC", "cc")
+    if not command:
+        raise BuildError("$CC is set but empty, so there is no C compiler to run",
+                         fix="unset CC or set it to a C compiler, e.g. CC=gcc")
+    return command
 
 
 def compile_flags(statements: int, part: int = 2) -> list:
@@ -76,8 +126,7 @@ def compile_flags(statements: int, part: int = 2) -> list:
     ``$MODELGEN_CFLAGS`` is appended (and is part of the cache key).
     """
     opt = "-O1" if statements > O1_ABOVE[part] else "-O2"
-    extra = shlex.split(os.environ.get("MODELGEN_CFLAGS", ""))
-    return [opt, *BASE_FLAGS, *extra]
+    return [opt, *BASE_FLAGS, *_split_env("MODELGEN_CFLAGS", "")]
 
 
 def cache_dir() -> Path:
@@ -94,7 +143,7 @@ def cache_dir() -> Path:
 
 def integrator_flags() -> list:
     """Compiler flags of mg_integrate.c (``$MODELGEN_CFLAGS`` appended)."""
-    return [*INTEGRATOR_FLAGS, *shlex.split(os.environ.get("MODELGEN_CFLAGS", ""))]
+    return [*INTEGRATOR_FLAGS, *_split_env("MODELGEN_CFLAGS", "")]
 
 
 def integrator_hash(sources: dict) -> str:
@@ -118,8 +167,7 @@ def integrator_object(sources: dict) -> tuple:
     target = directory / f"mg_integrate-{integrator_hash(sources)[:20]}.o"
     if target.is_file():
         return target, True
-    directory.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=".mg-", dir=directory))
+    tmp = _private_dir(directory, ".mg-")
     try:
         for name in ("mg_integrate.h", "mg_integrate.c"):
             (tmp / name).write_text(sources[name])
@@ -131,37 +179,189 @@ def integrator_object(sources: dict) -> tuple:
     return target, False
 
 
-def manifest_path(directory: Path) -> Path:
-    return Path(directory) / "manifest.json"
+def manifest_path(directory: Path, build_hash: str | None = None) -> Path:
+    """``manifest.json`` (the newest build), or ``manifest-<hash16>.json`` (an older one)."""
+    name = f"manifest-{build_hash[:16]}.json" if build_hash else "manifest.json"
+    return Path(directory) / name
 
 
-def read_manifest(directory: Path) -> dict | None:
-    try:
-        return json.loads(manifest_path(directory).read_text())
-    except (OSError, ValueError):
-        return None
+def read_manifest(directory: Path, build_hash: str | None = None) -> dict | None:
+    """The manifest of the build of ``build_hash`` (default: the newest), unchecked."""
+    paths = [manifest_path(directory)]
+    if build_hash:
+        paths.append(manifest_path(directory, build_hash))
+    manifest = None
+    for path in paths:
+        try:
+            manifest = json.loads(path.read_text())
+        except (OSError, ValueError):
+            continue
+        if not build_hash or (isinstance(manifest, dict)
+                              and manifest.get("build_hash") == build_hash):
+            return manifest
+    return manifest
+
+
+def file_sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for chunk in iter(lambda: f.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def manifest_digest(manifest: dict) -> str:
+    """SHA-256 of a manifest's content, its own ``manifest_sha256`` and ``seconds`` left out."""
+    content = {k: v for k, v in manifest.items() if k not in ("manifest_sha256", "seconds")}
+    return hashlib.sha256(json.dumps(content, sort_keys=True).encode()).hexdigest()
+
+
+def manifest_problem(manifest) -> str | None:
+    """What is wrong with the structure of ``manifest``, or None: a dict with every
+    key of :data:`MANIFEST_KEYS`, of its type, and names lists of names."""
+    if not isinstance(manifest, dict):
+        return f"the manifest is a {type(manifest).__name__}, not a mapping"
+    for key, kind in MANIFEST_KEYS.items():
+        if key not in manifest:
+            return f"the manifest has no {key!r}"
+        if not isinstance(manifest[key], kind) or isinstance(manifest[key], bool):
+            return f"the manifest's {key!r} is not a {kind.__name__}"
+    for key in ("coordinates", "inputs", "bodies"):
+        if not all(isinstance(v, str) for v in manifest[key]):
+            return f"the manifest's {key!r} is not a list of names"
+    if not all(isinstance(v, list) and len(v) == 2 and isinstance(v[0], str)
+               and isinstance(v[1], (int, float)) for v in manifest["parameters"]):
+        return "the manifest's 'parameters' is not a list of [name, value]"
+    if not all(isinstance(o, dict) and isinstance(o.get("name"), str)
+               and isinstance(o.get("columns"), list) for o in manifest["outputs"]):
+        return "the manifest's 'outputs' is not a list of {name, columns}"
+    if Path(manifest["module_file"]).name != manifest["module_file"]:
+        return "the manifest's 'module_file' is not a file name"
+    return None
+
+
+def cache_lookup(directory: Path, build_hash: str) -> tuple:
+    """(BuildResult or None, why not): the verified build of ``build_hash`` in ``directory``.
+
+    The manifest must be intact (structure and its own digest) and the library
+    must have the recorded size and SHA-256; nothing is imported.  ``why not``
+    is "" for a hit or for no build at all, else it says what is damaged.
+    """
+    directory = Path(directory)
+    manifest = read_manifest(directory, build_hash)
+    if manifest is None:
+        return None, ""
+    if isinstance(manifest, dict) and manifest.get("build_hash") != build_hash:
+        return None, ""          # another model, or this one changed: not damage
+    problem = manifest_problem(manifest)
+    if problem is None and manifest["manifest_sha256"] != manifest_digest(manifest):
+        problem = "the manifest was edited after the build (its SHA-256 does not match)"
+    if problem is None:
+        module_path = directory / manifest["module_file"]
+        try:
+            size = module_path.stat().st_size
+            if size != manifest["module_size"]:
+                problem = (f"{module_path.name} has {size} bytes, the build wrote "
+                           f"{manifest['module_size']}")
+            elif file_sha256(module_path) != manifest["module_sha256"]:
+                problem = f"{module_path.name} was altered (its SHA-256 does not match)"
+        except OSError as exc:
+            problem = f"{module_path.name} cannot be read ({exc.strerror or exc})"
+    if problem:
+        return None, f"damaged build in {directory}: {problem}"
+    return BuildResult(directory, manifest["module_name"], module_path, manifest, True, 0.0), ""
 
 
 def cached_build(directory: Path, build_hash: str) -> BuildResult | None:
-    """The existing build in ``directory`` if it matches ``build_hash``."""
-    manifest = read_manifest(directory)
-    if not manifest or manifest.get("build_hash") != build_hash:
-        return None
-    module_path = Path(directory) / manifest["module_file"]
-    if not module_path.is_file():
-        return None
-    return BuildResult(Path(directory), manifest["module_name"], module_path, manifest, True, 0.0)
+    """The existing, verified build in ``directory`` if it matches ``build_hash``."""
+    return cache_lookup(directory, build_hash)[0]
+
+
+def _private_dir(directory: Path, prefix: str) -> Path:
+    """A new private temporary directory in ``directory`` (created with its parents);
+    BuildError naming the path if it cannot be written."""
+    directory = Path(directory)
+    try:
+        directory.mkdir(parents=True, exist_ok=True)
+        return Path(tempfile.mkdtemp(prefix=prefix, dir=directory))
+    except OSError as exc:
+        what = "is a file, not a directory" if isinstance(exc, (FileExistsError,
+                                                                NotADirectoryError)) \
+            else f"cannot be written ({exc.strerror or exc})"
+        raise BuildError(f"the build directory {directory} {what}",
+                         fix="choose a writable directory (out_dir=..., or "
+                             "MODELGEN_CACHE_DIR for the cache)") from None
+
+
+def remove_stale_builds(directory: Path, prefix: str = ".build-",
+                        age: float = STALE_SECONDS) -> list:
+    """Remove ``prefix*`` temporary directories older than ``age`` seconds (left by
+    killed builds); returns their paths."""
+    removed, now = [], time.time()
+    for path in Path(directory).glob(prefix + "*"):
+        with contextlib.suppress(OSError):
+            if path.is_dir() and now - path.stat().st_mtime > age:
+                shutil.rmtree(path)
+                removed.append(path)
+    return removed
+
+
+@contextlib.contextmanager
+def _locked(directory: Path):
+    """Exclusive lock on ``directory`` (flock on the directory itself)."""
+    if fcntl is None:
+        yield
+        return
+    fd = os.open(directory, os.O_RDONLY)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)
+        yield
+    finally:
+        os.close(fd)                          # releases the lock
+
+
+def _remove_old_builds(directory: Path, name: str, keep: str) -> None:
+    """Keep the newest :data:`KEEP_BUILDS` modules of model ``name`` that have a
+    manifest (``keep`` always among them); delete the others and their manifests."""
+    pattern = re.compile(rf"_mg_{re.escape(name)}_([0-9a-f]{{16}})\.")
+    modules = []
+    for path in directory.iterdir():
+        match = pattern.match(path.name)
+        if match and path.is_file():
+            with contextlib.suppress(OSError):
+                modules.append((path.name == keep, path.stat().st_mtime, path, match[1]))
+    modules.sort(reverse=True)
+    for rank, (_, _, path, short) in enumerate(modules):
+        has_manifest = path.name == keep or manifest_path(directory, short).is_file()
+        if rank >= KEEP_BUILDS or not has_manifest:
+            with contextlib.suppress(OSError):
+                path.unlink()
+            with contextlib.suppress(OSError):
+                manifest_path(directory, short).unlink()
 
 
 def _run(commands: list, cwd: Path) -> None:
     """Run compiler commands in parallel; raise BuildError on the first failure."""
-    procs = [(cmd, subprocess.Popen(cmd, cwd=cwd, stdout=subprocess.PIPE,
-                                    stderr=subprocess.STDOUT, text=True)) for cmd in commands]
+    procs = []
+    try:
+        for cmd in commands:
+            procs.append((cmd, subprocess.Popen(cmd, cwd=cwd, stdout=subprocess.PIPE,
+                                                stderr=subprocess.STDOUT, text=True)))
+    except OSError as exc:
+        for _, proc in procs:
+            proc.kill()
+            proc.communicate()
+        raise BuildError(f"the C compiler {cmd[0]!r} cannot be run ({exc.strerror or exc})",
+                         cmd, fix=FIX_COMPILER) from None
     failure = None
     for cmd, proc in procs:
         out, _ = proc.communicate()
         if proc.returncode != 0 and failure is None:
-            failure = BuildError(f"C compiler failed (exit {proc.returncode})", cmd, out)
+            python_h = "Python.h" in out
+            failure = BuildError(
+                "the Python headers (Python.h) are missing" if python_h else "C compiler failed",
+                cmd, out, returncode=proc.returncode,
+                fix=FIX_PYTHON_H if python_h else None)
     if failure:
         raise failure
 
@@ -189,12 +389,12 @@ def build_module(directory: Path, name: str, sources: dict, manifest: dict,
     """
     start = time.perf_counter()
     directory = Path(directory)
-    directory.mkdir(parents=True, exist_ok=True)
     module_name = f"_mg_{name}_{manifest['build_hash'][:16]}"
     suffix = sysconfig.get_config_var("EXT_SUFFIX") or ".so"
     module_file = module_name + suffix
 
-    tmp = Path(tempfile.mkdtemp(prefix=".build-", dir=directory))
+    tmp = _private_dir(directory, ".build-")
+    remove_stale_builds(directory)
     try:
         integrator_obj, integrator_cached = integrator_object(integrator)
         for fname in (f"{name}.c", f"{name}.h"):
@@ -220,15 +420,31 @@ def build_module(directory: Path, name: str, sources: dict, manifest: dict,
         _run([link], tmp)
 
         manifest = dict(manifest, module_name=module_name, module_file=module_file,
+                        module_size=(tmp / module_file).stat().st_size,
+                        module_sha256=file_sha256(tmp / module_file),
                         compile_commands=[" ".join(c) for c in model_objs],
                         integrators={"path": str(integrator_obj), "cached": integrator_cached})
-        _write_if_changed(directory / f"{name}.c", sources[f"{name}.c"], tmp)
-        _write_if_changed(directory / f"{name}.h", sources[f"{name}.h"], tmp)
-        for fname in ("mg_integrate.h", "mg_integrate.c"):
-            _write_if_changed(directory / fname, integrator[fname], tmp)
-        os.replace(tmp / module_file, directory / module_file)
+        manifest["manifest_sha256"] = manifest_digest(manifest)
         (tmp / "manifest.json").write_text(json.dumps(manifest, indent=2, sort_keys=True))
-        os.replace(tmp / "manifest.json", manifest_path(directory))
+        with _locked(directory):
+            _write_if_changed(directory / f"{name}.c", sources[f"{name}.c"], tmp)
+            _write_if_changed(directory / f"{name}.h", sources[f"{name}.h"], tmp)
+            for fname in ("mg_integrate.h", "mg_integrate.c"):
+                _write_if_changed(directory / fname, integrator[fname], tmp)
+            os.replace(tmp / module_file, directory / module_file)
+            newest = read_manifest(directory)
+            if isinstance(newest, dict) and isinstance(newest.get("build_hash"), str) \
+                    and newest["build_hash"] != manifest["build_hash"]:
+                os.replace(manifest_path(directory), manifest_path(directory,
+                                                                   newest["build_hash"]))
+            with contextlib.suppress(FileNotFoundError):
+                manifest_path(directory, manifest["build_hash"]).unlink()
+            os.replace(tmp / "manifest.json", manifest_path(directory))
+            _remove_old_builds(directory, name, module_file)
+    except OSError as exc:
+        raise BuildError(f"the build cannot be written to {directory} "
+                         f"({exc.strerror or exc}: {exc.filename or ''})",
+                         fix="choose a writable output directory") from None
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     return BuildResult(directory, module_name, directory / module_file, manifest, False,

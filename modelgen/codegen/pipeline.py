@@ -12,7 +12,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 from modelgen.version import __version__
-from modelgen.codegen.build import (BuildResult, build_module, cache_dir, cached_build,
+from modelgen.codegen.build import (BuildResult, build_module, cache_dir, cache_lookup,
                                     compiler, integrator_hash)
 from modelgen.codegen.cse import make_routines
 from modelgen.derive.dynamics import Equations, derive_equations
@@ -121,8 +121,9 @@ def generate(spec: ModelSpec, out_dir=None, *, force: bool = False, outputs=(),
     _check_generable(spec)
     directory = Path(out_dir) if out_dir is not None else default_output(spec.name)
     key = build_hash(spec, outputs, jacobian)
+    damage = ""
     if not force:
-        hit = cached_build(directory, key)
+        hit, damage = cache_lookup(directory, key)
         if hit is not None:
             return Generated(hit, hit.manifest)
 
@@ -173,5 +174,6 @@ def generate(spec: ModelSpec, out_dir=None, *, force: bool = False, outputs=(),
     build = build_module(directory, spec.name, sources, dict(manifest, seconds=seconds),
                          statements, integrator_sources())
     seconds["compile"] = build.seconds
+    build = replace(build, rebuilt_because=damage)
     manifest = dict(build.manifest, seconds=seconds)
     return Generated(build, manifest)

@@ -13,8 +13,9 @@ from pathlib import Path
 
 import numpy as np
 
+from modelgen.codegen.build import manifest_problem
 from modelgen.codegen.emit import ABI_VERSION
-from modelgen.errors import DerivationError, MassMatrixError, ModelgenError, SimulationError
+from modelgen.errors import BuildError, DerivationError, MassMatrixError, SimulationError
 from modelgen.sim import integrate
 from modelgen.sim.conditioning import (PIVOT_TOL, failing_pivot, failure_kind,
                                        negligible_diagonal)
@@ -40,6 +41,13 @@ class CompiledModel:
     """
 
     def __init__(self, manifest: dict, module_path: Path):
+        problem = manifest_problem(manifest)
+        if problem:
+            raise BuildError(f"{module_path}: {problem}; rebuild the model (force=True)")
+        if manifest["abi_version"] != ABI_VERSION:
+            raise BuildError(f"{module_path}: built for ABI version {manifest['abi_version']}, "
+                             f"this modelgen expects {ABI_VERSION}; rebuild the model "
+                             f"(force=True)")
         self.manifest = manifest
         self.name = manifest["name"]
         self.coordinates = tuple(manifest["coordinates"])
@@ -52,10 +60,7 @@ class CompiledModel:
         self.path = Path(module_path)
         module = _import(manifest["module_name"], self.path)
         self.ffi, self.lib = module.ffi, module.lib
-        got = getattr(self.lib, f"{self.name}_abi_version")()
-        if got != ABI_VERSION:
-            raise ModelgenError(f"{self.path}: generated ABI version {got}, this modelgen "
-                                f"expects {ABI_VERSION}; regenerate the model")
+        self._check_module()
         fn = lambda suffix: getattr(self.lib, f"{self.name}_{suffix}")   # noqa: E731
         self._mass_matrix = fn("mass_matrix")
         self._velocity_terms = fn("velocity_terms")
@@ -68,6 +73,25 @@ class CompiledModel:
         self._outputs = fn("outputs") if self.output_columns else None
         self._p_default = np.array(list(self.parameters.values()), dtype=float)
         self._param_index = {name: i for i, name in enumerate(self.parameters)}
+
+    def _check_module(self) -> None:
+        """The module's own constants against the manifest: every buffer is sized
+        by names from the manifest, so a count that differs would overrun one."""
+        prefix = self.name.upper()
+        expected = {"ABI_VERSION": ABI_VERSION, "NQ": self.n, "NX": 2 * self.n,
+                    "NP": len(self.parameters), "NU": len(self.inputs),
+                    "NBODIES": len(self.bodies),
+                    "NY": sum(len(o["columns"]) for o in self.manifest["outputs"])}
+        for key, value in expected.items():
+            got = getattr(self.lib, f"{prefix}_{key}", None)
+            if got != value:
+                raise BuildError(f"{self.path}: the module's {prefix}_{key} is {got}, the "
+                                 f"manifest says {value}; the build is damaged, rebuild "
+                                 f"the model (force=True)")
+        got = getattr(self.lib, f"{self.name}_abi_version")()
+        if got != ABI_VERSION:
+            raise BuildError(f"{self.path}: generated ABI version {got}, this modelgen "
+                             f"expects {ABI_VERSION}; regenerate the model")
 
     def __reduce__(self):
         """Pickle as (manifest, module path): the unpickled model imports the same
