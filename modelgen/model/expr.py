@@ -51,8 +51,9 @@ parsing, before sympy evaluates anything expensive, and a violation is an
   at once (sinh overflows) instead of sending sympy into an unbounded search.
   Intermediate exact values may exceed the double range (``1e400/1e300`` is
   ``1e100``);
-* exact powers: sympy computes powers of the numbers in a base exactly (also
-  in ``(2*x)**(10**9)``), so such a power may need at most
+* exact powers: sympy computes powers and rational roots of the numbers in a
+  base exactly (also in ``(2*x)**(10**9)``, and ``212.124**5e-209`` is a root of
+  degree 2e208), so such a power or root may need at most
   :data:`MAX_POWER_BITS` bits;
 * a constant argument of sin, cos or tan is at most
   :data:`MAX_PERIODIC_ARGUMENT` in magnitude.
@@ -453,7 +454,10 @@ class _Parser:
             # sympy computes powers of the numbers in the base exactly, even in
             # (2*x)**(10**9): bound the size of every such power first
             for factor in sympy.Mul.make_args(base):
-                if factor.is_number and abs(exponent.p) * _exact_bits(factor) > MAX_POWER_BITS:
+                # a rational root (a/b)**(1/q) is computed as (a b**(q-1))**(1/q) / b:
+                # its size grows with q as a power's grows with p
+                if (factor.is_number and max(abs(exponent.p), exponent.q) * _exact_bits(factor)
+                        > MAX_POWER_BITS):
                     raise self.error("the power is too large to compute exactly",
                                      token.column, "use a smaller exponent")
         if base.is_number and exponent.is_number and not (base.is_Rational
