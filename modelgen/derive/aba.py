@@ -36,6 +36,7 @@ import sympy
 
 from modelgen.derive.dynamics import Equations
 from modelgen.derive.graph import ZERO, ZERO3, Graph, GraphBuilder, add, cross, dot, sub
+from modelgen.derive.jacobian import JacobianTerms, differentiate
 from modelgen.derive.joint_tree import JointTree
 from modelgen.model.spec import CANONICAL_BASE
 
@@ -380,3 +381,13 @@ def derive_aba(eqs: Equations, tree: JointTree, spec, graph: Graph | None = None
     for i, joint in enumerate(joints):
         D_out[joint.coordinate] = D[i]
     return ForwardDynamics(g.freeze(), tuple(qdd), tuple(D_out))
+
+
+def derive_aba_jacobian(fd: ForwardDynamics, eqs: Equations) -> JacobianTerms:
+    """d(qdd)/dx, x = [q, qd], by forward-mode differentiation of the ABA program.
+
+    Unlike the CRBA Jacobian there is nothing to solve: ``D`` is the lower half
+    of the state Jacobian itself (``a`` is empty).
+    """
+    graph, rows = differentiate(fd.graph, fd.qdd, eqs.q + eqs.qd)
+    return JacobianTerms(graph, (), rows)
