@@ -34,7 +34,7 @@ FORMULATIONS = ("auto", "aba", "crba")
 
 #: smallest n for which ``auto`` chooses aba: the rhs in C is faster with aba
 #: from here on (bench/aba_scaling.py; see the table in its docstring).
-ABA_CROSSOVER = 3
+ABA_CROSSOVER = 1
 
 
 @dataclass(frozen=True)
