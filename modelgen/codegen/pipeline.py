@@ -110,7 +110,8 @@ def routines_for(eqs: Equations, output_exprs=(), jacobian=None,
     """The C routines of a model: (name, inputs, outputs) for make_routines.
 
     With ``forward`` (the ABA program) the ``rhs`` routine writes q_ddot and
-    the articulated inertias D, and ``jacobian_terms`` is d(q_ddot)/dx.
+    the articulated inertias D (in the order of ``forward.inward``), and
+    ``jacobian_terms`` is d(q_ddot)/dx.
     """
     n = len(eqs.q)
     t = (("t", (eqs.t,)),)
@@ -119,7 +120,8 @@ def routines_for(eqs: Equations, output_exprs=(), jacobian=None,
     A_flat = tuple(eqs.A[i][j] for i in range(n) for j in range(n))
     b = tuple(eqs.tau[k] - eqs.h[k] for k in range(n))
     if forward is not None:
-        rhs = ("rhs", t + (x, u, p), (("qdd", forward.qdd), ("D", forward.D)))
+        rhs = ("rhs", t + (x, u, p),
+               (("qdd", forward.qdd), ("D", tuple(forward.D[k] for k in forward.inward))))
         jac_inputs = t + (x, u, p)
     else:
         rhs = ("rhs", t + (x, u, p), (("A", A_flat), ("b", b)))
@@ -203,7 +205,8 @@ def generate(spec: ModelSpec, out_dir=None, *, force: bool = False, outputs=(),
         bodies=eqs.bodies, functions=functions,
         output_columns=[c for cols in columns.columns for c in cols] if columns else (),
         has_jacobian=bool(jacobian))
-    sources = emit_sources(dict(context, formulation=formulation))
+    sources = emit_sources(dict(context, formulation=formulation,
+                                aba_inward=list(forward.inward) if forward else []))
     t3 = time.perf_counter()
     seconds["emit"] = t3 - t2
     statements = max(f.statements for f in functions.values())

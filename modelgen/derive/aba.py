@@ -45,10 +45,16 @@ _PAIRS = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
 
 @dataclass(frozen=True)
 class ForwardDynamics:
-    """Output of :func:`derive_aba`: ``qdd`` and ``D`` in coordinate order, over ``graph``."""
+    """Output of :func:`derive_aba`: ``qdd`` and ``D`` in coordinate order, over ``graph``.
+
+    ``inward`` lists the coordinate indices in the order the inward pass
+    computes their D: a D that is not positive spoils the D of every joint
+    nearer the root, so the first failing one in this order names the joint.
+    """
     graph: Graph
     qdd: tuple
     D: tuple
+    inward: tuple
 
 
 # -- 3x3 helpers: symmetric matrices as full tuples of rows ---------------------
@@ -380,7 +386,8 @@ def derive_aba(eqs: Equations, tree: JointTree, spec, graph: Graph | None = None
     D_out = [None] * n
     for i, joint in enumerate(joints):
         D_out[joint.coordinate] = D[i]
-    return ForwardDynamics(g.freeze(), tuple(qdd), tuple(D_out))
+    inward = tuple(joints[i].coordinate for i in reversed(range(count)))
+    return ForwardDynamics(g.freeze(), tuple(qdd), tuple(D_out), inward)
 
 
 def derive_aba_jacobian(fd: ForwardDynamics, eqs: Equations) -> JacobianTerms:
