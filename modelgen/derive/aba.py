@@ -12,11 +12,14 @@ each link's own frame (:mod:`modelgen.derive.joint_tree` gives the links):
    ``a_i = a'_i + S_i qdd_i``.
 
 Gravity (the top-level ``gravity`` and gravity effects in base E) is the
-acceleration ``-g`` of the ground, so it costs nothing per body.  Every
-other effect and action enters through its generalized force ``tau_k``, taken
+acceleration ``-g`` of the ground, so it costs nothing per body.  Actions are
+external spatial forces ``f_i`` on their links (``pA_i = v_i x* I_i v_i - f_i``),
+turned into link components along the base and point trees.  Every other
+effect enters through its generalized force ``tau_k``, taken
 from the CRBA derivation (:attr:`modelgen.derive.dynamics.Equations.tau_parts`):
 ``tau_k`` is exactly the power of those forces per unit ``qd_k``, so adding it
-to ``u_i`` gives the same ``qdd`` as ``A qdd = tau - h``.
+to ``u_i`` gives the same ``qdd`` as ``A qdd = tau - h``.  (Actions could go
+that way too, but their projection needs every base's rotation in E.)
 
 The program is built with :class:`~modelgen.derive.graph.GraphBuilder`, so the
 constant zeros and ones of the motion subspaces (unit vectors along a base
@@ -38,7 +41,7 @@ from modelgen.derive.dynamics import Equations
 from modelgen.derive.graph import ZERO, ZERO3, Graph, GraphBuilder, add, cross, dot, sub
 from modelgen.derive.jacobian import JacobianTerms, differentiate
 from modelgen.derive.joint_tree import JointTree
-from modelgen.model.spec import CANONICAL_BASE
+from modelgen.model.spec import CANONICAL_BASE, CANONICAL_POINT
 
 _PAIRS = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
 
@@ -296,6 +299,74 @@ def _to_parent_inertia(g, joint, I):
     return I
 
 
+def _base_steps(spec, X: str, L: str) -> tuple:
+    """Bases from X up to (not including) the common ancestor with L, and from
+    below that ancestor down to L."""
+    parent = {b.name: b.parent for b in spec.bases}
+
+    def chain(b):
+        out = []
+        while b != CANONICAL_BASE:
+            out.append(b)
+            b = parent[b]
+        return out
+
+    cx, cl = chain(X), chain(L)
+    shared = set(cx) & set(cl)
+    return [b for b in cx if b not in shared], [b for b in reversed(cl) if b not in shared]
+
+
+def _rotate_into(g, spec, v, X: str, L: str) -> tuple:
+    """Components in base L of the vector with components ``v`` in base X."""
+    if all(x == 0 for x in v):
+        return ZERO3
+    bases = {b.name: b for b in spec.bases}
+    up, down = _base_steps(spec, X, L)
+    v = tuple(v)
+    for name in up:                  # child -> parent components: E^T v
+        b = bases[name]
+        E = _rotation(b.axis, g.name(sympy.cos(b.angle)), g.name(sympy.sin(b.angle)))
+        v = g.vec(_mv(_T(E), v))
+    for name in down:                # parent -> child components: E v
+        b = bases[name]
+        E = _rotation(b.axis, g.name(sympy.cos(b.angle)), g.name(sympy.sin(b.angle)))
+        v = g.vec(_mv(E, v))
+    return v
+
+
+def _point_offset(g, spec, P: str, Q: str, L: str) -> tuple:
+    """r_P - r_Q in components of base L."""
+    points = {p.name: p for p in spec.points}
+
+    def chain(p):
+        out = []
+        while p != CANONICAL_POINT:
+            out.append(p)
+            p = points[p].parent
+        return out
+
+    cp, cq = chain(P), chain(Q)
+    shared = set(cp) & set(cq)
+    total = ZERO3
+    for name, sign in [(p, 1) for p in cp if p not in shared] + \
+                      [(p, -1) for p in cq if p not in shared]:
+        seg = _rotate_into(g, spec, points[name].coordinates, points[name].base, L)
+        total = add(total, tuple(sign * x for x in seg))
+    return g.vec(total)
+
+
+def _action_force(g, spec, joint, act) -> tuple:
+    """An action as a spatial force on its link, at the link origin, in link components."""
+    L = joint.base
+    T = _rotate_into(g, spec, act.torque, act.base, L)
+    F = _rotate_into(g, spec, act.force, act.base, L)
+    if any(x != 0 for x in F):
+        point, correction = joint.origin
+        r = g.vec(sub(_point_offset(g, spec, act.point, point, L), correction))
+        T = g.vec(add(T, cross(r, F)))
+    return T + F
+
+
 def _ground_acceleration(eqs_spec) -> tuple:
     """(-g as a spatial acceleration in E, labels of the tau parts it replaces)."""
     total = ZERO3
@@ -326,8 +397,17 @@ def derive_aba(eqs: Equations, tree: JointTree, spec, graph: Graph | None = None
     g = GraphBuilder(graph or eqs.graph)
     n = len(eqs.q)
     a0, gravity_labels = _ground_acceleration(spec)
-    others = [part for label, part in eqs.tau_parts if label not in gravity_labels]
+    actions = list(spec.actions) + [e for e in spec.effects if e.kind == "action"]
+    local = set(gravity_labels) | {a.name for a in actions}
+    others = [part for label, part in eqs.tau_parts if label not in local]
     tau = [g.name(sympy.Add(*[part[k] for part in others])) for k in range(n)]
+    link_of = dict(tree.body_links)
+    external: dict = {}                 # joint index -> spatial force on its link
+    for act in actions:
+        i = link_of[act.body]
+        if i >= 0:
+            f = _action_force(g, spec, tree.joints[i], act)
+            external[i] = g.vec(add(external[i], f)) if i in external else f
 
     joints = tree.joints
     count = len(joints)
@@ -346,6 +426,8 @@ def derive_aba(eqs: Equations, tree: JointTree, spec, graph: Graph | None = None
         hx = _skew(h)
         IA[i] = (A, hx, ((m, ZERO, ZERO), (ZERO, m, ZERO), (ZERO, ZERO, m)))
         pA[i] = _rigid_bias(g, A, h, m, v[i])
+        if i in external:
+            pA[i] = g.vec(sub(pA[i], external[i]))
 
     U, D, invD, u = [None] * count, [None] * count, [None] * count, [None] * count
     for i in reversed(range(count)):                        # pass 2: inwards

@@ -70,6 +70,8 @@ class Joint:
     offset: tuple         # prismatic: a*q (3 components); revolute: zeros
     S: tuple              # 6 entries
     source: str           # the dotted key of the expression the joint comes from
+    base: str             # the base whose orientation the link frame has
+    origin: tuple         # (point, correction): the link origin is r_point + R_base correction
 
 
 @dataclass(frozen=True)
@@ -90,6 +92,7 @@ class JointTree:
     """Output of :func:`extract_joint_tree`: joints parents-first, one inertia each."""
     joints: tuple         # tuple[Joint, ...], a parent before its children
     inertias: tuple       # tuple[LinkInertia, ...], one per joint
+    body_links: tuple     # ((body name, joint index or -1 for the ground), ...)
 
     def joint_of(self, coordinate: int) -> int:
         """Index in ``joints`` of the joint of coordinate number ``coordinate``."""
@@ -285,6 +288,21 @@ def extract_joint_tree(spec: ModelSpec) -> JointTree:
             node = children[node][key]
         ends.append(node)
 
+    # orientation base and origin (point, correction in that base) after each node
+    orient = {0: CANONICAL_BASE}
+    origin = {0: (CANONICAL_POINT, ZERO3)}
+    for node in range(1, len(nodes)):
+        parent, key, kind, data = nodes[node]
+        orient[node], origin[node] = orient[parent], origin[parent]
+        if kind == "rot":
+            orient[node] = data.name
+        elif kind in ("trans", "prism"):
+            point = points[key[1]]
+            slopes = [_linear_in(c, q)[0] for c in point.coordinates]
+            later = [k for k in sorted({k for sl in slopes for k in sl}) if k > key[2]]
+            origin[node] = (point.name, tuple(-sympy.Add(*[sl.get(k, ZERO) * q[k] for k in later])
+                                              for sl in slopes))
+
     # joints: nodes whose op moves with a coordinate, parents first (node order)
     joint_at: dict = {}                 # node -> joint index
     joints = []
@@ -323,11 +341,12 @@ def extract_joint_tree(spec: ModelSpec) -> JointTree:
             S = (a if data.axis == 1 else ZERO, a if data.axis == 2 else ZERO,
                  a if data.axis == 3 else ZERO, ZERO, ZERO, ZERO)
             joint = Joint(spec.coordinates[k], k, joint_at.get(up, -1), fixed.value(),
-                          "revolute", data.axis, data.angle, ZERO3, S, source)
+                          "revolute", data.axis, data.angle, ZERO3, S, source,
+                          orient[node], origin[node])
         else:
             joint = Joint(spec.coordinates[k], k, joint_at.get(up, -1), fixed.value(),
                           "prismatic", 0, ZERO, tuple(d * q[k] for d in direction),
-                          ZERO3 + tuple(direction), source)
+                          ZERO3 + tuple(direction), source, orient[node], origin[node])
         joint_at[node] = len(joints)
         joints.append(joint)
     for k, name in enumerate(spec.coordinates):
@@ -338,12 +357,14 @@ def extract_joint_tree(spec: ModelSpec) -> JointTree:
 
     # bodies: merged per link
     merged: dict = {}
+    body_links = []
     for body, end in zip(spec.bodies, ends):
         ops = []
         node = end
         while node and node not in joint_at:
             ops.append(nodes[node])
             node = nodes[node][0]
+        body_links.append((body.name, joint_at.get(node, -1)))
         if not node:
             continue                    # fixed to the ground
         rel = _Compose()
@@ -364,7 +385,7 @@ def extract_joint_tree(spec: ModelSpec) -> JointTree:
         merged[i] = (I, h, m, names)
     inertias = tuple(LinkInertia(*merged[i]) if i in merged else
                      LinkInertia((ZERO,) * 6, ZERO3, ZERO, ()) for i in range(len(joints)))
-    return JointTree(tuple(joints), inertias)
+    return JointTree(tuple(joints), inertias, tuple(body_links))
 
 
 def is_joint_tree(spec: ModelSpec) -> bool:
