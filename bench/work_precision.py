@@ -6,7 +6,7 @@ Run from the repository root::
     .venv/bin/python bench/work_precision.py --quick         # whole decades, 2 repeats
     .venv/bin/python bench/work_precision.py --problems double_pendulum stiff_chain
 
-Problems (``modelgen.bench.workprecision.STANDARD``)
+Problems (``modelgen.bench.STANDARD``; scenes in ``modelgen/bench/problems/``)
     * ``pendulum``: simple pendulum released from horizontal (L = 1, g = 9.81)
       over 4 periods of 2.367841947576237 s; closed-form reference (Jacobi sn
       in mpmath; after whole periods the state is the initial one).
@@ -29,7 +29,7 @@ Method
     coordinates) and the RMS error of the positions over the grid; y: the
     minimum wall time over up to 5 repeats (1 s per setting at most), and the
     rhs evaluations.  Adaptive methods run at atol = rtol over half decades
-    (``--quick``: whole decades); fixed-step methods (C rk4, C gauss4) over
+    (``--quick``: whole decades); fixed-step methods (C rk4, midpoint, gauss4) over
     step sizes in quarter decades (``--quick``: half).  solve_ivp (RK45,
     DOP853, Radau with the generated symbolic Jacobian) calls
     ``cm.rhs_function()``, the low-overhead path into the same compiled rhs.
@@ -55,7 +55,7 @@ sys.path.insert(0, str(REPO))
 
 import numpy as np  # noqa: E402
 
-from modelgen import workprecision as wp  # noqa: E402
+import modelgen.bench as wp  # noqa: E402
 
 #: target 1: C dop853 against solve_ivp DOP853 at equal final error on the double pendulum
 DP_ERROR, DP_SPEEDUP = 1e-8, 30.0
@@ -116,11 +116,10 @@ def stiff_target(points, problem, budget) -> list:
     lines.append(f"  dopri5 {'fails' if not explicit.ok else f'is {time_ratio:.0f}x slower'} "
                  f"where rodas finishes (target: fails/reports, or >= {MUCH_SLOWER:g}x slower): "
                  f"{_verdict(slower and stiff.ok)}")
-    if hasattr(problem.model, "simulate"):
-        res = problem.model.simulate(problem.x0, problem.t_span, problem.t_eval, method="dopri5",
-                                     rtol=STIFF_RTOL, atol=STIFF_RTOL, max_steps=HAIRER_NMAX)
-        lines.append(f"  with Hairer's default nmax = {HAIRER_NMAX}, C dopri5 reports: status "
-                     f"{res.status}, {res.message} ({res.nfev} evaluations)")
+    res = problem.model.simulate(problem.x0, problem.t_span, problem.t_eval, method="dopri5",
+                                 rtol=STIFF_RTOL, atol=STIFF_RTOL, max_steps=HAIRER_NMAX)
+    lines.append(f"  with Hairer's default nmax = {HAIRER_NMAX}, C dopri5 reports: status "
+                 f"{res.status}, {res.message} ({res.nfev} evaluations)")
     for label in ("solve_ivp Radau", "solve_ivp RK45"):
         p = wp.point_at(points, label, STIFF_RTOL)
         if p is not None:
@@ -184,7 +183,7 @@ def main(argv=None) -> int:
         progress(f"{name}: building the model and the reference")
         problem = wp.STANDARD[name](args.build_dir, quick=args.quick)
         t_ref = time.perf_counter() - t0
-        methods = wp.default_methods(problem.model)
+        methods = wp.default_methods()
         points = wp.run_sweep(problem, methods, repeats=repeats, time_budget=time_budget,
                               budget=budget, progress=progress)
         md, csv_path = wp.write_tables(points, out / name, problem)

@@ -55,6 +55,23 @@ def _generate(args) -> int:
     return 0
 
 
+def _import(args) -> int:
+    from modelgen.model.urdf import import_urdf, urdf_to_yaml
+    imported = import_urdf(args.urdf, fix_floating_root=args.fix_floating_root,
+                           inertial_parameters=args.inertial_parameters)
+    spec = imported.model.spec()
+    out = Path(args.output) if args.output else Path(args.urdf).with_suffix(".yaml")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(urdf_to_yaml(imported))
+    print(f"model      {spec.name}  ({args.urdf})")
+    print(f"n          {spec.n} coordinates, {len(spec.bodies)} bodies, "
+          f"{len(spec.inputs)} inputs, {len(spec.effects)} joint effects")
+    for note in imported.notes:
+        print(f"note       {note}")
+    print(f"wrote      {out}")
+    return 0
+
+
 def _parse_assignments(items, what):
     out = {}
     for item in items or ():
@@ -91,8 +108,11 @@ def _check_times(args) -> None:
             raise ModelgenError(f"{flag} must be a positive number of seconds, got {value!r}")
 
 
-def _report(result, out: Path, name: str, args, title: str, conservative) -> int:
-    """Write CSV, NPZ and PNG of a result; print the energy balance; the exit status."""
+def _report(result, out: Path, name: str, args, title: str, conservative,
+            animation=None) -> int:
+    """Write CSV, NPZ and PNG of a result (and with ``--animate`` the animation and the
+    HTML viewer, from ``animation`` = (model spec, compiled model, p)); print the
+    energy balance; the exit status."""
     out.mkdir(parents=True, exist_ok=True)
     print(f"wrote {result.to_csv(out / f'{name}.csv')}")
     print(f"wrote {result.to_npz(out / f'{name}.npz')}")
@@ -100,6 +120,12 @@ def _report(result, out: Path, name: str, args, title: str, conservative) -> int
         png = out / f"{name}.png"
         result.plot(png, title=title, conservative=conservative)
         print(f"wrote {png}")
+    if args.animate and animation is not None:
+        from modelgen.sim.animate import animate_files
+        spec, compiled, p = animation
+        for path in animate_files(result, spec, out / name, compiled=compiled, p=p,
+                                  trace=args.trace, movie=args.animate_format):
+            print(f"wrote {path}")
     if result.energy is not None and len(result.t):
         total = result.energy.sum(axis=1)
         scale = max(float(np.max(np.abs(result.energy[0]))), 1e-300)
@@ -107,6 +133,8 @@ def _report(result, out: Path, name: str, args, title: str, conservative) -> int
         label = "relative energy error" if conservative else "relative energy change"
         print(f"{label} {change:.3e} (against the initial energies); {len(result.t)} samples "
               f"to t = {result.t[-1]:g} s")
+    if result.info.get("stability_warning"):
+        print(f"modelgen: warning: {result.info['stability_warning']}", file=sys.stderr)
     if not result.success:
         print(f"modelgen: simulation stopped: {result.message}", file=sys.stderr)
         return EXIT["simulation"]
@@ -152,16 +180,17 @@ def _simulate_scene(args) -> int:
     progress(f"{spec.name}: integrating ({time.perf_counter() - t0:.2f} s so far)")
     result = scene.run(p=p, x0=x0)
     return _report(result, Path(args.output), spec.name, args, f"scene {spec.name}",
-                   scene.conservative)
+                   scene.conservative, animation=(spec.model, scene.model, p))
 
 
 def _simulate(args) -> int:
-    from modelgen.model import is_scene_file
+    from modelgen.model import as_spec, is_scene_file
     from modelgen.sim.load import load
     _check_times(args)
     if is_scene_file(args.model):
         return _simulate_scene(args)
-    cm = load(args.model, args.build_dir)
+    model = as_spec(args.model)
+    cm = load(model, args.build_dir)
     x0 = np.zeros(2 * cm.n)
     for key, value in _state_overrides(cm.state_names, args.init).items():
         x0[cm.state_names.index(key)] = value
@@ -176,18 +205,18 @@ def _simulate(args) -> int:
     how = f"step {dt:g} s" if not method.adaptive else "rtol 1e-8"
     print(f"{cm.name}: {method.name}, {how}, t = 0..{t_end:g} s, {len(result.t)} samples")
     return _report(result, Path(args.output), cm.name, args, f"{cm.name}: {method.name}, {how}",
-                   conservative=None)
+                   conservative=None, animation=(model, cm, p))
 
 
 def _bench(args) -> int:
-    from modelgen.bench import workprecision as wp
+    import modelgen.bench as wp
 
     def progress(message):
         print(f"... {message}", file=sys.stderr, flush=True)
     t0 = time.perf_counter()
     progress(f"{args.scene}: building the model and the reference (two methods at 1e-14)")
     problem = wp.scene_problem(args.scene, args.build_dir, quick=args.quick)
-    points = wp.run_sweep(problem, wp.default_methods(problem.model),
+    points = wp.run_sweep(problem, wp.default_methods(),
                           repeats=2 if args.quick else 5, time_budget=0.3 if args.quick else 1.0,
                           budget=wp.Budget(max_nfev=1_000_000, max_seconds=20.0),
                           progress=progress if args.verbose else None)
@@ -257,12 +286,36 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--set", action="append", metavar="NAME=VALUE",
                    help="override a parameter (repeatable)")
     s.add_argument("--no-plot", action="store_true", help="do not write the PNG")
+    s.add_argument("--animate", action="store_true",
+                   help="also write OUT/<name>.gif (the bodies' frames, the points as a "
+                        "stick figure, traces) and OUT/<name>.html (a 3D viewer that plays "
+                        "offline)")
+    s.add_argument("--animate-format", choices=("gif", "mp4"), default="gif",
+                   help="format of the animation (mp4 needs ffmpeg; default gif)")
+    s.add_argument("--trace", action="append", metavar="POINT",
+                   help="trace this point in the animation (repeatable; default: the ends "
+                        "of the longest branches)")
     s.set_defaults(func=_simulate)
+
+    i = sub.add_parser("import", help="import a URDF robot (fixed base) as a model file",
+                       description="Read a URDF file and write a model file in modelgen's "
+                                   "YAML: bases, points, bodies, gravity, one input "
+                                   "tau_<joint> per joint and the joints' damping and "
+                                   "friction as effects. Meshes are not read.")
+    i.add_argument("urdf", help="URDF file")
+    i.add_argument("-o", "--output", default=None,
+                   help="model file to write (default: the URDF path with .yaml)")
+    i.add_argument("--fix-floating-root", action="store_true",
+                   help="weld a floating joint at the root to the ground (floating bases "
+                        "are not supported yet)")
+    i.add_argument("--inertial-parameters", action="store_true",
+                   help="make masses and inertias parameters instead of numbers")
+    i.set_defaults(func=_import)
 
     b = sub.add_parser("bench", help="work-precision diagram of a scene: the C integrators "
                                      "against scipy's solve_ivp",
-                       description="Integrate a scene with every C integrator (dopri5, dop853, "
-                                   "rodas over tolerances; rk4, gauss4 over steps) and with "
+                       description="Integrate a scene with every C integrator (the adaptive "
+                                   "ones over tolerances, the fixed-step ones over steps) and with "
                                    "solve_ivp (RK45, DOP853, Radau) on the same compiled rhs; "
                                    "measure the final-time and dense L2 errors of the positions "
                                    "against a reference by two high-order methods at 1e-14, the "

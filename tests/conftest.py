@@ -29,3 +29,15 @@ def compiled(build_root):
             cache[key] = modelgen.load(path, build_root / key)
         return cache[key]
     return get
+
+
+#: lines that tests want shown after the run (e.g. the worst errors against references)
+SUMMARY: list = []
+
+
+def pytest_terminal_summary(terminalreporter):
+    """Print what tests collected in SUMMARY once, after the progress dots."""
+    if SUMMARY:
+        terminalreporter.section("figures measured by the tests")
+        for line in SUMMARY:
+            terminalreporter.write_line(line)

@@ -29,6 +29,7 @@ import pytest
 
 import modelgen
 import modelgen.model.spec
+from conftest import SUMMARY
 from mechanics_reference import (MechanicsReference, actions_spec,
                                  double_pendulum_closed_form, effects_spec, free_body_spec,
                                  rigid_body_closed_form, zxz_body_rate_matrix,
@@ -193,13 +194,7 @@ def report_worst_ratios(request):
         cells = [f"{WORST[(c, q)]:10.1e}" if (c, q) in WORST else f"{'-':>10s}"
                  for q in quantities]
         lines.append(f"{c:28s}" + "".join(cells))
-    capture = request.config.pluginmanager.getplugin("capturemanager")
-    reporter = request.config.pluginmanager.getplugin("terminalreporter")
-    if reporter is None:
-        return
-    with capture.global_and_fixture_disabled():
-        for line in lines:
-            reporter.write_line(line)
+    SUMMARY.extend(lines)           # printed after the run (conftest's terminal summary)
 
 
 # -- modelgen against KanesMethod -------------------------------------------------

@@ -8,7 +8,7 @@ import pytest
 import sympy
 
 from modelgen.errors import ModelError
-from modelgen.model.api import EFFECT_FIELD_ROLES, EFFECT_KINDS, Model, load_model, parse_model, \
+from modelgen.model import EFFECT_FIELD_ROLES, EFFECT_KINDS, Model, load_model, parse_model, \
     spec_to_yaml
 from modelgen.model.spec import (EFFECT_TYPES, ActionSpec, DamperEffect, DragEffect, FrictionEffect,
                            GravityEffect, JointDampingEffect, SpringEffect, TorsionSpringEffect,

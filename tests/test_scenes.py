@@ -222,3 +222,25 @@ def test_stiffness_verdict_comes_from_the_jacobian_not_the_effect_kind(scene):
     finally:
         block.spec = spec
     assert "WARNING the step" in summary and "beyond rk4's stability limit" in summary
+
+
+def test_rk4_beyond_its_stability_limit_is_warned_not_silent(scene, tmp_path):
+    """The friction block with a step 2x beyond RK4's limit at rest: the run 'succeeds'
+    but its message, and the CLI, say the result is unreliable; within it, no warning."""
+    block = scene("block_friction")
+    lam = block.stiffness()
+    x0 = block.initial_state()
+    x0[block.model.n:] = 0.0          # at rest, where the smoothed friction is steepest
+    bad = block.model.simulate(x0, (0.0, 0.5), method="rk4", step=2 * 2.785 / lam)
+    assert "WARNING: the step" in bad.message and "stability limit" in bad.message
+    good = block.model.simulate(x0, (0.0, 0.5), method="rk4", step=0.5 * 2.785 / lam)
+    assert "WARNING" not in good.message and good.success
+    from modelgen.cli import main
+    import subprocess
+    import sys
+    proc = subprocess.run([sys.executable, "-m", "modelgen", "simulate",
+                           str(SCENES / "block_friction.yaml"), "--dt", str(2 * 2.785 / lam),
+                           "--init", f"{block.model.state_names[-1]}=0",
+                           "--t-end", "0.5", "--no-plot", "-o", str(tmp_path / "o"),
+                           "--build-dir", str(tmp_path / "b")], capture_output=True, text=True)
+    assert "modelgen: warning: the step" in proc.stderr, proc.stderr

@@ -1,4 +1,4 @@
-"""Work-precision machinery (modelgen/workprecision.py) on small problems.
+"""Work-precision machinery (modelgen/bench/) on small problems.
 
 References are independent of the code under test: the pendulum's closed
 form (mpmath and scipy's ellipj), scipy's expm for a linear chain, the
@@ -8,15 +8,19 @@ from __future__ import annotations
 
 import csv
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
 from scipy.linalg import expm
 from scipy.special import ellipj, ellipk
 
-from modelgen.bench import workprecision as wp
+import modelgen.bench as wp
+from modelgen.bench import standard
 from modelgen.cli import main
 from modelgen.errors import SimulationError
+from modelgen.model.scene import load_scene
+from modelgen.sim.integrate import METHODS
 
 from conftest import MODELS
 
@@ -28,18 +32,16 @@ def pendulum(build_root):
     return wp.pendulum_problem(build_root / "wp")
 
 
-def _methods(cm):
-    methods = [wp.scipy_method("RK45"), wp.scipy_method("DOP853"),
-               wp.scipy_method("Radau", jac=True)]
-    methods += [wp.c_method("dopri5"), wp.c_method("dop853"), wp.c_method("rodas"),
-                wp.c_method("rk4")]
-    return methods
+def _methods():
+    return [wp.scipy_method("RK45"), wp.scipy_method("DOP853"),
+            wp.scipy_method("Radau", jac=True), wp.c_method("dopri5"), wp.c_method("dop853"),
+            wp.c_method("rodas"), wp.c_method("rk4")]
 
 
 @pytest.fixture(scope="module")
 def sweep(pendulum):
     spacing = pendulum.t_eval[1] - pendulum.t_eval[0]
-    return wp.run_sweep(pendulum, _methods(pendulum.model), tolerances=[1e-4, 1e-6, 1e-8],
+    return wp.run_sweep(pendulum, _methods(), tolerances=[1e-4, 1e-6, 1e-8],
                         steps=[spacing, spacing / 4, spacing / 16], repeats=2, time_budget=0.05)
 
 
@@ -70,7 +72,7 @@ def test_errors_fall_with_tolerance_and_step_for_every_method(sweep):
         assert all(p.final_error < 1e-2 for p in mine)
 
 
-def test_c_and_scipy_dop853_take_about_the_same_steps(sweep, pendulum):
+def test_c_and_scipy_dop853_take_about_the_same_steps(sweep):
     for rtol in (1e-4, 1e-6, 1e-8):
         c = wp.point_at(sweep, "C dop853", rtol)
         s = wp.point_at(sweep, "solve_ivp DOP853", rtol)
@@ -95,7 +97,7 @@ def test_failures_are_recorded_not_dropped(pendulum):
     bad = [p for p in points if p.method == "broken"]
     assert all(p.failed and "deliberately broken" in p.message for p in bad)
     c = [p for p in points if p.method == "C dop853"]
-    assert any(p.failed and p.status == -1 for p in c)    # MAX_STEPS from the C
+    assert any(p.failed and p.status == -1 for p in c)        # MAX_STEPS from the C
     table = wp.markdown_table(points)
     assert table.count("**FAILED**") == sum(p.failed for p in points)
 
@@ -185,3 +187,23 @@ integrator: {{method: rk4, step: 0.01}}
     for suffix in (".png", ".md", ".csv"):
         assert (tmp_path / "out" / f"swing_short_work_precision{suffix}").is_file()
     assert "solve_ivp DOP853" in out and "rtol=1e-08" in out
+
+
+def test_standard_scenes_and_models_ship_inside_the_package(tmp_path, monkeypatch):
+    package = Path(wp.__file__).resolve().parent
+    scenes = sorted(standard.SCENES.glob("*.yaml"))
+    assert len(scenes) == len(wp.STANDARD)
+    monkeypatch.chdir(tmp_path)                        # nothing is found through the cwd
+    for path in scenes:
+        assert package in path.resolve().parents
+        spec = load_scene(path)
+        assert spec.model.source is not None
+        assert package in Path(spec.model.source).resolve().parents, spec.model.source
+
+
+def test_default_c_methods_are_the_method_table():
+    c = [m for m in wp.default_methods() if m.family == "C"]
+    assert [m.name for m in c] == list(METHODS)
+    assert [m.fixed_step for m in c] == [not m.adaptive for m in METHODS.values()]
+    with pytest.raises(SimulationError, match="unknown method 'gauss2'"):
+        wp.c_method("gauss2")

@@ -28,10 +28,11 @@ from dataclasses import dataclass
 
 import sympy
 
+from modelgen.derive.effects import action_forces, derive_effect
 from modelgen.derive.graph import (ZERO, ZERO3, Graph, GraphBuilder, add, cross, dot, matvec,
-                    scale, sub)
+                                   scale, sub)
 from modelgen.derive.kinematics import Kinematics
-from modelgen.model.spec import CANONICAL_BASE, TIME, symbol
+from modelgen.model.spec import TIME, symbol
 
 
 @dataclass(frozen=True)
@@ -52,73 +53,6 @@ class Equations:
     kinetic: sympy.Expr
     potential: sympy.Expr   # of gravity, zero at O
     poses: tuple            # per body: 16 entries of the 4x4 pose, row-major
-
-
-def _action_forces(g, kin, act, body_index) -> dict:
-    """The seed's Action as a spatial force at O on its body: (T + r_P x F, F)."""
-    Rb = kin.bases[act.base].R
-    F = g.vec(matvec(Rb, act.force))
-    T = g.vec(matvec(Rb, act.torque))
-    rP = kin.points[act.point].r
-    return {body_index[act.body]: g.vec(add(T, cross(rP, F))) + F}
-
-
-def _point_force_power(g, kin, point: str, F, n: int) -> list:
-    """Generalized force of a force F applied at a model point (its own kinematics).
-
-    b_k = beta_k + w_k x r, so F . b_k = F . beta_k + w_k . (r x F).
-    """
-    P = kin.points[point]
-    if not P.partials:
-        return [ZERO] * n
-    M = g.vec(cross(P.r, F))
-    out = [ZERO] * n
-    for k, (w, beta) in P.partials.items():
-        out[k] = dot(F, beta) + dot(w, M)
-    return out
-
-
-def _direct_effect(g, kin, eff, n: int):
-    """(generalized force n-tuple, potential energy) of a point or coordinate effect."""
-    q, qd = kin.q, kin.qd
-    coord = {name: k for k, name in enumerate(kin.spec.coordinates)}
-    tau = [ZERO] * n
-    energy = ZERO
-    if eff.kind in ("spring", "damper"):
-        A, B = kin.points[eff.point_a], kin.points[eff.point_b]
-        d = g.vec(sub(B.r, A.r))
-        length = g.name(sympy.sqrt(dot(d, d)))
-        unit = g.vec(scale(1 / length, d))
-        if eff.kind == "spring":
-            stretch = g.name(length - eff.rest_length)
-            tension = g.name(eff.stiffness * stretch + eff.preload)
-            energy = eff.stiffness * stretch ** 2 / 2 + eff.preload * length
-        else:
-            rate = g.name(dot(unit, sub(B.v, A.v)))
-            tension = g.name(eff.damping * rate)
-        F_b = g.vec(scale(-tension, unit))            # on B; -F_b on A
-        on_b = _point_force_power(g, kin, eff.point_b, F_b, n)
-        on_a = _point_force_power(g, kin, eff.point_a, F_b, n)
-        tau = [b - a for a, b in zip(on_a, on_b)]
-    elif eff.kind == "torsion_spring":
-        k = coord[eff.coordinate]
-        stretch = q[k] - eff.rest_angle
-        tau[k] = -eff.stiffness * stretch
-        energy = eff.stiffness * stretch ** 2 / 2
-    elif eff.kind == "joint_damping":
-        for name in eff.coordinates:
-            tau[coord[name]] = -eff.damping * qd[coord[name]]
-    elif eff.kind == "friction":
-        k = coord[eff.coordinate]
-        v = qd[k]
-        static = eff.coulomb if eff.static is None else eff.static
-        level = eff.coulomb
-        if static != eff.coulomb:
-            level = level + (static - eff.coulomb) * sympy.exp(-(v / eff.stribeck_speed) ** 2)
-        tau[k] = -level * sympy.tanh(v / eff.smoothing_speed) - eff.viscous * v
-    else:   # pragma: no cover - the loader only produces the kinds above
-        raise ValueError(f"unknown effect kind {eff.kind!r}")
-    return tuple(g.name(x) for x in tau), energy
 
 
 def _transform_inertia(g: GraphBuilder, R, inertia):
@@ -259,40 +193,20 @@ def derive_equations(kin: Kinematics) -> Equations:
 
     if gravity is not None:
         ext_parts.append(("gravity", grav_forces))
-    body_index = {b.name: i for i, b in enumerate(spec.bodies)}
     for act in spec.actions:
-        ext_parts.append((act.name, _action_forces(g, kin, act, body_index)))
+        ext_parts.append((act.name, action_forces(g, kin, act)))
 
-    # effects: forces on bodies (projected with the groups below) or generalized
-    # forces computed directly (springs, dampers between points; coordinates)
+    # effects (modelgen.derive.effects): forces on bodies, projected with the
+    # groups below, or generalized forces computed directly (springs and
+    # dampers between points; effects on coordinates)
     direct_parts = []
     for eff in spec.effects:
-        if eff.kind == "action":
-            ext_parts.append((eff.name, _action_forces(g, kin, eff, body_index)))
-        elif eff.kind == "gravity":
-            vec = g.vec(matvec(kin.bases[eff.base].R, eff.vector))
-            forces = {}
-            for i, body in enumerate(spec.bodies):
-                r = kin.points[body.G].r
-                Fg = g.vec(scale(body.mass, vec))
-                forces[i] = g.vec(cross(r, Fg)) + Fg
-                if eff.base == CANONICAL_BASE:
-                    potential -= dot(Fg, r)
-            ext_parts.append((eff.name, forces))
-        elif eff.kind == "drag":
-            i = body_index[eff.body]
-            body = spec.bodies[i]
-            B, G = kin.bases[body.base], kin.points[body.G]
-            rP = kin.points[eff.point].r
-            vP = g.vec(add(G.v, cross(B.omega, sub(rP, G.r))))
-            speed = g.name(sympy.sqrt(dot(vP, vP)))
-            coef = g.name(-eff.density * eff.drag_coefficient * eff.area * speed / 2)
-            F = g.vec(scale(coef, vP))
-            ext_parts.append((eff.name, {i: g.vec(cross(rP, F)) + F}))
+        terms = derive_effect(g, kin, eff)
+        if terms.body_forces is not None:
+            ext_parts.append((eff.name, terms.body_forces))
         else:
-            part, energy = _direct_effect(g, kin, eff, n)
-            direct_parts.append((eff.name, part))
-            potential += energy
+            direct_parts.append((eff.name, terms.generalized))
+        potential += terms.potential
 
     # -- group bodies by identical spatial partials ----------------------------
     groups = []       # per k: [(S, frozenset of bodies)]

@@ -2,28 +2,38 @@
 
 Input: a model or scene file (untrusted text) or calls on :class:`Model`.
 Output: immutable specs (``spec.py``) that every later stage reads and none
-mutates.  Nothing here knows of sympy derivations, C or compilers.
+mutates.  Nothing here knows of sympy derivations, C or compilers.  The file
+format is documented in ``docs/model-format.md``; the modules, and how to add
+an effect kind, an output kind or a top-level key, in ``README.md`` here.
 """
 from __future__ import annotations
 
 import re
 from pathlib import Path
 
-from modelgen.model.api import (API_FILE, EFFECT_FIELD_ROLES, EFFECT_KINDS, Model, check_name,
-                                load_model, parse_model, spec_to_yaml)
+from modelgen.model.api import Model, load_model, parse_model
+from modelgen.model.messages import API_FILE
+from modelgen.model.names import check_name
 from modelgen.model.scene import load_scene, parse_scene
-from modelgen.model.spec import ModelSpec
+from modelgen.model.spec import (CONSERVATIVE_KINDS, EFFECT_FIELD_ROLES, EFFECT_KINDS,
+                                 EFFECT_TYPES, STIFF_KINDS, ModelSpec, SceneSpec)
+from modelgen.model.urdf import load_urdf
+from modelgen.model.writer import spec_to_yaml
 
-__all__ = ["Model", "ModelSpec", "load_model", "parse_model", "spec_to_yaml", "check_name",
-           "load_scene", "parse_scene", "as_spec", "is_scene_file", "API_FILE",
-           "EFFECT_KINDS", "EFFECT_FIELD_ROLES"]
+__all__ = ["Model", "ModelSpec", "SceneSpec", "load_model", "parse_model", "spec_to_yaml",
+           "check_name", "load_scene", "parse_scene", "as_spec", "is_scene_file", "API_FILE",
+           "EFFECT_TYPES", "EFFECT_KINDS", "EFFECT_FIELD_ROLES", "STIFF_KINDS",
+           "CONSERVATIVE_KINDS", "load_urdf"]
 
 
 def as_spec(source) -> ModelSpec:
-    """A :class:`ModelSpec` from a path, a :class:`Model` or a spec."""
+    """A :class:`ModelSpec` from a path (YAML, or URDF by its ``.urdf`` suffix), a
+    :class:`Model` or a spec."""
     if isinstance(source, ModelSpec):
         return source
     if isinstance(source, (str, Path)):
+        if Path(source).suffix.lower() == ".urdf":
+            return load_urdf(source).spec()
         return load_model(source)
     if isinstance(source, Model):
         return source.spec()

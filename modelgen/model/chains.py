@@ -4,7 +4,8 @@ from __future__ import annotations
 import numbers
 
 from modelgen.errors import ModelError
-from modelgen.model.api import API_FILE, Model
+from modelgen.model.api import Model
+from modelgen.model.messages import API_FILE
 
 __all__ = ["spatial_chain"]
 

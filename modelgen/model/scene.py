@@ -1,84 +1,18 @@
-"""The scene stage: a scene file and its model -> a validated :class:`SceneSpec`.
+"""The scene loader: a scene file and its model -> a validated :class:`SceneSpec`.
 
-A scene says what to simulate with a model: which effects are on, parameter
-overrides, the initial state, the time span, the integrator, the inputs and
-what to record.  :func:`load_scene` reads a scene file; :func:`parse_scene`
-reads scene text.  The format (YAML)::
+Input: scene YAML (a path for :func:`load_scene`, text for :func:`parse_scene`)
+naming a model file relative to itself.  Output: a frozen
+:class:`~modelgen.model.spec.SceneSpec`: the reduced model (only the switched-on
+effects and the parameters they use, overrides as defaults, named after the
+scene), the full model, the initial state, time span, integrator, input
+signals and resolved outputs; or a :class:`~modelgen.errors.ModelError` naming
+the scene file, line, key and a fix.
 
-    scene: dp_damped                 # REQUIRED: a C identifier, the generated model's name
-    description: Double pendulum with damped hinges.   # optional (default: the model's)
-    model: ../double_pendulum.yaml   # REQUIRED: the model file, relative to the scene file
-    add_parameters: {c: 0.05}        # optional: parameters the added effects need
-    add_effects:                     # optional: effects defined here, as the model's effects:
-      hinge_damping: {type: joint_damping, coordinates: [q1, q2], damping: c}
-    effects: [gravity, hinge_damping]   # REQUIRED: the effects switched on ([] for none)
-    parameters: {m2: 2.0}            # optional: overrides, they become the defaults
-    initial: {q1: 1.0, q2: 0.5, q1_dot: 0.0, q2_dot: 0.0}   # REQUIRED: the whole state
-    time: {start: 0.0, end: 10.0, sample: 0.01}   # REQUIRED (start defaults to 0)
-    integrator: {method: rk4, step: 0.001}        # optional (these are the defaults)
-    inputs:                          # optional: inputs not listed are 0
-      T1: 0.5                                      # a constant, or samples in time:
-      T2: {times: [0, 1, 2], values: [0, 1, 0], interpolation: linear}
-    outputs:                         # optional: name -> one output kind and its options
-      tip:   {position: P1, from: O, base: E}      # r(P1) - r(O) in components of E
-      tip_v: {velocity: P1, base: E}               # velocity of P1 wrt E, in E
-      R2:    {orientation: B2, relative_to: E}     # 3x3 change of basis (row-major)
-      w2:    {angular_velocity: B2, relative_to: E, components: B2}
-      energy: {energy: total}                     # kinetic | potential | total
-      fd:    {generalized_force: hinge_damping}    # tau of one switched-on effect
-      pose2: {pose: rod2}                          # 4x4 pose of a body (row-major)
-
-Effects and names:
-
-* The effects a scene can switch on are the model's top-level ``gravity``
-  (named ``gravity``), its ``actions`` and its ``effects`` by name, and the
-  scene's ``add_effects``.  Everything not listed under ``effects`` is off and
-  is not generated.  Added effects and parameters share the model's
-  namespace, so they must not reuse a model name.
-* Selected effects whose kind is in :data:`modelgen.model.spec.STIFF_KINDS`
-  (springs, torsion springs, friction) are listed in
-  ``SceneSpec.stiff_effects``: they can make the problem stiff or non-smooth,
-  and the scene summary flags them.  The test is by kind only; it does not
-  estimate frequencies.
-
-The reduced model (``SceneSpec.model``):
-
-* is named after the scene and keeps only the selected effects (the
-  top-level gravity only if ``gravity`` is selected; actions and effects
-  filtered; added effects appended to ``effects``);
-* keeps only the parameters some expression of the reduced model still uses
-  (base angles, point coordinates, masses, inertias, gravity, actions,
-  effect fields), in declaration order, with the overrides as defaults;
-  the checks that depend on defaults (masses, inertias, effect
-  coefficients) run again with the overrides;
-* keeps every input of the model, so the inputs array of the generated C
-  has the same layout whichever effects are on.
-
-``SceneSpec.full_model`` is the model with the added parameters and effects
-and nothing removed.
-
-Rules (each broken one is a :class:`~modelgen.errors.ModelError` naming the
-scene file, line, key and a fix):
-
-* ``parameters`` may only override parameters the reduced model uses (an
-  override of a parameter of a switched-off effect would do nothing), and
-  ``inputs`` may only set inputs the switched-on effects use.
-* ``initial`` gives every coordinate and every speed (``<q>_dot``) a value.
-* ``time.end > time.start``, ``time.sample > 0``, ``integrator.step > 0``,
-  ``method`` one of :data:`METHODS`, and the sample interval is a whole
-  multiple of the step (relative tolerance 1e-9), since samples are taken at
-  steps.
-* A sampled input has one or more strictly increasing ``times`` and as many
-  ``values``.  ``interpolation`` is ``linear`` (default) or ``hold``
-  (zero-order hold: the value of the last sample at or before t); before the
-  first and after the last sample the end values are held.
-* Every number is finite (no ``.nan``/``.inf``).
-* Outputs name points, bases and bodies of the model (``O`` and ``E``
-  included), and ``generalized_force`` a switched-on effect.  Defaults:
-  ``from: O``, ``base: E``, ``relative_to: E``, ``components: E``.  An
-  ``energy`` output of ``potential`` or ``total`` is refused while a gravity
-  effect in a base other than E is on, because that potential is not
-  counted.  Output names are C identifiers (``E`` and ``O`` are allowed).
+The format (every key, rule and output kind, with examples) is documented in
+``docs/model-format.md``, section "Scenes".  Selected effects whose class is
+flagged ``stiff`` (:data:`~modelgen.model.spec.STIFF_KINDS`) are listed in
+``SceneSpec.stiff_effects``; the test is by kind only, it does not estimate
+frequencies.
 """
 from __future__ import annotations
 
@@ -86,11 +20,15 @@ import os
 from dataclasses import replace
 
 from modelgen.errors import ModelError
-from modelgen.model.api import (_a, _check_top_level, _closest, _compose, _Context, _describe, _listing,
-                            _load_effects, _load_parameters, _parse_context, _read_text, _replay,
-                            _yaml_float, check_name)
-from modelgen.model.spec import (CANONICAL_BASE, CANONICAL_POINT, OUTPUT_KINDS, STIFF_KINDS,
-                           InputSignal, ModelSpec, OutputSpec, SceneSpec, symbol)
+from modelgen.model.builder import ModelBuilder, replay
+from modelgen.model.messages import article, closest, describe, listing
+from modelgen.model.names import check_name
+from modelgen.model.reader import compose, read_text
+from modelgen.model.sections import (builder_from_text, check_top_level, load_effects,
+                                     load_parameters)
+from modelgen.model.spec import (CANONICAL_BASE, CANONICAL_POINT, EFFECT_KINDS, OUTPUT_KINDS,
+                                 InputSignal, ModelSpec, OutputSpec, SceneSpec, symbol)
+from modelgen.model.writer import yaml_float
 
 __all__ = ["METHODS", "TOP_LEVEL_KEYS", "INTERPOLATIONS", "ENERGIES", "OUTPUT_DEFAULTS",
            "GRAVITY", "load_scene", "parse_scene"]
@@ -133,7 +71,7 @@ def load_scene(path) -> SceneSpec:
     >>> scene.effects, scene.model.parameter_names              # doctest: +SKIP
     (('gravity', 'hinge_damping'), ('m1', 'm2', 'l1', 'l2', 'g', 'c'))
     """
-    file, text = _read_text(path, "scene")
+    file, text = read_text(path, "scene")
     return parse_scene(text, source=file, base_dir=os.path.dirname(file))
 
 
@@ -155,9 +93,9 @@ def parse_scene(text: str, source: str = "<string>", base_dir=None) -> SceneSpec
     (('point', 'P'), ('from', 'O'), ('base', 'E'))
     """
     if not isinstance(text, str):
-        raise ModelError(f"expected YAML text but got {_describe(text)}", file=source,
+        raise ModelError(f"expected YAML text but got {describe(text)}", file=source,
                          fix="pass the file's text, or use load_scene(path)")
-    data, lines = _compose(text, source)
+    data, lines = compose(text, source)
     base_dir = os.getcwd() if base_dir is None else os.fspath(base_dir)
     return _SceneReader(data, lines, source, base_dir).read()
 
@@ -170,7 +108,7 @@ class _SceneReader:
         self.lines = lines
         self.file = file
         self.base_dir = base_dir
-        self.ctx = _Context(file, lines)     # errors, numbers and lines of the scene file
+        self.ctx = ModelBuilder(file, lines)     # errors, numbers and lines of the scene file
 
     def error(self, problem: str, key, fix) -> ModelError:
         return self.ctx.error(problem, key, fix)
@@ -184,7 +122,7 @@ class _SceneReader:
         if value is None:
             return {}
         if not isinstance(value, dict):
-            raise self.error(f"expected a mapping but got {_describe(value)}", key,
+            raise self.error(f"expected a mapping but got {describe(value)}", key,
                              f"write {key}: {example}")
         return value
 
@@ -195,7 +133,7 @@ class _SceneReader:
     def check_keys(self, entry: dict, valid: tuple, key: str, what: str) -> None:
         for field in entry:
             if field not in valid:
-                close = _closest(field, valid)
+                close = closest(field, valid)
                 fix = f"did you mean '{close}'? " if close else ""
                 raise self.error(f"unknown key '{field}' in {what}", f"{key}.{field}",
                                  fix + "valid keys: " + ", ".join(valid))
@@ -206,23 +144,23 @@ class _SceneReader:
         if data is None:
             raise ModelError("the scene file is empty", file=self.file, line=1,
                              fix="start with 'scene: <scene name>' and 'model: <model file>'")
-        _check_top_level(data, self.ctx, "scene", TOP_LEVEL_KEYS,
-                         "start with 'scene: <scene name>'")
+        check_top_level(data, self.ctx, "scene", TOP_LEVEL_KEYS,
+                        "start with 'scene: <scene name>'")
         if "scene" not in data:
             raise self.missing("scene", "<scene name>")
         name = check_name(data["scene"], file=self.file, line=self.ctx.line_of("scene"),
                           key="scene", what="scene name", modelgen_reserved=False)
         description = data.get("description")
         if description is not None and not isinstance(description, str):
-            raise self.error(f"expected a string but got {_describe(description)}",
+            raise self.error(f"expected a string but got {describe(description)}",
                              "description", "write the description as text (quote it if "
                              "needed)")
         model_ctx = self.model_context()
         full_ctx = model_ctx.clone()
         for section in ("add_parameters", "add_effects"):
             full_ctx.add_source(section, self.file, self.lines)
-        _load_parameters(full_ctx, data.get("add_parameters"), "add_parameters")
-        _load_effects(full_ctx, data.get("add_effects"), "add_effects")
+        load_parameters(full_ctx, data.get("add_parameters"), "add_parameters")
+        load_effects(full_ctx, data.get("add_effects"), "add_effects")
         full = full_ctx.build()
         self.full, self.full_ctx = full, full_ctx
 
@@ -239,16 +177,16 @@ class _SceneReader:
             t_start=t_start, t_end=t_end, sample_dt=sample, method=method, step=step,
             rtol=rtol, atol=atol,
             inputs=inputs, outputs=outputs,
-            stiff_effects=tuple(e for e in selected if kinds[e] in STIFF_KINDS),
+            stiff_effects=tuple(e for e in selected if EFFECT_KINDS[kinds[e]].stiff),
             source=self.file, lines=tuple(self.lines.items()))
 
     # -- the model ----------------------------------------------------------------
-    def model_context(self) -> _Context:
+    def model_context(self) -> ModelBuilder:
         value = self.data.get("model")
         if value is None:
             raise self.missing("model", "<model file, relative to the scene file>")
         if not isinstance(value, str) or not value.strip():
-            raise self.error(f"expected the path of a model file but got {_describe(value)}",
+            raise self.error(f"expected the path of a model file but got {describe(value)}",
                              "model", "write the model file's path relative to the scene "
                              "file, e.g. model: ../double_pendulum.yaml")
         path = os.path.normpath(os.path.join(self.base_dir, value))
@@ -256,35 +194,35 @@ class _SceneReader:
             folder = os.path.dirname(path)
             known = sorted(f for f in os.listdir(folder) if f.endswith((".yaml", ".yml"))) \
                 if os.path.isdir(folder) else []
-            close = _closest(os.path.basename(path), known)
+            close = closest(os.path.basename(path), known)
             if close:
                 fix = f"did you mean '{os.path.join(os.path.dirname(value), close)}'?"
             else:
                 fix = f"give the model's path relative to the scene file's folder " \
                       f"{self.base_dir or '.'}"
             raise self.error(f"model file '{path}' does not exist", "model", fix)
-        file, text = _read_text(path)
-        ctx = _parse_context(text, file)
+        file, text = read_text(path)
+        ctx = builder_from_text(text, file)
         ctx.build()                        # the model alone must be valid
         return ctx
 
     def selected_effects(self, kinds: dict) -> tuple:
-        known = f"effects of model '{self.full.name}': {_listing(kinds, 20)}"
+        known = f"effects of model '{self.full.name}': {listing(kinds, 20)}"
         if "effects" not in self.data:
             raise self.missing("effects", "[" + ", ".join(kinds) + "]")
         value = self.data["effects"]
         if not isinstance(value, list):
-            raise self.error(f"expected a list of effect names but got {_describe(value)}",
+            raise self.error(f"expected a list of effect names but got {describe(value)}",
                              "effects", "list the effects to switch on, e.g. effects: ["
                              + ", ".join(kinds) + "], or write effects: [] for none")
         chosen = []
         for i, item in enumerate(value):
             key = f"effects[{i}]"
             if not isinstance(item, str):
-                raise self.error(f"expected an effect name but got {_describe(item)}", key,
+                raise self.error(f"expected an effect name but got {describe(item)}", key,
                                  known)
             if item not in kinds:
-                close = _closest(item, kinds)
+                close = closest(item, kinds)
                 fix = (f"did you mean '{close}'? " if close else "") + known
                 if not close:
                     fix += " (define new ones under 'add_effects')"
@@ -309,26 +247,26 @@ class _SceneReader:
         for p, value in overrides.items():
             key = f"parameters.{p}"
             if p not in full.parameter_names:
-                close = _closest(str(p), full.parameter_names)
+                close = closest(str(p), full.parameter_names)
                 fix = f"did you mean '{close}'? " if close else ""
                 raise self.error(f"unknown parameter '{p}'", key, fix + "parameters of "
-                                 f"model '{full.name}': {_listing(full.parameter_names, 20)}")
+                                 f"model '{full.name}': {listing(full.parameter_names, 20)}")
             if p not in used_names:
                 users = [n for n in _effect_kinds(full) if n not in on
                          and symbol(p) in _free_symbols(_only(full, n))]
                 fix = "remove the override" + (
-                    f", or switch on an effect that uses it: {_listing(users)}" if users
+                    f", or switch on an effect that uses it: {listing(users)}" if users
                     else f" (no expression of model '{full.name}' uses it)")
                 raise self.error(f"parameter '{p}' is not used by the switched-on effects",
                                  key, fix)
             values[p] = self.number(value, key, f"the override of parameter '{p}'")
         parameters = [(p, values[p]) for p, _ in parameters]
 
-        ctx = _Context(full.source, dict(full.lines))
+        ctx = ModelBuilder(full.source, dict(full.lines))
         ctx.set_name(name, "scene")
         ctx.set_description(full.description if description is None else description)
         try:
-            _replay(ctx, kept, parameters)
+            replay(ctx, kept, parameters)
             return ctx.build()
         except ModelError as exc:
             if not overrides:      # pragma: no cover - the full model was checked already
@@ -345,7 +283,7 @@ class _SceneReader:
 
         def template() -> str:
             return "initial: {" + ", ".join(
-                f"{s}: {_yaml_float(given.get(s, 0.0))}" for s in state) + "}"
+                f"{s}: {yaml_float(given.get(s, 0.0))}" for s in state) + "}"
 
         if "initial" not in self.data:
             raise ModelError("missing required key 'initial'", file=self.file, line=1,
@@ -353,11 +291,11 @@ class _SceneReader:
                              f"{template()}")
         if not isinstance(value, dict):
             raise self.error(f"expected a mapping of coordinates and speeds to values but "
-                             f"got {_describe(value)}", "initial", f"write {template()}")
+                             f"got {describe(value)}", "initial", f"write {template()}")
         for s, v in value.items():
             key = f"initial.{s}"
             if s not in state:
-                close = _closest(str(s), state)
+                close = closest(str(s), state)
                 fix = f"did you mean '{close}'? " if close else ""
                 raise self.error(f"unknown coordinate or speed '{s}'", key,
                                  fix + f"the state of model '{full.name}' is "
@@ -399,8 +337,8 @@ class _SceneReader:
         self.check_keys(settings, INTEGRATOR_KEYS, "integrator", "integrator")
         method = settings.get("method", DEFAULT_METHOD)
         if not isinstance(method, str) or method not in METHODS:
-            shown = f"'{method}'" if isinstance(method, str) else _describe(method)
-            close = _closest(method, METHODS) if isinstance(method, str) else None
+            shown = f"'{method}'" if isinstance(method, str) else describe(method)
+            close = closest(method, METHODS) if isinstance(method, str) else None
             fix = f"did you mean '{close}'? " if close else ""
             raise self.error(f"unknown integration method {shown}", "integrator.method",
                              fix + "methods: " + ", ".join(METHODS))
@@ -433,16 +371,16 @@ class _SceneReader:
         for name, value in self.mapping("inputs", "{T1: 0.5}").items():
             key = f"inputs.{name}"
             if name not in full.inputs:
-                close = _closest(str(name), full.inputs)
+                close = closest(str(name), full.inputs)
                 fix = f"did you mean '{close}'? " if close else ""
                 raise self.error(f"unknown input '{name}'", key,
                                  fix + f"inputs of model '{full.name}': "
-                                 f"{_listing(full.inputs, 20)}")
+                                 f"{listing(full.inputs, 20)}")
             if symbol(name) not in used:
                 users = [n for n in _effect_kinds(full) if n not in selected
                          and symbol(name) in _free_symbols(_only(full, n))]
                 fix = "remove it" + (f", or switch on an effect that uses it: "
-                                     f"{_listing(users)}" if users else "")
+                                     f"{listing(users)}" if users else "")
                 raise self.error(f"input '{name}' is not used by the switched-on effects",
                                  key, fix)
             signals[name] = self.signal(name, value, key)
@@ -454,7 +392,7 @@ class _SceneReader:
         if not isinstance(value, dict):
             if isinstance(value, (list, tuple)) or value is None:
                 raise self.error(f"expected a number or a mapping of samples but got "
-                                 f"{_describe(value)}", key,
+                                 f"{describe(value)}", key,
                                  f"write a constant such as {name}: 0.5, or {name}: {example}")
             return InputSignal(name, constant=self.number(value, key, f"input '{name}'"))
         self.check_keys(value, SIGNAL_KEYS, key, "a sampled input")
@@ -466,7 +404,7 @@ class _SceneReader:
             items = value[field]
             if not isinstance(items, list) or not items:
                 raise self.error(f"expected a list of one or more numbers but got "
-                                 f"{_describe(items)}", f"{key}.{field}", f"write {example}")
+                                 f"{describe(items)}", f"{key}.{field}", f"write {example}")
             lists[field] = tuple(self.number(v, f"{key}.{field}[{i}]",
                                              f"{field[:-1]} {i} of input '{name}'")
                                  for i, v in enumerate(items))
@@ -482,8 +420,8 @@ class _SceneReader:
         interpolation = value.get("interpolation", "linear")
         if interpolation not in INTERPOLATIONS:
             shown = f"'{interpolation}'" if isinstance(interpolation, str) \
-                else _describe(interpolation)
-            close = _closest(interpolation, INTERPOLATIONS) \
+                else describe(interpolation)
+            close = closest(interpolation, INTERPOLATIONS) \
                 if isinstance(interpolation, str) else None
             fix = f"did you mean '{close}'? " if close else ""
             raise self.error(f"unknown interpolation {shown}", f"{key}.interpolation",
@@ -499,7 +437,7 @@ class _SceneReader:
             check_name(name, file=self.file, line=self.ctx.line_of(key), key=key,
                        what="output name", modelgen_reserved=False)
             if not isinstance(entry, dict):
-                raise self.error(f"expected a mapping but got {_describe(entry)}", key,
+                raise self.error(f"expected a mapping but got {describe(entry)}", key,
                                  f"write it like '{example}'")
             found = [k for k in entry if k in OUTPUT_KINDS]
             kinds_text = "output kinds: " + ", ".join(OUTPUT_KINDS)
@@ -509,7 +447,7 @@ class _SceneReader:
                 if not strange:
                     raise self.error(f"output '{name}' has no kind", key,
                                      f"add one of the {kinds_text}")
-                close = _closest(strange[0], OUTPUT_KINDS)
+                close = closest(strange[0], OUTPUT_KINDS)
                 fix = f"did you mean '{close}'? " if close else ""
                 raise self.error(f"unknown output kind '{strange[0]}'",
                                  f"{key}.{strange[0]}", fix + kinds_text)
@@ -521,13 +459,13 @@ class _SceneReader:
             first, *options = OUTPUT_KINDS[kind]
             for field in entry:
                 if field != kind and field not in options:
-                    close = _closest(field, options + list(OUTPUT_KINDS))
+                    close = closest(field, options + list(OUTPUT_KINDS))
                     fix = f"did you mean '{close}'? " if close else ""
                     takes = "only '" + kind + "'" if not options else \
                         f"{kind}, " + ", ".join(options)
-                    raise self.error(f"unknown key '{field}' for {_a(kind)} output",
+                    raise self.error(f"unknown key '{field}' for {article(kind)} output",
                                      f"{key}.{field}",
-                                     fix + f"{_a(kind)} output takes {takes}")
+                                     fix + f"{article(kind)} output takes {takes}")
             args = {first: (entry[kind], f"{key}.{kind}")}
             for option in options:
                 default = OUTPUT_DEFAULTS.get(kind, {}).get(option)
@@ -548,40 +486,40 @@ class _SceneReader:
         role = _ARG_ROLE[arg]
         if role == "energy":
             if value not in ENERGIES:
-                shown = f"'{value}'" if isinstance(value, str) else _describe(value)
-                close = _closest(value, ENERGIES) if isinstance(value, str) else None
+                shown = f"'{value}'" if isinstance(value, str) else describe(value)
+                close = closest(value, ENERGIES) if isinstance(value, str) else None
                 fix = f"did you mean '{close}'? " if close else ""
                 raise self.error(f"unknown energy {shown}", key,
                                  fix + "write kinetic, potential or total")
             return value
         if not isinstance(value, str):
-            raise self.error(f"expected {_a(role)} name but got {_describe(value)}", key,
-                             f"write the name of {_a(role)}")
+            raise self.error(f"expected {article(role)} name but got {describe(value)}", key,
+                             f"write the name of {article(role)}")
         if role == "effect":
             if value in selected:
                 return value
             if value in kinds:
                 raise self.error(f"effect '{value}' is not switched on", key,
                                  f"add it to 'effects', or record a switched-on effect: "
-                                 f"{_listing(selected)}")
-            close = _closest(value, selected)
+                                 f"{listing(selected)}")
+            close = closest(value, selected)
             fix = f"did you mean '{close}'? " if close else ""
             raise self.error(f"unknown effect '{value}'", key,
-                             fix + f"switched-on effects: {_listing(selected)}")
+                             fix + f"switched-on effects: {listing(selected)}")
         known = {"point": [CANONICAL_POINT] + [p.name for p in model.points],
                  "base": [CANONICAL_BASE] + [b.name for b in model.bases],
                  "body": [b.name for b in model.bodies]}[role]
         if value in known:
             return value
         plural = {"point": "points", "base": "bases", "body": "bodies"}[role]
-        listing = f"{plural} of model '{self.full.name}': {_listing(known, 20)}"
+        names = f"{plural} of model '{self.full.name}': {listing(known, 20)}"
         other = self.full_ctx.kind_of(value)
         if other is not None:
-            raise self.error(f"'{value}' is {_a(other)}, not {_a(role)}", key,
-                             f"name {_a(role)} here ({listing})")
-        close = _closest(value, known)
+            raise self.error(f"'{value}' is {article(other)}, not {article(role)}", key,
+                             f"name {article(role)} here ({names})")
+        close = closest(value, known)
         fix = f"did you mean '{close}'? " if close else ""
-        raise self.error(f"unknown {role} '{value}'", key, fix + listing)
+        raise self.error(f"unknown {role} '{value}'", key, fix + names)
 
     def check_potential(self, name: str, key: str, model: ModelSpec) -> None:
         for e in model.effects:

@@ -1,6 +1,6 @@
 """The validated model specification: plain, immutable data.
 
-This is what the loader (:mod:`modelgen.model.api`) produces from YAML or from the
+This is what the loaders (:mod:`modelgen.model.api`) produce from YAML or from the
 Python API, and what every later stage consumes.  Nothing here parses or
 validates; by the time a :class:`ModelSpec` exists it is known to be valid:
 
@@ -24,8 +24,8 @@ Conventions, fixed for every stage:
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-from typing import Optional
+from dataclasses import MISSING, dataclass, field, fields
+from typing import ClassVar, Optional
 
 import sympy
 
@@ -114,12 +114,35 @@ class ActionSpec:
     torque: Vec3
     force: Vec3
     kind = "action"
+    roles: ClassVar[dict] = {"body": "body", "point": "point", "base": "base",
+                             "torque": "vector", "force": "vector"}
+    stiff = False
+    conservative = False
 
 
 # -- effects: the physical effects a scene may switch on ---------------------------
 # Each contributes to the generalized forces tau and, where it has one, to the
-# potential energy.  Every name below is a field of the YAML entry
-# ``effects: {<name>: {type: <kind>, <field>: ...}}``.
+# potential energy.  Every field below is a key of the YAML entry
+# ``effects: {<name>: {type: <kind>, <field>: ...}}``; a field with a default is
+# optional.  One class is the whole description of a kind, as class-level data:
+#
+# * ``kind``: the YAML ``type``;
+# * ``roles``: how the loader reads each field (one of :data:`FIELD_ROLES`);
+# * ``stiff``: the effect can make a problem stiff or non-smooth (scenes flag it);
+# * ``conservative``: its forces derive from a potential (energy is conserved).
+#
+# Its physics is one function in :data:`modelgen.derive.effects.DERIVATIONS`.
+# The registries below (EFFECT_KINDS, EFFECT_FIELD_ROLES, STIFF_KINDS,
+# CONSERVATIVE_KINDS) are computed from these classes, never written out.
+
+#: How an effect field is read: a reference to a declared ``point``, ``body``,
+#: ``base`` or ``coordinate``; ``coordinates``, a list of coordinates; a
+#: ``vector`` of three expressions (parameters and t); or a parameters-only
+#: expression that must be ``nonnegative``, ``positive`` or may be ``signed``
+#: at the parameter defaults.
+FIELD_ROLES = ("point", "body", "base", "coordinate", "coordinates", "vector",
+               "nonnegative", "positive", "signed")
+
 
 @dataclass(frozen=True)
 class GravityEffect:
@@ -128,6 +151,9 @@ class GravityEffect:
     vector: Vec3
     base: str = CANONICAL_BASE
     kind = "gravity"
+    roles: ClassVar[dict] = {"vector": "vector", "base": "base"}
+    stiff = False
+    conservative = True
 
 
 @dataclass(frozen=True)
@@ -145,6 +171,11 @@ class SpringEffect:
     rest_length: Expr
     preload: Expr = sympy.S.Zero
     kind = "spring"
+    roles: ClassVar[dict] = {"point_a": "point", "point_b": "point",
+                             "stiffness": "nonnegative", "rest_length": "nonnegative",
+                             "preload": "signed"}
+    stiff = True
+    conservative = True
 
 
 @dataclass(frozen=True)
@@ -155,6 +186,10 @@ class TorsionSpringEffect:
     stiffness: Expr
     rest_angle: Expr = sympy.S.Zero
     kind = "torsion_spring"
+    roles: ClassVar[dict] = {"coordinate": "coordinate", "stiffness": "nonnegative",
+                             "rest_angle": "signed"}
+    stiff = True
+    conservative = True
 
 
 @dataclass(frozen=True)
@@ -165,6 +200,10 @@ class DamperEffect:
     point_b: str
     damping: Expr
     kind = "damper"
+    roles: ClassVar[dict] = {"point_a": "point", "point_b": "point",
+                             "damping": "nonnegative"}
+    stiff = False
+    conservative = False
 
 
 @dataclass(frozen=True)
@@ -174,6 +213,9 @@ class JointDampingEffect:
     coordinates: tuple
     damping: Expr
     kind = "joint_damping"
+    roles: ClassVar[dict] = {"coordinates": "coordinates", "damping": "nonnegative"}
+    stiff = False
+    conservative = False
 
 
 @dataclass(frozen=True)
@@ -193,6 +235,11 @@ class FrictionEffect:
     stribeck_speed: Expr = sympy.S.One
     smoothing_speed: Expr = sympy.Rational(1, 1000)
     kind = "friction"
+    roles: ClassVar[dict] = {"coordinate": "coordinate", "coulomb": "nonnegative",
+                             "viscous": "nonnegative", "static": "nonnegative",
+                             "stribeck_speed": "positive", "smoothing_speed": "positive"}
+    stiff = True
+    conservative = False
 
 
 @dataclass(frozen=True)
@@ -209,12 +256,39 @@ class DragEffect:
     drag_coefficient: Expr
     area: Expr
     kind = "drag"
+    roles: ClassVar[dict] = {"body": "body", "point": "point", "density": "nonnegative",
+                             "drag_coefficient": "nonnegative", "area": "nonnegative"}
+    stiff = False
+    conservative = False
 
 
+#: The effect classes, in the order their types are listed in messages.
 EFFECT_TYPES = (GravityEffect, SpringEffect, TorsionSpringEffect, DamperEffect,
                 JointDampingEffect, FrictionEffect, DragEffect)
-#: effects that can make a problem stiff or non-smooth: scenes flag them
-STIFF_KINDS = ("spring", "torsion_spring", "friction")
+#: Effect ``type`` -> the spec class it builds (``action`` builds an ActionSpec).
+EFFECT_KINDS = {**{cls.kind: cls for cls in EFFECT_TYPES}, "action": ActionSpec}
+#: Field -> role over every effect kind (a field has the same role in every kind).
+EFFECT_FIELD_ROLES = {name: role for cls in EFFECT_KINDS.values()
+                      for name, role in cls.roles.items()}
+#: Effect kinds that can make a problem stiff or non-smooth: scenes flag them.
+STIFF_KINDS = tuple(kind for kind, cls in EFFECT_KINDS.items() if cls.stiff)
+#: Effect kinds whose forces derive from a potential (energy is then conserved).
+CONSERVATIVE_KINDS = tuple(kind for kind, cls in EFFECT_KINDS.items() if cls.conservative)
+
+
+def effect_fields(effect) -> dict:
+    """The fields of an effect spec that differ from the dataclass defaults (not ``name``).
+
+    >>> effect_fields(TorsionSpringEffect("s", "q", sympy.Symbol("k")))
+    {'coordinate': 'q', 'stiffness': k}
+    """
+    given = {}
+    for f in fields(effect):
+        value = getattr(effect, f.name)
+        if f.name == "name" or (f.default is not MISSING and value == f.default):
+            continue
+        given[f.name] = value
+    return given
 
 
 @dataclass(frozen=True)

@@ -298,6 +298,11 @@ class CompiledModel:
             return integrate.simulate(self, x0, t_span, times, method, rtol, atol, u, p,
                                       events, **options)
         res = make_result(state_names=self.state_names, **run(t_eval))
+        if step is not None:
+            warning = self.stability_warning(method, step, t_span[0], x0, u, p)
+            if warning:
+                res.message = f"{res.message} WARNING: {warning}"
+                res.info["stability_warning"] = warning
         if dense_output:
             steps = res if t_eval is None else make_result(state_names=self.state_names,
                                                            **run(None))
@@ -326,6 +331,30 @@ class CompiledModel:
             return None
         values[:, 1:-1] = got.reshape(len(ts) - 1, len(inner), nx)
         return DenseOutput(ts, values)
+
+    def stability_warning(self, method, step, t0, x0, u=None, p=None) -> str | None:
+        """Why a fixed ``step`` of an explicit ``method`` is unstable at (t0, x0), or None.
+
+        Explicit Runge-Kutta methods are stable only while h |lambda| stays inside
+        their stability region; with h |lambda|max beyond it (lambda the eigenvalues
+        of d xdot / d x at the start) the run "succeeds" with a wrong answer.
+        """
+        name = integrate.method_of(method).name
+        limit = STABILITY_LIMIT.get(name)
+        if limit is None:            # implicit methods: A-stable
+            return None
+        x = self._vector(x0, 2 * self.n, "x0")
+        try:
+            J = self.jac(t0, x, _input_at(self, u, t0, x), p)
+            lam = float(np.max(np.abs(np.linalg.eigvals(J))))
+        except (SimulationError, np.linalg.LinAlgError):
+            return None
+        if float(step) * lam <= limit:
+            return None
+        return (f"the step {float(step):g} s is beyond {name}'s stability limit: "
+                f"h |lambda|max = {float(step) * lam:.3g} > {limit:g} (|lambda|max = "
+                f"{lam:.3g} 1/s at the start), so the result is unreliable; use a step "
+                f"below {limit / lam:.3g} s or an implicit method (rodas, gauss4)")
 
     def _record_outputs(self, res, u, p) -> None:
         """The scene's outputs at every recorded time (res.outputs, res.output_columns)."""
@@ -409,6 +438,12 @@ def _cholesky_pivot(A, tol=1e-13):
         L[j, j] = np.sqrt(d)
         L[j + 1:, j] = (A[j + 1:, j] - L[j + 1:, :j] @ L[j, :j]) / L[j, j]
     return None
+
+
+#: |h lambda| where each explicit method's stability region ends on the negative real
+#: axis (Hairer & Wanner, Solving ODEs I, IV.2: RK4 2.785, DOPRI5 3.31, DOP853 6.0);
+#: on the imaginary axis RK4's is 2.83
+STABILITY_LIMIT = {"rk4": 2.785, "dopri5": 3.31, "dop853": 6.0}
 
 
 def _input_at(cm, u, t, x):

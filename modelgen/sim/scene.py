@@ -9,16 +9,13 @@ import numpy as np
 
 from modelgen.codegen.pipeline import generate
 from modelgen.errors import SimulationError
-from modelgen.sim.runtime import CompiledModel, check_mass_matrix
+from modelgen.model.spec import CONSERVATIVE_KINDS
+from modelgen.sim.animate import animate
 from modelgen.sim.integrate import method_of
 from modelgen.sim.result import Result
+from modelgen.sim.runtime import STABILITY_LIMIT, CompiledModel, check_mass_matrix
 
 
-#: effect kinds whose forces derive from a potential (energy is then conserved)
-CONSERVATIVE_KINDS = ("gravity", "spring", "torsion_spring")
-#: |h lambda| at which each explicit method's stability region ends on the negative
-#: real axis (Hairer & Wanner I, IV.2; RK4's is 2.79, on the imaginary axis 2.83)
-STABILITY_LIMIT = {"rk4": 2.78, "dopri5": 3.3, "dop853": 6.0}
 #: a run needing more steps than this for stability alone is called stiff
 STIFF_STEPS = 1e4
 
@@ -28,7 +25,7 @@ class Scene:
 
     >>> scene = modelgen.load_scene("models/scenes/dp_damped.yaml")   # doctest: +SKIP
     >>> res = scene.run()                                             # doctest: +SKIP
-    >>> res.t, res.x, res["tip"]                                      # doctest: +SKIP
+    >>> res.t, res.y, res["q1"], res["elbow"]                         # doctest: +SKIP
     """
 
     def __init__(self, spec, out_dir=None, *, force: bool = False, progress=None):
@@ -155,6 +152,15 @@ class Scene:
         res.energy = cm.energies(res, p)
         res.info.update(scene=s.name, conservative=self.conservative)
         return res
+
+    def animate(self, res: Result, path, **options):
+        """Write the animation of a run of this scene to ``path`` (``.gif``, ``.mp4`` or
+        ``.html``); ``options`` as :func:`modelgen.sim.animate.motion` (pass the run's
+        ``p`` if it overrode parameters).
+
+        >>> scene.animate(scene.run(), "out/dp_free.html")       # doctest: +SKIP
+        """
+        return animate(res, self.spec.model, path, compiled=self.model, **options)
 
     def initial_state(self, x0=None) -> np.ndarray:
         """The scene's initial state, or ``x0`` (an array, or names -> values over it)."""

@@ -1,0 +1,639 @@
+"""The model builder: validated declarations, one ``add_*`` call per entry.
+
+Input: calls from the YAML section readers (:mod:`modelgen.model.sections`),
+the Python API (:class:`~modelgen.model.api.Model`) and the scene loader, one
+per declared name, with raw values and the entry's dotted key.
+Output: :meth:`ModelBuilder.build` -> a frozen :class:`~modelgen.model.spec.ModelSpec`
+(references are resolved by :mod:`modelgen.model.resolve`).  Every ``add_*``
+validates its entry completely (names, expressions, physical checks at the
+parameter defaults) before it changes anything, so a failed call leaves the
+builder as it was.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+import numbers
+from typing import Mapping, NamedTuple, Optional
+
+import numpy as np
+import sympy
+
+from modelgen.errors import ModelError
+
+#: the symmetry of an inertia matrix is checked numerically, at the default parameters
+#: and at SYMMETRY_SAMPLES - 1 seeded random scalings of them, to this relative tolerance
+#: of the matrix's largest entry (a tensor from R diag(d) R^T differs by ulps across the
+#: diagonal; an exact comparison refused most real tensors, a symbolic one could hang)
+SYMMETRY_SAMPLES = 3
+SYMMETRY_RTOL = 1e-9
+from modelgen.model import spec as specmod
+from modelgen.model.expr import ExpressionParseError, format_expression, parse_expression
+from modelgen.model.messages import (article, as_list, closest, describe, join_and,
+                                     quote_expression)
+from modelgen.model.names import (MAX_NAME_LENGTH, NAME_FIX, NAME_RE, NAMESPACE_NOTE,
+                                  NAMESPACE_NOTE_EFFECTS, check_name)
+from modelgen.model.resolve import build_spec
+from modelgen.model.schema import ENTRY_KEYS, EXPRESSION_RULES, NUMERIC_STRING, REQUIRED_KEYS
+from modelgen.model.spec import (CANONICAL_BASE, CANONICAL_POINT, EFFECT_KINDS, TIME,
+                                 ModelSpec, effect_fields)
+
+__all__ = ["ModelBuilder", "replay", "BaseDecl", "PointDecl", "FrameDecl", "BodyDecl",
+           "ActionDecl", "EffectDecl"]
+
+
+# -- declarations: validated entries, before references are resolved ----------
+
+class BaseDecl(NamedTuple):
+    name: str
+    parent: str
+    axis: int
+    angle: sympy.Expr
+    key: str
+
+
+class PointDecl(NamedTuple):
+    name: str
+    parent: Optional[str]   # None when given by a frame
+    base: Optional[str]
+    frame: Optional[str]
+    coordinates: tuple
+    key: str
+
+
+class FrameDecl(NamedTuple):
+    name: str
+    point: str
+    base: str
+    key: str
+
+
+class BodyDecl(NamedTuple):
+    name: str
+    mass: sympy.Expr
+    G: str
+    base: str
+    inertia: tuple
+    key: str
+
+
+class ActionDecl(NamedTuple):
+    name: str
+    body: str
+    point: Optional[str]
+    base: Optional[str]
+    frame: Optional[str]
+    torque: tuple
+    force: tuple
+    key: str
+
+
+class EffectDecl(NamedTuple):
+    name: str
+    kind: str               # a key of EFFECT_KINDS
+    fields: dict            # field -> validated value (given fields only)
+    frame: Optional[str]    # action effects given a frame
+    key: str
+
+
+class ModelBuilder:
+    """Accumulates validated declarations; :meth:`build` resolves them into a spec.
+
+    Every ``add_*`` method validates completely before it changes anything.
+    ``lines`` maps dotted keys to 1-based lines (empty for the Python API).
+    Keys under a prefix registered with :meth:`add_source` come from another
+    file (a scene adding parameters and effects to its model) and their
+    errors name that file.
+    """
+
+    def __init__(self, file: Optional[str], lines: Optional[dict] = None):
+        self.file = file
+        self.lines = lines if lines is not None else {}
+        self.name: Optional[str] = None
+        self.description = ""
+        self.kinds: dict = {}         # name -> (kind, key) for every declared name
+        self.speeds: dict = {}        # speed name -> coordinate
+        self.symbols: dict = {}       # name -> Symbol (coordinates, speeds, parameters, inputs)
+        self.coordinates: list = []
+        self.parameters: list = []    # (name, float)
+        self.defaults: dict = {}      # Symbol -> sympy Float, for the physical checks
+        self.inputs: list = []
+        self.bases: list = []
+        self.points: list = []
+        self.frames: list = []
+        self.bodies: list = []
+        self.actions: list = []
+        self.effects: list = []
+        self.gravity: Optional[tuple] = None
+        self.sources: list = []       # (key prefix, file, lines) of keys from other files
+        self._allowed: dict = {}
+
+    def clone(self) -> "ModelBuilder":
+        other = ModelBuilder(self.file, self.lines)
+        for attr, value in vars(self).items():
+            if isinstance(value, (dict, list)) and attr != "lines":
+                value = type(value)(value)
+            setattr(other, attr, value)
+        return other
+
+    # -- errors ------------------------------------------------------------
+    def add_source(self, prefix: str, file: Optional[str], lines: dict) -> None:
+        """Keys ``prefix`` and ``prefix.*`` come from ``file`` with line table ``lines``."""
+        self.sources.append((prefix, file, lines))
+
+    def _source(self, key: Optional[str]):
+        for prefix, file, lines in self.sources:
+            if key and (key == prefix or key.startswith((prefix + ".", prefix + "["))):
+                return file, lines
+        return self.file, self.lines
+
+    def file_of(self, key: Optional[str]) -> Optional[str]:
+        return self._source(key)[0]
+
+    def line_of(self, key: Optional[str]) -> Optional[int]:
+        lines = self._source(key)[1]
+        while key:
+            if key in lines:
+                return lines[key]
+            cut = max(key.rfind("."), key.rfind("["))
+            key = key[:cut] if cut > 0 else ""
+        return None
+
+    def place(self, key: str, seen_from: Optional[str]) -> str:
+        """``key (line 3)``, or ``key (file:3)`` when ``key`` is in another file."""
+        line, file = self.line_of(key), self.file_of(key)
+        if file != self.file_of(seen_from) and file is not None:
+            return f"{key} ({file}" + (f":{line})" if line is not None else ")")
+        return key + (f" (line {line})" if line is not None else "")
+
+    def error(self, problem: str, key: Optional[str], fix: Optional[str]) -> ModelError:
+        return ModelError(problem, file=self.file_of(key), line=self.line_of(key), key=key,
+                          fix=fix)
+
+    # -- names -------------------------------------------------------------
+    def kind_of(self, name: str) -> Optional[str]:
+        if name in self.kinds:
+            return self.kinds[name][0]
+        if name in self.speeds:
+            return "speed"
+        if name == "t":
+            return "time"
+        return None
+
+    def check_new_name(self, name, kind: str, key: str) -> str:
+        check_name(name, file=self.file_of(key), line=self.line_of(key), key=key,
+                   what=f"{kind} name")
+        if name in self.kinds:
+            other_kind, other_key = self.kinds[name]
+            note = NAMESPACE_NOTE_EFFECTS if "effect" in (kind, other_kind) \
+                else NAMESPACE_NOTE
+            raise self.error(f"duplicate name '{name}': already declared as "
+                             f"{article(other_kind)} at {self.place(other_key, key)}", key,
+                             f"rename one of them; {note}")
+        if name in self.speeds:
+            raise self.error(f"'{name}' is the speed of coordinate '{self.speeds[name]}'",
+                             key, "rename it; the speed of a coordinate q is named q_dot")
+        return name
+
+    def register(self, name: str, kind: str, key: str) -> None:
+        self.kinds[name] = (kind, key)
+
+    def add_symbol(self, name: str) -> None:
+        self.symbols[name] = specmod.symbol(name)
+        self._allowed = {}
+
+    # -- values --------------------------------------------------------------
+    def allowed(self, rule: str) -> dict:
+        if rule not in self._allowed:
+            kinds = EXPRESSION_RULES[rule].kinds
+            table = {name: symbol for name, symbol in self.symbols.items()
+                     if self.kind_of(name) in kinds}
+            if "time" in kinds:
+                table["t"] = TIME
+            self._allowed[rule] = table
+        return self._allowed[rule]
+
+    def expression(self, value, key: str, rule: str) -> sympy.Expr:
+        try:
+            return parse_expression(value, self.allowed(rule),
+                                    kinds=EXPRESSION_RULES[rule].text)
+        except ExpressionParseError as exc:
+            raise self._expression_error(exc, value, key, rule) from None
+
+    def _expression_error(self, exc: ExpressionParseError, value, key: str,
+                          rule_name: str) -> ModelError:
+        rule = EXPRESSION_RULES[rule_name]
+        if exc.name is not None:
+            name = exc.name
+            kind = self.kind_of(name)
+            if kind is not None:
+                return self.error(f"{kind} '{name}' is not allowed in expression "
+                                  f"{quote_expression(value)}", key,
+                                  f"use only {rule.text} here{rule.why}")
+            close = closest(name, list(self.allowed(rule_name)))
+            fix = f"did you mean '{close}'? Otherwise " if close else ""
+            fix += (f"declare '{name}' under {rule.declare}; only {rule.text} "
+                    f"may be used here")
+            return self.error(f"undefined name '{name}' in expression {quote_expression(value)}",
+                              key, fix)
+        problem = "invalid expression: " + exc.reason
+        if exc.column is not None:
+            problem += f" at column {exc.column} of {quote_expression(exc.text)}"
+        elif exc.text is not None:
+            problem += f" in {quote_expression(exc.text)}"
+        return self.error(problem, key, exc.hint or "correct the expression")
+
+    def vector(self, value, key: str, rule: str, length: int = 3,
+               example: str = "[x, y, z]") -> tuple:
+        items = as_list(value)
+        if not isinstance(items, list):
+            raise self.error(f"expected a list of {length} components but got "
+                             f"{describe(value)}", key, f"write {example}")
+        if len(items) != length:
+            raise self.error(f"expected {length} components but got {len(items)}", key,
+                             f"write {example}")
+        return tuple(self.expression(item, f"{key}[{i}]", rule)
+                     for i, item in enumerate(items))
+
+    def reference(self, value, what: str, key: str) -> str:
+        """A reference to a base, point, body or frame: must be a string name."""
+        if not isinstance(value, str):
+            raise self.error(f"expected {article(what)} name but got {describe(value)}", key,
+                             f"write the name of {article(what)}")
+        return value
+
+    def number(self, value, key: str, what: str) -> float:
+        if isinstance(value, str) and NUMERIC_STRING.match(value):
+            value = float(value)
+        if (isinstance(value, bool) or not isinstance(value, numbers.Real)
+            or not math.isfinite(float(value))):
+            raise self.error(f"{what} must be a finite real number but is "
+                             f"{describe(value)}", key, "write a number such as 1.0")
+        return float(value)
+
+    def at_defaults(self, expr: sympy.Expr) -> Optional[float]:
+        """Value of a parameters-only expression at the defaults (None if not real)."""
+        value = expr.xreplace(self.defaults)
+        try:
+            result = float(value)
+        except TypeError:
+            return None
+        return result if math.isfinite(result) else None
+
+    # -- declarations ---------------------------------------------------------
+    def set_name(self, name, key: str = "name") -> None:
+        if not isinstance(name, str) or not NAME_RE.match(name) or len(name) > MAX_NAME_LENGTH:
+            shown = f"'{name}'" if isinstance(name, str) else describe(name)
+            raise self.error(f"model name {shown} is not a valid C identifier", key,
+                             f"{NAME_FIX} and at most {MAX_NAME_LENGTH} characters "
+                             "(it prefixes every generated C function)")
+        check_name(name, file=self.file, line=self.line_of(key), key=key, what="model name",
+                   modelgen_reserved=False)
+        self.name = name
+
+    def set_description(self, text, key: str = "description") -> None:
+        if text is None:
+            text = ""
+        if not isinstance(text, str):
+            raise self.error(f"expected a string but got {describe(text)}", key,
+                             "write the description as text (quote it if needed)")
+        self.description = text
+
+    def add_coordinate(self, name, key: str) -> None:
+        self.check_new_name(name, "coordinate", key)
+        speed = specmod.speed_name(name)
+        if speed in self.kinds:
+            other_kind, other_key = self.kinds[speed]
+            raise self.error(f"the speed of coordinate '{name}' would be '{speed}', which "
+                             f"is already declared as {article(other_kind)} at {other_key}", key,
+                             f"rename {other_kind} '{speed}' or coordinate '{name}'")
+        self.register(name, "coordinate", key)
+        self.coordinates.append(name)
+        self.speeds[speed] = name
+        self.add_symbol(name)
+        self.add_symbol(speed)
+
+    def add_parameter(self, name, default, key: str) -> None:
+        self.check_new_name(name, "parameter", key)
+        value = self.number(default, key, f"the default of parameter '{name}'")
+        self.register(name, "parameter", key)
+        self.parameters.append((name, value))
+        self.add_symbol(name)
+        self.defaults[self.symbols[name]] = sympy.Float(value)
+
+    def add_input(self, name, key: str) -> None:
+        self.check_new_name(name, "input", key)
+        self.register(name, "input", key)
+        self.inputs.append(name)
+        self.add_symbol(name)
+
+    def add_base(self, name, parent, axis, angle, key: str) -> None:
+        self.check_new_name(name, "base", key)
+        parent = self.reference(parent, "base", f"{key}.parent")
+        if isinstance(axis, bool) or not isinstance(axis, numbers.Integral) \
+                or not 1 <= axis <= 3:
+            raise self.error(f"axis must be 1, 2 or 3 but is {describe(axis)}",
+                             f"{key}.axis", "use 1, 2 or 3 for the parent's x, y or z axis")
+        angle = self.expression(angle, f"{key}.angle", "position")
+        self.register(name, "base", key)
+        self.bases.append(BaseDecl(name, parent, int(axis), angle, key))
+
+    def add_point(self, name, parent, base, frame, coordinates, key: str) -> None:
+        self.check_new_name(name, "point", key)
+        if frame is not None:
+            if parent is not None or base is not None:
+                raise self.error("'frame' cannot be combined with 'from' or 'base'",
+                                 f"{key}.frame", "give either 'frame' or 'from' and 'base'")
+            frame = self.reference(frame, "frame", f"{key}.frame")
+        elif parent is None and base is None:
+            parent, base = CANONICAL_POINT, CANONICAL_BASE
+        elif base is None:
+            raise self.error("missing required key 'base' (needed with 'from')", key,
+                             "add 'base', or use 'frame' instead of 'from'")
+        elif parent is None:
+            raise self.error("missing required key 'from' (needed with 'base')", key,
+                             "add 'from', or use 'frame' instead of 'base'")
+        if frame is None:
+            parent = self.reference(parent, "point", f"{key}.from")
+            base = self.reference(base, "base", f"{key}.base")
+        where = f"base '{base}'" if frame is None else f"frame '{frame}'"
+        coordinates = self.vector(coordinates, f"{key}.coordinates", "position",
+                                  example=f"[x, y, z] (components in {where})")
+        self.register(name, "point", key)
+        self.points.append(PointDecl(name, parent, base, frame, coordinates, key))
+
+    def add_frame(self, name, point, base, key: str) -> None:
+        self.check_new_name(name, "frame", key)
+        point = self.reference(point, "point", f"{key}.point")
+        base = self.reference(base, "base", f"{key}.base")
+        self.register(name, "frame", key)
+        self.frames.append(FrameDecl(name, point, base, key))
+
+    def add_body(self, name, mass, G, base, inertia, key: str) -> None:
+        self.check_new_name(name, "body", key)
+        mass = self.expression(mass, f"{key}.mass", "constant")
+        G = self.reference(G, "point", f"{key}.G")
+        base = self.reference(base, "base", f"{key}.base")
+        inertia = self.inertia(inertia, f"{key}.inertia", name)
+        mass_value = self.at_defaults(mass)
+        if mass_value is None:
+            raise self.error(f"mass of body '{name}' is not a real number with the default "
+                             f"parameters: {format_expression(mass)}", f"{key}.mass",
+                             "give a mass >= 0")
+        if mass_value < 0:
+            raise self.error(f"mass of body '{name}' is negative: {format_expression(mass)} "
+                             f"= {mass_value!r} with the default parameters", f"{key}.mass",
+                             "give a mass >= 0")
+        self.check_physical_inertia(name, inertia, f"{key}.inertia")
+        self.register(name, "body", key)
+        self.bodies.append(BodyDecl(name, mass, G, base, inertia, key))
+
+    def inertia(self, value, key: str, body: str) -> tuple:
+        zero = sympy.Integer(0)
+        if value is None:
+            return ((zero,) * 3,) * 3
+        shape = "write [Ixx, Iyy, Izz] (principal moments) or a 3x3 matrix [[Ixx, Ixy, Ixz], " \
+                "[Ixy, Iyy, Iyz], [Ixz, Iyz, Izz]]"
+        rows = as_list(value)
+        if not isinstance(rows, list) or len(rows) != 3:
+            raise self.error("expected 3 principal moments or a 3x3 matrix but got "
+                             f"{describe(value)}", key, shape)
+        rows = [as_list(row) for row in rows]
+        if not any(isinstance(row, list) for row in rows):
+            diagonal = [self.expression(item, f"{key}[{i}]", "constant")
+                        for i, item in enumerate(rows)]
+            return tuple(tuple(diagonal[i] if i == j else zero for j in range(3))
+                         for i in range(3))
+        for i, row in enumerate(rows):
+            if not isinstance(row, list) or len(row) != 3:
+                raise self.error(f"row {i + 1} of the 3x3 inertia matrix is "
+                                 f"{describe(row)}, not a list of 3 items", key, shape)
+        matrix = [[self.expression(item, f"{key}[{i}][{j}]", "constant")
+                   for j, item in enumerate(row)] for i, row in enumerate(rows)]
+        samples = [self.sample_values(matrix, k) for k in range(SYMMETRY_SAMPLES)]
+        for i in range(3):
+            for j in range(i + 1, 3):
+                upper, lower = matrix[i][j], matrix[j][i]
+                if upper == lower:
+                    continue
+                for values in samples:
+                    if values is None:
+                        continue
+                    scale = max(abs(v) for row in values for v in row) or 1.0
+                    if not abs(values[i][j] - values[j][i]) <= SYMMETRY_RTOL * scale:
+                        raise self.error(
+                            f"inertia of body '{body}' is not symmetric: entry [{i}][{j}] is "
+                            f"{format_expression(upper)} but entry [{j}][{i}] is "
+                            f"{format_expression(lower)}", key,
+                            f"make entries [{i}][{j}] and [{j}][{i}] equal")
+                # equal to rounding (a tensor computed as R diag(d) R^T): keep their mean
+                matrix[i][j] = matrix[j][i] = (
+                    (upper + lower) / 2 if upper.is_Number and lower.is_Number else upper)
+        return tuple(tuple(row) for row in matrix)
+
+    def sample_values(self, matrix, k: int):
+        """The 3x3 ``matrix`` evaluated numerically (never expanded): at the defaults for
+        ``k = 0``, else with every parameter scaled by a seeded factor in [0.5, 2].
+        None when it is not real there."""
+        if k == 0:
+            values = self.defaults
+        else:
+            rng = np.random.default_rng(k)
+            values = {s: sympy.Float(float(v) * rng.uniform(0.5, 2.0))
+                      for s, v in self.defaults.items()}
+        out = []
+        for row in matrix:
+            try:
+                out.append([float(item.xreplace(values)) for item in row])
+            except (TypeError, ValueError, OverflowError):
+                return None
+        return out if all(math.isfinite(v) for row in out for v in row) else None
+
+    def check_physical_inertia(self, body: str, inertia: tuple, key: str) -> None:
+        values = [[self.at_defaults(item) for item in row] for row in inertia]
+        if any(v is None for row in values for v in row):
+            raise self.error(f"inertia of body '{body}' is not real with the default "
+                             "parameters", key, "check the inertia expressions")
+        moments = np.linalg.eigvalsh(np.array(values, dtype=float))
+        tol = 1e-9 * max(1.0, float(np.max(np.abs(moments))))
+        shown = "[" + ", ".join(f"{m:.6g}" for m in moments) + "]"
+        if moments[0] < -tol:
+            raise self.error(f"inertia of body '{body}' has a negative principal moment "
+                             f"with the default parameters: {shown}", key,
+                             "give a positive semi-definite inertia tensor about G")
+        if moments[0] + moments[1] < moments[2] - tol:
+            raise self.error(f"inertia of body '{body}' violates the triangle inequality "
+                             f"with the default parameters: principal moments {shown}, "
+                             f"{moments[0]:.6g} + {moments[1]:.6g} < {moments[2]:.6g}", key,
+                             "no rigid body has these moments; each principal moment must "
+                             "be at most the sum of the other two")
+
+    def set_gravity(self, vector, key: str = "gravity") -> None:
+        if vector is None:
+            self.gravity = None
+            return
+        self.gravity = self.vector(vector, key, "gravity",
+                                   example="[gx, gy, gz] (components in base E)")
+
+    def add_action(self, name, body, point, base, frame, torque, force, vector,
+                   key: str) -> None:
+        self.check_new_name(name, "action", key)
+        parts = self.action_parts(body, point, base, frame, torque, force, vector, key)
+        self.register(name, "action", key)
+        self.actions.append(ActionDecl(name, *parts, key))
+
+    def action_parts(self, body, point, base, frame, torque, force, vector,
+                     key: str) -> tuple:
+        """Validated (body, point, base, frame, torque, force) of an action."""
+        body = self.reference(body, "body", f"{key}.body")
+        if frame is not None:
+            if point is not None or base is not None:
+                raise self.error("'frame' cannot be combined with 'point' or 'base'",
+                                 f"{key}.frame", "give either 'frame' or 'point' and 'base'")
+            frame = self.reference(frame, "frame", f"{key}.frame")
+        else:
+            if point is None:
+                raise self.error("missing required key 'point' (or 'frame')", key,
+                                 "add 'point' and 'base', or 'frame'")
+            if base is None:
+                raise self.error("missing required key 'base' (needed with 'point')", key,
+                                 "add 'base', or give 'frame' instead of 'point' and 'base'")
+            point = self.reference(point, "point", f"{key}.point")
+            base = self.reference(base, "base", f"{key}.base")
+        zero = (sympy.Integer(0),) * 3
+        if vector is not None:
+            if torque is not None or force is not None:
+                raise self.error("'vector' cannot be combined with 'torque' or 'force'",
+                                 f"{key}.vector",
+                                 "give either 'vector' or 'torque' and 'force'")
+            six = self.vector(vector, f"{key}.vector", "action", 6,
+                              "[Mx, My, Mz, Fx, Fy, Fz]")
+            torque, force = six[:3], six[3:]
+        else:
+            torque = zero if torque is None else self.vector(
+                torque, f"{key}.torque", "action", example="[Mx, My, Mz]")
+            force = zero if force is None else self.vector(
+                force, f"{key}.force", "action", example="[Fx, Fy, Fz]")
+        return body, point, base, frame, torque, force
+
+    def add_effect(self, name, kind, fields: Mapping, key: str) -> None:
+        """An effect of type ``kind`` with ``fields`` (None means not given)."""
+        self.check_new_name(name, "effect", key)
+        types = ", ".join(EFFECT_KINDS)
+        if not isinstance(kind, str):
+            raise self.error(f"expected an effect type but got {describe(kind)}",
+                             f"{key}.type", f"write one of {types}")
+        if kind not in EFFECT_KINDS:
+            close = closest(kind, EFFECT_KINDS)
+            fix = f"did you mean '{close}'? " if close else ""
+            raise self.error(f"unknown effect type '{kind}'", f"{key}.type",
+                             fix + f"effect types: {types}")
+        if kind == "action":
+            valid = ENTRY_KEYS["actions"]
+            required = REQUIRED_KEYS["actions"]
+        else:
+            valid = tuple(f.name for f in dataclasses.fields(EFFECT_KINDS[kind])
+                          if f.name != "name")
+            required = tuple(f.name for f in dataclasses.fields(EFFECT_KINDS[kind])
+                             if f.name != "name" and f.default is dataclasses.MISSING)
+        for field in fields:
+            if field not in valid:
+                close = closest(field, valid)
+                fix = f"did you mean '{close}'? " if close else ""
+                raise self.error(f"unknown key '{field}' for {article(kind)} effect",
+                                 f"{key}.{field}",
+                                 fix + "valid keys: " + ", ".join(("type",) + valid))
+        for field in required:
+            if field not in fields:
+                raise self.error(f"missing required key '{field}'", key,
+                                 f"add '{field}'; {article(kind)} effect needs " + join_and(required))
+        if kind == "action":
+            parts = self.action_parts(*(fields.get(f) for f in valid), key)
+            body, point, base, frame, torque, force = parts
+            values = {"body": body, "point": point, "base": base, "torque": torque,
+                      "force": force}
+        else:
+            frame = None
+            values = {field: self.effect_field(name, kind, field, fields[field],
+                                               f"{key}.{field}")
+                      for field in valid if fields.get(field) is not None
+                      or field in required}
+            if "point_a" in values and values["point_a"] == values.get("point_b"):
+                raise self.error(f"{kind} '{name}' joins point '{values['point_a']}' to "
+                                 "itself", f"{key}.point_b", f"give two different points "
+                                 f"({article(kind)} acts along the line between them)")
+        self.register(name, "effect", key)
+        self.effects.append(EffectDecl(name, kind, values, frame, key))
+
+    def effect_field(self, name: str, kind: str, field: str, value, key: str):
+        """One validated field of an effect (its role in the effect class's ``roles``)."""
+        role = EFFECT_KINDS[kind].roles[field]
+        if role in ("point", "body", "base", "coordinate"):
+            return self.reference(value, role, key)
+        if role == "coordinates":
+            items = as_list(value)
+            if not isinstance(items, list) or not items:
+                raise self.error(f"expected a list of one or more coordinate names but got "
+                                 f"{describe(value)}", key, "write e.g. [q1, q2]")
+            for i, item in enumerate(items):
+                self.reference(item, "coordinate", f"{key}[{i}]")
+                if item in items[:i]:
+                    raise self.error(f"coordinate '{item}' is listed twice", f"{key}[{i}]",
+                                     "list each coordinate once")
+            return tuple(items)
+        if role == "vector":
+            return self.vector(value, key, "gravity",
+                               example="[gx, gy, gz] (components in the effect's base)")
+        expr = self.expression(value, key, "coefficient")
+        if role == "signed":
+            return expr
+        shown = format_expression(expr)
+        at = self.at_defaults(expr)
+        bound = ">= 0" if role == "nonnegative" else "> 0"
+        fix = f"give {article(field)} {bound}"
+        if field == "smoothing_speed":
+            fix += (" (the speed over which friction changes sign: tanh(v/smoothing_speed); "
+                    "e.g. 0.001)")
+        if at is None:
+            raise self.error(f"{field} of {kind} '{name}' is not a real number with the "
+                             f"default parameters: {shown}", key, fix)
+        if at < 0 or (role == "positive" and at == 0):
+            problem = "is negative" if at < 0 else "is not positive"
+            raise self.error(f"{field} of {kind} '{name}' {problem}: {shown} = {at!r} "
+                             "with the default parameters", key, fix)
+        return expr
+
+    # -- the spec ------------------------------------------------------------------
+    def build(self) -> ModelSpec:
+        """Resolve references, check for cycles, sort and freeze into a ModelSpec."""
+        return build_spec(self)
+
+
+def replay(ctx: ModelBuilder, spec: ModelSpec, parameters=None) -> ModelBuilder:
+    """Declare everything of ``spec`` in ``ctx`` again (every check runs again).
+
+    ``parameters`` replaces the spec's ``(name, default)`` pairs if given.
+    Points are declared with their resolved from/base.
+    """
+    for c in spec.coordinates:
+        ctx.add_coordinate(c, f"coordinates[{len(ctx.coordinates)}]")
+    for p, value in (spec.parameters if parameters is None else parameters):
+        ctx.add_parameter(p, value, f"parameters.{p}")
+    for i in spec.inputs:
+        ctx.add_input(i, f"inputs[{len(ctx.inputs)}]")
+    for b in spec.bases:
+        ctx.add_base(b.name, b.parent, b.axis, b.angle, f"bases.{b.name}")
+    for p in spec.points:
+        ctx.add_point(p.name, p.parent, p.base, None, p.coordinates, f"points.{p.name}")
+    for f in spec.frames:
+        ctx.add_frame(f.name, f.point, f.base, f"frames.{f.name}")
+    for b in spec.bodies:
+        ctx.add_body(b.name, b.mass, b.G, b.base, b.inertia, f"bodies.{b.name}")
+    ctx.set_gravity(spec.gravity)
+    for a in spec.actions:
+        ctx.add_action(a.name, a.body, a.point, a.base, None, a.torque, a.force, None,
+                       f"actions.{a.name}")
+    for e in spec.effects:
+        ctx.add_effect(e.name, e.kind, effect_fields(e), f"effects.{e.name}")
+    return ctx
+

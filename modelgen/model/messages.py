@@ -1,0 +1,103 @@
+"""Message helpers shared by the model and scene loaders.
+
+Input: values, names and candidate lists met while validating a file.
+Output: the short English phrases of :class:`~modelgen.errors.ModelError`
+messages ("the number 3", "a base name", "did you mean ..."), so that every
+loader words its errors the same way.
+"""
+from __future__ import annotations
+
+import difflib
+import numbers
+from typing import Mapping, Optional
+
+import sympy
+
+__all__ = ["API_FILE", "describe", "listing", "article", "join_and", "closest", "as_list",
+           "quote_expression"]
+
+#: ``file`` of the errors raised by the Python API.
+API_FILE = "<api>"
+
+
+def describe(value) -> str:
+    """A value's type (and value, when short) for messages.
+
+    >>> describe(3), describe([1, 2]), describe(None)
+    ('the number 3', 'a list of 2 items', 'null')
+    """
+    if value is None:
+        return "null"
+    if isinstance(value, bool):
+        return f"the boolean {str(value).lower()}"
+    if isinstance(value, numbers.Number):
+        return f"the number {value!r}"
+    if isinstance(value, str):
+        return f"the string {value!r}"
+    if isinstance(value, Mapping):
+        return "a mapping"
+    if isinstance(value, (list, tuple)):
+        return f"a list of {len(value)} item" + ("" if len(value) == 1 else "s")
+    return f"a {type(value).__name__}"
+
+
+def listing(names, limit: int = 10) -> str:
+    """Names joined by commas, at most ``limit``: 'a, b and 3 more', or 'none'.
+
+    >>> listing(['q1', 'q2', 'q3'], limit=2)
+    'q1, q2 and 1 more'
+    """
+    names = list(names)
+    if not names:
+        return "none"
+    if len(names) > limit:
+        return ", ".join(names[:limit]) + f" and {len(names) - limit} more"
+    return ", ".join(names)
+
+
+def article(noun: str) -> str:
+    """The noun with its indefinite article: 'a base name', 'an input name'.
+
+    >>> article('input name')
+    'an input name'
+    """
+    return ("an " if noun[:1] in "aeiou" else "a ") + noun
+
+
+def join_and(words) -> str:
+    """'a', 'a and b', 'a, b and c'.
+
+    >>> join_and(['mass', 'G', 'base'])
+    'mass, G and base'
+    """
+    words = list(words)
+    return words[0] if len(words) == 1 else ", ".join(words[:-1]) + " and " + words[-1]
+
+
+def closest(word: str, candidates) -> Optional[str]:
+    """The candidate closest to ``word`` (for "did you mean ...?"), or None.
+
+    >>> closest('stifness', ['stiffness', 'damping'])
+    'stiffness'
+    """
+    matches = difflib.get_close_matches(word, list(candidates), n=1, cutoff=0.6)
+    return matches[0] if matches else None
+
+
+def as_list(value):
+    """A list/tuple (or numpy array, sympy Matrix) as a list; anything else unchanged."""
+    if isinstance(value, (list, tuple)):
+        return list(value)
+    if isinstance(value, sympy.MatrixBase) or (
+            hasattr(value, "tolist") and not isinstance(value, (str, sympy.Basic))):
+        return value.tolist()
+    return value
+
+
+def quote_expression(value) -> str:
+    """An expression as quoted text for a message, shortened past 80 characters."""
+    text = value if isinstance(value, str) else repr(value)
+    if len(text) > 80:
+        text = text[:60] + "..." + text[-15:]
+    return repr(text)
+

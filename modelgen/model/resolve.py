@@ -1,0 +1,185 @@
+"""Resolution: a builder's validated declarations -> a frozen ModelSpec.
+
+Input: a :class:`~modelgen.model.builder.ModelBuilder` whose entries are each
+valid on their own.  Output: the :class:`~modelgen.model.spec.ModelSpec`, once
+every reference (parents, points, bases, frames, bodies, coordinates) names a
+declared entity of the right kind, the bases and points form trees (no
+cycles), and both are sorted parents-first; or a ModelError naming the
+offending reference, with a suggestion.
+"""
+from __future__ import annotations
+
+import heapq
+from typing import Optional
+
+from modelgen.model.messages import API_FILE, article, closest, listing
+from modelgen.model.schema import SECTION_OF
+from modelgen.model.spec import (CANONICAL_BASE, CANONICAL_POINT, EFFECT_KINDS, ActionSpec,
+                                 BaseSpec, BodySpec, FrameSpec, ModelSpec, PointSpec)
+
+__all__ = ["build_spec", "resolve", "resolve_effect"]
+
+
+def resolve(builder, ref: str, kind: str, key: str, canonical: Optional[str] = None) -> str:
+    """Check that ``ref`` names a declared ``kind`` (or the canonical one)."""
+    if ref == canonical or builder.kind_of(ref) == kind:
+        return ref
+    section = SECTION_OF[kind]
+    known = ([canonical] if canonical else []) + \
+        [name for name, (k, _) in builder.kinds.items() if k == kind]
+    other = builder.kind_of(ref)
+    if other is not None:
+        raise builder.error(f"'{ref}' is {article(other)}, not {article(kind)}", key,
+                            f"name {article(kind)} here (known {section}: {listing(known)})")
+    close = closest(ref, known)
+    if close:
+        fix = f"did you mean '{close}'? Otherwise declare '{ref}' under '{section}'"
+    else:
+        fix = f"declare '{ref}' under '{section}' (known {section}: {listing(known)})"
+    raise builder.error(f"unknown {kind} '{ref}'", key, fix)
+
+
+def build_spec(builder) -> ModelSpec:
+    """Resolve references, check for cycles, sort and freeze into a ModelSpec."""
+    if builder.name is None:
+        raise builder.error("missing required key 'name'", None,
+                            "add 'name: <model name>' (a C identifier) at the top level")
+    for b in builder.bases:
+        resolve(builder, b.parent, "base", f"{b.key}.parent", CANONICAL_BASE)
+    bases = _topological(builder.bases, lambda b: b.parent)
+    if isinstance(bases, tuple):
+        first = _declared(builder.bases, bases[0])
+        raise builder.error("the bases form a cycle: " + " -> ".join(bases) +
+                            " (each base is rotated from the next)", f"{first.key}.parent",
+                            "make one of these bases a child of 'E' or of a base outside "
+                            "the cycle")
+    frames = {}
+    for f in builder.frames:
+        resolve(builder, f.point, "point", f"{f.key}.point", CANONICAL_POINT)
+        resolve(builder, f.base, "base", f"{f.key}.base", CANONICAL_BASE)
+        frames[f.name] = f
+    points = []
+    for p in builder.points:
+        if p.frame is not None:
+            resolve(builder, p.frame, "frame", f"{p.key}.frame")
+            frame = frames[p.frame]
+            p = p._replace(parent=frame.point, base=frame.base)
+        else:
+            resolve(builder, p.parent, "point", f"{p.key}.from", CANONICAL_POINT)
+            resolve(builder, p.base, "base", f"{p.key}.base", CANONICAL_BASE)
+        points.append(p)
+    ordered_points = _topological(points, lambda p: p.parent)
+    if isinstance(ordered_points, tuple):
+        first = _declared(points, ordered_points[0])
+        via = "frame" if first.frame is not None else "from"
+        raise builder.error("the points form a cycle: " + " -> ".join(ordered_points) +
+                            " (each point is measured from the next)",
+                            f"{first.key}.{via}",
+                            "measure one of these points from 'O' or from a point outside "
+                            "the cycle")
+    for body in builder.bodies:
+        resolve(builder, body.G, "point", f"{body.key}.G", CANONICAL_POINT)
+        resolve(builder, body.base, "base", f"{body.key}.base", CANONICAL_BASE)
+    actions = []
+    for a in builder.actions:
+        resolve(builder, a.body, "body", f"{a.key}.body")
+        if a.frame is not None:
+            resolve(builder, a.frame, "frame", f"{a.key}.frame")
+            frame = frames[a.frame]
+            a = a._replace(point=frame.point, base=frame.base)
+        else:
+            resolve(builder, a.point, "point", f"{a.key}.point", CANONICAL_POINT)
+            resolve(builder, a.base, "base", f"{a.key}.base", CANONICAL_BASE)
+        actions.append(a)
+    effects = [resolve_effect(builder, e, frames) for e in builder.effects]
+    if builder.gravity is not None and builder.kind_of("gravity") in ("action", "effect"):
+        kind, key = builder.kinds["gravity"]
+        raise builder.error(f"{article(kind)} is named 'gravity', the name of the top-level "
+                            "gravity", key, f"rename the {kind}, or remove the top-level "
+                            "'gravity:' and declare it as an effect of type gravity")
+    return ModelSpec(
+        name=builder.name,
+        description=builder.description,
+        coordinates=tuple(builder.coordinates),
+        parameters=tuple(builder.parameters),
+        inputs=tuple(builder.inputs),
+        bases=tuple(BaseSpec(b.name, b.parent, b.axis, b.angle) for b in bases),
+        points=tuple(PointSpec(p.name, p.parent, p.base, p.coordinates)
+                     for p in ordered_points),
+        frames=tuple(FrameSpec(f.name, f.point, f.base) for f in builder.frames),
+        bodies=tuple(BodySpec(b.name, b.mass, b.G, b.base, b.inertia)
+                     for b in builder.bodies),
+        gravity=builder.gravity,
+        actions=tuple(ActionSpec(a.name, a.body, a.point, a.base, a.torque, a.force)
+                      for a in actions),
+        effects=tuple(effects),
+        source=None if builder.file == API_FILE else builder.file,
+        lines=tuple(builder.lines.items()),
+    )
+
+
+def resolve_effect(builder, e, frames: dict):
+    """Check an effect's references and build its spec dataclass."""
+    values = dict(e.fields)
+    if e.frame is not None:
+        resolve(builder, e.frame, "frame", f"{e.key}.frame")
+        values["point"], values["base"] = frames[e.frame].point, frames[e.frame].base
+    for field, value in values.items():
+        role = EFFECT_KINDS[e.kind].roles.get(field)
+        where = f"{e.key}.{field}"
+        if e.frame is not None and field in ("point", "base"):
+            continue
+        if role in ("point", "base"):
+            resolve(builder, value, role, where,
+                    CANONICAL_POINT if role == "point" else CANONICAL_BASE)
+        elif role in ("body", "coordinate"):
+            resolve(builder, value, role, where)
+        elif role == "coordinates":
+            for i, item in enumerate(value):
+                resolve(builder, item, "coordinate", f"{where}[{i}]")
+    return EFFECT_KINDS[e.kind](name=e.name, **values)
+
+def _declared(items, name):
+    """The declaration named ``name``."""
+    return next(item for item in items if item.name == name)
+
+
+def _topological(items: list, parent_of):
+    """Parents-first order of ``items``; ties keep declaration order.
+
+    Returns the sorted list, or, if some items form a cycle, the cycle as a
+    tuple of names starting at its earliest-declared member and ending with
+    it again (``("B1", "B2", "B1")``).
+    """
+    index = {item.name: i for i, item in enumerate(items)}
+    children: dict = {}
+    heap = []
+    for i, item in enumerate(items):
+        parent = parent_of(item)
+        if parent in index:
+            children.setdefault(parent, []).append(i)
+        else:
+            heap.append(i)
+    heapq.heapify(heap)
+    order = []
+    while heap:
+        i = heapq.heappop(heap)
+        order.append(items[i])
+        for child in children.get(items[i].name, ()):
+            heapq.heappush(heap, child)
+    if len(order) == len(items):
+        return order
+    placed = {item.name for item in order}
+    remaining = [item for item in items if item.name not in placed]
+    # follow parents from the first unplaced item until a name repeats
+    seen: list = []
+    name = remaining[0].name
+    while name not in seen:
+        seen.append(name)
+        name = parent_of(items[index[name]])
+    cycle = seen[seen.index(name):]
+    start = min(cycle, key=index.__getitem__)
+    k = cycle.index(start)
+    cycle = cycle[k:] + cycle[:k]
+    return tuple(cycle + [start])
+

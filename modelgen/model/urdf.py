@@ -1,0 +1,409 @@
+"""URDF import: a fixed-base robot description -> a :class:`~modelgen.model.Model`.
+
+:func:`load_urdf` reads a ``.urdf`` file (``modelgen.load("robot.urdf")`` and
+``modelgen import robot.urdf -o robot.yaml`` use it) and builds the model
+through the public :class:`Model` API, so every check of the model loader
+applies.  What becomes what:
+
+* The root link is the ground (base ``E``, point ``O``).  Gravity is
+  ``[0, 0, -g]`` in E with parameter ``g = 9.81``.
+* A joint's ``origin`` is a point ``J_<joint>`` (``P_<link>`` for a fixed
+  joint: the child link's origin; from the parent link's origin, in its base) and constant rotations ``B_<joint>_rz``, ``_ry``,
+  ``_rx`` for ``rpy`` (R = Rz(yaw) Ry(pitch) Rx(roll): yaw about z first,
+  moving axes); zero offsets and angles are left out.
+* ``revolute`` and ``continuous`` joints are one angle coordinate; an axis
+  along +-x, +-y or +-z is one simple rotation (the angle negated for a
+  negative axis), any other unit axis a: constant rotations ``_az`` (about
+  z by atan2(ay, ax)) and ``_ay`` (about y by acos(az)) that bring z onto
+  a, the rotation about z, and the same two undone.  ``prismatic`` joints
+  move the child's origin by ``q * a`` in the joint frame.  The child link's
+  base is ``B_<link>`` (or the joint frame's base when the joint does not
+  rotate), its origin point ``P_<link>`` (or the joint point).
+* Coordinates are the joint names with every character outside
+  ``[A-Za-z0-9_]`` replaced by ``_``, in depth-first order from the root
+  (children in file order).  A ``mimic`` joint has no coordinate: its
+  position is ``multiplier * q + offset`` of the joint it mimics, and it has
+  no input or effects.
+* A ``fixed`` joint welds its child to the parent: the child keeps its
+  frames (bases and points, so outputs can use them) and its mass, centre of
+  mass and inertia are merged exactly into the parent's body (the body of a
+  group of welded links is named after its first link).  Links welded to
+  the root do not move and get no body.  A link without ``<inertial>`` is a
+  massless frame; a moving group without mass is a body of mass 0 (so the
+  joint torques have a body to act on).
+* Each joint with a coordinate gets an input ``tau_<joint>``: a torque about
+  (revolute) or a force along (prismatic) the axis acting on the child's
+  body, with the reaction on the parent's body (actions ``motor_<joint>``
+  and ``motor_<joint>_reaction``), so ``tau_<joint>`` is exactly the
+  generalized force of the joint's coordinate.
+* ``<dynamics damping=...>`` > 0 is an effect ``damping_<joint>`` (type
+  ``joint_damping``) and ``friction`` > 0 an effect ``friction_<joint>``
+  (type ``friction``, Coulomb level = the URDF value); ``<limit>`` values are
+  kept in :attr:`UrdfImport.joints` and written as comments by
+  :func:`urdf_to_yaml`.
+* Masses, centres of mass and inertias are numbers (exact decimals of the
+  URDF values) unless ``inertial_parameters=True``, which makes each body's
+  mass ``m_<body>`` and inertia entries ``I_<body>_xx`` ... parameters.
+* ``floating`` joints are refused (floating bases are not supported yet);
+  ``fix_floating_root=True`` welds a floating joint at the root instead and
+  says so in the description.  Meshes are never opened.
+
+>>> imp = import_urdf_text('''<robot name="pend"><link name="world"/>
+...   <link name="rod"><inertial><origin xyz="0 0 -0.5"/><mass value="1"/>
+...     <inertia ixx="0.1" iyy="0.1" izz="0" ixy="0" ixz="0" iyz="0"/></inertial></link>
+...   <joint name="hinge" type="continuous"><parent link="world"/><child link="rod"/>
+...     <axis xyz="0 1 0"/></joint></robot>''')
+>>> spec = imp.model.spec()
+>>> spec.coordinates, spec.inputs, spec.bases[0].axis
+(('hinge',), ('tau_hinge',), 2)
+"""
+from __future__ import annotations
+
+import math
+import re
+from pathlib import Path
+from typing import NamedTuple, Optional
+
+import numpy as np
+import sympy
+
+from modelgen.errors import ModelError
+from modelgen.model.api import Model, check_name
+from modelgen.model.spec import CANONICAL_BASE, CANONICAL_POINT, symbol
+from modelgen.model.urdf_read import Joint, Limit, Robot, parse_robot, rpy_matrix
+
+__all__ = ["UrdfImport", "JointInfo", "load_urdf", "import_urdf", "import_urdf_text",
+           "urdf_to_yaml", "sanitize"]
+
+_MOVING = ("revolute", "continuous", "prismatic")
+
+
+class JointInfo(NamedTuple):
+    """What the model keeps of one URDF joint (limits for later use)."""
+    name: str                  # URDF name
+    type: str
+    coordinate: Optional[str]  # None for fixed and mimic joints
+    input: Optional[str]
+    limit: Optional[Limit]
+    damping: float
+    friction: float
+    mimic: Optional[tuple] = None   # (coordinate, multiplier, offset) of a mimic joint
+
+
+class UrdfImport(NamedTuple):
+    """The result of an import: the model, the joints' data and notes for the reader."""
+    model: Model
+    joints: tuple      # JointInfo in depth-first order
+    source: str
+    notes: tuple       # sentences (e.g. a floating root imported fixed)
+
+
+def sanitize(name: str) -> str:
+    """The URDF name with every character outside ``[A-Za-z0-9_]`` replaced by ``_``.
+
+    >>> sanitize("r-arm.joint 1")
+    'r_arm_joint_1'
+    """
+    return re.sub(r"[^A-Za-z0-9_]", "_", name)
+
+
+def _num(x: float):
+    """A float as an exact sympy number of its shortest decimal (ints stay ints)."""
+    if x == int(x) and abs(x) < 2 ** 53:
+        return sympy.Integer(int(x))
+    return sympy.Rational(repr(float(x)))
+
+
+class _Builder:
+    def __init__(self, robot: Robot, inertial_parameters: bool, notes: tuple):
+        self.robot = robot
+        self.inertial_parameters = inertial_parameters
+        self.notes = notes
+        moving = [j for j in robot.order if j.type in _MOVING]
+        text = (f"Robot '{robot.name}' imported from {Path(robot.file).name}: "
+                f"{sum(j.mimic is None for j in moving)} coordinates, {len(moving)} moving "
+                "links, fixed base.")
+        self.model = Model(self.model_name(), " ".join((text,) + notes))
+        self.actuation: dict = {}                     # joint -> (base, point, unit axis)
+        self.taken: set = set()
+        self.base = {robot.root: CANONICAL_BASE}      # link -> base name
+        self.point = {robot.root: CANONICAL_POINT}    # link -> point name
+        self.group = {robot.root: robot.root}          # link -> head of its welded group
+        self.placement = {robot.root: (np.eye(3), np.zeros(3))}   # link in its group's frame
+        self.coordinate: dict = {}                    # joint -> coordinate name
+        self.infos: list = []
+
+    def error(self, problem, joint: Joint, key: str, fix: str) -> ModelError:
+        return ModelError(problem, file=self.robot.file, line=joint.line,
+                          key=f"joint[{joint.name}].{key}", fix=fix)
+
+    def model_name(self) -> str:
+        name = sanitize(self.robot.name)
+        if not re.match(r"[A-Za-z]", name):
+            name = "robot_" + name
+        return name[:63]
+
+    def unique(self, wanted: str) -> str:
+        """A fresh valid name close to ``wanted`` (suffix _2, _3... on a clash)."""
+        stem = sanitize(wanted)[:56]
+        if not re.match(r"[A-Za-z]", stem):
+            stem = "L_" + stem
+        name, k = stem, 1
+        while True:
+            try:
+                check_name(name)
+                ok = name not in self.taken and not name.endswith("_dot")
+            except ModelError:
+                ok = False
+            if ok:
+                self.taken.add(name)
+                return name
+            k += 1
+            name = f"{stem}_{k}"
+
+    # -- declarations ---------------------------------------------------------
+    def coordinates(self) -> None:
+        for joint in self.robot.order:
+            if joint.type not in _MOVING or joint.mimic is not None:
+                continue
+            name = sanitize(joint.name)
+            key = f"joint[{joint.name}]"
+            check_name(name, file=self.robot.file, line=joint.line, key=key,
+                       what="coordinate (the sanitized joint name)")
+            if name in self.taken or f"{name}_dot" in self.taken or \
+                    (name.endswith("_dot") and name[:-4] in self.taken):
+                raise ModelError(f"joint '{joint.name}' gives coordinate '{name}', which "
+                                 "clashes with another joint's coordinate or speed",
+                                 file=self.robot.file, line=joint.line, key=key,
+                                 fix="rename one of the joints")
+            self.taken.add(name)
+            self.coordinate[joint.name] = name
+            self.model.add_coordinate(name)
+
+    def position(self, joint: Joint) -> sympy.Expr:
+        """The joint's angle or displacement: its coordinate or the mimic expression."""
+        if joint.mimic is None:
+            return symbol(self.coordinate[joint.name])
+        target, multiplier, offset = joint.mimic
+        return _num(multiplier) * symbol(self.coordinate[target]) + _num(offset)
+
+    def add_base(self, wanted: str, parent: str, axis: int, angle) -> str:
+        name = self.unique(wanted)
+        self.model.add_base(name, parent=parent, axis=axis, angle=angle)
+        return name
+
+    def add_point(self, wanted: str, parent: str, base: str, coordinates) -> str:
+        name = self.unique(wanted)
+        self.model.add_point(name, parent=parent, base=base, coordinates=coordinates)
+        return name
+
+    # -- kinematics -----------------------------------------------------------
+    def joint(self, joint: Joint) -> None:
+        parent_base, parent_point = self.base[joint.parent], self.point[joint.parent]
+        jname = sanitize(joint.name)
+        point = parent_point
+        if any(joint.xyz):      # a welded link's origin is named after the link
+            wanted = f"J_{jname}" if joint.type in _MOVING else f"P_{sanitize(joint.child)}"
+            point = self.add_point(wanted, parent_point, parent_base,
+                                   [_num(x) for x in joint.xyz])
+        base = parent_base
+        for axis, angle, tag in ((3, joint.rpy[2], "rz"), (2, joint.rpy[1], "ry"),
+                                 (1, joint.rpy[0], "rx")):
+            if angle != 0:
+                base = self.add_base(f"B_{jname}_{tag}", base, axis, _num(angle))
+        child = joint.child
+        moving = joint.type in _MOVING
+        if not moving:
+            self.weld(joint)
+            self.base[child], self.point[child] = base, point
+            return
+        self.group[child] = child
+        self.placement[child] = (np.eye(3), np.zeros(3))
+        q = self.position(joint)
+        a = joint.axis
+        action_base = base
+        if joint.type == "prismatic":
+            self.base[child] = base
+            self.point[child] = self.add_point(f"P_{sanitize(child)}", point, base,
+                                               [_num(x) * q for x in a])
+        else:
+            self.point[child] = point
+            aligned = [k for k in range(3) if abs(a[k]) == 1.0]
+            if aligned:
+                k = aligned[0]
+                angle = q if a[k] > 0 else -q
+                self.base[child] = self.add_base(f"B_{sanitize(child)}", base, k + 1, angle)
+            else:
+                phi = math.atan2(a[1], a[0])
+                theta = math.acos(max(-1.0, min(1.0, a[2])))
+                if phi != 0:
+                    base = self.add_base(f"B_{jname}_az", base, 3, _num(phi))
+                base = self.add_base(f"B_{jname}_ay", base, 2, _num(theta))
+                action_base = base
+                base = self.add_base(f"B_{jname}_q", base, 3, q)
+                if phi != 0:
+                    base = self.add_base(f"B_{jname}_ay_back", base, 2, _num(-theta))
+                    base = self.add_base(f"B_{sanitize(child)}", base, 3, _num(-phi))
+                else:
+                    base = self.add_base(f"B_{sanitize(child)}", base, 2, _num(-theta))
+                self.base[child] = base
+                a = (0.0, 0.0, 1.0)
+        self.actuation[joint.name] = (action_base, point, a)
+
+    def weld(self, joint: Joint) -> None:
+        """The child of a fixed joint joins its parent's group (placement in the group)."""
+        r, p = self.placement[joint.parent]
+        self.group[joint.child] = self.group[joint.parent]
+        self.placement[joint.child] = (r @ rpy_matrix(joint.rpy), p + r @ np.array(joint.xyz))
+
+    # -- bodies, inputs, effects -----------------------------------------------
+    def bodies(self) -> dict:
+        """One body per moving group (merged mass, centre of mass and inertia)."""
+        members: dict = {}
+        for link in self.robot.links.values():
+            members.setdefault(self.group[link.name], []).append(link)
+        body_of = {}
+        for head, links in members.items():
+            if head == self.robot.root:
+                continue
+            mass, com, inertia = _merge(links, self.placement)
+            name = self.unique(sanitize(head))
+            body_of[head] = name
+            base, point = self.base[head], self.point[head]
+            if mass > 0 and np.any(com != 0):
+                point = self.add_point(f"G_{sanitize(head)}", point, base,
+                                       [_num(x) for x in com])
+            inertia = [[_num(inertia[i][j]) for j in range(3)] for i in range(3)]
+            mass = _num(mass)
+            if self.inertial_parameters:
+                mass = self.parameter(f"m_{name}", mass)
+                for i, j, tag in ((0, 0, "xx"), (1, 1, "yy"), (2, 2, "zz"), (0, 1, "xy"),
+                                  (0, 2, "xz"), (1, 2, "yz")):
+                    inertia[i][j] = inertia[j][i] = self.parameter(f"I_{name}_{tag}",
+                                                                   inertia[i][j])
+            self.model.add_body(name, mass=mass, G=point, base=base, inertia=inertia)
+        return body_of
+
+    def parameter(self, wanted: str, value) -> sympy.Symbol:
+        name = self.unique(wanted)
+        self.model.add_parameter(name, float(value))
+        return symbol(name)
+
+    def inputs_and_effects(self, body_of: dict) -> None:
+        for joint in self.robot.order:
+            coordinate = self.coordinate.get(joint.name)
+            if coordinate is None:
+                mimic = None
+                if joint.mimic is not None and joint.type in _MOVING:
+                    target, multiplier, offset = joint.mimic
+                    mimic = (self.coordinate[target], multiplier, offset)
+                self.infos.append(JointInfo(joint.name, joint.type, None, None, joint.limit,
+                                            joint.damping, joint.friction, mimic))
+                continue
+            jname = sanitize(joint.name)
+            tau = self.unique(f"tau_{jname}")
+            self.model.add_input(tau)
+            base, point, a = self.actuation[joint.name]
+            vector = [_num(x) * symbol(tau) for x in a]
+            what = "force" if joint.type == "prismatic" else "torque"
+            child = body_of[self.group[joint.child]]
+            at = self.point[joint.child] if what == "force" else point
+            self.model.add_action(self.unique(f"motor_{jname}"), body=child, point=at,
+                                  base=base, **{what: vector})
+            parent_group = self.group[joint.parent]
+            if parent_group != self.robot.root:
+                self.model.add_action(self.unique(f"motor_{jname}_reaction"),
+                                      body=body_of[parent_group], point=point, base=base,
+                                      **{what: [-v for v in vector]})
+            if joint.damping > 0:
+                self.model.add_effect(self.unique(f"damping_{jname}"), "joint_damping",
+                                      coordinates=[coordinate], damping=_num(joint.damping))
+            if joint.friction > 0:
+                self.model.add_effect(self.unique(f"friction_{jname}"), "friction",
+                                      coordinate=coordinate, coulomb=_num(joint.friction))
+            self.infos.append(JointInfo(joint.name, joint.type, coordinate, tau, joint.limit,
+                                        joint.damping, joint.friction))
+
+    def build(self) -> UrdfImport:
+        self.taken.update(("g",))
+        self.coordinates()
+        self.model.add_parameter("g", 9.81)
+        for joint in self.robot.order:
+            self.joint(joint)
+        body_of = self.bodies()
+        self.inputs_and_effects(body_of)
+        self.model.set_gravity([0, 0, -symbol("g")])
+        return UrdfImport(self.model, tuple(self.infos), self.robot.file, self.notes)
+
+
+def _merge(links, placement) -> tuple:
+    """Total mass, centre of mass and inertia about it, in the group's frame (exact)."""
+    parts = []
+    for link in links:
+        if link.inertial is None or link.inertial.mass == 0 and not link.inertial.inertia.any():
+            continue
+        r, p = placement[link.name]
+        ri = r @ rpy_matrix(link.inertial.rpy)
+        parts.append((link.inertial.mass, p + r @ np.array(link.inertial.xyz),
+                      ri @ link.inertial.inertia @ ri.T))
+    if not parts:
+        return 0.0, np.zeros(3), np.zeros((3, 3))
+    if len(parts) == 1:
+        mass, com, inertia = parts[0]
+        return mass, com, (inertia + inertia.T) / 2
+    mass = sum(m for m, _, _ in parts)
+    com = sum(m * c for m, c, _ in parts) / mass if mass > 0 else parts[0][1]
+    inertia = np.zeros((3, 3))
+    for m, c, i in parts:
+        d = c - com
+        inertia += i + m * (d @ d * np.eye(3) - np.outer(d, d))
+    return mass, com, (inertia + inertia.T) / 2
+
+
+def import_urdf_text(text, source: str = "<string>", *, fix_floating_root: bool = False,
+                     inertial_parameters: bool = False) -> UrdfImport:
+    """Import URDF text (str or bytes); see the module docstring."""
+    robot = parse_robot(text, source, fix_floating_root=fix_floating_root)
+    notes = tuple(f"The floating joint '{j.name}' at the root was imported as fixed "
+                  "(floating bases are not supported yet)."
+                  for j in robot.order if j.type == "floating")
+    return _Builder(robot, inertial_parameters, notes).build()
+
+
+def import_urdf(path, **options) -> UrdfImport:
+    """Import a URDF file; ``options`` as :func:`import_urdf_text`.
+
+    >>> imp = import_urdf("tests/data/urdf/ur5_robot.urdf")      # doctest: +SKIP
+    >>> imp.model.spec().coordinates[0]                          # doctest: +SKIP
+    'shoulder_pan_joint'
+    """
+    path = Path(path)
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        raise ModelError(f"cannot read the URDF file: {exc.strerror}", file=str(path),
+                         fix="check the path") from None
+    return import_urdf_text(data, str(path), **options)
+
+
+def load_urdf(path, **options) -> Model:
+    """The :class:`Model` of a URDF file (see :func:`import_urdf`)."""
+    return import_urdf(path, **options).model
+
+
+def _fmt(x: Optional[float]) -> str:
+    return "-" if x is None else repr(x)
+
+
+def urdf_to_yaml(imported: UrdfImport) -> str:
+    """The model file of an import: a comment header (source, notes, joint limits), then YAML."""
+    lines = [f"# Imported by 'modelgen import' from {Path(imported.source).name}.",
+             "# Edit freely; re-importing overwrites this file."]
+    lines += [f"# Note: {note}" for note in imported.notes]
+    limited = [j for j in imported.joints if j.limit is not None and j.coordinate]
+    if limited:
+        lines.append("# Joint limits (URDF <limit>; not enforced by the model):")
+        lines.append("#   coordinate: lower upper velocity effort")
+        lines += [f"#   {j.coordinate}: {_fmt(j.limit.lower)} {_fmt(j.limit.upper)} "
+                  f"{_fmt(j.limit.velocity)} {_fmt(j.limit.effort)}" for j in limited]
+    return "\n".join(lines) + "\n" + imported.model.to_yaml()

@@ -1,0 +1,263 @@
+"""URDF import: the models of real robots against Pinocchio, and the importer's errors.
+
+The URDFs in tests/data/urdf are copied from the ``example-robot-data``
+package (licences in tests/data/urdf/README.md).  The comparisons with
+Pinocchio (``pip install -e '.[robots]'``) are skipped when it is missing;
+the other tests always run.
+"""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from modelgen.cli import main
+from modelgen.errors import ModelError
+from modelgen.model import as_spec, load_model
+from modelgen.model.spec import symbol
+from modelgen.model.urdf import import_urdf, import_urdf_text, urdf_to_yaml
+from modelgen.sim.load import load
+
+DATA = Path(__file__).parent / "data" / "urdf"
+TOL = 1e-10
+
+#: a synthetic robot with everything the real ones lack: rpy about all three
+#: axes, axes along no base axis (revolute and prismatic), negative axes, an
+#: inertial with its own rpy, a welded child with mass, a massless link in the
+#: chain, a mimic with multiplier and offset, branches and damping.
+EXOTIC = """<?xml version="1.0"?>
+<robot name="exotic">
+  <link name="world"/>
+  <link name="a"><inertial><origin xyz="0.1 -0.05 0.2" rpy="0.3 -0.2 0.5"/><mass value="2.0"/>
+    <inertia ixx="0.05" ixy="0.004" ixz="-0.003" iyy="0.04" iyz="0.002" izz="0.03"/></inertial></link>
+  <link name="b"><inertial><origin xyz="0.0 0.2 0.1" rpy="-0.4 0.1 0.2"/><mass value="1.5"/>
+    <inertia ixx="0.02" ixy="0.001" ixz="0.0" iyy="0.03" iyz="-0.002" izz="0.025"/></inertial></link>
+  <link name="tool"><inertial><origin xyz="0.05 0.0 -0.02" rpy="0.7 0.0 -0.3"/><mass value="0.7"/>
+    <inertia ixx="0.004" ixy="0.0" ixz="0.0005" iyy="0.005" iyz="0.0" izz="0.006"/></inertial></link>
+  <link name="frame_only"/>
+  <link name="c"><inertial><mass value="0.9"/>
+    <inertia ixx="0.01" ixy="0" ixz="0" iyy="0.012" iyz="0" izz="0.008"/></inertial></link>
+  <link name="d"><inertial><origin xyz="0.02 0.03 0.04"/><mass value="0.4"/>
+    <inertia ixx="0.002" ixy="0" ixz="0" iyy="0.002" iyz="0" izz="0.001"/></inertial></link>
+  <link name="e"><inertial><origin xyz="0.0 0.0 0.05"/><mass value="0.3"/>
+    <inertia ixx="0.001" ixy="0" ixz="0" iyy="0.001" iyz="0" izz="0.0005"/></inertial></link>
+  <joint name="j1" type="revolute"><parent link="world"/><child link="a"/>
+    <origin xyz="0.1 0.2 0.3" rpy="0.1 0.2 0.3"/><axis xyz="0.2 -0.5 0.8"/>
+    <limit lower="-2" upper="2" effort="10" velocity="1"/><dynamics damping="0.2"/></joint>
+  <joint name="j2-slide" type="prismatic"><parent link="a"/><child link="b"/>
+    <origin xyz="0.0 0.4 0.0" rpy="-0.3 0.5 1.2"/><axis xyz="0.6 0.0 -0.8"/>
+    <limit lower="-1" upper="1" effort="50" velocity="1"/></joint>
+  <joint name="weld" type="fixed"><parent link="b"/><child link="tool"/>
+    <origin xyz="0.1 0.0 0.3" rpy="1.0 -0.4 0.25"/></joint>
+  <joint name="to_frame" type="fixed"><parent link="tool"/><child link="frame_only"/>
+    <origin xyz="0.0 0.1 0.0" rpy="0 0 1.5707963"/></joint>
+  <joint name="j3" type="continuous"><parent link="frame_only"/><child link="c"/>
+    <origin xyz="0.05 0.0 0.1"/><axis xyz="0 -1 0"/></joint>
+  <joint name="j4" type="revolute"><parent link="a"/><child link="d"/>
+    <origin xyz="-0.2 0.0 0.1" rpy="0 0.3 0"/><axis xyz="1 0 0"/>
+    <limit lower="-1" upper="1" effort="5" velocity="1"/></joint>
+  <joint name="j5" type="revolute"><parent link="d"/><child link="e"/>
+    <origin xyz="0.0 0.1 0.0"/><axis xyz="0 0 -1"/>
+    <limit lower="-1" upper="1" effort="5" velocity="1"/><mimic joint="j4" multiplier="-0.7" offset="0.25"/></joint>
+</robot>
+"""
+
+
+def _pinocchio_maps(pm, imp):
+    """q -> Pinocchio's configuration, and J (nv x n) with Pinocchio's v = J qd.
+
+    Pinocchio orders sibling joints its own way and, built with mimic=False,
+    keeps a mimic joint as a joint of its own: J maps through the mimic law.
+    """
+    joints = {j.name: j for j in imp.joints}
+    index = {c: k for k, c in enumerate(imp.model.spec().coordinates)}
+    jmap = np.zeros((pm.nv, len(index)))
+    parts = []
+    for jid in range(1, pm.njoints):
+        info = joints[pm.names[jid]]
+        coordinate, mult, off = (info.coordinate, 1.0, 0.0) if info.mimic is None \
+            else info.mimic
+        jmap[pm.joints[jid].idx_v, index[coordinate]] = mult
+        parts.append((pm.joints[jid].idx_q, pm.joints[jid].nq, index[coordinate], mult, off))
+
+    def q_of(q):
+        out = np.zeros(pm.nq)
+        for iq, nq, k, mult, off in parts:
+            angle = mult * q[k] + off
+            out[iq:iq + nq] = [math.cos(angle), math.sin(angle)] if nq == 2 else [angle]
+        return out
+    return q_of, jmap
+
+
+def _compare_with_pinocchio(pin, path: Path, out_dir: Path, samples: int = 4) -> None:
+    imp = import_urdf(path)
+    cm = load(imp.model, out_dir)
+    pm = pin.buildModelFromUrdf(str(path))
+    pd = pm.createData()
+    q_of, jmap = _pinocchio_maps(pm, imp)
+    damping = np.array([j.damping for j in imp.joints if j.coordinate is not None])
+    n = cm.n
+    assert len(damping) == n
+    rng = np.random.default_rng(20240611)
+    for _ in range(samples):
+        q, qd, u = rng.uniform(-1.5, 1.5, n), rng.uniform(-2, 2, n), rng.uniform(-5, 5, n)
+        pq, pv = q_of(q), jmap @ qd
+        m_pin = pin.crba(pm, pd, pq)
+        m_pin = np.triu(m_pin) + np.triu(m_pin, 1).T
+        a_ref = jmap.T @ m_pin @ jmap
+        a_mg = cm.mass_matrix(q)
+        assert np.max(np.abs(a_mg - a_ref)) <= TOL * np.max(np.abs(a_ref))
+        # h - tau_gravity = Pinocchio's non-linear effects C v + g (gravity from qd = 0)
+        nle = jmap.T @ pin.nonLinearEffects(pm, pd, pq, pv)
+        tau_gravity = cm.generalized_forces(0.0, q, np.zeros(n), np.zeros(n))
+        h_mg = cm.velocity_terms(q, qd) - tau_gravity
+        assert np.max(np.abs(h_mg - nle)) <= TOL * max(1.0, np.max(np.abs(nle)))
+        # the inputs are the joint efforts, the damping effects -c qd
+        forces = cm.generalized_forces(0.0, q, qd, u) - tau_gravity
+        assert np.max(np.abs(forces - (u - damping * qd))) <= TOL * np.max(np.abs(u))
+        tau = u - damping * qd
+        if pm.nv == n:
+            qdd_ref = pin.aba(pm, pd, pq, pv, tau)
+        else:           # mimic joints: the reduced equations from Pinocchio's CRBA and RNEA
+            qdd_ref = np.linalg.solve(a_ref, tau - nle)
+        qdd_mg = cm.rhs(0.0, np.concatenate([q, qd]), u)[n:]
+        assert np.max(np.abs(qdd_mg - qdd_ref)) <= TOL * max(1.0, np.max(np.abs(qdd_ref)))
+
+
+@pytest.fixture(scope="module")
+def pin():
+    return pytest.importorskip("pinocchio")
+
+
+@pytest.mark.parametrize("robot", ["double_pendulum", "ur5_robot", "panda", "kinova"])
+def test_real_robots_match_pinocchio_crba_nle_aba(robot, pin, tmp_path):
+    _compare_with_pinocchio(pin, DATA / f"{robot}.urdf", tmp_path / "build")
+
+
+def test_unaligned_axes_rpy_welds_and_mimic_match_pinocchio(pin, tmp_path):
+    path = tmp_path / "exotic.urdf"
+    path.write_text(EXOTIC)
+    _compare_with_pinocchio(pin, path, tmp_path / "build")
+
+
+# -- files, entry points ----------------------------------------------------------
+
+def test_import_names_coordinates_inputs_and_effects_in_depth_first_order():
+    spec = import_urdf_text(EXOTIC, "exotic.urdf").model.spec()
+    # j2-slide before j3 (its subtree), then j4; j5 is a mimic (no coordinate)
+    assert spec.coordinates == ("j1", "j2_slide", "j3", "j4")
+    assert spec.inputs == ("tau_j1", "tau_j2_slide", "tau_j3", "tau_j4")
+    assert spec.parameters == (("g", 9.81),)
+    assert spec.gravity == (0, 0, -symbol("g"))
+    assert [e.name for e in spec.effects] == ["damping_j1"]
+    # tool and frame_only are welded to b: one body for the three links
+    assert sorted(b.name for b in spec.bodies) == ["a", "b", "c", "d", "e"]
+
+
+def test_cli_import_writes_a_model_file_that_loads_to_the_same_spec(tmp_path):
+    out = tmp_path / "ur5.yaml"
+    assert main(["import", str(DATA / "ur5_robot.urdf"), "-o", str(out)]) == 0
+    text = out.read_text()
+    assert "#   shoulder_pan_joint: -6.28318530718 6.28318530718 3.15 150.0" in text
+    assert load_model(out) == as_spec(DATA / "ur5_robot.urdf")
+
+
+def test_modelgen_load_takes_a_urdf_path(tmp_path):
+    cm = load(str(DATA / "double_pendulum.urdf"), tmp_path)
+    assert cm.coordinates == ("joint1", "joint2")
+    assert cm.inputs == ("tau_joint1", "tau_joint2")
+
+
+def test_inertial_parameters_give_the_same_mass_matrix(tmp_path):
+    numbers = load(import_urdf(DATA / "double_pendulum.urdf").model, tmp_path / "n")
+    params = import_urdf(DATA / "double_pendulum.urdf", inertial_parameters=True).model
+    spec = params.spec()
+    assert "m_link1" in spec.parameter_names and "I_link1_xx" in spec.parameter_names
+    cm = load(params, tmp_path / "p")
+    q = np.array([0.3, -1.1])
+    assert np.allclose(cm.mass_matrix(q), numbers.mass_matrix(q), rtol=1e-12, atol=0)
+
+
+# -- errors -------------------------------------------------------------------------
+
+def _robot(body: str) -> str:
+    return f'<?xml version="1.0"?>\n<robot name="r">\n{body}\n</robot>\n'
+
+
+LINKS = '<link name="a"/>\n<link name="b"/>'
+
+
+def _joint(name="j", kind="revolute", parent="a", child="b", extra=""):
+    return (f'<joint name="{name}" type="{kind}"><parent link="{parent}"/>'
+            f'<child link="{child}"/>{extra}</joint>')
+
+
+@pytest.mark.parametrize("body, line, key, words", [
+    (LINKS + "\n" + _joint() + "\n" + _joint("k", child="b"), 6, "joint[k].child",
+     "has two parents"),
+    (LINKS + "\n" + _joint(child="nowhere"), 5, "joint[j].child", "unknown link 'nowhere'"),
+    (LINKS + '\n<joint type="revolute"/>', 5, "joint", "without a name"),
+    ('<link/>', 3, "link", "without a name"),
+    (LINKS + "\n" + _joint(kind="planar"), 5, "joint[j].type",
+     "unsupported joint type 'planar'"),
+    (LINKS + "\n" + _joint(extra='<origin xyz="0 0.1x 0"/>'), 5, "joint[j].origin.xyz",
+     "malformed number '0.1x'"),
+    (LINKS + "\n" + _joint(extra='<axis xyz="0 1"/>'), 5, "joint[j].axis", "needs 3 numbers"),
+    (LINKS + "\n" + _joint(extra='<axis xyz="0 0 0"/>'), 5, "joint[j].axis", "axis is zero"),
+    ('<link name="a"/>\n<link name="b"><inertial><mass value="1"/>\n'
+     '<inertia ixx="1" iyy="1" izz="3" ixy="0" ixz="0" iyz="0"/></inertial></link>\n'
+     + _joint(), 5, "link[b].inertial.inertia", "not positive"),
+    ('<link name="a"/>\n<link name="b"><inertial><mass value="-1"/>'
+     '<inertia ixx="1" iyy="1" izz="1" ixy="0" ixz="0" iyz="0"/></inertial></link>\n'
+     + _joint(), 4, "link[b].inertial.mass", "negative mass"),
+    (LINKS + "\n" + _joint(kind="floating"), 5, "joint[j].type",
+     "floating joints are not supported yet"),
+    (LINKS + "\n" + _joint(extra='<mimic joint="ghost"/>'), 5, "joint[j].mimic",
+     "mimic of unknown joint 'ghost'"),
+    (LINKS + '\n<link name="c"/>\n' + _joint(), 5, "robot", "2 root links"),
+    (LINKS + "\n" + _joint(parent="b", child="a") + "\n" + _joint("k", parent="a", child="b"),
+     2, "robot", "loop: every link has a parent joint"),
+    (LINKS + '\n<link name="c"/>\n<link name="d"/>\n' + _joint() + "\n"
+     + _joint("k", parent="c", child="d") + "\n" + _joint("l", parent="d", child="c"),
+     8, "joint[k]", "cycle not connected to the root link 'a'"),
+])
+def test_bad_urdf_names_file_line_and_key(body, line, key, words):
+    with pytest.raises(ModelError) as err:
+        import_urdf_text(_robot(body), "bad.urdf")
+    e = err.value
+    assert (e.file, e.line, e.key) == ("bad.urdf", line, key), str(e)
+    assert words in e.problem and e.fix
+
+
+def test_floating_root_can_be_imported_fixed_with_a_note():
+    text = _robot(LINKS + '\n<link name="c"/>\n' + _joint("free", kind="floating")
+                  + _joint("k", parent="b", child="c", extra='<axis xyz="0 0 1"/>'))
+    imp = import_urdf_text(text, "f.urdf", fix_floating_root=True)
+    assert imp.model.spec().coordinates == ("k",)
+    assert "floating joint 'free' at the root was imported as fixed" in imp.model.description
+    assert imp.notes and "floating joint 'free'" in urdf_to_yaml(imp)
+
+
+def test_malformed_xml_and_entity_expansion_are_refused_with_a_line():
+    with pytest.raises(ModelError, match=r"bad.urdf:3: malformed XML"):
+        import_urdf_text('<robot name="r">\n<link name="a">\n</robot>', "bad.urdf")
+    laughs = ('<?xml version="1.0"?>\n<!DOCTYPE r [\n<!ENTITY a "aaaaaaaaaa">\n'
+              '<!ENTITY b "&a;&a;&a;&a;&a;&a;&a;&a;&a;&a;">\n]>\n<robot name="&b;"/>')
+    with pytest.raises(ModelError, match=r"bad.urdf:3: entity declaration 'a' refused"):
+        import_urdf_text(laughs, "bad.urdf")
+    with pytest.raises(ModelError, match="cannot read the URDF file"):
+        import_urdf(DATA / "missing.urdf")
+
+
+def test_meshes_are_not_opened():
+    text = _robot('<link name="a"><visual><geometry><mesh filename="/nonexistent/x.stl"/>'
+                  '</geometry></visual></link>\n<link name="b"/>\n'
+                  + _joint(extra='<axis xyz="0 0 1"/>'))
+    assert import_urdf_text(text).model.spec().coordinates == ("j",)
+
+
+def test_shipped_ur5_model_is_the_import_of_its_urdf():
+    shipped = Path(__file__).parent.parent / "models" / "robots" / "ur5.yaml"
+    assert load_model(shipped) == as_spec(DATA / "ur5_robot.urdf")
