@@ -28,7 +28,8 @@ from modelgen.model.chains import spatial_chain
 
 from conftest import MODELS
 
-SHIPPED = sorted(p.stem for p in MODELS.glob("*.yaml"))
+SHIPPED = sorted(str(p.relative_to(MODELS).with_suffix("")) for p in MODELS.glob("**/*.yaml")
+                 if "scenes" not in p.parts)
 
 
 def _program(graph, outputs, inputs):
