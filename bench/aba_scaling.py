@@ -28,7 +28,10 @@ Method
       max |qdd_aba - qdd_crba| / max |qdd_crba|, and the backward error of
       the ABA answer in the CRBA equations,
       ||A qdd_aba - b|| / (||A|| ||qdd_aba|| + ||b||) (infinity norms), which
-      does not grow with cond(A).
+      does not grow with cond(A).  With ``--reference`` both are also
+      compared with q_ddot from the CRBA program evaluated in 40-digit
+      mpmath arithmetic (A and b, then an mpmath LU solve): this shows which
+      side of a disagreement carries the rounding error.
 """
 from __future__ import annotations
 
@@ -108,6 +111,51 @@ def agreement(cm_crba, cm_aba, n: int, seed: int = 0) -> tuple:
     return forward, backward
 
 
+def mp_reference(spec, states, digits: int = 40) -> list:
+    """q_ddot at ``states`` from the CRBA program in ``digits``-digit arithmetic."""
+    import mpmath
+    import sympy
+    from sympy.printing.pycode import MpmathPrinter
+    from modelgen.derive.dynamics import derive_equations
+    from modelgen.derive.kinematics import derive_kinematics
+    eqs = derive_equations(derive_kinematics(spec))
+    n = len(eqs.q)
+    outputs = [eqs.A[i][j] for i in range(n) for j in range(n)] + \
+              [eqs.tau[k] - eqs.h[k] for k in range(n)]
+    printer = MpmathPrinter({"fully_qualified_modules": True})
+    inputs = (eqs.t,) + eqs.q + eqs.qd + eqs.u + eqs.p
+    lines = ["def f(" + ", ".join(str(x) for x in inputs) + "):"]
+    lines += [f"    {sym} = {printer.doprint(e)}" for sym, e in eqs.graph.closure(outputs)]
+    lines.append("    return [" + ", ".join(printer.doprint(sympy.sympify(e)) for e in outputs)
+                 + "]")
+    namespace = {"mpmath": mpmath}
+    exec("\n".join(lines), namespace)     # noqa: S102 - our own program
+    out = []
+    with mpmath.workdps(digits):
+        for x in states:
+            values = ([mpmath.mpf(0)] + [mpmath.mpf(float(v)) for v in x]
+                      + [mpmath.mpf(0)] * len(eqs.u)
+                      + [mpmath.mpf(v) for v in spec.parameter_defaults])
+            r = namespace["f"](*values)
+            A = mpmath.matrix(n, n)
+            for i in range(n):
+                for j in range(n):
+                    A[i, j] = r[i * n + j]
+            b = mpmath.matrix(r[n * n:])
+            out.append(np.array([float(v) for v in mpmath.lu_solve(A, b)]))
+    return out
+
+
+def reference_errors(spec, cms, seed: int = 0) -> dict:
+    """max |qdd - qdd_mp| / max |qdd_mp| over 2 seeded states, per formulation."""
+    n = spec.n
+    rng = np.random.default_rng(seed)
+    states = [rng.uniform(-1, 1, 2 * n) for _ in range(2)]
+    refs = mp_reference(spec, states)
+    return {f: max(float(np.max(np.abs(cms[f].rhs(0.0, x)[n:] - ref)) / np.max(np.abs(ref)))
+                   for x, ref in zip(states, refs)) for f in FORMULATIONS}
+
+
 def fmt(v, spec=".3g"):
     return "–" if v is None else format(v, spec)
 
@@ -121,6 +169,8 @@ def main(argv=None) -> int:
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--agreement-only", action="store_true",
                     help="no timing: generation figures and agreement only")
+    ap.add_argument("--reference", action="store_true",
+                    help="also compare both with a 40-digit mpmath solution")
     args = ap.parse_args(argv)
     if args.child:
         child(*args.child)
@@ -153,6 +203,7 @@ def main(argv=None) -> int:
                                  f"{fg['ops']['after_cse'] / n:.0f}"])
             n = figures["aba"]["n"]
             fwd, bwd = agreement(cms["crba"], cms["aba"], n)
+            ref = reference_errors(model_spec(kind), cms) if args.reference else {}
             times = {f: None for f in FORMULATIONS}
             mj = None
             if not args.agreement_only:
@@ -174,7 +225,8 @@ def main(argv=None) -> int:
             run_rows.append([kind, fmt(times["crba"]), fmt(times["aba"]),
                              fmt(times["crba"] / times["aba"] if times["aba"] else None),
                              fmt(mj), fmt(mj / times["aba"] if mj and times["aba"] else None),
-                             f"{fwd:.1e}", f"{bwd:.1e}"])
+                             f"{fwd:.1e}", f"{bwd:.1e}",
+                             fmt(ref.get("crba"), ".1e"), fmt(ref.get("aba"), ".1e")])
             print(f"done {kind}", flush=True)
     print()
     print(cs.markdown(["model", "formulation", "derive s", "cse s", "emit s", "compile s",
@@ -182,7 +234,8 @@ def main(argv=None) -> int:
                        "after/n"], gen_rows, left=2))
     print()
     print(cs.markdown(["model", "crba rhs µs", "aba rhs µs", "crba/aba", "mj_forward µs",
-                       "mj/aba", "aba-crba rel", "aba backward err"], run_rows))
+                       "mj/aba", "aba-crba rel", "aba backward err", "crba err (mp)",
+                       "aba err (mp)"], run_rows))
     return 0
 
 
