@@ -41,7 +41,7 @@ from modelgen.derive.dynamics import Equations
 from modelgen.derive.graph import ZERO, ZERO3, Graph, GraphBuilder, add, cross, dot, sub
 from modelgen.derive.jacobian import JacobianTerms, differentiate
 from modelgen.derive.joint_tree import JointTree
-from modelgen.model.spec import CANONICAL_BASE, CANONICAL_POINT
+from modelgen.model.spec import CANONICAL_BASE, CANONICAL_POINT, ModelSpec
 
 _PAIRS = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
 
@@ -381,18 +381,22 @@ def _ground_acceleration(eqs_spec) -> tuple:
     return ZERO3 + tuple(-x for x in total), labels
 
 
-def derive_aba(eqs: Equations, tree: JointTree, spec, graph: Graph | None = None
+def derive_aba(eqs: Equations, tree: JointTree, spec: ModelSpec, graph: Graph | None = None
                ) -> ForwardDynamics:
     """qdd by the articulated-body algorithm over ``graph`` (default ``eqs.graph``).
 
     ``spec`` is the model the equations came from; ``tree`` its joint tree.
-    The generalized forces of every effect and action except uniform gravity
-    in E are read from ``eqs.tau_parts``.
+    Gravity in E and actions are handled here; the generalized forces of every
+    other effect are read from ``eqs.tau_parts``.
 
-    >>> from modelgen.model.chains import spatial_chain       # doctest: +SKIP
-    >>> spec = spatial_chain(3).spec()                         # doctest: +SKIP
-    >>> eqs = derive_equations(derive_kinematics(spec))        # doctest: +SKIP
-    >>> fd = derive_aba(eqs, extract_joint_tree(spec), spec)   # doctest: +SKIP
+    >>> from modelgen.model.chains import spatial_chain
+    >>> from modelgen.derive.kinematics import derive_kinematics
+    >>> from modelgen.derive.dynamics import derive_equations
+    >>> from modelgen.derive.joint_tree import extract_joint_tree
+    >>> spec = spatial_chain(2).spec()
+    >>> fd = derive_aba(derive_equations(derive_kinematics(spec)), extract_joint_tree(spec), spec)
+    >>> len(fd.qdd), fd.inward
+    (2, (1, 0))
     """
     g = GraphBuilder(graph or eqs.graph)
     n = len(eqs.q)
