@@ -38,7 +38,7 @@ from dataclasses import dataclass
 import sympy
 
 from modelgen.derive.dynamics import Equations
-from modelgen.derive.graph import ZERO, ZERO3, Graph, GraphBuilder, add, cross, dot, sub
+from modelgen.derive.graph import ONE, ZERO, ZERO3, Graph, GraphBuilder
 from modelgen.derive.jacobian import JacobianTerms, differentiate
 from modelgen.derive.joint_tree import JointTree
 from modelgen.model.spec import CANONICAL_BASE, CANONICAL_POINT, ModelSpec
@@ -60,6 +60,61 @@ class ForwardDynamics:
     inward: tuple
 
 
+# -- arithmetic that skips constant zeros and ones before sympy sees them --------
+# (most entries of S, of the joint rotations and of the first inertias are 0 or 1;
+# building 0*x and x + 0 through sympy costs more than the whole rest)
+
+def _zero(x) -> bool:
+    if x is ZERO:
+        return True
+    if isinstance(x, int):
+        return x == 0
+    return x.is_Number and x.is_zero
+
+
+def _one(x) -> bool:
+    return x is ONE or (isinstance(x, int) and x == 1)
+
+
+def _times(x, y):
+    if _zero(x) or _zero(y):
+        return ZERO
+    if _one(x):
+        return y
+    if _one(y):
+        return x
+    return x * y
+
+
+def _total(terms):
+    terms = [t for t in terms if not _zero(t)]
+    if not terms:
+        return ZERO
+    return terms[0] if len(terms) == 1 else sympy.Add(*terms)
+
+
+def _neg(x):
+    return ZERO if _zero(x) else -x
+
+
+def dot(a, b):
+    return _total(_times(x, y) for x, y in zip(a, b))
+
+
+def add(a, b):
+    return tuple(_total((x, y)) for x, y in zip(a, b))
+
+
+def sub(a, b):
+    return tuple(_total((x, _neg(y))) for x, y in zip(a, b))
+
+
+def cross(a, b):
+    return (_total((_times(a[1], b[2]), _neg(_times(a[2], b[1])))),
+            _total((_times(a[2], b[0]), _neg(_times(a[0], b[2])))),
+            _total((_times(a[0], b[1]), _neg(_times(a[1], b[0])))))
+
+
 # -- 3x3 helpers: symmetric matrices as full tuples of rows ---------------------
 
 def _sym(entries) -> tuple:
@@ -77,7 +132,7 @@ def _name_full(g, M) -> tuple:
 
 
 def _mul(a, b) -> tuple:
-    return tuple(tuple(sympy.Add(*[a[i][l] * b[l][j] for l in range(3)]) for j in range(3))
+    return tuple(tuple(_total(_times(a[i][l], b[l][j]) for l in range(3)) for j in range(3))
                  for i in range(3))
 
 
@@ -132,9 +187,9 @@ def _inertia_xlt_T(g, r, I):
     M = _name_full(g, _mul(rx, C))                # rx C
     N = _name_full(g, _mul(B, rx))                # B rx
     P = _mul(M, rx)                               # rx C rx (symmetric)
-    A2 = tuple(tuple(A[i][j] - N[i][j] - N[j][i] - P[i][j] for j in range(3))
-               for i in range(3))
-    B2 = tuple(tuple(B[i][j] + M[i][j] for j in range(3)) for i in range(3))
+    A2 = tuple(tuple(_total((A[i][j], _neg(N[i][j]), _neg(N[j][i]), _neg(P[i][j])))
+                     for j in range(3)) for i in range(3))
+    B2 = tuple(tuple(_total((B[i][j], M[i][j])) for j in range(3)) for i in range(3))
     return (_name_sym(g, A2), _name_full(g, B2), C)
 
 
@@ -178,7 +233,7 @@ def _rigid_bias(g, I_O, h, m, v):
     w, vl = v[:3], v[3:]
     n = g.vec(add(_mv(I_O, w), cross(h, vl)))
     k = g.vec(cross(h, w))
-    f = g.vec(sub(tuple(m * x for x in vl), k))
+    f = g.vec(sub(tuple(_times(m, x) for x in vl), k))
     return g.vec(sub(cross(w, n), cross(vl, k))) + g.vec(cross(w, f))
 
 
@@ -236,7 +291,8 @@ _PLANE = {1: (1, 2), 2: (2, 0), 3: (0, 1)}
 
 def _plane_rot_T(c, s, k1, k2, x1, x2):
     """(E^T x)[k1], (E^T x)[k2] for the plane rotation."""
-    return c * x1 - s * x2, s * x1 + c * x2
+    return (_total((_times(c, x1), _neg(_times(s, x2)))),
+            _total((_times(s, x1), _times(c, x2))))
 
 
 def _sym_axis_rot_T(g, M, k1, k2, c, s, trig):
@@ -351,7 +407,7 @@ def _point_offset(g, spec, P: str, Q: str, L: str) -> tuple:
     for name, sign in [(p, 1) for p in cp if p not in shared] + \
                       [(p, -1) for p in cq if p not in shared]:
         seg = _rotate_into(g, spec, points[name].coordinates, points[name].base, L)
-        total = add(total, tuple(sign * x for x in seg))
+        total = add(total, tuple(_times(sign, x) for x in seg))
     return g.vec(total)
 
 
@@ -417,7 +473,7 @@ def derive_aba(eqs: Equations, tree: JointTree, spec: ModelSpec, graph: Graph | 
     count = len(joints)
     v, c, IA, pA = [None] * count, [None] * count, [None] * count, [None] * count
     for i, joint in enumerate(joints):                      # pass 1: outwards
-        vJ = g.vec(s * eqs.qd[joint.coordinate] for s in joint.S)
+        vJ = g.vec(_times(s, eqs.qd[joint.coordinate]) for s in joint.S)
         if joint.parent < 0:
             v[i], c[i] = vJ, (ZERO,) * 6
         else:
@@ -443,20 +499,20 @@ def derive_aba(eqs: Equations, tree: JointTree, spec: ModelSpec, graph: Graph | 
         u[i] = g.name(tau[joint.coordinate] - dot(S, pA[i]))
         if joint.parent < 0:
             continue
-        Ud = g.vec(x * invD[i] for x in U[i])
+        Ud = g.vec(_times(x, invD[i]) for x in U[i])
         A, B, C = IA[i]
-        Ia = (_name_sym(g, tuple(tuple(A[r][s] - U[i][r] * Ud[s] for s in range(3))
-                                 for r in range(3))),
-              _name_full(g, tuple(tuple(B[r][s] - U[i][r] * Ud[3 + s] for s in range(3))
-                                  for r in range(3))),
-              _name_sym(g, tuple(tuple(C[r][s] - U[i][3 + r] * Ud[3 + s] for s in range(3))
-                                 for r in range(3))))
-        Ia = _drop_subspace(Ia, S)
+
+        def update(M, r0, s0):
+            return tuple(tuple(_total((M[r][s], _neg(_times(U[i][r0 + r], Ud[s0 + s]))))
+                               for s in range(3)) for r in range(3))
+
+        A, B, C = _drop_subspace((update(A, 0, 0), update(B, 0, 3), update(C, 3, 3)), S)
+        Ia = (_name_sym(g, A), _name_full(g, B), _name_sym(g, C))
         ui = g.name(u[i] * invD[i])
-        pa = g.vec(add(add(pA[i], _inertia_times(Ia, c[i])), tuple(x * ui for x in U[i])))
+        pa = g.vec(add(add(pA[i], _inertia_times(Ia, c[i])), tuple(_times(x, ui) for x in U[i])))
         p = joint.parent
         Ip = _to_parent_inertia(g, joint, Ia)
-        IA[p] = tuple(_name_full(g, tuple(tuple(X[r][s] + Y[r][s] for s in range(3))
+        IA[p] = tuple(_name_full(g, tuple(tuple(_total((X[r][s], Y[r][s])) for s in range(3))
                                           for r in range(3)))
                       for X, Y in zip(IA[p], Ip))
         pA[p] = g.vec(add(pA[p], _to_parent_force(g, joint, pa)))
@@ -468,7 +524,7 @@ def derive_aba(eqs: Equations, tree: JointTree, spec: ModelSpec, graph: Graph | 
         a_prime = g.vec(add(_joint_motion(g, joint, ap), c[i]))
         k = joint.coordinate
         qdd[k] = g.name((u[i] - dot(U[i], a_prime)) * invD[i])
-        acc[i] = g.vec(add(a_prime, tuple(s * qdd[k] for s in joint.S)))
+        acc[i] = g.vec(add(a_prime, tuple(_times(s, qdd[k]) for s in joint.S)))
     D_out = [None] * n
     for i, joint in enumerate(joints):
         D_out[joint.coordinate] = D[i]

@@ -112,7 +112,10 @@ def _error(spec: ModelSpec, key: str, problem: str) -> ModelError:
 
 def _linear_in(expr, coordinates: dict):
     """{k: d expr / d q_k} and the rest, or None if expr is not linear in the q."""
-    used = [k for k, qk in coordinates.items() if qk in expr.free_symbols]
+    if not getattr(expr, "free_symbols", None):
+        return {}, expr
+    free = expr.free_symbols
+    used = [k for k, qk in coordinates.items() if qk in free]
     slopes = {}
     rest = expr
     for k in used:
@@ -138,7 +141,11 @@ def _rotation(axis: int, angle) -> tuple:
 
 
 def _matmul(a, b) -> tuple:
-    return tuple(tuple(sympy.Add(*[a[i][l] * b[l][j] for l in range(3)]) for j in range(3))
+    """a @ b for 3x3 tuples of rows, skipping constant zeros and ones."""
+    def term(x, y):
+        return y if x == 1 else x if y == 1 else x * y
+    return tuple(tuple(sympy.Add(*[term(a[i][l], b[l][j]) for l in range(3)
+                                   if a[i][l] != 0 and b[l][j] != 0]) for j in range(3))
                  for i in range(3))
 
 
@@ -165,14 +172,13 @@ class _Compose:
 def _occurrences(spec: ModelSpec, q: dict) -> dict:
     """{k: [(key, element)]}: where each coordinate enters the bases and points."""
     where: dict = {k: [] for k in q}
-    for b in spec.bases:
+    items = [(f"bases.{b.name}.angle", b, (b.angle,)) for b in spec.bases]
+    items += [(f"points.{p.name}.coordinates", p, p.coordinates) for p in spec.points]
+    for key, element, exprs in items:
+        free = set().union(*(getattr(e, "free_symbols", set()) for e in exprs))
         for k, qk in q.items():
-            if qk in getattr(b.angle, "free_symbols", ()):
-                where[k].append((f"bases.{b.name}.angle", b))
-    for p in spec.points:
-        for k, qk in q.items():
-            if any(qk in getattr(c, "free_symbols", ()) for c in p.coordinates):
-                where[k].append((f"points.{p.name}.coordinates", p))
+            if qk in free:
+                where[k].append((key, element))
     return where
 
 
@@ -197,7 +203,7 @@ def _check_coordinates(spec: ModelSpec, q: dict) -> None:
                              "coordinates")
 
 
-def _body_ops(spec: ModelSpec, body, q: dict, bases: dict, points: dict) -> list:
+def _body_ops(spec: ModelSpec, body, bases: dict, points: dict, linear: dict) -> list:
     """The body's pose as elementary ops: (key, kind, data), E/O outwards."""
     chain = []
     b = body.base
@@ -235,7 +241,7 @@ def _body_ops(spec: ModelSpec, body, q: dict, bases: dict, points: dict) -> list
                          f"body {body.name}: point {point.name} is given in base "
                          f"{point.base}, which {why}")
         advance(d)
-        slopes = [_linear_in(c, q) for c in point.coordinates]
+        slopes = linear[point.name]
         const = tuple(rest for _, rest in slopes)
         if any(c != 0 for c in const):
             ops.append((("point", point.name, -1), "trans", const))
@@ -249,7 +255,7 @@ def _body_ops(spec: ModelSpec, body, q: dict, bases: dict, points: dict) -> list
 def _spatial_inertia(body, E, r) -> tuple:
     """(I about the link origin as 6 entries, h, m) of a body at (E, r) from the link."""
     m = body.mass
-    Ic = _matmul(_transpose(E), _matmul(body.inertia, E))     # in link components
+    Ic = body.inertia if E == IDENTITY3 else _matmul(_transpose(E), _matmul(body.inertia, E))
     c = r
     cc = c[0] ** 2 + c[1] ** 2 + c[2] ** 2
     I = tuple(Ic[i][j] + m * ((cc if i == j else 0) - c[i] * c[j])
@@ -273,6 +279,7 @@ def extract_joint_tree(spec: ModelSpec) -> JointTree:
     _check_coordinates(spec, q)
     bases = {b.name: b for b in spec.bases}
     points = {p.name: p for p in spec.points}
+    linear = {p.name: [_linear_in(c, q) for c in p.coordinates] for p in spec.points}
 
     # the trie of every body's ops, merged by names
     nodes = [None]                      # node -> (parent node, key, kind, data)
@@ -280,7 +287,7 @@ def extract_joint_tree(spec: ModelSpec) -> JointTree:
     ends = []
     for body in spec.bodies:
         node = 0
-        for key, kind, data in _body_ops(spec, body, q, bases, points):
+        for key, kind, data in _body_ops(spec, body, bases, points, linear):
             if key not in children[node]:
                 nodes.append((node, key, kind, data))
                 children.append({})
@@ -298,7 +305,7 @@ def extract_joint_tree(spec: ModelSpec) -> JointTree:
             orient[node] = data.name
         elif kind in ("trans", "prism"):
             point = points[key[1]]
-            slopes = [_linear_in(c, q)[0] for c in point.coordinates]
+            slopes = [sl for sl, _ in linear[point.name]]
             later = [k for k in sorted({k for sl in slopes for k in sl}) if k > key[2]]
             origin[node] = (point.name, tuple(-sympy.Add(*[sl.get(k, ZERO) * q[k] for k in later])
                                               for sl in slopes))
