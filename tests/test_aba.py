@@ -257,3 +257,11 @@ def test_generated_aba_rhs_reports_a_vanishing_articulated_inertia(build_root):
     with pytest.raises(MassMatrixError) as info:
         cm.rhs(0.0, [0.0, 0.3, 0.0, 0.0], [0.0], p)
     assert info.value.coordinate == "theta"     # the joint where D vanishes, not its parent
+
+
+def test_aba_simulation_stops_at_a_massless_link(compiled):
+    cm = compiled("double_pendulum")
+    assert cm.manifest["formulation"] == "aba"          # auto picks aba for a joint tree
+    res = cm.simulate([0.5, -0.3, 0, 0], (0, 1), method="rk4", step=1e-2,
+                      p={"m1": 0.0, "m2": 0.0})
+    assert res.status == -3 and "coordinate 'q2'" in res.message   # the outer link first

@@ -307,7 +307,7 @@ void double_pendulum_body_poses(const double *q, const double *p, double *T)
 
 #if !defined(MG_PART) || MG_PART == 2
 
-/* rhs: 53 statements, 91 operations after CSE (91 before) */
+/* rhs: 53 statements, 92 operations after CSE (92 before) */
 static void double_pendulum_rhs_eval(double t, const double *x, const double *u, const double *p, double *qdd, double *D)
 {
     (void)t;
@@ -359,11 +359,11 @@ static void double_pendulum_rhs_eval(double t, const double *x, const double *u,
     const double v41 = v38 + v10;
     const double v42 = v29*v3 + v30*v2;
     const double v43 = v28 + p[2]*v42;
-    const double v44 = 1.0/v40;
-    const double v45 = u[0] - v43;
+    const double v44 = v43 - u[0];
+    const double v45 = 1.0/v40;
     const double v46 = p[4]*v1;
     const double v47 = p[4]*v0;
-    const double v48 = v44*(v45 - v37*v46 - v41*v47);
+    const double v48 = v45*(-v44 - v37*v46 - v41*v47);
     const double v49 = v47 + p[2]*v48;
     const double v50 = v49*v2 - v46*v3;
     const double v51 = v50 + v15;
