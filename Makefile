@@ -1,5 +1,5 @@
 # Two commands set everything up on a fresh machine (Python >= 3.10 and a C compiler):
-#   make demo   -- venv, install, generate the double pendulum and run its scene: out/dp_free.{csv,npz,png}
+#   make demo   -- venv, install, generate the double pendulum and run its scene: out/dp_free.{csv,npz,png,gif,html}
 #   make test   -- venv, install, run the test suite
 PYTHON ?= python3
 VENV   ?= .venv
@@ -19,7 +19,7 @@ install: $(VENV)/.installed
 
 demo: install
 	$(BIN)/modelgen generate models/double_pendulum.yaml
-	$(BIN)/modelgen simulate models/scenes/dp_free.yaml -o out
+	$(BIN)/modelgen simulate models/scenes/dp_free.yaml -o out --animate
 
 test: install
 	$(BIN)/python -m pytest -q

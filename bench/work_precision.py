@@ -156,7 +156,7 @@ def build_parser():
                         default=list(wp.STANDARD), metavar="NAME",
                         help=f"problems to run (default all: {' '.join(wp.STANDARD)})")
     parser.add_argument("--build-dir", default=None,
-                        help="where the models are built (default generated/workprecision)")
+                        help="where the models are built (default: the per-user cache)")
     parser.add_argument("--repeats", type=int, default=None,
                         help="repeats per setting (default 5, --quick 2)")
     return parser

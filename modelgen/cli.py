@@ -22,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
+from modelgen.codegen.capi import STATUS_BY_NAME
 from modelgen.errors import (BuildError, ModelgenError, SimulationError, TemplateError)
 from modelgen.version import __version__
 
@@ -137,7 +138,7 @@ def _report(result, out: Path, name: str, args, title: str, conservative,
         print(f"modelgen: warning: {result.info['stability_warning']}", file=sys.stderr)
     if not result.success:
         print(f"modelgen: simulation stopped: {result.message}", file=sys.stderr)
-        return EXIT["simulation"]
+        return EXIT["interrupted" if result.status == INTERRUPTED else "simulation"]
     return 0
 
 
@@ -235,6 +236,27 @@ def _bench(args) -> int:
     return 0
 
 
+def _hard_cases(args) -> int:
+    import modelgen.bench.hardcases as hc
+
+    def progress(name):
+        print(f"... {name}", file=sys.stderr, flush=True)
+    results = hc.run_cases(args.cases, quick=args.quick, build_root=args.build_dir,
+                           progress=progress)
+    table = hc.markdown(results)
+    print(table)
+    out = Path(args.output)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "hard_cases.md").write_text(table)
+    hc.figure(results).savefig(out / "hard_cases.png", dpi=80)
+    print(f"wrote {out / 'hard_cases.md'} and {out / 'hard_cases.png'}")
+    failed = [r.name for r in results if r.passed is False]
+    if failed:
+        print(f"modelgen: error: hard cases failed: {', '.join(failed)}", file=sys.stderr)
+        return EXIT["simulation"]
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="modelgen",
@@ -251,7 +273,7 @@ def build_parser() -> argparse.ArgumentParser:
                                    "unchanged model reuses the cached build.")
     g.add_argument("model", help="model YAML file")
     g.add_argument("-o", "--output", default=None,
-                   help="output directory (default: generated/<name>)")
+                   help="output directory (default: the per-user cache, see modelgen.codegen.pipeline.default_output)")
     g.add_argument("--force", action="store_true", help="rebuild even if cached")
     g.add_argument("--jacobian", action="store_true",
                    help="also generate <name>_jacobian, the symbolic d(xdot)/dx")
@@ -269,7 +291,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("model", help="scene YAML file (or model YAML file)")
     s.add_argument("-o", "--output", default="out", help="output directory (default: out)")
     s.add_argument("--build-dir", default=None,
-                   help="where the model is built (default: generated/<name>)")
+                   help="where the model is built (default: the per-user cache)")
     s.add_argument("--t-end", type=float, default=None,
                    help="final time [s] (default: the scene's, or 10 for a model)")
     s.add_argument("--dt", type=float, default=None,
@@ -326,12 +348,29 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--quick", action="store_true",
                    help="whole-decade tolerances, half-decade steps, 2 repeats")
     b.add_argument("--build-dir", default=None,
-                   help="where the model is built (default: generated/workprecision/<scene>)")
+                   help="where the model is built (default: the per-user cache)")
     b.add_argument("-v", "--verbose", action="store_true", help="report every run on stderr")
     b.set_defaults(func=_bench)
+
+    h = sub.add_parser("hard-cases", help="run the hard-case suite: each case against an "
+                                          "independent reference, a table and a figure",
+                       description="Run the named hard cases (pendulum near the top, Lagrange "
+                                   "top, stiff springs, mass ratios, singular mass matrices, "
+                                   "long-run energy, friction, chains against MuJoCo, tennis "
+                                   "racket, ...) and write OUT/hard_cases.md and .png. Exit "
+                                   "status 4 when a case fails.")
+    h.add_argument("-o", "--output", default="out", help="output directory (default: out)")
+    h.add_argument("--quick", action="store_true", help="the short version of each case")
+    h.add_argument("--cases", nargs="+", metavar="NAME", default=None,
+                   help="run only these cases")
+    h.add_argument("--build-dir", default=None,
+                   help="where the models are built (default: the per-user build cache)")
+    h.set_defaults(func=_hard_cases)
     return parser
 
 
+#: the C integrators' status for a run stopped by Ctrl-C
+INTERRUPTED = STATUS_BY_NAME["INTERRUPTED"].code
 #: exit status of each outcome (documented in the module docstring and the README)
 EXIT = {"ok": 0, "internal": 1, "input": 2, "build": 3, "simulation": 4, "interrupted": 130}
 

@@ -85,10 +85,11 @@ class SimulationError(ModelgenError):
 
 
 class MassMatrixError(SimulationError):
-    """The mass matrix is not positive definite at the given state."""
+    """The mass matrix is not positive definite, or singular to working precision,
+    at the given state (``kind`` says which)."""
 
-    def __init__(self, pivot: int, coordinate: str, t, x):
-        self.pivot, self.coordinate, self.t, self.x = pivot, coordinate, t, x
+    def __init__(self, pivot: int, coordinate: str, t, x, kind: str = "not positive definite"):
+        self.pivot, self.coordinate, self.t, self.x, self.kind = pivot, coordinate, t, x, kind
         super().__init__(
-            f"mass matrix not positive definite at t={t!r}: Cholesky pivot {pivot} "
+            f"mass matrix {kind} at t={t!r}: Cholesky pivot {pivot} "
             f"(coordinate {coordinate!r}) failed; state x=[{', '.join(repr(float(v)) for v in x)}]")

@@ -116,3 +116,19 @@ def test_failed_simulation_exits_4_and_keeps_its_partial_results(tmp_path):
     assert proc.returncode == 4, proc.stderr
     assert "simulation stopped" in proc.stderr and "np.float64" not in proc.stderr
     assert (tmp_path / "out" / "double_pendulum.csv").stat().st_size > 0
+
+
+def test_builds_go_to_the_user_cache_not_the_current_directory(tmp_path):
+    import os
+    import subprocess
+    import sys
+    cache, cwd = tmp_path / "cache", tmp_path / "work"
+    cwd.mkdir()
+    env = dict(os.environ, MODELGEN_CACHE_DIR=str(cache))
+    proc = subprocess.run([sys.executable, "-m", "modelgen", "generate",
+                           str(MODELS / "simple_pendulum.yaml")], cwd=cwd, env=env,
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    assert list(cwd.iterdir()) == []
+    assert (cache / "models" / "simple_pendulum" / "simple_pendulum.c").is_file()
+    assert str(cache / "models" / "simple_pendulum") in proc.stdout

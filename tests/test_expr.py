@@ -2,13 +2,15 @@
 from __future__ import annotations
 
 import random
+import time
+from fractions import Fraction
 
 import pytest
 import sympy
 
 from modelgen.errors import ExpressionError
-from modelgen.model.expr import (FUNCTIONS, MAX_DEPTH, MAX_LENGTH, ExpressionParseError,
-                           format_expression, parse_expression)
+from modelgen.model.expr import (FUNCTIONS, MAX_DEPTH, MAX_LENGTH, MAX_NUMBER_CHARS,
+                                 ExpressionParseError, format_expression, parse_expression)
 from modelgen.model.spec import TIME, symbol
 
 x, y, z, m, l = (symbol(n) for n in ("x", "y", "z", "m", "l"))
@@ -253,7 +255,9 @@ def test_power_towers_are_refused_before_computing_them():
 
 
 def test_huge_number_literals_are_refused():
-    assert message("9" * 101).startswith("number literal is 101 characters long at column 1")
+    too_long = MAX_NUMBER_CHARS + 1
+    assert message("9" * too_long).startswith(
+        f"number literal is {too_long} characters long at column 1")
     assert message("1e401") == ("exponent of '1e401' is out of range at column 1 of '1e401'; "
                                 "use exponents between -400 and 400")
 
@@ -262,6 +266,86 @@ def test_long_sum_of_allowed_terms_is_parsed():
     text = "+".join(f"sin({i}*x)" for i in range(1, 700))
     assert len(text) < MAX_LENGTH
     assert len(parse(text).args) == 699
+
+
+
+# -- budgets: refused before sympy evaluates anything expensive -----------------------
+
+@pytest.mark.parametrize("text", [
+    "(x/100)**(10**8)", "(2*x)**(10**9)", "(sqrt(2)*x)**20001", "tanh(tan(sinh(1e99)))",
+    "acos(cos(cosh(1.7976931348623157e308)))", "acos(cos(10**300))", "exp(exp(exp(10)))",
+])
+def test_pathological_constants_and_powers_are_refused_at_once(text):
+    start = time.perf_counter()
+    with pytest.raises(ExpressionParseError):
+        parse(text)
+    assert time.perf_counter() - start < 1.0
+
+
+def test_overflowing_constants_are_refused_naming_the_function():
+    assert message("tanh(tan(sinh(1e99)))") == (
+        "sinh(...) is not a finite real number here at column 10 of "
+        "'tanh(tan(sinh(1e99)))'; check the argument")
+    assert message("sin(10**300)*x") == (
+        "the argument of sin(...) is too large at column 1 of 'sin(10**300)*x'; use "
+        "constant arguments of at most 1e+15 in magnitude")
+
+
+@pytest.mark.parametrize("text, where", [
+    ("(-1)**(1/3)", "the power is not a finite real number"),
+    ("x + (-8)**(2/3)", "the power is not a finite real number"),
+    ("acos(2)*x", "acos(...) is not a finite real number here"),
+    ("x - asin(2)", "asin(...) is not a finite real number here"),
+    ("x*log(0)", "log(...) is not a finite real number here"),
+    ("x*log(-1)", "log(...) is not a finite real number here"),
+])
+def test_complex_or_undefined_constants_are_refused(text, where):
+    assert message(text).startswith(where)
+
+
+@pytest.mark.parametrize("text", ["x*\u00b2", "x + \u0661", "\u0662*x", "x\u00b2"])
+def test_unicode_digits_are_refused_by_name(text):
+    text = text.encode().decode("unicode-escape")
+    assert "unexpected character" in message(text)
+
+
+@pytest.mark.parametrize("text, value", [
+    ("1e100*x", sympy.Integer(10)**100 * x), ("1e-100*x", x / sympy.Integer(10)**100),
+    ("2**333*x", sympy.Integer(2)**333 * x), ("1e400/1e300*x", sympy.Integer(10)**100 * x),
+    ("5e-324*x", sympy.Rational(5, 10**324) * x),
+])
+def test_numbers_within_double_range_are_accepted_and_round_trip(text, value):
+    result = parse(text)
+    assert result == value
+    assert parse(format_expression(result)) == result
+
+
+@pytest.mark.parametrize("text, problem", [
+    ("1e400*x", "the number 1e400 is beyond the range of a double"),
+    ("x/3e-320", "the number 1e320/3 is beyond the range of a double"),
+    ("1e-400*x", "the number 1e-400 is too small for a double (it would be 0)"),
+    ("(1e-200)**2*x + 1", "the number 1e-400 is too small for a double (it would be 0)"),
+    ("x**(10**400)", "the number 1e400 is beyond the range of a double"),
+])
+def test_numbers_beyond_double_range_are_refused(text, problem):
+    assert message(text).startswith(f"{problem} in ")
+
+
+@pytest.mark.parametrize("value", [10**400, -10**309, Fraction(1, 10**400)])
+def test_yaml_numbers_go_through_the_same_limits(value):
+    assert "range of a double" in message(value) or "too small" in message(value)
+
+
+@pytest.mark.parametrize("value", [10**308, 1e-320, 5e-324, 1.7976931348623157e308, -10**19])
+def test_yaml_numbers_in_range_round_trip(value):
+    result = parse(value)
+    assert parse(format_expression(result)) == result
+
+
+def test_large_integers_are_written_compactly():
+    assert format_expression(sympy.Integer(10)**19 * x) == "1e19*x"
+    assert format_expression(sympy.Rational(3, 10**20)) == "3e-20"
+    assert format_expression(sympy.Integer(1000) * x) == "1000*x"
 
 
 # -- printer -----------------------------------------------------------------------

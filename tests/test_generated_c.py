@@ -1,19 +1,22 @@
 """The generated C as a product of its own: it builds outside Python, warning-free,
 as C99 and as C++, it is deterministic, and the build around it is robust.
 
-* ``examples/embedded_c`` (plain C, classic RK4) is built with its Makefile and
-  its final state is compared with scipy's DOP853 on the same model.
+* ``examples/embedded_c`` (plain C, ``double_pendulum_integrate`` with rk4 or
+  dop853) is built with its Makefile from the output directory alone, and its
+  final state is compared with scipy's DOP853 on the same model.
 * Every model in ``models/*.yaml``, ``spatial_chain(3)`` and ``spatial_chain(12)``
-  (large enough that routines are cut into ``noinline`` parts) compile with
+  (large enough that routines are cut into ``noinline`` parts), and the
+  model-independent ``mg_integrate.c`` copied next to them, compile with
   ``cc -std=c99 -Wall -Wextra -Werror -pedantic`` and
   ``c++ -x c++ -std=c++11 -Wall -Wextra -Werror``, whole and as the two
   ``MG_PART`` parts, and a small generated ``main`` calls every exported
   function of the header.
 * Golden files: ``tests/golden/double_pendulum.c`` and ``.h`` are the generated
-  source, byte for byte.  The preamble holds the modelgen version and the
-  model hash (which covers the generator version, the templates, the model,
-  and the compiler command), so a version bump or any template change changes
-  the golden files on purpose.  After checking the diff, regenerate them with::
+  model source, byte for byte (the integrators, the same for every model, are
+  not part of them).  The preamble holds the modelgen version and the model
+  hash (which covers the generator version, the model templates, the model),
+  so a version bump or any model template change changes the golden files on
+  purpose.  After checking the diff, regenerate them with::
 
       MODELGEN_UPDATE_GOLDEN=1 pytest tests/test_generated_c.py -k golden
 
@@ -55,8 +58,10 @@ HASH_ENV = ("CC", "MODELGEN_CFLAGS")
 #: Every function a model exports, without the "<name>_" prefix; written out
 #: here rather than taken from modelgen.codegen.emit.public_api, which renders the header.
 EXPORTED = ("abi_version", "default_parameters", "mass_matrix", "velocity_terms",
-            "generalized_forces", "rhs", "energy", "body_poses", "simulate_rk4",
-            "jacobian_fd", "integrate", "integrate_batch")
+            "generalized_forces", "rhs", "energy", "body_poses",
+            "system", "jacobian_fd", "integrate", "integrate_batch")
+#: The model-independent integrator files copied next to every model's C.
+INTEGRATOR = ("mg_integrate.c", "mg_integrate.h")
 C99 = ("cc", "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic")
 CXX11 = ("c++", "-x", "c++", "-std=c++11", "-Wall", "-Wextra", "-Werror")
 JOBS = max(2, os.cpu_count() or 2)
@@ -133,7 +138,8 @@ def _run_example(binary: Path, *args) -> dict:
 
 
 def test_embedded_example_builds_and_runs(generated, tmp_path):
-    """The plain-C RK4 example matches DOP853 to RK4's own error at h = 1e-3.
+    """The plain-C example (double_pendulum_integrate with rk4, from the output
+    directory's files alone) matches DOP853 to RK4's own error at h = 1e-3.
 
     RK4's global error is C h^4: about 4e-10 for this state after 2 s at
     h = 1e-3 (it shrinks 13-16x per halving of h, as a fourth-order method's
@@ -150,7 +156,7 @@ def test_embedded_example_builds_and_runs(generated, tmp_path):
     r = _run(["make", "-C", EXAMPLE, f"MODEL_DIR={model_dir}", f"BUILD_DIR={build}"])
     assert r.returncode == 0, r.stdout
     assert sorted(p.name for p in EXAMPLE.iterdir()) == tree_before, "make wrote into the source tree"
-    binary = build / "double_pendulum_rk4"
+    binary = build / "double_pendulum_sim"
 
     cm = modelgen.load(DOUBLE_PENDULUM, model_dir)
     ref = scipy.integrate.solve_ivp(cm.rhs, (0.0, T), X0, method="DOP853",
@@ -173,10 +179,13 @@ def test_embedded_example_builds_and_runs(generated, tmp_path):
     default = _run_example(binary)                      # 10 s at h = 1e-3
     assert abs(default["drift"]) < 1e-8 * abs(default["e0"])
 
-    # a nonzero rhs status (NaN state: no Cholesky pivot is positive) stops the program
+    # a failure status (a NaN state) stops the program with the integrator's reason
     r = _run([binary, 1, 1e-3, "nan", 0, 0, 0])
     assert r.returncode != 0
-    assert "mass matrix not positive definite" in r.stdout
+    assert "NaN or Inf in the state" in r.stdout
+    # dop853 (h = 0) through the same entry point, to its tolerance
+    tight = _run_example(binary, T, 0, *X0)
+    assert np.linalg.norm(tight["x"] - x_ref) < 1e-9
 
 
 # -- compiling the C on its own -----------------------------------------------------
@@ -221,18 +230,6 @@ def _checker(model_dir: Path, name: str) -> str:
         f"    {name}_default_parameters(p);",
     ]
     for ret, fn, params in _prototypes(model_dir, name):
-        if fn == f"{name}_simulate_rk4":
-            # 10 steps recorded every 5: rows at steps 0, 5 and 10
-            lines += [
-                "    {",
-                f"        double ts[4], xs[4 * {N}_NX], ys[4 * ({N}_NY + 1)], t_stop;",
-                "        long rows = 0;",
-                f"        if ({fn}(0.0, 1e-3, 10, 5, x, p, 0, 0, 0, 0, ts, xs, ys, &rows, "
-                "&t_stop) != 0) ++failures;",
-                "        if (rows != 3 || ts[2] != 10 * 1e-3 || t_stop != ts[2]) ++failures;",
-                "    }",
-                f'    printf("called {fn}\\n");']
-            continue
         if fn == f"{name}_jacobian_fd":
             lines += [
                 "    {",
@@ -242,18 +239,35 @@ def _checker(model_dir: Path, name: str) -> str:
                 "    }",
                 f'    printf("called {fn}\\n");']
             continue
+        if fn == f"{name}_system":
+            lines += [
+                "    {",
+                "        mg_system sys;",
+                f"        {fn}(&sys);",
+                f"        if (sys.nx != {N}_NX || sys.nu != {N}_NU || sys.np != {N}_NP || "
+                f"sys.ny != {N}_NY || !sys.rhs) ++failures;",
+                "    }",
+                f'    printf("called {fn}\\n");']
+            continue
         if fn == f"{name}_integrate":
             # dopri5 over 10 ms sampled at 5 and 10 ms, one event at t = 4 ms
             lines += [
                 "    {",
                 f"        double rt[{N}_NX], at[{N}_NX], te[2] = {{0.005, 0.01}}, to[2], xo[2 * {N}_NX];",
-                f"        double tf[4], xf[4 * {N}_NX], stop[9 + {N}_NX];",
-                "        long st[8], n_o = 0, n_f = 0;",
+                f"        double tf[4], xf[4 * {N}_NX], stop[MG_STOP_X + {N}_NX], work[{N}_WORK_SIZE];",
                 "        int dir = 1, term = 0, wh[4];",
+                "        mg_options opt;",
+                "        mg_output out;",
+                "        mg_stats st;",
+                "        memset(&opt, 0, sizeof opt);",
+                "        memset(&out, 0, sizeof out);",
                 f"        for (i = 0; i < {N}_NX; ++i) {{ rt[i] = 1e-8; at[i] = 1e-10; }}",
-                f"        if ({fn}(1, 0.0, 0.01, x, p, 0, 0, 0, 0, rt, at, 0.0, 0.0, 0.0, 1000, 0, 2, te, "
-                f"to, xo, &n_o, 1, event_{name}, 0, &dir, &term, 4, tf, xf, wh, &n_f, st, stop) != 0) ++failures;",
-                "        if (n_o != 2 || to[1] != 0.01 || n_f != 1 || wh[0] != 0) ++failures;",
+                "        opt.method = MG_METHOD_DOPRI5; opt.rtol = rt; opt.atol = at; opt.max_steps = 1000;",
+                f"        opt.n_events = 1; opt.events = event_{name}; opt.direction = &dir; opt.terminal = &term;",
+                "        out.capacity = 2; out.t_eval = te; out.t = to; out.x = xo; out.stop = stop;",
+                "        out.events_capacity = 4; out.t_events = tf; out.x_events = xf; out.which_events = wh;",
+                f"        if ({fn}(0.0, 0.01, x, p, 0, &opt, &out, &st, work) != MG_STATUS_SUCCESS) ++failures;",
+                "        if (out.n != 2 || to[1] != 0.01 || out.n_events != 1 || wh[0] != 0) ++failures;",
                 "        if (!(tf[0] > 0.004 - 1e-12 && tf[0] < 0.004 + 1e-12) || stop[0] != 0.01) ++failures;",
                 "    }",
                 f'    printf("called {fn}\\n");']
@@ -262,14 +276,17 @@ def _checker(model_dir: Path, name: str) -> str:
             # two identical runs of rk4 (10 steps), final states only
             lines += [
                 "    {",
-                f"        double X[2 * {N}_NX], te[1] = {{0.01}}, xo[2 * {N}_NX], stop[2 * (9 + {N}_NX)];",
-                f"        double rt[{N}_NX], at[{N}_NX];",
-                "        long n_o[2], st[16];",
+                f"        double X[2 * {N}_NX], te[1] = {{0.01}}, xo[2 * {N}_NX], stop[2 * (MG_STOP_X + {N}_NX)];",
+                f"        double work[MG_WORK_SIZE({N}_NX, {N}_NU, 0)];",
+                "        long n_o[2];",
                 "        int sts[2];",
-                f"        for (i = 0; i < {N}_NX; ++i) {{ rt[i] = 1e-8; at[i] = 1e-10; X[i] = X[{N}_NX + i] = x[i]; }}",
-                f"        if ({fn}(2, 0, 0.0, 0.01, X, p, 0, 0, 0, 0, 0, rt, at, 0.0, 0.0, 1e-3, 100, 1, te, "
-                "xo, n_o, sts, st, stop) != 0) ++failures;",
-                f"        if (n_o[0] != 1 || n_o[1] != 1 || sts[0] != 0 || xo[0] != xo[{N}_NX] || st[0] != 10) ++failures;",
+                "        mg_options opt;",
+                "        mg_stats st[2];",
+                "        memset(&opt, 0, sizeof opt);",
+                f"        for (i = 0; i < {N}_NX; ++i) X[i] = X[{N}_NX + i] = x[i];",
+                "        opt.method = MG_METHOD_RK4; opt.fixed_step = 1e-3; opt.max_steps = 100;",
+                f"        if ({fn}(2, 0.0, 0.01, X, p, 0, 0, &opt, 1, te, xo, n_o, sts, st, stop, work) != 0) ++failures;",
+                f"        if (n_o[0] != 1 || n_o[1] != 1 || sts[0] != 0 || xo[0] != xo[{N}_NX] || st[0].naccept != 10) ++failures;",
                 "    }",
                 f'    printf("called {fn}\\n");']
             continue
@@ -295,7 +312,7 @@ def _checker(model_dir: Path, name: str) -> str:
 
 def _main_source(models: dict) -> str:
     """A main (valid C99 and C++11) that checks every model of ``models``."""
-    head = ["#include <stdio.h>"] + [f'#include "{n}.h"' for n in models] + [""]
+    head = ["#include <stdio.h>", "#include <string.h>"] + [f'#include "{n}.h"' for n in models] + [""]
     body = [_checker(d, n) for n, d in models.items()]
     calls = " + ".join(f"check_{n}()" for n in models)
     main = ["int main(void)", "{", f"    int failures = {calls};",
@@ -315,9 +332,11 @@ def test_generated_c_compiles_warning_free_as_c99_and_cxx(generated, tmp_path):
     Unoptimised compiles, to keep this fast: the shared builds already passed
     the build's own ``-O2 -Wall -Wextra -Werror``, which covers the warnings
     that need optimisation.  Each model links three ways (C main + C object,
-    C++ main + the C halves, C main + the C++-compiled halves), each program
-    calls every function of the header, and ``nm`` shows that the object
-    defines exactly the prefixed functions and the halves split them.
+    C++ main + the C halves, C main + the C++-compiled halves), always with the
+    ``mg_integrate.c`` of its output directory (compiled the same way), each
+    program calls every function of the header, and ``nm`` shows that the
+    model object defines exactly the prefixed functions and the halves split
+    them, and that mg_integrate defines only ``mg_`` functions.
     """
     large = f"spatial_chain_{LARGE_CHAIN}"
     ops = json.loads((generated[large] / "manifest.json").read_text())["ops"]
@@ -332,18 +351,21 @@ def test_generated_c_compiles_warning_free_as_c99_and_cxx(generated, tmp_path):
         out.mkdir()
         (out / "main.c").write_text(_main_source({name: src}))
         inc = f"-I{src}"
-        for tag, flags in (("all", []), ("1", ["-DMG_PART=1"]), ("2", ["-DMG_PART=2"]),
-                           ("3", ["-DMG_PART=3"])):
+        assert sorted(p.name for p in src.iterdir() if p.suffix in (".c", ".h")) == \
+            sorted([f"{name}.c", f"{name}.h", *INTEGRATOR]), "the output directory is not self-contained"
+        for tag, flags in (("all", []), ("1", ["-DMG_PART=1"]), ("2", ["-DMG_PART=2"])):
             compiles.append(([*C99, *flags, "-c", src / f"{name}.c", "-o", f"c_{tag}.o"], out))
             compiles.append(([*CXX11, *flags, "-c", src / f"{name}.c", "-o", f"cxx_{tag}.o"], out))
+        compiles.append(([*C99, "-c", src / "mg_integrate.c", "-o", "c_mg.o"], out))
+        compiles.append(([*CXX11, "-c", src / "mg_integrate.c", "-o", "cxx_mg.o"], out))
         compiles.append(([*C99, inc, "-c", "main.c", "-o", "main_c.o"], out))
         compiles.append(([*CXX11, "-pedantic", inc, "-c", "main.c", "-o", "main_cxx.o"], out))
-        # C main + whole C file; C++ main + the three C parts (extern "C");
-        # C main + the three C++-compiled parts
-        for exe, cmd in (("c_all", ["cc", "main_c.o", "c_all.o"]),
-                         ("cxx_main_c_parts", ["c++", "main_cxx.o", "c_1.o", "c_2.o", "c_3.o"]),
+        # C main + whole C file; C++ main + the two C parts (extern "C");
+        # C main + the two C++-compiled parts
+        for exe, cmd in (("c_all", ["cc", "main_c.o", "c_all.o", "c_mg.o"]),
+                         ("cxx_main_c_parts", ["c++", "main_cxx.o", "c_1.o", "c_2.o", "c_mg.o"]),
                          ("c_main_cxx_parts", ["c++", "main_c.o", "cxx_1.o", "cxx_2.o",
-                                               "cxx_3.o"])):
+                                               "cxx_mg.o"])):
             links.append(([*cmd, "-o", exe, "-lm"], out))
             binaries[(name, exe)] = out / exe
 
@@ -361,8 +383,9 @@ def test_generated_c_compiles_warning_free_as_c99_and_cxx(generated, tmp_path):
         out = tmp_path / name
         exported = sorted(f"{name}_{s}" for s in EXPORTED)
         assert _defined_globals(out / "c_all.o") == exported, name
-        parts = [g for k in (1, 2, 3) for g in _defined_globals(out / f"c_{k}.o")]
+        parts = [g for k in (1, 2) for g in _defined_globals(out / f"c_{k}.o")]
         assert sorted(parts) == exported, f"{name}: MG_PART parts overlap or miss symbols"
+        assert all(g.startswith("mg_") for g in _defined_globals(out / "c_mg.o"))
 
 
 def test_two_models_link_into_one_program_without_symbol_clashes(generated, tmp_path):
@@ -373,9 +396,14 @@ def test_two_models_link_into_one_program_without_symbol_clashes(generated, tmp_
     compiles = [([*C99, *incs, "-c", "main.c", "-o", "main.o"], tmp_path)]
     compiles += [([*C99, "-O2", "-c", d / f"{n}.c", "-o", f"{n}.o"], tmp_path)
                  for n, d in models.items()]
+    # both directories hold the same mg_integrate.c: it is compiled once for both
+    mg = [(d / "mg_integrate.c").read_bytes() for d in models.values()]
+    assert mg[0] == mg[1]
+    compiles.append(([*C99, "-O2", "-c", models["double_pendulum"] / "mg_integrate.c", "-o",
+                      "mg_integrate.o"], tmp_path))
     failures = _run_all(compiles)
     assert not failures, "\n".join(failures)
-    r = _run(["cc", "main.o", *objs, "-o", "two_models", "-lm"], cwd=tmp_path)
+    r = _run(["cc", "main.o", *objs, "mg_integrate.o", "-o", "two_models", "-lm"], cwd=tmp_path)
     assert r.returncode == 0, r.stdout
     r = _run([tmp_path / "two_models"])
     assert r.returncode == 0 and "failures: 0" in r.stdout, r.stdout
@@ -491,6 +519,39 @@ def test_build_cache_reuses_unchanged_model(tmp_path):
     assert third.build.module_path != so
 
 
+def test_a_changed_model_reuses_the_compiled_integrators(monkeypatch, tmp_path):
+    """The integrators are compiled once into the cache; an edited model compiles only
+    its own code.  Changed integrator sources give another object and rebuild the
+    modules that linked the old one."""
+    import dataclasses
+    from modelgen.codegen import build, pipeline
+    monkeypatch.setenv("MODELGEN_CACHE_DIR", str(tmp_path / "cache"))
+    spec = modelgen.as_spec(MODELS / "simple_pendulum.yaml")
+    first = modelgen.generate_model(spec, tmp_path / "a")
+    objects = sorted((tmp_path / "cache").glob("mg_integrate-*.o"))
+    assert len(objects) == 1
+    stamp = objects[0].stat().st_mtime_ns
+    changed = dataclasses.replace(spec, parameters=(("L", 2.0),) + spec.parameters[1:])
+    second = modelgen.generate_model(changed, tmp_path / "b")
+    assert not second.build.cached
+    assert sorted((tmp_path / "cache").glob("mg_integrate-*.o")) == objects
+    assert objects[0].stat().st_mtime_ns == stamp
+    assert not any("mg_integrate" in c for c in second.manifest["compile_commands"])
+    assert not first.manifest["integrators"]["cached"] and second.manifest["integrators"]["cached"]
+    assert first.manifest["build_hash"] != second.manifest["build_hash"]
+    assert (tmp_path / "a" / "mg_integrate.c").read_bytes() == \
+        (tmp_path / "b" / "mg_integrate.c").read_bytes()
+
+    sources = pipeline.integrator_sources()
+    edited = dict(sources, **{"mg_integrate.c": sources["mg_integrate.c"] + "/* edited */\n"})
+    monkeypatch.setattr(pipeline, "integrator_sources", lambda: edited)
+    third = modelgen.generate_model(spec, tmp_path / "a")
+    assert not third.build.cached
+    assert len(list((tmp_path / "cache").glob("mg_integrate-*.o"))) == 2
+    assert (tmp_path / "a" / "mg_integrate.c").read_text().endswith("/* edited */\n")
+    assert build.integrator_hash(edited) != build.integrator_hash(sources)
+
+
 _RACE = """
 import sys, time
 from pathlib import Path
@@ -536,7 +597,7 @@ def test_concurrent_builds_both_succeed(generated, tmp_path):
     names = sorted(p.name for p in out.iterdir())
     manifest = json.loads((out / "manifest.json").read_text())
     assert names == sorted(["manifest.json", "double_pendulum.c", "double_pendulum.h",
-                            manifest["module_file"]]), names
+                            *INTEGRATOR, manifest["module_file"]]), names
     assert not [n for n in names if n.startswith(".build-")]
 
     r = _run([sys.executable, "-c", _CHECK_MODULE, out])

@@ -26,7 +26,7 @@ from modelgen.bench.problem import (Problem, Reference, grid, steps_dividing,
                                     tolerance_sweep)
 from modelgen.bench.references import (extended_reference, linear_reference,
                                        reference_from_methods)
-from modelgen.codegen.pipeline import DEFAULT_OUTPUT
+from modelgen.codegen.pipeline import default_output
 from modelgen.errors import SimulationError
 from modelgen.model.scene import load_scene
 from modelgen.sim.load import load
@@ -42,7 +42,7 @@ JACOBIAN_UP_TO = 12
 def _build(spec, build_dir):
     """The scene's reduced model, compiled (with the symbolic Jacobian when small)."""
     if build_dir is None:
-        build_dir = DEFAULT_OUTPUT / "workprecision" / spec.name
+        build_dir = default_output("workprecision") / spec.name
     return load(spec.model, build_dir, jacobian=spec.model.n <= JACOBIAN_UP_TO)
 
 

@@ -21,12 +21,17 @@ import jinja2
 import sympy
 
 from modelgen.version import __version__
+from modelgen.codegen import capi
 from modelgen.codegen.cse import Routine
 from modelgen.errors import TemplateError
 from modelgen.codegen.printer import ModelPrinter
 
-#: Version of the generated C ABI, checked by the Python loader.
-ABI_VERSION = 1
+#: Version of the generated C ABI, checked by the Python loader (the C interface table's).
+ABI_VERSION = capi.ABI_VERSION
+#: The templates of a model's own code (the model hash covers these only).
+MODEL_TEMPLATES = ("model.c.j2", "model.h.j2", "cdef.h.j2", "macros.j2")
+#: The model-independent integrator files, rendered from modelgen.codegen.capi alone.
+INTEGRATOR_FILES = ("mg_integrate.h", "mg_integrate.c")
 #: Statements per noinline part of a large routine.
 CHUNK = 150
 #: Routines up to this many statements stay in one function.
@@ -52,12 +57,32 @@ def environment() -> jinja2.Environment:
 
 
 def templates_digest() -> str:
-    """Hash of every template file, part of the build cache key."""
+    """Hash of the model templates (not the integrators'), part of the model hash."""
     h = hashlib.sha256()
-    for path in sorted(templates_dir().glob("*.j2")):
-        h.update(path.name.encode())
-        h.update(path.read_bytes())
+    for name in MODEL_TEMPLATES:
+        h.update(name.encode())
+        h.update((templates_dir() / name).read_bytes())
     return h.hexdigest()
+
+
+@functools.lru_cache(maxsize=None)
+def _integrator_sources(digest: str) -> tuple:
+    context = dict(capi.context(), capi=capi.context(), version=__version__)
+    return tuple((name, render(f"{name}.j2", dict(context, template=f"{name}.j2")))
+                 for name in INTEGRATOR_FILES)
+
+
+def integrator_sources() -> dict:
+    """``mg_integrate.h`` and ``mg_integrate.c``: the same for every model.
+
+    Rendered from :mod:`modelgen.codegen.capi` and their two templates only
+    (cached while the templates are unchanged).
+    """
+    h = hashlib.sha256(repr(capi.context()).encode())
+    for name in INTEGRATOR_FILES + ("macros.j2",):
+        path = templates_dir() / (name if name.endswith(".j2") else f"{name}.j2")
+        h.update(path.read_bytes())
+    return dict(_integrator_sources(h.hexdigest()))
 
 
 def render(template: str, context: dict) -> str:
@@ -132,7 +157,7 @@ def print_routine(routine: Routine, outputs_c: dict) -> CFunction:
             work += 1
         else:
             slots[sym] = f"v{i}"
-    printer = ModelPrinter(slots)
+    printer = ModelPrinter(slots, routine.name)
 
     parts = [[] for _ in range(n_parts)]
     for i, (sym, expr) in enumerate(statements):
@@ -171,11 +196,11 @@ def unrolled_ldlt(n: int, tol: str) -> list:
     No square roots: each pivot costs one division, which shortens the
     dependency chain from pivot to pivot.  Reads the lower triangle of the
     row-major ``A``; overwrites ``b`` with y.  Returns the 1-based failing
-    pivot (d_j <= tol * A_jj, or A_jj <= tol * max A_ii) like the loop version.
+    pivot (d_j <= tol * A_jj, or A_jj <= 0) like the loop version: A_jj / d_j
+    estimates the condition number of the diagonally scaled A, so extreme but
+    well-defined mass ratios pass (see ``modelgen.sim.conditioning``).
     """
-    lines = ["double largest = 0.0;"]
-    for j in range(n):
-        lines.append(f"if (A[{j * n + j}] > largest) largest = A[{j * n + j}];")
+    lines = []
     for j in range(n):
         # u{j}_{k} = L{j}_{k} * d{k}: reused by every row below j
         for k in range(j):
@@ -183,7 +208,7 @@ def unrolled_ldlt(n: int, tol: str) -> list:
         terms = "".join(f" - u{j}_{k} * L{j}_{k}" for k in range(j))
         lines.append(f"const double d{j} = A[{j * n + j}]{terms};")
         lines.append(f"if (!(d{j} > {tol} * A[{j * n + j}]) || "
-                     f"!(A[{j * n + j}] > {tol} * largest)) return {j + 1};")
+                     f"!(A[{j * n + j}] > 0.0)) return {j + 1};")
         lines.append(f"const double inv{j} = 1.0 / d{j};")
         for i in range(j + 1, n):
             terms = "".join(f" - L{i}_{k} * u{j}_{k}" for k in range(j))
@@ -198,8 +223,25 @@ def unrolled_ldlt(n: int, tol: str) -> list:
 
 
 def _comment_safe(text: str) -> str:
-    """Text that cannot close or nest a C comment, nor smuggle a line break."""
-    return "".join(ch if ch.isprintable() else " " for ch in text).replace("*/", "* /").replace("/*", "/ *")
+    r"""Text that cannot close or nest a C comment, nor smuggle a line break.
+
+    Non-printable characters become spaces; ``*/`` and ``/*`` are split; ``??``
+    is split so that no trigraph (``??/`` is a backslash in C99) survives; a
+    trailing backslash, which would splice the comment with the next line, is
+    followed by a full stop.
+
+    >>> _comment_safe("ends in ??/")
+    'ends in ? ?/'
+    >>> _comment_safe("a */ b\\")
+    'a * / b\\.'
+    """
+    text = "".join(ch if ch.isprintable() else " " for ch in text)
+    text = text.replace("*/", "* /").replace("/*", "/ *")
+    while "??" in text:
+        text = text.replace("??", "? ?")
+    if text.rstrip().endswith("\\"):
+        text = text.rstrip() + "."
+    return text
 
 
 def template_context(*, name: str, description: str, model_hash: str, n: int,
@@ -229,6 +271,7 @@ def template_context(*, name: str, description: str, model_hash: str, n: int,
         "api": public_api(name, n, len(parameters), len(inputs), len(bodies),
                           len(output_columns), has_jacobian),
         "solve_lines": unrolled_ldlt(n, f"{name.upper()}_PIVOT_TOL") if n <= UNROLL_SOLVE else [],
+        "capi": capi.context(),
     }
 
 
@@ -252,20 +295,6 @@ def public_api(name: str, n: int, n_p: int, n_u: int, n_b: int, n_y: int = 0,
              "params": "double t, const double *x, const double *u, const double *p, double *J",
              "doc": [f"Jacobian J[{2 * n}*{2 * n}] = d xdot / d x, row-major, derived symbolically",
                      "(forward mode over the generated program). Returns the rhs status."]})
-    extra.append(
-        {"ret": "int", "name": f"{name}_simulate_rk4",
-         "params": "double t0, double step, long n_steps, long every, const double *x0, "
-                   "const double *p, long n_u, const double *u_times, const double *u_values, "
-                   "int u_hold, double *t_out, double *x_out, double *y_out, long *n_out, "
-                   "double *t_stop",
-         "doc": ["Classic RK4 from x0 at t0 for n_steps steps of size step, recording t, x",
-                 f"(and the {n_y} outputs) every `every` steps and after the last step:",
-                 "t_out[], x_out[][NX], y_out[][NY] need n_steps/every + 2 rows.",
-                 f"Inputs: n_u samples u_times[n_u] (increasing), u_values[n_u][{n_u}],",
-                 "interpolated linearly (u_hold = 0) or held (u_hold = 1), ends held;",
-                 "n_u = 0 means all inputs are zero.  Returns 0; or k > 0 when pivot k",
-                 "of A failed, -1 when the state became non-finite.  *n_out rows were",
-                 "written either way, *t_stop is the time of the last good state."]})
     return extra + [
         {"ret": "int", "name": f"{name}_abi_version", "params": "void",
          "doc": [f"Returns the ABI version ({ABI_VERSION}) this file was generated for."]},
@@ -298,74 +327,41 @@ def public_api(name: str, n: int, n_p: int, n_u: int, n_b: int, n_y: int = 0,
          "doc": [f"Pose of every body: T[{n_b}*16], one row-major 4x4 matrix per body",
                  "[[R, r_G], [0, 0, 0, 1]]: R's columns are the body base's unit vectors",
                  "in E, r_G the centre of mass from O in E [m]."]},
-    ] + _integrator_api(name, n, n_p, n_u)
+    ] + _integrator_api(name, n, n_p, n_u, n_y, has_jacobian)
 
 
-# -- integrators (templates/integrators.c.j2) ----------------------------------------
+# -- integration (mg_integrate.h, rendered from modelgen/codegen/capi.py) ----------------
 
-def _integrator_api(name: str, n: int, n_p: int, n_u: int) -> list:
-    """Prototypes and documentation of the integrators' exported functions.
-
-    The status codes, method numbers and statistics slots named here are
-    defined in templates/integrators.c.j2 and mirrored, with the messages, by
-    :mod:`modelgen.sim.integrate`.
-    """
+def _integrator_api(name: str, n: int, n_p: int, n_u: int, n_y: int, has_jacobian: bool) -> list:
+    """Prototypes and documentation of the model's entry points into mg_integrate."""
     nx = 2 * n
     return [
+        {"ret": "void", "name": f"{name}_system", "params": "mg_system *system",
+         "doc": [f"Fills system with this model for mg_integrate: nx = {nx}, nu = {n_u},",
+                 f"np = {n_p}, ny = {n_y}, rhs = {name}_rhs, jacobian = "
+                 + (f"{name}_jacobian," if has_jacobian else "NULL (central differences),"),
+                 "outputs = " + (f"{name}_outputs." if n_y else "NULL.")]},
         {"ret": "int", "name": f"{name}_jacobian_fd",
          "params": "double t, const double *x, const double *u, const double *p, double *J",
-         "doc": [f"d xdot / d x by central differences of {name}_rhs (step cbrt(eps) max(1, |x_j|),",
-                 f"error about 1e-10 relative): J[{nx}*{nx}] row-major, J[i*{nx} + j] = d xdot_i / d x_j.",
-                 f"x[{nx}], u[{n_u}], p[{n_p}] as for {name}_rhs; returns its status."]},
+         "doc": [f"d xdot / d x by central differences of {name}_rhs (mg_jacobian_fd):",
+                 f"J[{nx}*{nx}] row-major, J[i*{nx} + j] = d xdot_i / d x_j; x[{nx}], u[{n_u}],",
+                 f"p[{n_p}] as for {name}_rhs; returns its status."]},
         {"ret": "int", "name": f"{name}_integrate",
-         "params": "int method, double t0, double t1, const double *x0, const double *p, "
-                   "long n_u, const double *u_times, const double *u_values, int u_hold, "
-                   "const double *rtol, const double *atol, double first_step, double max_step, "
-                   "double fixed_step, long max_steps, const double *resume, long n_out_max, "
-                   "const double *t_eval, "
-                   "double *t_out, double *x_out, long *n_out, int n_events, "
-                   "int (*events)(void *, double, const double *, double *), void *ctx, "
-                   "const int *direction, const int *terminal, long n_found_max, "
-                   "double *t_found, double *x_found, int *which_found, long *n_found, "
-                   "long *stats, double *stop",
-         "doc": [f"Integrates x' = xdot(t, x) from x0[{nx}] at t0 to t1 >= t0; nothing is allocated.",
-                 "method: 0 rk4, 1 dopri5, 2 dop853, 3 rodas4 (Rosenbrock, uses the Jacobian),",
-                 "4 implicit midpoint, 5 gauss4 (2-stage Gauss-Legendre).  fixed_step > 0 gives",
-                 "fixed steps of about that size (required by 0, 4 and 5; no error control);",
-                 f"else rtol[{nx}], atol[{nx}] set the error control, first_step (0: Hairer's",
-                 "hinit) and max_step (0: t1 - t0) its steps.  max_steps counts attempts.",
-                 "resume: NULL, or the stop array of a call that returned 2, to continue it",
-                 "exactly (from t0 = stop[0], x0 = stop + 9).",
-                 f"p, n_u, u_times, u_values, u_hold: as for {name}_simulate_rk4.",
-                 "Output: t_eval NULL records t0 and every accepted step into t_out[n_out_max],",
-                 f"x_out[n_out_max][{nx}]; else x_out[i] is x(t_eval[i]) for the n_out_max increasing",
-                 "times t_eval (from the dense output; t_out may be NULL).  *n_out rows written.",
-                 "Events (n_events <= 32, 0: no calls): events(ctx, t, x, g) writes g[n_events],",
-                 "returns nonzero to abort; a sign change of g[i] (direction[i] > 0 rising only,",
-                 "< 0 falling only) is located on the dense output and recorded in t_found,",
-                 f"x_found[][{nx}], which_found (capacity n_found_max, *n_found written); the",
-                 "integration stops at occurrence terminal[i] > 0 of event i.",
-                 "stats[8]: accepted, rejected steps, rhs, Jacobian evaluations, LU",
-                 "factorizations, Newton iterations, event function calls, failing pivot.",
-                 f"stop[9 + {nx}]: t reached, next step size, time of the failure, the step",
-                 "controller's memory (4), steps since the first t0, that t0; x at t from 9.",
-                 "Returns 0 (t1 reached), 1 (terminal event), 2 (an output buffer is full:",
-                 "continue from stop), -1 max_steps reached, -2 step size underflow, -3 mass",
-                 "matrix not positive definite, -4 NaN/Inf in the state, -5 implicit stage",
-                 "equations not solved, -6 event function aborted, -7 bad argument.",
-                 "Everything up to the stop is written."]},
+         "params": "double t0, double t1, const double *x0, const double *p, "
+                   "const mg_inputs *inputs, const mg_options *options, mg_output *output, "
+                   "mg_stats *stats, double *work",
+         "doc": [f"mg_integrate on this model: x0[{nx}], p[{n_p}], inputs (NULL: u = 0),",
+                 f"output->x[capacity][{nx}]" + (f", output->y[capacity][{n_y}]" if n_y else "")
+                 + f", work[{name.upper()}_WORK_SIZE].",
+                 "Returns an MG_STATUS_* (see mg_integrate.h)."]},
         {"ret": "int", "name": f"{name}_integrate_batch",
-         "params": "long n_runs, int method, double t0, double t1, const double *x0, "
-                   "const double *p, long p_stride, long n_u, const double *u_times, "
-                   "const double *u_values, int u_hold, const double *rtol, const double *atol, "
-                   "double first_step, double max_step, double fixed_step, long max_steps, "
+         "params": "long n_runs, double t0, double t1, const double *x0, const double *p, "
+                   "long p_stride, const mg_inputs *inputs, const mg_options *options, "
                    "long n_eval, const double *t_eval, double *x_out, long *n_out, int *status, "
-                   "long *stats, double *stop",
-         "doc": [f"{name}_integrate for n_runs initial states x0[n_runs][{nx}] with parameters",
-                 f"p + r * p_stride (p_stride 0: one parameter set, {n_p}: one per run), sampled",
-                 f"at t_eval[n_eval] (required) into x_out[n_runs][n_eval][{nx}]; no events.",
-                 f"n_out[n_runs], status[n_runs], stats[n_runs][8], stop[n_runs][9 + {nx}].",
-                 "Returns the number of runs that failed (status < 0)."]},
+                   "mg_stats *stats, double *stop, double *work",
+         "doc": [f"mg_integrate_batch on this model: x0[n_runs][{nx}], parameters",
+                 f"p + r * p_stride (0: one set, {n_p}: one per run), x_out[n_runs][n_eval][{nx}],",
+                 f"stop[n_runs][MG_STOP_X + {nx}].  Returns the number of failed runs."]},
     ]
 
 

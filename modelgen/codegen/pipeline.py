@@ -12,19 +12,25 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 from modelgen.version import __version__
-from modelgen.codegen.build import BuildResult, build_module, cached_build, compiler
+from modelgen.codegen.build import (BuildResult, build_module, cache_dir, cached_build,
+                                    compiler, integrator_hash)
 from modelgen.codegen.cse import make_routines
 from modelgen.derive.aba import ForwardDynamics, derive_aba, derive_aba_jacobian
 from modelgen.derive.dynamics import Equations, derive_equations
 from modelgen.derive.joint_tree import JointTree, extract_joint_tree
 from modelgen.errors import ModelError
-from modelgen.codegen.emit import ABI_VERSION, emit_sources, print_routine, template_context, templates_digest
+from modelgen.codegen.emit import (ABI_VERSION, emit_sources, integrator_sources, print_routine,
+                                   template_context, templates_digest)
 from modelgen.derive.jacobian import derive_jacobian_terms
 from modelgen.derive.kinematics import derive_kinematics
 from modelgen.derive.outputs import derive_outputs
 from modelgen.model.spec import ModelSpec
 
-DEFAULT_OUTPUT = Path("generated")
+def default_output(name: str) -> Path:
+    """Where a model is built when no output directory is given: the per-user cache
+    (``models/<name>`` under :func:`modelgen.codegen.build.cache_dir`), never the
+    current directory."""
+    return cache_dir() / "models" / name
 
 #: how ``<name>_rhs`` computes q_ddot: ``crba`` builds A and b = tau - h and
 #: solves A q_ddot = b (Cholesky in C); ``aba`` runs the articulated-body
@@ -57,7 +63,8 @@ class Generated:
 
 def model_hash(spec: ModelSpec, outputs=(), jacobian: bool = False,
                formulation: str = "crba") -> str:
-    """Hash of what determines the generated C: the model, modelgen, the templates.
+    """Hash of what determines the model's generated C: the model, modelgen, the
+    model templates (not the integrators', which every model shares), the formulation.
 
     The file the model came from and its line numbers are not part of it, so
     the same model gives the same C wherever it lies.
@@ -73,9 +80,11 @@ def model_hash(spec: ModelSpec, outputs=(), jacobian: bool = False,
 
 def build_hash(spec: ModelSpec, outputs=(), jacobian: bool = False,
                formulation: str = "crba") -> str:
-    """Cache key of the compiled module: the model hash, the compiler and its flags."""
+    """Cache key of the compiled module: the model hash, the compiler and its flags,
+    and the integrators it links (so a changed mg_integrate rebuilds every module)."""
     h = hashlib.sha256()
-    for part in (model_hash(spec, outputs, jacobian, formulation), " ".join(compiler()), os.environ.get("MODELGEN_CFLAGS", "")):
+    for part in (model_hash(spec, outputs, jacobian, formulation), " ".join(compiler()),
+                 os.environ.get("MODELGEN_CFLAGS", ""), integrator_hash(integrator_sources())):
         h.update(part.encode())
         h.update(b"\0")
     return h.hexdigest()
@@ -157,7 +166,7 @@ def generate(spec: ModelSpec, out_dir=None, *, force: bool = False, outputs=(),
              jacobian: bool = False, formulation: str = "auto") -> Generated:
     """Generate, compile and cache the model; reuse an unchanged build.
 
-    ``out_dir`` defaults to ``generated/<name>``.  ``outputs`` (a tuple of
+    ``out_dir`` defaults to :func:`default_output` (the per-user cache).  ``outputs`` (a tuple of
     :class:`~modelgen.model.spec.OutputSpec`, from a scene) adds a
     ``<name>_outputs`` routine computing exactly those quantities.
     ``jacobian=True`` adds ``<name>_jacobian``, the symbolic d(xdot)/dx.
@@ -170,7 +179,7 @@ def generate(spec: ModelSpec, out_dir=None, *, force: bool = False, outputs=(),
     """
     _check_generable(spec)
     formulation, tree = choose_formulation(spec, formulation)
-    directory = Path(out_dir) if out_dir is not None else DEFAULT_OUTPUT / spec.name
+    directory = Path(out_dir) if out_dir is not None else default_output(spec.name)
     key = build_hash(spec, outputs, jacobian, formulation)
     if not force:
         hit = cached_build(directory, key)
@@ -232,7 +241,7 @@ def generate(spec: ModelSpec, out_dir=None, *, force: bool = False, outputs=(),
                          "statements": f.statements} for f in functions.values()},
     }
     build = build_module(directory, spec.name, sources, dict(manifest, seconds=seconds),
-                         statements)
+                         statements, integrator_sources())
     seconds["compile"] = build.seconds
     manifest = dict(build.manifest, seconds=seconds)
     return Generated(build, manifest)

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 
 import sympy
 
+from modelgen.derive.calculus import diff
 from modelgen.derive.dynamics import Equations
 from modelgen.derive.graph import Graph, GraphBuilder
 
@@ -62,7 +63,7 @@ def differentiate(graph: Graph, outputs, wrt) -> tuple:
                 inner = grads.get(f)
                 if not inner:
                     continue
-            partial = expr.diff(f)
+            partial = diff(expr, f)
             if partial == 0:
                 continue
             for j, dj in inner.items():

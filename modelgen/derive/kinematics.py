@@ -32,6 +32,7 @@ from dataclasses import dataclass
 
 import sympy
 
+from modelgen.derive.calculus import diff
 from modelgen.derive.graph import (ZERO, ZERO3, Graph, GraphBuilder, add, cross, is_zero_vec,
                     matvec, scale, sub)
 from modelgen.errors import ModelError
@@ -102,22 +103,22 @@ class _Deriver:
     def gradient(self, expr):
         """{k: df/dq_k} for the coordinates f depends on."""
         free = expr.free_symbols
-        return {k: sympy.diff(expr, qk) for k, qk in enumerate(self.q) if qk in free}
+        return {k: diff(expr, qk) for k, qk in enumerate(self.q) if qk in free}
 
     def rate(self, expr, grad=None):
         """df/dt = sum_k df/dq_k * qd_k + df/dt (explicit)."""
         grad = self.gradient(expr) if grad is None else grad
         total = sympy.Add(*[g * self.qd[k] for k, g in grad.items()])
         if expr.has(TIME):
-            total += sympy.diff(expr, TIME)
+            total += diff(expr, TIME)
         return total
 
     def bias_rate(self, expr_dot):
         """d/dt of an expression in (q, qd, t) with every qdd set to zero."""
-        total = sympy.Add(*[sympy.diff(expr_dot, qk) * self.qd[k]
+        total = sympy.Add(*[diff(expr_dot, qk) * self.qd[k]
                             for k, qk in enumerate(self.q) if qk in expr_dot.free_symbols])
         if expr_dot.has(TIME):
-            total += sympy.diff(expr_dot, TIME)
+            total += diff(expr_dot, TIME)
         return total
 
 

@@ -30,12 +30,32 @@ gives ``2*x`` and ``(x + y)/2`` gives ``x/2 + y/2``.  One visible
 consequence of building products in one call: ``2*(x + y)*z`` stays
 ``2*z*(x + y)`` (Python's pairwise ``*`` would give ``z*(2*x + 2*y)``).
 
-Hostile input is bounded: at most :data:`MAX_LENGTH` characters, nesting
-depth :data:`MAX_DEPTH`, number literals of at most :data:`MAX_NUMBER_CHARS`
-characters with exponents up to :data:`MAX_EXPONENT`, and exact powers of
-numbers whose result would exceed :data:`MAX_POWER_BITS` bits are refused.
-Results that are not finite and real (``1/0``, ``log(0)``, ``sqrt(-1)``)
-are refused too.
+Limits (model files are untrusted input; every limit is checked while
+parsing, before sympy evaluates anything expensive, and a violation is an
+:class:`ExpressionParseError`, which the loader reports with file, line and key):
+
+* text: at most :data:`MAX_LENGTH` characters, ASCII only (``x²``, ``١`` and
+  other non-ASCII characters are refused by name);
+* nesting depth (parentheses, signs, powers, function calls, operands) at most
+  :data:`MAX_DEPTH`;
+* number literals: at most :data:`MAX_NUMBER_CHARS` characters, decimal
+  exponents from -:data:`MAX_EXPONENT` to :data:`MAX_EXPONENT` (``1e-400`` to
+  ``1e400``); the same holds for the numerator and denominator of every
+  number in the result, and for YAML numbers;
+* values: every number and every constant subexpression (``sqrt(2)``,
+  ``sin(1)``, ``2**(1/3)``) must be a finite real double: at most about
+  1.8e308 in magnitude, not so small that it becomes 0 (subnormals down to
+  5e-324 are fine), not complex (``(-1)**(1/3)``, ``acos(2)``) and not
+  undefined (``1/0``, ``log(0)``).  Constants are evaluated in double
+  precision before sympy sees them, so ``tanh(tan(sinh(1e99)))`` is refused
+  at once (sinh overflows) instead of sending sympy into an unbounded search.
+  Intermediate exact values may exceed the double range (``1e400/1e300`` is
+  ``1e100``);
+* exact powers: sympy computes powers of the numbers in a base exactly (also
+  in ``(2*x)**(10**9)``), so such a power may need at most
+  :data:`MAX_POWER_BITS` bits;
+* a constant argument of sin, cos or tan is at most
+  :data:`MAX_PERIODIC_ARGUMENT` in magnitude.
 
 :func:`format_expression` writes a sympy expression back in this grammar, so
 that ``parse_expression(format_expression(e), allowed) == e``.  To make that
@@ -50,6 +70,7 @@ from __future__ import annotations
 import math
 import numbers
 import re
+import sys
 from fractions import Fraction
 from typing import Mapping, Optional
 
@@ -59,20 +80,23 @@ from modelgen.errors import ExpressionError
 
 __all__ = [
     "FUNCTIONS", "CONSTANTS", "MAX_LENGTH", "MAX_DEPTH", "MAX_NUMBER_CHARS",
-    "MAX_EXPONENT", "MAX_POWER_BITS", "ExpressionParseError",
+    "MAX_EXPONENT", "MAX_POWER_BITS", "MAX_PERIODIC_ARGUMENT", "ExpressionParseError",
     "parse_expression", "format_expression",
 ]
 
 #: Longest expression text accepted, in characters.
 MAX_LENGTH = 10_000
-#: Deepest nesting accepted (parentheses, unary signs, powers, calls).
-MAX_DEPTH = 200
-#: Longest number literal accepted, in characters.
-MAX_NUMBER_CHARS = 100
+#: Deepest nesting accepted (parentheses, unary signs, powers, calls, operands).
+MAX_DEPTH = 32
+#: Longest number literal accepted, in characters (also the most digits of the
+#: numerator or denominator of a number in a parsed expression).
+MAX_NUMBER_CHARS = 400
 #: Largest decimal exponent accepted in a number literal (``1e400``).
 MAX_EXPONENT = 400
 #: Largest exact power of numbers that is computed, in bits.
 MAX_POWER_BITS = 10_000
+#: Largest magnitude of a constant argument of sin, cos or tan.
+MAX_PERIODIC_ARGUMENT = 1e15
 
 #: Function name -> (sympy function, number of arguments).
 FUNCTIONS: Mapping[str, tuple] = {
@@ -149,6 +173,7 @@ _NUMBER = re.compile(r"(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")
 _NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 _WORD_TAIL = re.compile(r"[A-Za-z0-9_.]*")
 _OPERATORS = ("**", "+", "-", "*", "/", "(", ")", ",")
+_DIGITS = "0123456789"
 
 
 class _Token:
@@ -175,7 +200,11 @@ def _tokenize(text: str) -> list:
             i += 1
             continue
         column = i + 1
-        if c.isdigit() or (c == "." and i + 1 < n and text[i + 1].isdigit()):
+        if not c.isascii() and (c.isdigit() or c.isnumeric()):
+            raise ExpressionParseError(
+                f"unexpected character {c!r}", text, column,
+                "write numbers with the ASCII digits 0-9 and powers as x**2")
+        if c in _DIGITS or (c == "." and i + 1 < n and text[i + 1] in _DIGITS):
             match = _NUMBER.match(text, i)
             end = match.end()
             tail = _WORD_TAIL.match(text, end).group()
@@ -248,6 +277,7 @@ class _Parser:
         self.kinds = kinds
         self.tokens = _tokenize(text)
         self.pos = 0
+        self.values: dict = {}
 
     def error(self, reason: str, column: Optional[int], hint: Optional[str] = None,
               name: Optional[str] = None) -> ExpressionParseError:
@@ -391,28 +421,187 @@ class _Parser:
                 f"function '{name}' takes {arity} {plural} but was given {len(args)}",
                 token.column,
                 "write atan2(y, x)" if name == "atan2" else f"write {name}(x)")
+        if all(a.is_number for a in args):
+            values = [self.value(a, token) for a in args]
+            if name in ("sin", "cos", "tan") and abs(values[0]) > MAX_PERIODIC_ARGUMENT:
+                raise self.error(f"the argument of {name}(...) is too large",
+                                 token.column,
+                                 f"use constant arguments of at most {MAX_PERIODIC_ARGUMENT:g} "
+                                 "in magnitude")
+            if _float_call(name, values) is None:
+                raise self.error(f"{name}(...) is not a finite real number here",
+                                 token.column, "check the argument")
         result = function(*args)
         if result.has(*_NOT_FINITE_REAL):
             raise self.error(f"{name}(...) is not a finite real number here",
                              token.column, "check the argument")
         return result
 
+    def value(self, expr: sympy.Expr, token: _Token) -> float:
+        """The double value of a constant, or an error naming the constant."""
+        try:
+            return _float_value(expr, self.values)
+        except _NotADouble as exc:
+            raise self.error(exc.reason, token.column, exc.hint) from None
+
     def power(self, base: sympy.Expr, exponent: sympy.Expr, token: _Token) -> sympy.Expr:
         if exponent.is_Rational and base.is_number:
             if base == 0 and exponent < 0:
                 raise self.error("division by zero (0 to a negative power)",
                                  token.column, "check the base and the exponent")
-            size = 2
-            if base.is_Rational:
-                size = max(abs(base.p), abs(base.q)).bit_length()
-            if size > 1 and abs(exponent.p) * size > MAX_POWER_BITS:
-                raise self.error("the power is too large to compute exactly",
-                                 token.column, "use a smaller exponent")
+        if exponent.is_Rational:
+            # sympy computes powers of the numbers in the base exactly, even in
+            # (2*x)**(10**9): bound the size of every such power first
+            for factor in sympy.Mul.make_args(base):
+                if factor.is_number and abs(exponent.p) * _exact_bits(factor) > MAX_POWER_BITS:
+                    raise self.error("the power is too large to compute exactly",
+                                     token.column, "use a smaller exponent")
+        if base.is_number and exponent.is_number and not (base.is_Rational
+                                                          and exponent.is_Integer):
+            values = (self.value(base, token), self.value(exponent, token))
+            if _float_call("**", values) is None:
+                raise self.error("the power is not a finite real number", token.column,
+                                 "check the base and the exponent")
         result = sympy.Pow(base, exponent)
         if result.has(*_NOT_FINITE_REAL):
             raise self.error("the power is not a finite real number", token.column,
                              "check the base and the exponent")
         return result
+
+
+# -- bounded arithmetic on constants -------------------------------------------
+#
+# sympy evaluates constants exactly, and some questions it asks of them (is
+# tan(sinh(10**99)) zero?) cost without bound.  Every constant the parser is
+# about to hand to a function or a power is first evaluated here, in double
+# precision, and refused unless it is a finite real double.
+
+_DOUBLE_MAX = sys.float_info.max
+
+_MATH = {
+    "sin": math.sin, "cos": math.cos, "tan": math.tan, "asin": math.asin,
+    "acos": math.acos, "atan": math.atan, "atan2": math.atan2, "sinh": math.sinh,
+    "cosh": math.cosh, "tanh": math.tanh, "exp": math.exp, "sqrt": math.sqrt,
+    "log": math.log, "abs": abs, "sign": lambda v: float((v > 0) - (v < 0)),
+    "**": math.pow,
+}
+
+
+class _NotADouble(Exception):
+    """Internal: a constant that is not a finite real double (reason, hint)."""
+
+    def __init__(self, reason: str, hint: str):
+        super().__init__(reason)
+        self.reason = reason
+        self.hint = hint
+
+
+def _float_call(name: str, values) -> Optional[float]:
+    """``name(*values)`` in double precision; None if not a finite real number."""
+    try:
+        result = _MATH[name](*values)
+    except (ValueError, OverflowError, ZeroDivisionError):
+        return None
+    if isinstance(result, complex) or not math.isfinite(result):
+        return None
+    return float(result)
+
+
+def _rational_float(e) -> float:
+    """The double nearest to a sympy Rational, or _NotADouble."""
+    try:
+        value = e.p / e.q
+    except OverflowError:
+        value = math.inf
+    if abs(value) > _DOUBLE_MAX:
+        raise _NotADouble(f"the number {_shorten(_fmt(e)[0])} is beyond the range of a double",
+                          "use numbers of magnitude at most 1.7e308")
+    if value == 0 and e.p != 0:
+        raise _NotADouble(f"the number {_shorten(_fmt(e)[0])} is too small for a double (it "
+                          "would be 0)", "use numbers of magnitude at least 5e-324, or 0")
+    return value
+
+
+def _shorten(text: str) -> str:
+    return text if len(text) <= 40 else text[:25] + "..." + text[-10:]
+
+
+def _float_value(e, memo: dict) -> float:
+    """Double value of a constant sympy expression, or :class:`_NotADouble`.
+
+    Evaluated node by node with Python floats (so in bounded time), with the
+    results memoised in ``memo``.
+    """
+    if e in memo:
+        return memo[e]
+    if e.is_Rational:
+        value = _rational_float(e)
+    elif e is sympy.pi:
+        value = math.pi
+    elif e is sympy.E:
+        value = math.e
+    elif isinstance(e, sympy.Float):
+        value = float(e)
+    else:
+        if e.is_Add:
+            name = "+"
+        elif e.is_Mul:
+            name = "*"
+        elif e.is_Pow:
+            name = "**"
+        else:
+            name = _FUNCTION_NAMES.get(e.func)
+            if name is None:
+                raise _NotADouble(f"{_shorten(str(e))} is not a real number",
+                                  "check divisors, logarithms, roots and powers")
+        values = [_float_value(a, memo) for a in e.args]
+        if name == "+":
+            value = math.fsum(values)
+        elif name == "*":
+            value = math.prod(values)
+        else:
+            value = _float_call(name, values)
+        if value is None or not math.isfinite(value):
+            raise _NotADouble(f"{_shorten(_fmt(e)[0])} is not a finite real number",
+                              "check divisors, logarithms, roots and powers, and keep "
+                              "constants within the range of a double")
+    if len(memo) < 10_000:
+        memo[e] = value
+    return value
+
+
+def _exact_bits(number) -> int:
+    """Bits sympy needs to hold ``number`` exactly (0 for symbolic constants like pi).
+
+    A power of a rational costs the bits of the rational times the exponent.
+    """
+    if number.is_Rational:
+        size = max(abs(number.p), abs(number.q)).bit_length()
+        return size if size > 1 else 0
+    if number.is_Pow and number.base.is_Rational and number.exp.is_Rational:
+        return _exact_bits(number.base) * abs(number.exp.p)
+    return 0
+
+
+def _check_numbers(result: sympy.Expr, text: Optional[str]) -> None:
+    """Every number in ``result`` is a finite double with at most MAX_NUMBER_CHARS digits."""
+    memo: dict = {}
+    stack = [result]
+    while stack:
+        e = stack.pop()
+        if e.is_Rational:
+            for part in (e.p, e.q):
+                if len(_fmt_integer(abs(part))) > MAX_NUMBER_CHARS:
+                    raise ExpressionParseError(
+                        f"a number in the expression has more than {MAX_NUMBER_CHARS} digits",
+                        text, None, "use fewer significant digits")
+        if e.is_number:
+            try:
+                _float_value(e, memo)
+            except _NotADouble as exc:
+                raise ExpressionParseError(exc.reason, text, None, exc.hint) from None
+        else:
+            stack.extend(e.args)
 
 
 def parse_expression(text_or_number, allowed: Mapping[str, sympy.Symbol], *,
@@ -447,16 +636,17 @@ def parse_expression(text_or_number, allowed: Mapping[str, sympy.Symbol], *,
     if isinstance(text_or_number, sympy.Basic):
         text_or_number = format_expression(text_or_number)
     elif isinstance(text_or_number, numbers.Integral):
-        return sympy.Integer(int(text_or_number))
+        return _checked(sympy.Integer(int(text_or_number)), None)
     elif isinstance(text_or_number, numbers.Rational):
-        return sympy.Rational(text_or_number.numerator, text_or_number.denominator)
+        return _checked(sympy.Rational(text_or_number.numerator,
+                                       text_or_number.denominator), None)
     elif isinstance(text_or_number, numbers.Real):
         value = float(text_or_number)
         if not math.isfinite(value):
             raise ExpressionParseError(f"{value!r} is not a finite number", None,
                                        None, "write a finite number")
         exact = Fraction(repr(value))
-        return sympy.Rational(exact.numerator, exact.denominator)
+        return _checked(sympy.Rational(exact.numerator, exact.denominator), None)
     if not isinstance(text_or_number, str):
         kind = type(text_or_number).__name__
         raise ExpressionParseError(f"expected an expression but got a {kind}",
@@ -468,11 +658,30 @@ def parse_expression(text_or_number, allowed: Mapping[str, sympy.Symbol], *,
     if not text.strip():
         raise ExpressionParseError("empty expression", None, None,
                                    "write a number or an expression")
-    result = _Parser(text, allowed, kinds).parse()
-    if result.has(*_NOT_FINITE_REAL):
-        raise ExpressionParseError("the expression is not a finite real number", text,
-                                   None, "check divisors, logarithms and square roots")
-    return _stable(result, text, allowed)
+    try:
+        result = _Parser(text, allowed, kinds).parse()
+        if result.has(*_NOT_FINITE_REAL):
+            raise ExpressionParseError("the expression is not a finite real number", text,
+                                       None, "check divisors, logarithms and square roots")
+        _check_numbers(result, text)
+        return _stable(result, text, allowed)
+    except _SYMPY_FAILURES as exc:
+        # a backstop: sympy's own evaluation failed on a corner the checks above miss
+        raise ExpressionParseError(
+            f"sympy cannot evaluate the expression ({type(exc).__name__})", text, None,
+            "simplify the expression, and keep constants within the range of a double"
+        ) from None
+
+
+#: Exceptions sympy's automatic evaluation raises on extreme input.
+_SYMPY_FAILURES = (ArithmeticError, AttributeError, TypeError, ValueError, RecursionError,
+                   NotImplementedError)
+
+
+def _checked(number: sympy.Rational, text: Optional[str]) -> sympy.Rational:
+    """A number given as YAML int or float, under the same limits as text."""
+    _check_numbers(number, text)
+    return number
 
 
 def _stable(result: sympy.Expr, text: str, allowed: Mapping[str, sympy.Symbol]) -> sympy.Expr:
@@ -555,9 +764,14 @@ def _wrap(item: tuple, minimum: int) -> str:
 def _fmt(e) -> tuple:
     """(text, precedence) of ``e``; the precedence tells the caller when to wrap."""
     if e.is_Integer:
-        return (str(int(e)), _PREC_NEG if e < 0 else _PREC_ATOM)
+        text = _fmt_integer(abs(e.p))
+        return ("-" + text, _PREC_NEG) if e < 0 else (text, _PREC_ATOM)
     if e.is_Rational:
-        text = f"{abs(e.p)}/{e.q}"
+        denominator = _fmt_integer(e.q)
+        if denominator.startswith("1e"):  # a small decimal fraction: 3e-20
+            text = f"{abs(e.p)}e-{denominator[2:]}"
+            return ("-" + text, _PREC_NEG) if e.p < 0 else (text, _PREC_ATOM)
+        text = f"{_fmt_integer(abs(e.p))}/{denominator}"
         return ("-" + text, _PREC_NEG) if e.p < 0 else (text, _PREC_MUL)
     if isinstance(e, sympy.Float):
         value = float(e)
@@ -580,6 +794,22 @@ def _fmt(e) -> tuple:
     if name is not None and e.args:
         return (f"{name}({', '.join(_fmt(a)[0] for a in e.args)})", _PREC_ATOM)
     raise _Unprintable(e)
+
+
+def _fmt_integer(n: int) -> str:
+    """A non-negative integer as a literal: digits, or ``<digits>e<k>`` when shorter.
+
+    >>> _fmt_integer(10**19), _fmt_integer(1000), _fmt_integer(12 * 10**40)
+    ('1e19', '1000', '12e40')
+    """
+    digits = str(n)
+    if len(digits) <= 15:
+        return digits
+    mantissa = digits.rstrip("0")
+    zeros = len(digits) - len(mantissa)
+    if zeros < 3:
+        return digits
+    return f"{mantissa}e{zeros}"
 
 
 class _Unprintable(Exception):
@@ -615,9 +845,9 @@ def _fmt_mul(e) -> tuple:
     numerator, denominator = [], []
     if coefficient.is_Rational:
         if coefficient.p != 1:
-            numerator.append((str(coefficient.p), _PREC_ATOM))
+            numerator.append((_fmt_integer(coefficient.p), _PREC_ATOM))
         if coefficient.q != 1:
-            denominator.append((str(coefficient.q), _PREC_ATOM))
+            denominator.append((_fmt_integer(coefficient.q), _PREC_ATOM))
     elif coefficient != 1:  # a Float coefficient
         numerator.append(_fmt(coefficient))
     for factor in factors:

@@ -1,7 +1,9 @@
 """Integration in C with error control, dense output and events, shaped like solve_ivp.
 
-The integrators live in the generated C (``templates/integrators.c.j2``), next
-to the model; this module validates arguments, calls ``<name>_integrate``
+The integrators are model-independent C (``mg_integrate.c``, compiled once and
+linked into every model's module), driven through the model's ``mg_system``;
+this module validates arguments, fills the structs of ``mg_integrate.h``
+(options, inputs, output buffers, statistics), calls ``<name>_integrate``
 (in chunks when every step is recorded), and builds a result with the fields
 of scipy's ``OdeResult``:
 
@@ -14,99 +16,36 @@ Methods (``METHODS``): ``rk4`` (fixed step), ``dopri5`` and ``dop853``
 (Gauss-Legendre, implicit, symplectic, fixed step).  Fixed-step methods need
 ``step=``; the adaptive ones run with fixed steps too when given ``step=``.
 
-The C status codes and their messages are in one table, :data:`STATUS`.
+The method codes, C status codes and their messages, and the statistics are
+one table, :mod:`modelgen.codegen.capi` (``STATUS`` and ``METHODS`` here are
+its); :func:`c_constants` reads the same constants back from a compiled model.
 """
 from __future__ import annotations
 
 import concurrent.futures
-from dataclasses import dataclass
+import signal
+import threading
 
 import numpy as np
 
+from modelgen.codegen.capi import (ALIASES, LIMITS, MAX_EVENTS, METHODS, STAT_NAMES, STATUS,
+                                   STATUS_BY_NAME, STOP_X, Method, define_values, work_size)
 from modelgen.errors import MassMatrixError, SimulationError
+from modelgen.sim.conditioning import condition_number, failure_kind, growth_note
+from modelgen.sim.result import Result, make_result
+
+__all__ = ["METHODS", "ALIASES", "STATUS", "Method", "method_of",
+           "status_message", "jacobian", "jacobian_source", "simulate", "simulate_batch",
+           "c_constants"]
 
 
-@dataclass(frozen=True)
-class Method:
-    """An integration method of the generated C."""
-    name: str
-    code: int           # the C method number ({NAME}_METHOD_*)
-    order: int          # order of the step
-    dense_order: int    # order of the continuous extension used for t_eval and events
-    adaptive: bool      # has error control (else fixed step only)
-    implicit: bool      # uses the Jacobian d xdot / d x
-
-
-METHODS = {m.name: m for m in (
-    Method("rk4", 0, 4, 3, False, False),
-    Method("dopri5", 1, 5, 4, True, False),
-    Method("dop853", 2, 8, 7, True, False),
-    Method("rodas", 3, 4, 3, True, True),
-    Method("midpoint", 4, 2, 3, False, True),
-    Method("gauss4", 5, 4, 3, False, True),
-)}
-#: other accepted spellings
-ALIASES = {"rodas4": "rodas", "implicit_midpoint": "midpoint", "gauss_legendre4": "gauss4"}
-
-#: C status code -> (name of the C constant {NAME}_ODE_<name>, message template).
-#: The templates are formatted with t (reached), h (step size), t_fail, x,
-#: pivot, coordinate and max_steps.
-STATUS = {
-    0: ("SUCCESS", "The solver successfully reached the end of the integration interval."),
-    1: ("EVENT", "A termination event occurred."),
-    2: ("BUFFER_FULL", "An output buffer is full (internal: the integration is continued)."),
-    -1: ("MAX_STEPS", "Maximum number of steps ({max_steps}) reached at t={t!r}."),
-    -2: ("STEP_UNDERFLOW", "Step size underflow at t={t!r}: the step {h:.3g} s is too small "
-                           "to advance t in double precision."),
-    -3: ("MASS_MATRIX", "Mass matrix not positive definite at t={t_fail!r}: Cholesky pivot "
-                        "{pivot} (coordinate {coordinate!r}) failed; last good state at "
-                        "t={t!r}: x={x}."),
-    -4: ("NON_FINITE", "NaN or Inf in the state at t={t_fail!r}; last finite state at "
-                       "t={t!r}: x={x}."),
-    -5: ("IMPLICIT_FAILED", "The implicit stage equations could not be solved in the step "
-                            "from t={t!r} (h={h:.3g}): the Newton iteration diverged or its "
-                            "matrix is singular; use a smaller step."),
-    -6: ("EVENT_ERROR", "The event function raised an exception at t={t!r}."),
-    -7: ("BAD_ARGUMENT", "Invalid argument to the C integrator."),
-}
-BUFFER_FULL = 2
-#: the slots of the C statistics array ({NAME}_STAT_<name upper>)
-STATS = ("naccept", "nreject", "nfev", "njev", "nlu", "nnewton", "ngev", "pivot")
-#: most event functions per call ({NAME}_MAX_EVENTS)
-MAX_EVENTS = 32
-#: where the state starts in the C stop array ({NAME}_STOP_X)
-STOP_X = 9
-#: numpy's C long (the statistics and counters of the C API)
+#: the C status codes are modelgen.codegen.capi's
+BUFFER_FULL = STATUS_BY_NAME["BUFFER_FULL"].code
+INTERRUPTED = STATUS_BY_NAME["INTERRUPTED"].code
+#: numpy's C long (the counters of the C API)
 _LONG = np.dtype("l")
-
-
-class IntegrationResult(dict):
-    """The result of :func:`simulate`: a dict with attribute access, like scipy's OdeResult.
-
-    Fields: ``t`` (n_points,), ``y`` (n_states, n_points), ``sol`` (None),
-    ``t_events`` and ``y_events`` (one array per event function, or None),
-    ``nfev``, ``njev``, ``nlu``, ``naccept``, ``nreject``, ``nnewton``,
-    ``status`` (0 end reached, 1 terminal event, < 0 failure: see
-    :data:`STATUS`), ``message``, ``success``, ``method``, ``t_fail`` (time of
-    the failure, else None).
-    """
-
-    def __getattr__(self, name):
-        try:
-            return self[name]
-        except KeyError as exc:
-            raise AttributeError(name) from exc
-
-    __setattr__ = dict.__setitem__
-    __delattr__ = dict.__delitem__
-
-    def __dir__(self):
-        return list(self.keys())
-
-    def __repr__(self):
-        width = max(map(len, self.keys())) + 1 if self else 0
-        return "\n".join(f"{k.rjust(width)}: {v!r}" if not isinstance(v, np.ndarray) else
-                         f"{k.rjust(width)}: array{v.shape}" for k, v in self.items())
+#: fixed step counts from here on do not fit the C integrator's counter (a C long)
+_MAX_FIXED_STEPS = float(np.iinfo(_LONG).max)
 
 
 def method_of(name: str) -> Method:
@@ -122,7 +61,7 @@ def status_message(status: int, **context) -> str:
     """The message of a C status code, formatted with what the stop left behind."""
     if status not in STATUS:
         return f"Unknown status {status} from the C integrator."
-    template = STATUS[status][1]
+    template = STATUS[status].message
     try:
         return template.format(**context)
     except (KeyError, ValueError, TypeError):
@@ -156,7 +95,8 @@ def jacobian(cm, t, x, u=None, p=None) -> np.ndarray:
     status = fn(float(t), cm._ptr(x), cm._ptr(cm.input_vector(u)), cm._ptr(cm.params(p)),
                 cm._ptr(out))
     if status:
-        raise MassMatrixError(status, cm.coordinates[status - 1], t, x)
+        raise MassMatrixError(status, cm.coordinates[status - 1], t, x,
+                              failure_kind(cm.mass_matrix(x[:cm.n], p), status - 1))
     return out
 
 
@@ -214,12 +154,49 @@ def _options(cm, method, rtol, atol, step, first_step, max_step, max_steps):
     return m, rtol, atol, fixed, first, hmax, max_steps
 
 
-def _inputs(cm, u):
-    if callable(u):
-        raise SimulationError(f"{cm.name}: inputs from a Python callable u(t, x) are not "
-                              "supported by the C integrators; use simulate_rk4, or "
-                              "scipy.integrate.solve_ivp with cm.rhs")
-    return cm._input_samples(u)
+class _Inputs:
+    """The ``mg_inputs`` struct of one call, and what its pointers point to.
+
+    ``u`` is None (zeros), a constant vector or dict, samples ``(times,
+    values, "linear" | "hold")``, or a callable ``u(t, x)`` called from the C
+    through a cffi callback (feedback; works with every method).  An exception
+    in the callable stops the integration with status INPUT_ERROR; the
+    trajectory up to it is kept and the exception is named in the message.
+    """
+
+    def __init__(self, cm, u):
+        ffi = cm.ffi
+        self.struct = ffi.new("mg_inputs *")
+        self.errors = []
+        self._keep = []
+        if callable(u):
+            nu, nx = len(cm.inputs), 2 * cm.n
+
+            def call(ctx, t, x_ptr, u_ptr):
+                x = np.frombuffer(ffi.buffer(x_ptr, 8 * nx), dtype=float).copy()
+                value = cm.input_vector(u(t, x))
+                for k in range(nu):
+                    u_ptr[k] = value[k]
+                return 0
+
+            def on_error(exc_type, exc_value, tb):
+                self.errors.append(exc_value)
+                return 1
+            callback = ffi.callback("int(void *, double, const double *, double *)", call,
+                                    onerror=on_error)
+            self._keep.append(callback)
+            self.struct.callback = callback
+            return
+        times, values, hold = cm._input_samples(u)
+        self._keep += [times, values]
+        self.struct.n = len(times)
+        self.struct.times = ffi.from_buffer("double[]", times)
+        self.struct.values = ffi.from_buffer("double[]", values)
+        self.struct.hold = LIMITS["INPUT_HOLD" if hold else "INPUT_LINEAR"][0]
+
+    def error(self):
+        """The first exception the callable raised, or None."""
+        return self.errors[0] if self.errors else None
 
 
 def _events(events):
@@ -255,9 +232,37 @@ def _direction(ev) -> int:
 
 # -- simulate ------------------------------------------------------------------------
 
+def _check_step_count(fixed, t0, t1):
+    """Refuse a fixed step so small that its step count overflows the C counter."""
+    if fixed > 0 and not (t1 - t0) / fixed < _MAX_FIXED_STEPS:
+        raise SimulationError(
+            f"step={fixed!r} over t_span ({t0!r}, {t1!r}) needs {(t1 - t0) / fixed:.3g} steps, "
+            f"more than the C integrator can count; give a larger step")
+
+
+def _c_options(cm, m, rtol, atol, fixed, first, hmax, max_steps):
+    """The ``mg_options`` struct (events and resume are set by the caller)."""
+    opt = cm.ffi.new("mg_options *")
+    opt.method = m.code
+    opt.rtol = cm._ptr(rtol)
+    opt.atol = cm._ptr(atol)
+    opt.first_step = first
+    opt.max_step = hmax
+    opt.fixed_step = fixed
+    opt.max_steps = max_steps
+    return opt
+
+
+def c_constants(cm) -> dict:
+    """The constants of ``mg_integrate.h`` as compiled into ``cm``'s module, by name
+    (``MG_METHOD_DOP853``, ``MG_STATUS_MAX_STEPS``...); equal to
+    :func:`modelgen.codegen.capi.define_values` unless the module is stale."""
+    return {name: getattr(cm.lib, name) for name in define_values()}
+
+
 def simulate(cm, x0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10, u=None,
              p=None, events=None, *, step=None, first_step=None, max_step=None,
-             max_steps=100_000, chunk=2048) -> IntegrationResult:
+             max_steps=100_000, chunk=2048, interrupt=None) -> Result:
     """Integrate the compiled model ``cm`` in C from ``x0`` over ``t_span``.
 
     ``t_eval`` samples the solution through each method's dense output (the
@@ -265,11 +270,17 @@ def simulate(cm, x0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10
     recorded.  ``events`` are callables ``g(t, x)`` with optional attributes
     ``terminal`` (bool, or the occurrence count at which to stop) and
     ``direction``, as in ``solve_ivp``; their zeros are located on the dense
-    output.  ``u`` and ``p`` are as for :meth:`CompiledModel.simulate_rk4`
-    (no callables).  ``rtol``/``atol`` are scalars or one value per state;
-    ``step`` selects fixed steps.  ``chunk`` is the number of rows per C
-    call when every step is recorded.  A failure returns what was computed up
-    to it, with ``status < 0`` and a message naming the time (and the state).
+    output.  ``u`` is None, constant (vector or dict), samples
+    ``(times, values, "linear" | "hold")``, or a feedback callable
+    ``u(t, x)`` (called from the C; any method).  ``p`` is None, a dict of
+    overrides or a vector.  ``rtol``/``atol`` are scalars or one value per
+    state; ``step`` selects fixed steps.  ``chunk`` is the number of rows per C
+    call when every step is recorded.  ``interrupt`` is None or a writable
+    numpy ``intc`` array of one element that the C polls every step: set it
+    nonzero (from another thread, a signal handler or a callback) to stop with
+    status INTERRUPTED and the trajectory so far.  A failure returns what was
+    computed up to it, with ``status < 0`` and a message naming the time (and
+    the state).
 
     >>> res = simulate(cm, [np.pi / 2, 0.0], (0.0, 3.0), rtol=1e-10, events=g)  # doctest: +SKIP
     >>> res.t_events[0], res.y.shape, res.message                             # doctest: +SKIP
@@ -278,11 +289,13 @@ def simulate(cm, x0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10
     m, rtol, atol, fixed, first, hmax, max_steps = _options(
         cm, method, rtol, atol, step, first_step, max_step, max_steps)
     t0, t1 = _span(t_span)
+    _check_step_count(fixed, t0, t1)
     x = cm._vector(x0, nx, "x0").copy()
     if not np.all(np.isfinite(x)):
         raise SimulationError(f"{cm.name}: x0 must be finite")
+    x_start = x.copy()
     times = None if t_eval is None else _times(t_eval, t0, t1)
-    u_times, u_values, hold = _inputs(cm, u)
+    inputs = _Inputs(cm, u)
     p_vec = cm.params(p).copy()
     events = _events(events)
     n_ev = len(events)
@@ -290,12 +303,16 @@ def simulate(cm, x0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10
     direction = np.array([_direction(ev) for ev in events] or [0], dtype=np.intc)
 
     errors = []
-    callback = ffi.NULL
+    opt = _c_options(cm, m, rtol, atol, fixed, first, hmax, max_steps)
     if n_ev:
         def call_events(ctx, t, x_ptr, g_ptr):
             xs = np.frombuffer(ffi.buffer(x_ptr, 8 * nx), dtype=float).copy()
             for i, ev in enumerate(events):
-                g_ptr[i] = float(ev(t, xs))
+                value = float(ev(t, xs))
+                if not np.isfinite(value):   # a NaN never changes sign: it would never fire
+                    raise ValueError(f"event function {i} ({getattr(ev, '__name__', ev)!s}) "
+                                     f"returned {value!r}")
+                g_ptr[i] = value
             return 0
 
         def on_error(exc_type, exc_value, tb):
@@ -303,15 +320,26 @@ def simulate(cm, x0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10
             return 1
         callback = ffi.callback("int(void *, double, const double *, double *)",
                                 call_events, onerror=on_error)
+        opt.n_events = n_ev
+        opt.events = callback
+        opt.direction = ffi.from_buffer("int[]", direction)
+        opt.terminal = ffi.from_buffer("int[]", terminal)
+    if interrupt is not None:
+        if not (isinstance(interrupt, np.ndarray) and interrupt.dtype == np.intc
+                and interrupt.size == 1 and interrupt.flags.writeable):
+            raise SimulationError("interrupt must be a writable numpy intc array of one element")
+    flag = interrupt if interrupt is not None else np.zeros(1, dtype=np.intc)
+    opt.interrupt = ffi.from_buffer("int[]", flag)
 
     fn = getattr(cm.lib, f"{cm.name}_integrate")
     ptr = cm._ptr
-    n_u = len(u_times)
-    stats = np.zeros(len(STATS), dtype=_LONG)
-    stats_total = np.zeros(len(STATS), dtype=_LONG)
+    work = np.empty(work_size(nx, len(cm.inputs), n_ev))
+    stats = ffi.new("mg_stats *")
+    stats_total = dict.fromkeys(STAT_NAMES, 0)
     stop = np.zeros(STOP_X + nx)
+    out = ffi.new("mg_output *")
+    out.stop = ptr(stop)
     resume = None
-    n_out, n_found = ffi.new("long *"), ffi.new("long *")
     t_parts, x_parts, ev_t, ev_x, ev_i = [], [], [], [], []
     capacity, ev_capacity = int(max(chunk, 2)), 64 * max(n_ev, 1)
     remaining = times
@@ -326,31 +354,33 @@ def simulate(cm, x0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10
         t_out, x_out = np.empty(max(rows_max, 1)), np.empty((max(rows_max, 1), nx))
         t_found, x_found = np.empty(ev_capacity), np.empty((ev_capacity, nx))
         which = np.empty(ev_capacity, dtype=np.intc)
-        status = fn(m.code, t0, t1, ptr(x), ptr(p_vec), n_u, ptr(u_times), ptr(u_values),
-                    int(hold), ptr(rtol), ptr(atol), first, hmax, fixed, steps_left,
-                    ffi.NULL if resume is None else ptr(resume), rows_max,
-                    ffi.NULL if t_eval_arg is None else ptr(t_eval_arg), ptr(t_out), ptr(x_out),
-                    n_out, n_ev, callback, ffi.NULL, ffi.from_buffer("int[]", direction),
-                    ffi.from_buffer("int[]", terminal), ev_capacity, ptr(t_found),
-                    ptr(x_found), ffi.from_buffer("int[]", which), n_found,
-                    ffi.from_buffer("long[]", stats), ptr(stop))
-        if errors:
-            raise errors[0]
-        rows, k = n_out[0], n_found[0]
+        out.capacity = rows_max
+        out.t_eval = ffi.NULL if t_eval_arg is None else ptr(t_eval_arg)
+        out.t, out.x = ptr(t_out), ptr(x_out)
+        out.events_capacity = ev_capacity
+        out.t_events, out.x_events = ptr(t_found), ptr(x_found)
+        out.which_events = ffi.from_buffer("int[]", which)
+        opt.max_steps = steps_left
+        opt.resume = ffi.NULL if resume is None else ptr(resume)
+        status = _interruptible(fn, (t0, t1, ptr(x), ptr(p_vec), inputs.struct, opt, out, stats,
+                                     ptr(work)), flag)
+        rows, k = out.n, out.n_events
         skip = 1 if (times is None and t_parts) else 0   # a continuation repeats its start
         t_parts.append(t_out[skip:rows].copy())
         x_parts.append(x_out[skip:rows].copy())
         ev_t.append(t_found[:k].copy())
         ev_x.append(x_found[:k].copy())
         ev_i.append(which[:k].copy())
-        stats_total[:-1] += stats[:-1]
-        stats_total[-1] = stats[-1] or stats_total[-1]
+        for name in STAT_NAMES:
+            if name != "pivot":
+                stats_total[name] += getattr(stats, name)
+        stats_total["pivot"] = stats.pivot or stats_total["pivot"]
         if status != BUFFER_FULL:
             break
         # continue exactly where the C stopped (step size, controller memory, grid)
         resume = stop.copy()
         t0, x = float(stop[0]), stop[STOP_X:].copy()
-        steps_left = max(max_steps - int(stats_total[0] + stats_total[1]), 0)
+        steps_left = max(max_steps - int(stats_total["naccept"] + stats_total["nreject"]), 0)
         if times is not None:
             remaining = remaining[rows:]
         else:
@@ -360,32 +390,79 @@ def simulate(cm, x0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10
                 terminal[i] -= int(np.count_nonzero(ev_i[-1] == i))
         ev_capacity = min(ev_capacity * 2, 1 << 16)
 
-    t_all = np.concatenate(t_parts)
-    x_all = np.concatenate(x_parts).reshape(-1, nx)
-    res = IntegrationResult()
-    res.t = t_all
-    res.y = np.ascontiguousarray(x_all.T)
-    res.sol = None
-    if n_ev:
-        et, ex, ei = np.concatenate(ev_t), np.concatenate(ev_x).reshape(-1, nx), np.concatenate(ev_i)
-        res.t_events = [et[ei == i] for i in range(n_ev)]
-        res.y_events = [ex[ei == i] for i in range(n_ev)]
-    else:
-        res.t_events = None
-        res.y_events = None
-    for name, value in zip(STATS, stats_total):
-        if name != "pivot":
-            res[name] = int(value)
-    res.status = int(status)
-    pivot = int(stats_total[-1])
-    res.t_fail = float(stop[2]) if status < 0 else None
-    res.message = status_message(
+    pivot = int(stats_total["pivot"])
+    failure = errors[0] if errors else inputs.error()
+    message = status_message(
         int(status), t=float(stop[0]), h=float(stop[1]), t_fail=float(stop[2]),
         x=_vector_text(stop[STOP_X:]), pivot=pivot,
-        coordinate=cm.coordinates[pivot - 1] if 0 < pivot <= cm.n else "?", max_steps=max_steps)
-    res.success = status >= 0
-    res.method = m.name
+        coordinate=cm.coordinates[pivot - 1] if 0 < pivot <= cm.n else "?", max_steps=max_steps,
+        kind=_mass_matrix_kind(cm, status, pivot, p_vec, x_start,
+                               stats_total["naccept"] == 0))
+    if failure is not None:
+        message = f"{message.rstrip('.')}: {type(failure).__name__}: {failure}."
+    if status < 0:
+        message += _conditioning_note(cm, p_vec, x_start, stop[STOP_X:])
+    et, ex, ei = (np.concatenate(ev_t), np.concatenate(ev_x).reshape(-1, nx),
+                  np.concatenate(ev_i))
+    res = make_result(
+        t=np.concatenate(t_parts), y=np.ascontiguousarray(np.concatenate(x_parts)
+                                                          .reshape(-1, nx).T),
+        state_names=cm.state_names, status=int(status), message=message, method=m.name,
+        t_events=[et[ei == i] for i in range(n_ev)] if n_ev else None,
+        y_events=[ex[ei == i] for i in range(n_ev)] if n_ev else None,
+        t_fail=float(stop[2]) if status < 0 else None,
+        **{name: int(stats_total[name]) for name in STAT_NAMES if name != "pivot"})
+    if failure is not None:
+        res.info["exception"] = failure
     return res
+
+
+def _interruptible(fn, args, flag):
+    """``fn(*args)``, a C integration loop that polls ``flag``, stopped by Ctrl-C.
+
+    In the main thread, with Python's default SIGINT handler in place, the C
+    call runs in a worker thread while the main thread waits in short joins;
+    Ctrl-C then sets ``flag`` (the C returns INTERRUPTED within a step and the
+    trajectory so far is kept) instead of raising KeyboardInterrupt after the
+    whole run.  Elsewhere (another thread, a custom handler) it is a plain call.
+    """
+    if (threading.current_thread() is not threading.main_thread()
+            or signal.getsignal(signal.SIGINT) is not signal.default_int_handler):
+        return fn(*args)
+    box = []
+
+    def on_sigint(signum, frame):
+        flag[0] = 1
+
+    worker = threading.Thread(target=lambda: box.append(fn(*args)), daemon=True)
+    previous = signal.signal(signal.SIGINT, on_sigint)
+    try:
+        worker.start()
+        while worker.is_alive():
+            worker.join(0.05)
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    return box[0]
+
+
+def _mass_matrix_kind(cm, status, pivot, p_vec, x_start, at_start) -> str:
+    """How the mass matrix failed: classified exactly at the start; later in a run A
+    was positive definite at the last accepted state and is continuous in q, so a
+    failing pivot is A becoming singular to working precision."""
+    if status != -3 or not 0 < pivot <= cm.n:
+        return "not positive definite"
+    if at_start:
+        return failure_kind(cm.mass_matrix(x_start[:cm.n], p_vec), pivot - 1)
+    return "singular to working precision"
+
+
+def _conditioning_note(cm, p_vec, x_start, x_last) -> str:
+    """Why a run failed when A's condition number grew by orders of magnitude between
+    its start and its last good state (a singular configuration ahead), else ''."""
+    if not (np.all(np.isfinite(x_start)) and np.all(np.isfinite(x_last))):
+        return ""
+    return growth_note(condition_number(cm.mass_matrix(x_start[:cm.n], p_vec)),
+                       condition_number(cm.mass_matrix(x_last[:cm.n], p_vec)))
 
 
 # -- batches ---------------------------------------------------------------------------
@@ -418,7 +495,7 @@ def _parameter_rows(cm, P, n_runs):
 
 def simulate_batch(cm, X0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10,
                    u=None, P=None, *, step=None, first_step=None, max_step=None,
-                   max_steps=100_000, threads=1) -> IntegrationResult:
+                   max_steps=100_000, threads=1) -> Result:
     """Integrate many initial states (rows of ``X0``), each with its own parameters.
 
     One C call loops over the runs (``threads`` > 1 splits them between Python
@@ -441,28 +518,29 @@ def simulate_batch(cm, X0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol
         raise SimulationError(f"{cm.name}: X0 must be finite")
     n_runs = X0.shape[0]
     times = _times([t1] if t_eval is None else t_eval, t0, t1)
-    u_times, u_values, hold = _inputs(cm, u)
+    inputs = _Inputs(cm, u)
     P_rows, p_stride = _parameter_rows(cm, P, n_runs)
     threads = max(1, min(int(threads), max(n_runs, 1)))
 
+    _check_step_count(fixed, t0, t1)
     n_t = len(times)
     x_out = np.full((n_runs, n_t, nx), np.nan)
     n_out = np.zeros(n_runs, dtype=_LONG)
     status = np.zeros(n_runs, dtype=np.intc)
-    stats = np.zeros((n_runs, len(STATS)), dtype=_LONG)
+    stats = cm.ffi.new("mg_stats[]", max(n_runs, 1))
     stop = np.zeros((n_runs, STOP_X + nx))
     fn = getattr(cm.lib, f"{cm.name}_integrate_batch")
     ffi, ptr = cm.ffi, cm._ptr
+    opt = _c_options(cm, m, rtol, atol, fixed, first, hmax, max_steps)
 
     def run(lo, hi):
         if hi <= lo:
             return
+        work = np.empty(work_size(nx, len(cm.inputs), 0))     # one per thread
         p_block = P_rows[lo:hi] if p_stride else P_rows
-        fn(hi - lo, m.code, t0, t1, ptr(X0[lo:hi]), ptr(p_block), p_stride, len(u_times),
-           ptr(u_times), ptr(u_values), int(hold), ptr(rtol), ptr(atol), first, hmax, fixed,
-           max_steps, n_t, ptr(times), ptr(x_out[lo:hi]), ffi.from_buffer("long[]", n_out[lo:hi]),
-           ffi.from_buffer("int[]", status[lo:hi]), ffi.from_buffer("long[]", stats[lo:hi]),
-           ptr(stop[lo:hi]))
+        fn(hi - lo, t0, t1, ptr(X0[lo:hi]), ptr(p_block), p_stride, inputs.struct, opt, n_t,
+           ptr(times), ptr(x_out[lo:hi]), ffi.from_buffer("long[]", n_out[lo:hi]),
+           ffi.from_buffer("int[]", status[lo:hi]), stats + lo, ptr(stop[lo:hi]), ptr(work))
 
     bounds = np.linspace(0, n_runs, threads + 1).astype(int)
     if threads == 1:
@@ -470,25 +548,27 @@ def simulate_batch(cm, X0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol
     else:
         with concurrent.futures.ThreadPoolExecutor(threads) as pool:
             list(pool.map(run, bounds[:-1], bounds[1:]))
-
     for r in range(n_runs):    # rows after a failure stay NaN
         x_out[r, n_out[r]:] = np.nan
-    res = IntegrationResult()
-    res.t = times
-    res.y = np.ascontiguousarray(x_out.transpose(0, 2, 1))
-    res.status = status.astype(int)
-    res.success = status >= 0
     messages = []
     for r in range(n_runs):
-        pivot = int(stats[r, -1])
+        pivot = int(stats[r].pivot)
         messages.append(status_message(
             int(status[r]), t=float(stop[r, 0]), h=float(stop[r, 1]), t_fail=float(stop[r, 2]),
             x=_vector_text(stop[r, STOP_X:]), pivot=pivot,
             coordinate=cm.coordinates[pivot - 1] if 0 < pivot <= cm.n else "?",
-            max_steps=max_steps))
-    res.message = messages
-    for i, name in enumerate(STATS):
-        if name != "pivot":
-            res[name] = stats[:, i].copy()
-    res.method = m.name
+            max_steps=max_steps,
+            kind=_mass_matrix_kind(cm, int(status[r]), pivot,
+                                   P_rows[r] if p_stride else P_rows, X0[r],
+                                   stats[r].naccept == 0)))
+        if status[r] < 0:
+            messages[-1] += _conditioning_note(cm, P_rows[r] if p_stride else P_rows, X0[r],
+                                               stop[r, STOP_X:])
+    res = make_result(
+        t=times, y=np.ascontiguousarray(x_out.transpose(0, 2, 1)), state_names=cm.state_names,
+        status=status.astype(int), message=messages, method=m.name,
+        **{name: np.array([getattr(stats[r], name) for r in range(n_runs)], dtype=_LONG)
+           for name in STAT_NAMES if name != "pivot"})
+    if inputs.error() is not None:
+        res.info["exception"] = inputs.error()
     return res

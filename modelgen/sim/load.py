@@ -41,7 +41,8 @@ def load(source, out_dir=None, *, force: bool = False, jacobian: bool = False,
     """Build (on first use) and import a model; returns a :class:`CompiledModel`.
 
     ``source`` is a YAML path, a :class:`modelgen.model.Model` or a ModelSpec.
-    Output goes to ``out_dir`` (default ``generated/<name>``).  With
+    Output goes to ``out_dir`` (default: the per-user cache,
+    :func:`modelgen.codegen.pipeline.default_output`).  With
     ``jacobian=True`` the symbolic Jacobian ``<name>_jacobian`` is generated too
     (for stiff integrators; it costs generation and compile time).
     ``formulation`` (``auto``, ``aba`` or ``crba``) chooses how the rhs computes
@@ -58,7 +59,7 @@ def load_scene(path, out_dir=None, *, force: bool = False, progress=None) -> Sce
     """Load a scene file and build its reduced model; returns a :class:`Scene`.
 
     Only the effects and outputs the scene selects are generated.  Output goes
-    to ``out_dir`` (default ``generated/<scene name>``).
+    to ``out_dir`` (default: the per-user cache).
 
     >>> res = load_scene("models/scenes/dp_damped.yaml").run()   # doctest: +SKIP
     """

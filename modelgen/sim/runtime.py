@@ -16,7 +16,9 @@ import numpy as np
 from modelgen.codegen.emit import ABI_VERSION
 from modelgen.errors import DerivationError, MassMatrixError, ModelgenError, SimulationError
 from modelgen.sim import integrate
-from modelgen.sim.result import DenseOutput, Result, make_result
+from modelgen.sim.conditioning import (PIVOT_TOL, failing_pivot, failure_kind,
+                                       negligible_diagonal)
+from modelgen.sim.result import DenseOutput, Result
 
 
 def _import(module_name: str, path: Path):
@@ -177,8 +179,13 @@ class CompiledModel:
         status = self._rhs(self._time(t), self._ptr(x), self._ptr(self.input_vector(u)),
                            self._ptr(self.params(p)), self._ptr(out))
         if status:
-            raise MassMatrixError(status, self.coordinates[status - 1], t, x)
+            raise self._mass_matrix_error(status, t, x, p)
         return out
+
+    def _mass_matrix_error(self, pivot: int, t, x, p=None) -> MassMatrixError:
+        """The error of a failing pivot at x, worded by the kind of failure."""
+        kind = failure_kind(self.mass_matrix(x[:self.n], p), pivot - 1)
+        return MassMatrixError(pivot, self.coordinates[pivot - 1], t, x, kind)
 
     def rhs_function(self, u=None, p=None):
         """Low-overhead ``f(t, x) -> xdot`` with parameters and inputs bound.
@@ -202,10 +209,9 @@ class CompiledModel:
         p_ptr, u_ptr = ffi.from_buffer("double[]", p_arr), ffi.from_buffer("double[]", u_arr)
         x_ptr, out_ptr = ffi.from_buffer("double[]", x_buf), ffi.from_buffer("double[]", out_buf)
         rhs = self._rhs
-        coordinates = self.coordinates
 
         def fail(status, t):
-            raise MassMatrixError(status, coordinates[status - 1], t, x_buf.copy())
+            raise self._mass_matrix_error(status, t, x_buf.copy(), p_arr)
 
         def f(t, x, out=None):
             if np.shape(x) != (nx,) or np.iscomplexobj(x):
@@ -293,19 +299,16 @@ class CompiledModel:
         if max_steps is not None:
             options["max_steps"] = max_steps
         def run(times):
-            if callable(u):
-                return _feedback_rk4(self, x0, t_span, times, method, u, p, step, options)
             return integrate.simulate(self, x0, t_span, times, method, rtol, atol, u, p,
                                       events, **options)
-        res = make_result(state_names=self.state_names, **run(t_eval))
+        res = run(t_eval)
         if step is not None:
             warning = self.stability_warning(method, step, t_span[0], x0, u, p)
             if warning:
                 res.message = f"{res.message} WARNING: {warning}"
                 res.info["stability_warning"] = warning
         if dense_output:
-            steps = res if t_eval is None else make_result(state_names=self.state_names,
-                                                           **run(None))
+            steps = res if t_eval is None else run(None)
             res.sol = self._dense(steps, run)
         if outputs and self.output_columns:
             self._record_outputs(res, u, p)
@@ -326,7 +329,7 @@ class CompiledModel:
         nx = ys.shape[0]
         values = np.empty((len(ts) - 1, len(DenseOutput.NODES), nx))
         values[:, 0], values[:, -1] = ys[:, :-1].T, ys[:, 1:].T
-        got = np.asarray(sampled["y"]).T.reshape(-1, nx)
+        got = np.asarray(sampled.y).T.reshape(-1, nx)
         if got.shape[0] != times.size:      # the second run stopped early: no sol
             return None
         values[:, 1:-1] = got.reshape(len(ts) - 1, len(inner), nx)
@@ -379,9 +382,8 @@ class CompiledModel:
         >>> res.y.shape                                                           # doctest: +SKIP
         (2, 4, 1)
         """
-        raw = integrate.simulate_batch(self, X0, t_span, t_eval, method, rtol, atol, u, P,
-                                       **options)
-        return make_result(state_names=self.state_names, **raw)
+        return integrate.simulate_batch(self, X0, t_span, t_eval, method, rtol, atol, u, P,
+                                        **options)
 
     def jac(self, t, x, u=None, p=None) -> np.ndarray:
         """d xdot / d x at (t, x), shape (2n, 2n), for ``solve_ivp(..., jac=cm.jac)``.
@@ -415,6 +417,8 @@ def check_mass_matrix(cm: CompiledModel, samples: int = 3, seed: int = 0) -> Non
         A = cm.mass_matrix(rng.uniform(-np.pi, np.pi, cm.n))
         pivot = _cholesky_pivot(A)
         if pivot is None:
+            pivot = negligible_diagonal(A)    # zero up to rounding
+        if pivot is None:
             return
         failing = pivot
     name = cm.coordinates[failing]
@@ -425,19 +429,10 @@ def check_mass_matrix(cm: CompiledModel, samples: int = 3, seed: int = 0) -> Non
         f"axis, or remove the coordinate")
 
 
-def _cholesky_pivot(A, tol=1e-13):
-    """Index of the first failing pivot of a Cholesky factorisation, or None."""
-    A = np.array(A, dtype=float)
-    n = A.shape[0]
-    L = np.zeros_like(A)
-    largest = max(np.max(np.diag(A)), 0.0)
-    for j in range(n):
-        d = A[j, j] - L[j, :j] @ L[j, :j]
-        if not (d > tol * A[j, j] and A[j, j] > tol * largest):
-            return j
-        L[j, j] = np.sqrt(d)
-        L[j + 1:, j] = (A[j + 1:, j] - L[j + 1:, :j] @ L[j, :j]) / L[j, j]
-    return None
+def _cholesky_pivot(A, tol=PIVOT_TOL):
+    """Index of the first failing pivot of the generated solve's test, or None
+    (see :mod:`modelgen.sim.conditioning`)."""
+    return failing_pivot(A, tol)
 
 
 #: |h lambda| where each explicit method's stability region ends on the negative real
@@ -460,47 +455,3 @@ def _input_at(cm, u, t, x):
             return values[k]
         return np.array([np.interp(t, times, values[:, j]) for j in range(values.shape[1])])
     return u
-
-
-def _feedback_rk4(cm, x0, t_span, t_eval, method, u, p, step, options) -> dict:
-    """Fixed-step RK4 with a feedback ``u(t, x)`` evaluated at every stage.
-
-    The path for callables until the C integrators take an input callback.
-    """
-    if integrate.method_of(method).name != "rk4" or step is None:
-        raise SimulationError(f"{cm.name}: a feedback input u(t, x) needs method='rk4' "
-                              "and step=")
-    t0, t1 = (float(v) for v in t_span)
-    x = cm._vector(x0, 2 * cm.n, "x0").copy()
-    steps = int(np.ceil((t1 - t0) / float(step) - 1e-9))
-    h = (t1 - t0) / steps
-    p_vec = cm.params(p)
-
-    def f(t, x):
-        return cm.rhs(t, x, u=u(t, x), p=p_vec)
-    ts, xs = [t0], [x.copy()]
-    status, message, t_fail = 0, integrate.STATUS[0][1], None
-    for i in range(steps):
-        t = t0 + i * h
-        try:
-            k1 = f(t, x)
-            k2 = f(t + h / 2, x + h / 2 * k1)
-            k3 = f(t + h / 2, x + h / 2 * k2)
-            k4 = f(t + h, x + h * k3)
-        except MassMatrixError as exc:
-            status, message, t_fail = -3, str(exc), t
-            break
-        x = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
-        if not np.all(np.isfinite(x)):
-            status, message, t_fail = -4, f"NaN or Inf in the state at t={t + h!r}", t + h
-            break
-        ts.append(t0 + (i + 1) * h if i + 1 < steps else t1)
-        xs.append(x.copy())
-    t_all, y_all = np.array(ts), np.array(xs).T
-    if t_eval is not None:
-        t_eval = np.asarray(t_eval, dtype=float)
-        t_eval = t_eval[t_eval <= t_all[-1]]
-        y_all = np.array([np.interp(t_eval, t_all, row) for row in y_all])
-        t_all = t_eval
-    return dict(t=t_all, y=y_all, status=status, message=message, t_fail=t_fail,
-                method="rk4", nfev=4 * (len(ts) - 1))

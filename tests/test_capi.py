@@ -1,0 +1,74 @@
+"""The C integrator interface is one Python table (modelgen.codegen.capi): the
+compiled constants, struct layouts and work size equal it."""
+from __future__ import annotations
+
+import re
+import subprocess
+
+import numpy as np
+import pytest
+
+from modelgen.codegen import capi
+from modelgen.codegen.emit import integrator_sources
+from modelgen.sim import integrate
+
+
+@pytest.fixture(scope="module")
+def sp(compiled):
+    return compiled("simple_pendulum")
+
+
+def test_the_compiled_constants_equal_the_python_table(sp):
+    compiled = integrate.c_constants(sp)
+    assert compiled == capi.define_values()
+    assert compiled["MG_ABI_VERSION"] == capi.ABI_VERSION == sp.lib.simple_pendulum_abi_version()
+    assert {name: compiled[f"MG_METHOD_{name.upper()}"] for name in capi.METHODS} == \
+        {name: m.code for name, m in capi.METHODS.items()}
+    assert {s.name: compiled[f"MG_STATUS_{s.name}"] for s in capi.STATUSES} == \
+        {s.name: s.code for s in capi.STATUSES}
+
+
+def test_the_header_defines_exactly_the_table_and_nothing_by_hand():
+    header = integrator_sources()["mg_integrate.h"]
+    defines = dict(re.findall(r"^#define (MG_\w+) \(?(-?\d+)\)?", header, re.M))
+    assert {k: int(v) for k, v in defines.items()} == capi.define_values()
+    source = integrator_sources()["mg_integrate.c"]
+    assert not re.search(r"^#define MG_(METHOD|STATUS)_", source, re.M)
+
+
+def test_struct_fields_of_the_module_follow_the_table(sp):
+    for name, _, fields in capi.STRUCTS:
+        got = [f for f, _ in sp.ffi.typeof(name).fields]
+        assert got == [field for _, field, _ in fields], name
+    assert [f for f, _ in sp.ffi.typeof("mg_stats").fields] == list(capi.STAT_NAMES)
+
+
+def test_status_and_method_codes_are_unique_and_statuses_signed_as_documented():
+    codes = [s.code for s in capi.STATUSES]
+    assert len(set(codes)) == len(codes)
+    assert capi.STATUS[0].name == "SUCCESS" and capi.STATUS[1].name == "EVENT"
+    assert all(s.code < 0 for s in capi.STATUSES if s.code not in (0, 1, 2))
+    assert "INTERRUPTED" in capi.STATUS_BY_NAME
+    methods = [m.code for m in capi.METHOD_LIST]
+    assert methods == list(range(len(methods)))
+    assert integrate.METHODS is capi.METHODS and integrate.method_of("rodas4").name == "rodas"
+
+
+def test_work_size_macro_and_function_equal_the_python_formula(sp, tmp_path):
+    sources = integrator_sources()
+    for name, text in sources.items():
+        (tmp_path / name).write_text(text)
+    (tmp_path / "main.c").write_text(
+        '#include <stdio.h>\n#include "mg_integrate.h"\n'
+        "int main(void)\n{\n"
+        '    printf("%ld %ld\\n", (long)MG_WORK_SIZE(4, 1, 3), mg_work_size(4, 1, 3));\n'
+        "    return 0;\n}\n")
+    r = subprocess.run(["cc", "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "main.c",
+                        "mg_integrate.c", "-o", "main", "-lm"], cwd=tmp_path,
+                       stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    assert r.returncode == 0, r.stdout
+    out = subprocess.run([str(tmp_path / "main")], stdout=subprocess.PIPE, text=True).stdout
+    assert out.split() == [str(capi.work_size(4, 1, 3))] * 2
+    # and the module's mg_work_size agrees
+    assert sp.lib.mg_work_size(4, 1, 3) == capi.work_size(4, 1, 3)
+    assert np.all([sp.lib.mg_work_size(n, 0, 0) == capi.work_size(n, 0, 0) for n in (1, 2, 60)])
