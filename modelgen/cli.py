@@ -33,12 +33,14 @@ def _generate(args) -> int:
     t0 = time.perf_counter()
     spec = as_spec(args.model)
     t_load = time.perf_counter() - t0
-    g = generate_model(spec, args.output, force=args.force, jacobian=args.jacobian)
+    g = generate_model(spec, args.output, force=args.force, jacobian=args.jacobian,
+                       formulation=args.formulation)
     b = g.build
     print(f"model      {spec.name}  ({args.model})")
     print(f"n          {spec.n} coordinates, {len(spec.parameters)} parameters, "
           f"{len(spec.inputs)} inputs, {len(spec.bodies)} bodies")
     print(f"output     {b.directory}/{spec.name}.c, {spec.name}.h, {b.module_path.name}")
+    print(f"rhs        formulation {g.manifest['formulation']}")
     if b.cached:
         print("build      unchanged model: reused the cached build")
     print("\nroutine              statements   ops before CSE   ops after CSE")
@@ -275,6 +277,10 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--force", action="store_true", help="rebuild even if cached")
     g.add_argument("--jacobian", action="store_true",
                    help="also generate <name>_jacobian, the symbolic d(xdot)/dx")
+    g.add_argument("--formulation", choices=("auto", "aba", "crba"), default="auto",
+                   help="how <name>_rhs computes q_ddot: aba (articulated-body algorithm, "
+                        "O(n), joint trees only), crba (mass matrix and Cholesky solve), or "
+                        "auto (aba for joint trees from a measured size on; default)")
     g.set_defaults(func=_generate)
 
     s = sub.add_parser("simulate", help="run a scene (or a model) and write CSV, NPZ and PNG",

@@ -15,7 +15,9 @@ from modelgen.version import __version__
 from modelgen.codegen.build import (BuildResult, build_module, cache_dir, cache_lookup,
                                     compiler, integrator_hash)
 from modelgen.codegen.cse import make_routines
+from modelgen.derive.aba import ForwardDynamics, derive_aba, derive_aba_jacobian
 from modelgen.derive.dynamics import Equations, derive_equations
+from modelgen.derive.joint_tree import JointTree, extract_joint_tree
 from modelgen.errors import ModelError
 from modelgen.codegen.emit import (ABI_VERSION, emit_sources, integrator_sources, print_routine,
                                    template_context, templates_digest)
@@ -29,6 +31,19 @@ def default_output(name: str) -> Path:
     (``models/<name>`` under :func:`modelgen.codegen.build.cache_dir`), never the
     current directory."""
     return cache_dir() / "models" / name
+
+#: how ``<name>_rhs`` computes q_ddot: ``crba`` builds A and b = tau - h and
+#: solves A q_ddot = b (Cholesky in C); ``aba`` runs the articulated-body
+#: algorithm (O(n), joint trees only); ``auto`` picks aba for joint trees with
+#: at least ABA_CROSSOVER coordinates, else crba.
+FORMULATIONS = ("auto", "aba", "crba")
+
+#: smallest n for which ``auto`` chooses aba.  Measured with bench/aba_scaling.py
+#: (rhs in C, same run, busy 2-core machine): crba/aba = 1.6 at n = 2, 1.7 at
+#: n = 7, 2.3-2.4 at n = 20, 4.2 at n = 50, 21 at n = 100, 1.4-3 on the 7-joint
+#: arm; there is no crossover (at n = 1 aba has nothing to solve either), so
+#: every joint tree gets aba.
+ABA_CROSSOVER = 1
 
 
 @dataclass(frozen=True)
@@ -46,9 +61,10 @@ class Generated:
         return self.manifest["ops"]
 
 
-def model_hash(spec: ModelSpec, outputs=(), jacobian: bool = False) -> str:
+def model_hash(spec: ModelSpec, outputs=(), jacobian: bool = False,
+               formulation: str = "crba") -> str:
     """Hash of what determines the model's generated C: the model, modelgen, the
-    model templates (not the integrators', which every model shares).
+    model templates (not the integrators', which every model shares), the formulation.
 
     The file the model came from and its line numbers are not part of it, so
     the same model gives the same C wherever it lies.
@@ -56,40 +72,81 @@ def model_hash(spec: ModelSpec, outputs=(), jacobian: bool = False) -> str:
     h = hashlib.sha256()
     for part in (repr(replace(spec, source=None, lines=())),
                  repr(tuple(outputs)) + (" jacobian" if jacobian else ""),
-                 __version__, str(ABI_VERSION), templates_digest()):
+                 formulation, __version__, str(ABI_VERSION), templates_digest()):
         h.update(part.encode())
         h.update(b"\0")
     return h.hexdigest()
 
 
-def build_hash(spec: ModelSpec, outputs=(), jacobian: bool = False) -> str:
+def build_hash(spec: ModelSpec, outputs=(), jacobian: bool = False,
+               formulation: str = "crba") -> str:
     """Cache key of the compiled module: the model hash, the compiler and its flags,
     and the integrators it links (so a changed mg_integrate rebuilds every module)."""
     h = hashlib.sha256()
-    for part in (model_hash(spec, outputs, jacobian), " ".join(compiler()),
+    for part in (model_hash(spec, outputs, jacobian, formulation), " ".join(compiler()),
                  os.environ.get("MODELGEN_CFLAGS", ""), integrator_hash(integrator_sources())):
         h.update(part.encode())
         h.update(b"\0")
     return h.hexdigest()
 
 
-def routines_for(eqs: Equations, output_exprs=(), jacobian=None):
-    """The C routines of a model: (name, inputs, outputs) for make_routines."""
+def choose_formulation(spec: ModelSpec, formulation: str = "auto"):
+    """``(formulation, joint tree or None)``: resolve ``auto`` and check ``aba``.
+
+    ``aba`` on a model that is not a joint tree raises the
+    :class:`~modelgen.errors.ModelError` of
+    :func:`~modelgen.derive.joint_tree.extract_joint_tree`, which names the
+    offending expression; ``auto`` then falls back to ``crba``.
+
+    >>> from modelgen.model.chains import spatial_chain
+    >>> choose_formulation(spatial_chain(7).spec())[0]
+    'aba'
+    """
+    if formulation not in FORMULATIONS:
+        raise ModelError(f"unknown formulation {formulation!r}", file=spec.source,
+                         key="formulation", fix="use one of " + ", ".join(FORMULATIONS))
+    if formulation == "crba":
+        return "crba", None
+    if formulation == "aba":
+        return "aba", extract_joint_tree(spec)
+    if spec.n < ABA_CROSSOVER:
+        return "crba", None
+    try:
+        return "aba", extract_joint_tree(spec)
+    except ModelError:
+        return "crba", None
+
+
+def routines_for(eqs: Equations, output_exprs=(), jacobian=None,
+                 forward: ForwardDynamics | None = None):
+    """The C routines of a model: (name, inputs, outputs) for make_routines.
+
+    With ``forward`` (the ABA program) the ``rhs`` routine writes q_ddot and
+    the articulated inertias D (in the order of ``forward.inward``), and
+    ``jacobian_terms`` is d(q_ddot)/dx.
+    """
     n = len(eqs.q)
     t = (("t", (eqs.t,)),)
     q, qd, u, p = ("q", eqs.q), ("qd", eqs.qd), ("u", eqs.u), ("p", eqs.p)
     x = ("x", eqs.q + eqs.qd)
     A_flat = tuple(eqs.A[i][j] for i in range(n) for j in range(n))
     b = tuple(eqs.tau[k] - eqs.h[k] for k in range(n))
+    if forward is not None:
+        rhs = ("rhs", t + (x, u, p),
+               (("qdd", forward.qdd), ("D", tuple(forward.D[k] for k in forward.inward))))
+        jac_inputs = t + (x, u, p)
+    else:
+        rhs = ("rhs", t + (x, u, p), (("A", A_flat), ("b", b)))
+        jac_inputs = t + (x, u, p, ("a", jacobian.a)) if jacobian else ()
     return [
         ("mass_matrix", (q, p), (("A", A_flat),)),
         ("velocity_terms", (q, qd, p), (("h", eqs.h),)),
         ("generalized_forces", t + (q, qd, u, p), (("tau", eqs.tau),)),
-        ("rhs", t + (x, u, p), (("A", A_flat), ("b", b))),
+        rhs,
         ("energy", (q, qd, p), (("out", (eqs.kinetic, eqs.potential)),)),
         ("body_poses", (q, p), (("T", tuple(e for pose in eqs.poses for e in pose)),)),
     ] + ([("outputs", t + (x, u, p), (("y", tuple(output_exprs)),))] if output_exprs else []) \
-      + ([("jacobian_terms", t + (x, u, p, ("a", jacobian.a)),
+      + ([("jacobian_terms", jac_inputs,
            (("D", tuple(e for row in jacobian.D for e in row)),))] if jacobian else [])
 
 
@@ -106,21 +163,24 @@ def _check_generable(spec: ModelSpec) -> None:
 
 
 def generate(spec: ModelSpec, out_dir=None, *, force: bool = False, outputs=(),
-             jacobian: bool = False) -> Generated:
+             jacobian: bool = False, formulation: str = "auto") -> Generated:
     """Generate, compile and cache the model; reuse an unchanged build.
 
     ``out_dir`` defaults to :func:`default_output` (the per-user cache).  ``outputs`` (a tuple of
     :class:`~modelgen.model.spec.OutputSpec`, from a scene) adds a
     ``<name>_outputs`` routine computing exactly those quantities.
     ``jacobian=True`` adds ``<name>_jacobian``, the symbolic d(xdot)/dx.
+    ``formulation`` (one of :data:`FORMULATIONS`) chooses how ``<name>_rhs``
+    computes q_ddot; the Jacobian is derived from the same program.
 
     >>> g = generate(load_model("models/double_pendulum.yaml"))   # doctest: +SKIP
     >>> g.manifest["n"]                                             # doctest: +SKIP
     2
     """
     _check_generable(spec)
+    formulation, tree = choose_formulation(spec, formulation)
     directory = Path(out_dir) if out_dir is not None else default_output(spec.name)
-    key = build_hash(spec, outputs, jacobian)
+    key = build_hash(spec, outputs, jacobian, formulation)
     damage = ""
     if not force:
         hit, damage = cache_lookup(directory, key)
@@ -133,24 +193,33 @@ def generate(spec: ModelSpec, out_dir=None, *, force: bool = False, outputs=(),
     eqs = derive_equations(kin)
     columns = derive_outputs(kin, eqs, outputs) if outputs else None
     graph = columns.graph if columns else eqs.graph
-    terms = derive_jacobian_terms(eqs, graph) if jacobian else None
+    forward = derive_aba(eqs, tree, spec, graph) if tree is not None else None
+    graph = forward.graph if forward else graph
+    if jacobian:
+        terms = (derive_aba_jacobian(forward, eqs) if forward else
+                 derive_jacobian_terms(eqs, graph))
+    else:
+        terms = None
     graph = terms.graph if terms else graph
     t1 = time.perf_counter()
     seconds["derive"] = t1 - t0
-    routines = make_routines(graph, routines_for(eqs, columns.exprs if columns else (), terms))
+    routines = make_routines(graph, routines_for(eqs, columns.exprs if columns else (), terms,
+                                                 forward))
     t2 = time.perf_counter()
     seconds["cse"] = t2 - t1
     outputs_c = {"A": "A", "h": "h", "tau": "tau", "b": "b", "out": "out", "T": "T", "y": "y",
-                 "D": "D"}
+                 "D": "D", "qdd": "qdd"}
     functions = {r.name: print_routine(r, outputs_c) for r in routines}
     context = template_context(
-        name=spec.name, description=spec.description, model_hash=model_hash(spec, outputs, jacobian)[:16],
+        name=spec.name, description=spec.description,
+        model_hash=model_hash(spec, outputs, jacobian, formulation)[:16],
         n=spec.n,
         coordinates=spec.coordinates, parameters=spec.parameters, inputs=spec.inputs,
         bodies=eqs.bodies, functions=functions,
         output_columns=[c for cols in columns.columns for c in cols] if columns else (),
         has_jacobian=bool(jacobian))
-    sources = emit_sources(context)
+    sources = emit_sources(dict(context, formulation=formulation,
+                                aba_inward=list(forward.inward) if forward else []))
     t3 = time.perf_counter()
     seconds["emit"] = t3 - t2
     statements = max(f.statements for f in functions.values())
@@ -165,6 +234,7 @@ def generate(spec: ModelSpec, out_dir=None, *, force: bool = False, outputs=(),
         "parameters": [[name, float(value)] for name, value in spec.parameters],
         "inputs": list(spec.inputs),
         "jacobian": bool(jacobian),
+        "formulation": formulation,
         "bodies": list(eqs.bodies),
         "outputs": [{"name": name, "columns": list(cols)}
                     for name, cols in zip(columns.names, columns.columns)] if columns else [],

@@ -13,13 +13,14 @@ from modelgen.sim.scene import Scene
 
 
 def generate_model(source, out_dir=None, *, force: bool = False,
-                   jacobian: bool = False) -> Generated:
+                   jacobian: bool = False, formulation: str = "auto") -> Generated:
     """Generate and compile a model (or reuse the cache); returns the report.
 
     Like :func:`load`, it refuses (:class:`~modelgen.errors.DerivationError`)
     a model whose mass matrix is singular for every configuration, cached or not.
     """
-    generated = generate(as_spec(source), out_dir, force=force, jacobian=jacobian)
+    generated = generate(as_spec(source), out_dir, force=force, jacobian=jacobian,
+                         formulation=formulation)
     _loaded(generated)
     return generated
 
@@ -35,7 +36,8 @@ def _loaded(generated: Generated) -> CompiledModel:
     return cm
 
 
-def load(source, out_dir=None, *, force: bool = False, jacobian: bool = False) -> CompiledModel:
+def load(source, out_dir=None, *, force: bool = False, jacobian: bool = False,
+         formulation: str = "auto") -> CompiledModel:
     """Build (on first use) and import a model; returns a :class:`CompiledModel`.
 
     ``source`` is a YAML path, a :class:`modelgen.model.Model` or a ModelSpec.
@@ -43,11 +45,14 @@ def load(source, out_dir=None, *, force: bool = False, jacobian: bool = False) -
     :func:`modelgen.codegen.pipeline.default_output`).  With
     ``jacobian=True`` the symbolic Jacobian ``<name>_jacobian`` is generated too
     (for stiff integrators; it costs generation and compile time).
+    ``formulation`` (``auto``, ``aba`` or ``crba``) chooses how the rhs computes
+    q_ddot (see :data:`modelgen.codegen.pipeline.FORMULATIONS`).
 
     >>> cm = load("models/double_pendulum.yaml")             # doctest: +SKIP
     >>> cm.rhs(0.0, [0.1, 0.2, 0.0, 0.0])                    # doctest: +SKIP
     """
-    return _loaded(generate(as_spec(source), out_dir, force=force, jacobian=jacobian))
+    return _loaded(generate(as_spec(source), out_dir, force=force, jacobian=jacobian,
+                            formulation=formulation))
 
 
 def load_scene(path, out_dir=None, *, force: bool = False, progress=None) -> Scene:

@@ -1,0 +1,243 @@
+"""ABA against CRBA: operation counts, generation cost and rhs time in C, with MuJoCo.
+
+Run from the repository root::
+
+    .venv/bin/python bench/aba_scaling.py                 # n = 2 7 20 50 100 and the arm
+    .venv/bin/python bench/aba_scaling.py --n 2 3 4 5 7   # the crossover region
+    .venv/bin/python bench/aba_scaling.py --n 100 --agreement-only
+
+Models
+    ``modelgen.model.chains.spatial_chain(n)`` (hinges alternating z, y) and
+    ``models/arm7.yaml`` (row ``arm7``; its seven motor torques are actions).
+
+Method
+    * Each (model, formulation) is generated in a fresh subprocess with
+      ``generate(spec, dir, force=True, formulation=...)``; *derive*, *cse*,
+      *emit*, *compile* are modelgen's stage timers, *RSS* the child's peak
+      resident set (Python side) after generating.
+    * ops: modelgen's operation counts of the ``rhs`` routine
+      (:func:`modelgen.codegen.cse.count_ops`) before and after CSE, per
+      coordinate.  For crba they do not include the Cholesky solve run in C
+      on A (about n^3/6 multiply-adds).
+    * rhs in C: bench/codegen_scaling.py's harness (``<name>_rhs`` in a loop,
+      each call perturbed by the previous output, min over 5 repeats of
+      >= 0.2 s, the rhs part of ``<name>.c`` compiled with the build's own
+      command); MuJoCo's ``mj_forward`` on the identical chain with its
+      harness, alternated ``--rounds`` times, minimum kept.
+    * agreement: q_ddot of aba against crba at 5 seeded random states, as
+      max |qdd_aba - qdd_crba| / max |qdd_crba|, and the backward error of
+      the ABA answer in the CRBA equations,
+      ||A qdd_aba - b|| / (||A|| ||qdd_aba|| + ||b||) (infinity norms), which
+      does not grow with cond(A).  With ``--reference`` both are also
+      compared with q_ddot from the CRBA program evaluated in 40-digit
+      mpmath arithmetic (A and b, then an mpmath LU solve): this shows which
+      side of a disagreement carries the rounding error.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(REPO / "bench"))
+
+import numpy as np  # noqa: E402
+
+import codegen_scaling as cs  # noqa: E402
+
+DEFAULT_NS = (2, 7, 20, 50, 100)
+MARK = "@@aba_scaling@@ "
+FORMULATIONS = ("crba", "aba")
+
+
+def model_spec(kind: str):
+    from modelgen.model.api import load_model
+    from modelgen.model.chains import spatial_chain
+    if kind == "arm7":
+        return load_model(str(REPO / "models" / "arm7.yaml"))
+    return spatial_chain(int(kind)).spec()
+
+
+def child(kind: str, formulation: str, out_dir: str) -> None:
+    """Generate one model with one formulation; print the figures as JSON."""
+    from modelgen.codegen.pipeline import generate
+    spec = model_spec(kind)
+    t0 = time.perf_counter()
+    g = generate(spec, out_dir, force=True, formulation=formulation)
+    wall = time.perf_counter() - t0
+    rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    print(MARK + json.dumps({"seconds": g.seconds, "wall": wall, "rss_mb": rss,
+                             "ops": g.ops["rhs"], "n": spec.n}))
+
+
+def generate_in_child(kind: str, formulation: str, out_dir: Path) -> dict:
+    proc = subprocess.run([sys.executable, __file__, "--child", kind, formulation,
+                           str(out_dir)], capture_output=True, text=True, cwd=REPO)
+    if proc.returncode:
+        raise RuntimeError(proc.stdout + proc.stderr)
+    line = next(x for x in proc.stdout.splitlines() if x.startswith(MARK))
+    return json.loads(line[len(MARK):])
+
+
+def compiled(kind: str, formulation: str, out_dir: Path):
+    """The CompiledModel of an existing build (the cache answers)."""
+    from modelgen.codegen.pipeline import generate
+    from modelgen.sim.runtime import CompiledModel
+    g = generate(model_spec(kind), out_dir, formulation=formulation)
+    return CompiledModel(g.manifest, g.build.module_path)
+
+
+def agreement(cm_crba, cm_aba, n: int, seed: int = 0) -> tuple:
+    rng = np.random.default_rng(seed)
+    forward, backward = 0.0, 0.0
+    for _ in range(5):
+        x = rng.uniform(-1, 1, 2 * n)
+        q1 = cm_crba.rhs(0.0, x)[n:]
+        q2 = cm_aba.rhs(0.0, x)[n:]
+        forward = max(forward, float(np.max(np.abs(q1 - q2)) / np.max(np.abs(q1))))
+        A = cm_crba.mass_matrix(x[:n])
+        b = cm_crba.generalized_forces(0.0, x[:n], x[n:]) - cm_crba.velocity_terms(x[:n], x[n:])
+        r = A @ q2 - b
+        scale = np.max(np.sum(np.abs(A), axis=1)) * np.max(np.abs(q2)) + np.max(np.abs(b))
+        backward = max(backward, float(np.max(np.abs(r)) / scale))
+    return forward, backward
+
+
+def mp_reference(spec, states, digits: int = 40) -> list:
+    """q_ddot at ``states`` from the CRBA program in ``digits``-digit arithmetic."""
+    import mpmath
+    import sympy
+    from sympy.printing.pycode import MpmathPrinter
+    from modelgen.derive.dynamics import derive_equations
+    from modelgen.derive.kinematics import derive_kinematics
+    eqs = derive_equations(derive_kinematics(spec))
+    n = len(eqs.q)
+    outputs = [eqs.A[i][j] for i in range(n) for j in range(n)] + \
+              [eqs.tau[k] - eqs.h[k] for k in range(n)]
+    printer = MpmathPrinter({"fully_qualified_modules": True})
+    inputs = (eqs.t,) + eqs.q + eqs.qd + eqs.u + eqs.p
+    lines = ["def f(" + ", ".join(str(x) for x in inputs) + "):"]
+    lines += [f"    {sym} = {printer.doprint(e)}" for sym, e in eqs.graph.closure(outputs)]
+    lines.append("    return [" + ", ".join(printer.doprint(sympy.sympify(e)) for e in outputs)
+                 + "]")
+    namespace = {"mpmath": mpmath}
+    exec("\n".join(lines), namespace)     # noqa: S102 - our own program
+    out = []
+    with mpmath.workdps(digits):
+        for x in states:
+            values = ([mpmath.mpf(0)] + [mpmath.mpf(float(v)) for v in x]
+                      + [mpmath.mpf(0)] * len(eqs.u)
+                      + [mpmath.mpf(v) for v in spec.parameter_defaults])
+            r = namespace["f"](*values)
+            A = mpmath.matrix(n, n)
+            for i in range(n):
+                for j in range(n):
+                    A[i, j] = r[i * n + j]
+            b = mpmath.matrix(r[n * n:])
+            out.append(np.array([float(v) for v in mpmath.lu_solve(A, b)]))
+    return out
+
+
+def reference_errors(spec, cms, seed: int = 0) -> dict:
+    """max |qdd - qdd_mp| / max |qdd_mp| over 2 seeded states, per formulation."""
+    n = spec.n
+    rng = np.random.default_rng(seed)
+    states = [rng.uniform(-1, 1, 2 * n) for _ in range(2)]
+    refs = mp_reference(spec, states)
+    return {f: max(float(np.max(np.abs(cms[f].rhs(0.0, x)[n:] - ref)) / np.max(np.abs(ref)))
+                   for x, ref in zip(states, refs)) for f in FORMULATIONS}
+
+
+def fmt(v, spec=".3g"):
+    return "–" if v is None else format(v, spec)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--child", nargs=3, metavar=("KIND", "FORMULATION", "DIR"),
+                    help=argparse.SUPPRESS)
+    ap.add_argument("--n", type=int, nargs="+", default=list(DEFAULT_NS))
+    ap.add_argument("--no-arm", action="store_true", help="skip models/arm7.yaml")
+    ap.add_argument("--rounds", type=int, default=3)
+    ap.add_argument("--agreement-only", action="store_true",
+                    help="no timing: generation figures and agreement only")
+    ap.add_argument("--reference", action="store_true",
+                    help="also compare both with a 40-digit mpmath solution")
+    args = ap.parse_args(argv)
+    if args.child:
+        child(*args.child)
+        return 0
+
+    kinds = ([] if args.no_arm else ["arm7"]) + [str(n) for n in args.n]
+    mj_harness = None
+    if not args.agreement_only and cs.have_mujoco():
+        mj_harness, why = cs.build_mujoco_harness(Path(tempfile.mkdtemp(prefix="aba_mj_")))
+        if mj_harness is None:
+            print("MuJoCo:", why)
+    print(f"load average {os.getloadavg()[0]:.2f} (2 cores shared: > 0.5 means noisy times)\n")
+    gen_rows, run_rows = [], []
+    with tempfile.TemporaryDirectory(prefix="aba_scaling_") as tmp:
+        tmp = Path(tmp)
+        for kind in kinds:
+            figures, cms = {}, {}
+            for f in FORMULATIONS:
+                out = tmp / f"{kind}_{f}"
+                figures[f] = generate_in_child(kind, f, out)
+                cms[f] = compiled(kind, f, out)
+                fg = figures[f]
+                n = fg["n"]
+                s = fg["seconds"]
+                gen_rows.append([kind, f, f"{s['derive']:.2f}", f"{s['cse']:.2f}",
+                                 f"{s['emit']:.2f}", f"{s['compile']:.2f}", f"{fg['wall']:.2f}",
+                                 f"{fg['rss_mb']:.0f}", str(fg["ops"]["before_cse"]),
+                                 str(fg["ops"]["after_cse"]),
+                                 f"{fg['ops']['before_cse'] / n:.0f}",
+                                 f"{fg['ops']['after_cse'] / n:.0f}"])
+            n = figures["aba"]["n"]
+            fwd, bwd = agreement(cms["crba"], cms["aba"], n)
+            ref = reference_errors(model_spec(kind), cms) if args.reference else {}
+            times = {f: None for f in FORMULATIONS}
+            mj = None
+            if not args.agreement_only:
+                rng = np.random.default_rng(1)
+                x0 = rng.uniform(-0.5, 0.5, 2 * n)
+                exes = {f: cs.build_rhs_harness(cms[f], x0, tmp / f"h_{kind}_{f}")[0]
+                        for f in FORMULATIONS}
+                xml = None
+                if mj_harness is not None and kind != "arm7":
+                    xml = tmp / f"chain_{kind}.xml"
+                    xml.write_text(cs.chain_mjcf(n, cms["aba"].parameters))
+                for _ in range(args.rounds):
+                    for f in FORMULATIONS:
+                        t = cs.run_rhs_harness(exes[f])
+                        times[f] = t if times[f] is None else min(times[f], t)
+                    if xml is not None:
+                        t = cs.run_mj_harness(mj_harness, xml, x0)[0]
+                        mj = t if mj is None else min(mj, t)
+            run_rows.append([kind, fmt(times["crba"]), fmt(times["aba"]),
+                             fmt(times["crba"] / times["aba"] if times["aba"] else None),
+                             fmt(mj), fmt(mj / times["aba"] if mj and times["aba"] else None),
+                             f"{fwd:.1e}", f"{bwd:.1e}",
+                             fmt(ref.get("crba"), ".1e"), fmt(ref.get("aba"), ".1e")])
+            print(f"done {kind}", flush=True)
+    print()
+    print(cs.markdown(["model", "formulation", "derive s", "cse s", "emit s", "compile s",
+                       "total s", "RSS MB", "ops before", "ops after", "before/n",
+                       "after/n"], gen_rows, left=2))
+    print()
+    print(cs.markdown(["model", "crba rhs µs", "aba rhs µs", "crba/aba", "mj_forward µs",
+                       "mj/aba", "aba-crba rel", "aba backward err", "crba err (mp)",
+                       "aba err (mp)"], run_rows))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

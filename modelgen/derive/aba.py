@@ -1,0 +1,542 @@
+"""Forward dynamics in O(n): the articulated-body algorithm, unrolled.
+
+Featherstone, *Rigid Body Dynamics Algorithms* (2008), ch. 7, Table 7.1, in
+each link's own frame (:mod:`modelgen.derive.joint_tree` gives the links):
+
+1. outwards: ``v_i = X_i v_p + S_i qd_i``, ``c_i = v_i x S_i qd_i``,
+   ``IA_i = I_i``, ``pA_i = v_i x* I_i v_i``;
+2. inwards: ``U_i = IA_i S_i``, ``D_i = S_i^T U_i``, ``u_i = tau_i - S_i^T pA_i``;
+   then ``Ia = IA_i - U_i U_i^T / D_i`` and ``pa = pA_i + Ia c_i + U_i u_i / D_i``
+   are added to the parent as ``X_i^T Ia X_i`` and ``X_i^T pa``;
+3. outwards: ``a'_i = X_i a_p + c_i``, ``qdd_i = (u_i - U_i^T a'_i) / D_i``,
+   ``a_i = a'_i + S_i qdd_i``.
+
+Gravity (the top-level ``gravity`` and gravity effects in base E) is the
+acceleration ``-g`` of the ground, so it costs nothing per body.  Actions are
+external spatial forces ``f_i`` on their links (``pA_i = v_i x* I_i v_i - f_i``),
+turned into link components along the base and point trees.  Every other
+effect enters through its generalized force ``tau_k``, taken
+from the CRBA derivation (:attr:`modelgen.derive.dynamics.Equations.tau_parts`):
+``tau_k`` is exactly the power of those forces per unit ``qd_k``, so adding it
+to ``u_i`` gives the same ``qdd`` as ``A qdd = tau - h``.  (Actions could go
+that way too, but their projection needs every base's rotation in E.)
+
+The program is built with :class:`~modelgen.derive.graph.GraphBuilder`, so the
+constant zeros and ones of the motion subspaces (unit vectors along a base
+axis) and of the joint transforms (one elementary rotation, one translation)
+fold away as the expressions are formed: a projection ``S^T f`` is a single
+entry, ``U`` a column of ``IA``.  Articulated inertias are symmetric 6x6
+matrices ``[[A, B], [B^T, C]]`` carried as 21 entries.
+
+``D_i`` is returned with ``qdd``: it must be checked > 0 at run time (a
+non-positive ``D_i`` is a singular configuration at joint i).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import sympy
+
+from modelgen.derive.dynamics import Equations
+from modelgen.derive.graph import ONE, ZERO, ZERO3, Graph, GraphBuilder
+from modelgen.derive.jacobian import JacobianTerms, differentiate
+from modelgen.derive.joint_tree import JointTree
+from modelgen.model.spec import CANONICAL_BASE, CANONICAL_POINT, ModelSpec
+
+_PAIRS = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
+
+
+@dataclass(frozen=True)
+class ForwardDynamics:
+    """Output of :func:`derive_aba`: ``qdd`` and ``D`` in coordinate order, over ``graph``.
+
+    ``inward`` lists the coordinate indices in the order the inward pass
+    computes their D: a D that is not positive spoils the D of every joint
+    nearer the root, so the first failing one in this order names the joint.
+    """
+    graph: Graph
+    qdd: tuple
+    D: tuple
+    inward: tuple
+
+
+# -- arithmetic that skips constant zeros and ones before sympy sees them --------
+# (most entries of S, of the joint rotations and of the first inertias are 0 or 1;
+# building 0*x and x + 0 through sympy costs more than the whole rest)
+
+def _zero(x) -> bool:
+    if x is ZERO:
+        return True
+    if isinstance(x, int):
+        return x == 0
+    return x.is_Number and x.is_zero
+
+
+def _one(x) -> bool:
+    return x is ONE or (isinstance(x, int) and x == 1)
+
+
+def _times(x, y):
+    if _zero(x) or _zero(y):
+        return ZERO
+    if _one(x):
+        return y
+    if _one(y):
+        return x
+    return x * y
+
+
+def _total(terms):
+    terms = [t for t in terms if not _zero(t)]
+    if not terms:
+        return ZERO
+    return terms[0] if len(terms) == 1 else sympy.Add(*terms)
+
+
+def _neg(x):
+    return ZERO if _zero(x) else -x
+
+
+def dot(a, b):
+    return _total(_times(x, y) for x, y in zip(a, b))
+
+
+def add(a, b):
+    return tuple(_total((x, y)) for x, y in zip(a, b))
+
+
+def sub(a, b):
+    return tuple(_total((x, _neg(y))) for x, y in zip(a, b))
+
+
+def cross(a, b):
+    return (_total((_times(a[1], b[2]), _neg(_times(a[2], b[1])))),
+            _total((_times(a[2], b[0]), _neg(_times(a[0], b[2])))),
+            _total((_times(a[0], b[1]), _neg(_times(a[1], b[0])))))
+
+
+# -- 3x3 helpers: symmetric matrices as full tuples of rows ---------------------
+
+def _sym(entries) -> tuple:
+    """Full rows from the 6 entries (xx, yy, zz, xy, xz, yz)."""
+    xx, yy, zz, xy, xz, yz = entries
+    return ((xx, xy, xz), (xy, yy, yz), (xz, yz, zz))
+
+
+def _name_sym(g, M) -> tuple:
+    return _sym(g.vec(M[i][j] for i, j in _PAIRS))
+
+
+def _name_full(g, M) -> tuple:
+    return tuple(g.vec(row) for row in M)
+
+
+def _mul(a, b) -> tuple:
+    return tuple(tuple(_total(_times(a[i][l], b[l][j]) for l in range(3)) for j in range(3))
+                 for i in range(3))
+
+
+def _T(a) -> tuple:
+    return tuple(tuple(a[j][i] for j in range(3)) for i in range(3))
+
+
+def _mv(m, v) -> tuple:
+    return tuple(dot(row, v) for row in m)
+
+
+def _skew(r) -> tuple:
+    return ((ZERO, -r[2], r[1]), (r[2], ZERO, -r[0]), (-r[1], r[0], ZERO))
+
+
+def _is_identity(E) -> bool:
+    return all(E[i][j] == (1 if i == j else 0) for i in range(3) for j in range(3))
+
+
+# -- spatial algebra: motion (w, v), force (n, f), inertia (A, B, C) -----------
+
+def _motion_rot(g, E, m):
+    return g.vec(_mv(E, m[:3])) + g.vec(_mv(E, m[3:]))
+
+
+def _motion_xlt(g, r, m):
+    return m[:3] + g.vec(sub(m[3:], cross(r, m[:3])))
+
+
+def _force_rot_T(g, E, f):
+    Et = _T(E)
+    return g.vec(_mv(Et, f[:3])) + g.vec(_mv(Et, f[3:]))
+
+
+def _force_xlt_T(g, r, f):
+    return g.vec(add(f[:3], cross(r, f[3:]))) + f[3:]
+
+
+def _inertia_rot_T(g, E, I):
+    """X^T I X for X = rot(E): each block B -> E^T B E."""
+    Et = _T(E)
+    A, B, C = I
+    return (_name_sym(g, _mul(Et, _name_full(g, _mul(A, E)))),
+            _name_full(g, _mul(Et, _name_full(g, _mul(B, E)))),
+            _name_sym(g, _mul(Et, _name_full(g, _mul(C, E)))))
+
+
+def _inertia_xlt_T(g, r, I):
+    """X^T I X for X = xlt(r): A + rx B^T - B rx - rx C rx, B + rx C, C."""
+    A, B, C = I
+    rx = _skew(r)
+    M = _name_full(g, _mul(rx, C))                # rx C
+    N = _name_full(g, _mul(B, rx))                # B rx
+    P = _mul(M, rx)                               # rx C rx (symmetric)
+    A2 = tuple(tuple(_total((A[i][j], _neg(N[i][j]), _neg(N[j][i]), _neg(P[i][j])))
+                     for j in range(3)) for i in range(3))
+    B2 = tuple(tuple(_total((B[i][j], M[i][j])) for j in range(3)) for i in range(3))
+    return (_name_sym(g, A2), _name_full(g, B2), C)
+
+
+def _drop_subspace(I, S):
+    """Ia with the row and column of a one-entry S set to zero exactly.
+
+    ``Ia S = U - U (S^T U) / D = 0``, so when S has a single non-zero entry j,
+    row and column j of Ia vanish; symbolically they would be
+    ``x - x * x * (1/x)``, which no folding sees.
+    """
+    nonzero = [j for j, s in enumerate(S) if s != 0]
+    if len(nonzero) != 1:
+        return I
+    (j,) = nonzero
+    A, B, C = I
+    if j < 3:
+        A = _zero_row_col(A, j)
+        B = tuple(tuple(ZERO if r == j else B[r][s] for s in range(3)) for r in range(3))
+    else:
+        C = _zero_row_col(C, j - 3)
+        B = tuple(tuple(ZERO if s == j - 3 else B[r][s] for s in range(3)) for r in range(3))
+    return (A, B, C)
+
+
+def _zero_row_col(M, j):
+    return tuple(tuple(ZERO if j in (r, s) else M[r][s] for s in range(3)) for r in range(3))
+
+
+def _inertia_times(I, m):
+    A, B, C = I
+    w, v = m[:3], m[3:]
+    return add(_mv(A, w), _mv(B, v)) + add(_mv(_T(B), w), _mv(C, v))
+
+
+def _rigid_bias(g, I_O, h, m, v):
+    """v x* (I v) for a rigid body (I_O about the origin, first moment h, mass m).
+
+    ``I v = (I_O w + h x vl, m vl - h x w)``; the term ``vl x (m vl)`` of
+    ``v x* (I v)`` vanishes, so ``p = (w x n - vl x k, w x f)`` with ``k = h x w``.
+    """
+    w, vl = v[:3], v[3:]
+    n = g.vec(add(_mv(I_O, w), cross(h, vl)))
+    k = g.vec(cross(h, w))
+    f = g.vec(sub(tuple(_times(m, x) for x in vl), k))
+    return g.vec(sub(cross(w, n), cross(vl, k))) + g.vec(cross(w, f))
+
+
+def _cross_motion(a, b):
+    """a x b for motion vectors (Featherstone's crm)."""
+    return cross(a[:3], b[:3]) + add(cross(a[:3], b[3:]), cross(a[3:], b[:3]))
+
+
+def _cross_force(a, f):
+    """a x* f for a motion a and a force f (Featherstone's crf)."""
+    return add(cross(a[:3], f[:3]), cross(a[3:], f[3:])) + cross(a[:3], f[3:])
+
+
+def _joint_motion(g, joint, m):
+    """X_i m for the parent->link transform X_i = X_J X_T."""
+    E, r = joint.fixed
+    if any(x != 0 for x in r):
+        m = _motion_xlt(g, r, m)
+    if not _is_identity(E):
+        m = _motion_rot(g, E, m)
+    if joint.kind == "revolute":
+        c, s = g.name(sympy.cos(joint.angle)), g.name(sympy.sin(joint.angle))
+        m = _motion_rot(g, _rotation(joint.axis, c, s), m)
+    else:
+        m = _motion_xlt(g, g.vec(joint.offset), m)
+    return m
+
+
+def _rotation(axis, c, s):
+    if axis == 1:
+        return ((1, ZERO, ZERO), (ZERO, c, s), (ZERO, -s, c))
+    if axis == 2:
+        return ((c, ZERO, -s), (ZERO, 1, ZERO), (s, ZERO, c))
+    return ((c, s, ZERO), (-s, c, ZERO), (ZERO, ZERO, 1))
+
+
+def _to_parent_force(g, joint, f):
+    """X_i^T f."""
+    E, r = joint.fixed
+    if joint.kind == "revolute":
+        c, s = g.name(sympy.cos(joint.angle)), g.name(sympy.sin(joint.angle))
+        f = _force_rot_T(g, _rotation(joint.axis, c, s), f)
+    else:
+        f = _force_xlt_T(g, g.vec(joint.offset), f)
+    if not _is_identity(E):
+        f = _force_rot_T(g, E, f)
+    if any(x != 0 for x in r):
+        f = _force_xlt_T(g, r, f)
+    return f
+
+
+#: the plane (k1, k2) of a rotation about axis 1, 2, 3 in which E = [[c, s], [-s, c]]
+_PLANE = {1: (1, 2), 2: (2, 0), 3: (0, 1)}
+
+
+def _plane_rot_T(c, s, k1, k2, x1, x2):
+    """(E^T x)[k1], (E^T x)[k2] for the plane rotation."""
+    return (_total((_times(c, x1), _neg(_times(s, x2)))),
+            _total((_times(s, x1), _times(c, x2))))
+
+
+def _sym_axis_rot_T(g, M, k1, k2, c, s, trig):
+    """E^T M E for a symmetric M and a rotation about one axis.
+
+    With a, b, d the in-plane entries and ``t = s^2 (a - d) + 2cs b``:
+    ``a' = a - t``, ``d' = d + t``, ``b' = cs (a - d) + (c^2 - s^2) b``
+    (expand ``E^T M E`` and use ``c^2 + s^2 = 1``); the out-of-plane column
+    turns like a vector.
+    """
+    ss, cs, C2, S2 = trig
+    j = 3 - k1 - k2
+    a, b, d = M[k1][k1], M[k1][k2], M[k2][k2]
+    out = [[None] * 3 for _ in range(3)]
+    diff = g.name(a - d)
+    t = g.name(ss * diff + S2 * b)
+    out[k1][k1], out[k2][k2] = a - t, d + t
+    out[k1][k2] = cs * diff + C2 * b
+    out[j][k1], out[j][k2] = _plane_rot_T(c, s, k1, k2, M[j][k1], M[j][k2])
+    out[j][j] = M[j][j]
+    return _name_sym(g, _sym_rows(out))
+
+
+def _sym_rows(out):
+    return tuple(tuple(out[i][j] if out[i][j] is not None else out[j][i] for j in range(3))
+                 for i in range(3))
+
+
+def _full_axis_rot_T(g, M, k1, k2, c, s):
+    """E^T M E for a general M and a rotation about one axis."""
+    cols = [list(row) for row in M]
+    for row in cols:
+        row[k1], row[k2] = _plane_rot_T(c, s, k1, k2, row[k1], row[k2])
+    cols = [g.vec(row) for row in cols]
+    rows = [list(row) for row in cols]
+    for col in range(3):
+        rows[k1][col], rows[k2][col] = _plane_rot_T(c, s, k1, k2, cols[k1][col],
+                                                    cols[k2][col])
+    return _name_full(g, rows)
+
+
+def _to_parent_inertia(g, joint, I):
+    """X_i^T I X_i."""
+    E, r = joint.fixed
+    if joint.kind == "revolute":
+        c, s = g.name(sympy.cos(joint.angle)), g.name(sympy.sin(joint.angle))
+        ss, cs = g.name(s * s), g.name(c * s)
+        trig = (ss, cs, g.name(1 - 2 * ss), g.name(2 * cs))
+        k1, k2 = _PLANE[joint.axis]
+        A, B, C = I
+        I = (_sym_axis_rot_T(g, A, k1, k2, c, s, trig),
+             _full_axis_rot_T(g, B, k1, k2, c, s),
+             _sym_axis_rot_T(g, C, k1, k2, c, s, trig))
+    else:
+        I = _inertia_xlt_T(g, g.vec(joint.offset), I)
+    if not _is_identity(E):
+        I = _inertia_rot_T(g, E, I)
+    if any(x != 0 for x in r):
+        I = _inertia_xlt_T(g, r, I)
+    return I
+
+
+def _base_steps(spec, X: str, L: str) -> tuple:
+    """Bases from X up to (not including) the common ancestor with L, and from
+    below that ancestor down to L."""
+    parent = {b.name: b.parent for b in spec.bases}
+
+    def chain(b):
+        out = []
+        while b != CANONICAL_BASE:
+            out.append(b)
+            b = parent[b]
+        return out
+
+    cx, cl = chain(X), chain(L)
+    shared = set(cx) & set(cl)
+    return [b for b in cx if b not in shared], [b for b in reversed(cl) if b not in shared]
+
+
+def _rotate_into(g, spec, v, X: str, L: str) -> tuple:
+    """Components in base L of the vector with components ``v`` in base X."""
+    if all(x == 0 for x in v):
+        return ZERO3
+    bases = {b.name: b for b in spec.bases}
+    up, down = _base_steps(spec, X, L)
+    v = tuple(v)
+    for name in up:                  # child -> parent components: E^T v
+        b = bases[name]
+        E = _rotation(b.axis, g.name(sympy.cos(b.angle)), g.name(sympy.sin(b.angle)))
+        v = g.vec(_mv(_T(E), v))
+    for name in down:                # parent -> child components: E v
+        b = bases[name]
+        E = _rotation(b.axis, g.name(sympy.cos(b.angle)), g.name(sympy.sin(b.angle)))
+        v = g.vec(_mv(E, v))
+    return v
+
+
+def _point_offset(g, spec, P: str, Q: str, L: str) -> tuple:
+    """r_P - r_Q in components of base L."""
+    points = {p.name: p for p in spec.points}
+
+    def chain(p):
+        out = []
+        while p != CANONICAL_POINT:
+            out.append(p)
+            p = points[p].parent
+        return out
+
+    cp, cq = chain(P), chain(Q)
+    shared = set(cp) & set(cq)
+    total = ZERO3
+    for name, sign in [(p, 1) for p in cp if p not in shared] + \
+                      [(p, -1) for p in cq if p not in shared]:
+        seg = _rotate_into(g, spec, points[name].coordinates, points[name].base, L)
+        total = add(total, tuple(_times(sign, x) for x in seg))
+    return g.vec(total)
+
+
+def _action_force(g, spec, joint, act) -> tuple:
+    """An action as a spatial force on its link, at the link origin, in link components."""
+    L = joint.base
+    T = _rotate_into(g, spec, act.torque, act.base, L)
+    F = _rotate_into(g, spec, act.force, act.base, L)
+    if any(x != 0 for x in F):
+        point, correction = joint.origin
+        r = g.vec(sub(_point_offset(g, spec, act.point, point, L), correction))
+        T = g.vec(add(T, cross(r, F)))
+    return T + F
+
+
+def _ground_acceleration(eqs_spec) -> tuple:
+    """(-g as a spatial acceleration in E, labels of the tau parts it replaces)."""
+    total = ZERO3
+    labels = []
+    if eqs_spec.gravity is not None:
+        total = add(total, eqs_spec.gravity)
+        labels.append("gravity")
+    for eff in eqs_spec.effects:
+        if eff.kind == "gravity" and eff.base == CANONICAL_BASE:
+            total = add(total, eff.vector)
+            labels.append(eff.name)
+    return ZERO3 + tuple(-x for x in total), labels
+
+
+def derive_aba(eqs: Equations, tree: JointTree, spec: ModelSpec, graph: Graph | None = None
+               ) -> ForwardDynamics:
+    """qdd by the articulated-body algorithm over ``graph`` (default ``eqs.graph``).
+
+    ``spec`` is the model the equations came from; ``tree`` its joint tree.
+    Gravity in E and actions are handled here; the generalized forces of every
+    other effect are read from ``eqs.tau_parts``.
+
+    >>> from modelgen.model.chains import spatial_chain
+    >>> from modelgen.derive.kinematics import derive_kinematics
+    >>> from modelgen.derive.dynamics import derive_equations
+    >>> from modelgen.derive.joint_tree import extract_joint_tree
+    >>> spec = spatial_chain(2).spec()
+    >>> fd = derive_aba(derive_equations(derive_kinematics(spec)), extract_joint_tree(spec), spec)
+    >>> len(fd.qdd), fd.inward
+    (2, (1, 0))
+    """
+    g = GraphBuilder(graph or eqs.graph)
+    n = len(eqs.q)
+    a0, gravity_labels = _ground_acceleration(spec)
+    actions = list(spec.actions) + [e for e in spec.effects if e.kind == "action"]
+    local = set(gravity_labels) | {a.name for a in actions}
+    others = [part for label, part in eqs.tau_parts if label not in local]
+    tau = [g.name(sympy.Add(*[part[k] for part in others])) for k in range(n)]
+    link_of = dict(tree.body_links)
+    external: dict = {}                 # joint index -> spatial force on its link
+    for act in actions:
+        i = link_of[act.body]
+        if i >= 0:
+            f = _action_force(g, spec, tree.joints[i], act)
+            external[i] = g.vec(add(external[i], f)) if i in external else f
+
+    joints = tree.joints
+    count = len(joints)
+    v, c, IA, pA = [None] * count, [None] * count, [None] * count, [None] * count
+    for i, joint in enumerate(joints):                      # pass 1: outwards
+        vJ = g.vec(_times(s, eqs.qd[joint.coordinate]) for s in joint.S)
+        if joint.parent < 0:
+            v[i], c[i] = vJ, (ZERO,) * 6
+        else:
+            v[i] = g.vec(add(_joint_motion(g, joint, v[joint.parent]), vJ))
+            c[i] = g.vec(_cross_motion(v[i], vJ))
+        body = tree.inertias[i]
+        A = _sym(g.vec(body.I))
+        h = g.vec(body.h)
+        m = g.name(body.m)
+        hx = _skew(h)
+        IA[i] = (A, hx, ((m, ZERO, ZERO), (ZERO, m, ZERO), (ZERO, ZERO, m)))
+        pA[i] = _rigid_bias(g, A, h, m, v[i])
+        if i in external:
+            pA[i] = g.vec(sub(pA[i], external[i]))
+
+    U, D, invD, u = [None] * count, [None] * count, [None] * count, [None] * count
+    for i in reversed(range(count)):                        # pass 2: inwards
+        joint = joints[i]
+        S = joint.S
+        U[i] = g.vec(_inertia_times(IA[i], S))
+        D[i] = g.name(dot(S, U[i]))
+        invD[i] = g.name(1 / D[i])
+        u[i] = g.name(tau[joint.coordinate] - dot(S, pA[i]))
+        if joint.parent < 0:
+            continue
+        Ud = g.vec(_times(x, invD[i]) for x in U[i])
+        A, B, C = IA[i]
+
+        def update(M, r0, s0):
+            return tuple(tuple(_total((M[r][s], _neg(_times(U[i][r0 + r], Ud[s0 + s]))))
+                               for s in range(3)) for r in range(3))
+
+        A, B, C = _drop_subspace((update(A, 0, 0), update(B, 0, 3), update(C, 3, 3)), S)
+        Ia = (_name_sym(g, A), _name_full(g, B), _name_sym(g, C))
+        ui = g.name(u[i] * invD[i])
+        pa = g.vec(add(add(pA[i], _inertia_times(Ia, c[i])), tuple(_times(x, ui) for x in U[i])))
+        p = joint.parent
+        Ip = _to_parent_inertia(g, joint, Ia)
+        IA[p] = tuple(_name_full(g, tuple(tuple(_total((X[r][s], Y[r][s])) for s in range(3))
+                                          for r in range(3)))
+                      for X, Y in zip(IA[p], Ip))
+        pA[p] = g.vec(add(pA[p], _to_parent_force(g, joint, pa)))
+
+    qdd = [None] * n
+    acc = [None] * count
+    for i, joint in enumerate(joints):                      # pass 3: outwards
+        ap = a0 if joint.parent < 0 else acc[joint.parent]
+        a_prime = g.vec(add(_joint_motion(g, joint, ap), c[i]))
+        k = joint.coordinate
+        qdd[k] = g.name((u[i] - dot(U[i], a_prime)) * invD[i])
+        acc[i] = g.vec(add(a_prime, tuple(_times(s, qdd[k]) for s in joint.S)))
+    D_out = [None] * n
+    for i, joint in enumerate(joints):
+        D_out[joint.coordinate] = D[i]
+    inward = tuple(joints[i].coordinate for i in reversed(range(count)))
+    return ForwardDynamics(g.freeze(), tuple(qdd), tuple(D_out), inward)
+
+
+def derive_aba_jacobian(fd: ForwardDynamics, eqs: Equations) -> JacobianTerms:
+    """d(qdd)/dx, x = [q, qd], by forward-mode differentiation of the ABA program.
+
+    Unlike the CRBA Jacobian there is nothing to solve: ``D`` is the lower half
+    of the state Jacobian itself (``a`` is empty).
+    """
+    graph, rows = differentiate(fd.graph, fd.qdd, eqs.q + eqs.qd)
+    return JacobianTerms(graph, (), rows)
