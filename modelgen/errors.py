@@ -105,5 +105,5 @@ class MassMatrixError(SimulationError):
     def __init__(self, pivot: int, coordinate: str, t, x, kind: str = "not positive definite"):
         self.pivot, self.coordinate, self.t, self.x, self.kind = pivot, coordinate, t, x, kind
         super().__init__(
-            f"mass matrix {kind} at t={t!r}: Cholesky pivot {pivot} "
+            f"mass matrix {kind} at t={t!r}: pivot {pivot} "
             f"(coordinate {coordinate!r}) failed; state x=[{', '.join(repr(float(v)) for v in x)}]")

@@ -89,7 +89,7 @@ def test_singular_and_indefinite_mass_matrices_are_worded_apart(ctx):
     with pytest.raises(MassMatrixError, match="mass matrix singular to working precision"):
         top.rhs(0.0, x)
     assert top.simulate(x, (0.0, 1.0)).message.startswith(
-        "Mass matrix singular to working precision at t=0.0: Cholesky pivot 3 (coordinate 'psi')")
+        "Mass matrix singular to working precision at t=0.0: pivot 3 (coordinate 'psi')")
     dp = ctx.model(hm.DOUBLE_PENDULUM, formulation="crba")
     with pytest.raises(MassMatrixError, match="mass matrix not positive definite"):
         dp.rhs(0.0, [0.3, -0.7, 0.0, 0.0], p={"J1": -1.0})

@@ -346,7 +346,7 @@ def test_singular_mass_matrix_stops_with_the_pivot_and_keeps_the_start(dp_crba, 
     res = dp_crba.simulate([0.5, -0.3, 0, 0], (0, 2), method=method, p={"m1": 0.0, "m2": 0.0},
                       **fixed_step(method))
     assert res.status == -3 and not res.success
-    assert res.message.startswith("Mass matrix not positive definite at t=0.0: Cholesky pivot "
+    assert res.message.startswith("Mass matrix not positive definite at t=0.0: pivot "
                                   "1 (coordinate 'q1') failed; last good state at t=0.0: "
                                   "x=[0.5, -0.3, 0.0, 0.0]")
     assert np.array_equal(res.t, [0.0]) and np.array_equal(res.y[:, 0], [0.5, -0.3, 0, 0])

@@ -68,7 +68,7 @@ STATUSES = (
     Status(-1, "MAX_STEPS", "Maximum number of steps ({max_steps}) reached at t={t!r}."),
     Status(-2, "STEP_UNDERFLOW", "Step size underflow at t={t!r}: the step {h:.3g} s is too small "
                                  "to advance t in double precision."),
-    Status(-3, "MASS_MATRIX", "Mass matrix {kind} at t={t_fail!r}: Cholesky pivot "
+    Status(-3, "MASS_MATRIX", "Mass matrix {kind} at t={t_fail!r}: pivot "
                               "{pivot} (coordinate {coordinate!r}) failed; last good state at "
                               "t={t!r}: x={x}."),
     Status(-4, "NON_FINITE", "NaN or Inf in the state at t={t_fail!r}; last finite state at "
@@ -93,7 +93,8 @@ STATS = (
     ("nlu", "LU factorizations"),
     ("nnewton", "Newton iterations of the implicit Gauss methods"),
     ("ngev", "calls of the event function"),
-    ("pivot", "the failing Cholesky pivot (1-based) of a MASS_MATRIX failure, else 0"),
+    ("pivot", "the failing pivot (1-based) of a MASS_MATRIX failure (of the LDL^T/Cholesky "
+              "factorization of A, or the articulated inertia D of the ABA), else 0"),
 )
 STAT_NAMES = tuple(name for name, _ in STATS)
 
