@@ -23,6 +23,7 @@ its); :func:`c_constants` reads the same constants back from a compiled model.
 from __future__ import annotations
 
 import concurrent.futures
+import functools
 import signal
 import threading
 
@@ -102,6 +103,21 @@ def jacobian(cm, t, x, u=None, p=None) -> np.ndarray:
 
 # -- argument checking ---------------------------------------------------------------
 
+def _checked(check):
+    """Make an argument check raise only SimulationError: the TypeError, ValueError
+    or OverflowError of a nonsensical argument (a string, a ragged list, a complex
+    number, 1e400 as an integer) becomes one naming the check's arguments."""
+    @functools.wraps(check)
+    def wrapper(*args, **kwargs):
+        try:
+            return check(*args, **kwargs)
+        except (TypeError, ValueError, OverflowError) as exc:
+            raise SimulationError(f"invalid argument to simulate ({check.__name__.strip('_')}): "
+                                  f"{type(exc).__name__}: {exc}") from None
+    return wrapper
+
+
+@_checked
 def _tolerance(value, nx, what):
     a = np.array(np.broadcast_to(np.asarray(value, dtype=float), (nx,)))
     if not np.all(np.isfinite(a)) or np.any(a < 0):
@@ -119,6 +135,7 @@ def _span(t_span):
     return t0, t1
 
 
+@_checked
 def _times(t_eval, t0, t1):
     t_eval = np.ascontiguousarray(t_eval, dtype=float)
     if t_eval.ndim != 1 or t_eval.size == 0:
@@ -130,6 +147,7 @@ def _times(t_eval, t0, t1):
     return t_eval
 
 
+@_checked
 def _options(cm, method, rtol, atol, step, first_step, max_step, max_steps):
     m = method_of(method)
     nx = 2 * cm.n
@@ -148,7 +166,7 @@ def _options(cm, method, rtol, atol, step, first_step, max_step, max_steps):
     hmax = 0.0 if max_step is None or max_step == np.inf else float(max_step)
     if not (np.isfinite(first) and first >= 0 and np.isfinite(hmax) and hmax >= 0):
         raise SimulationError("first_step and max_step must be positive")
-    max_steps = int(max_steps)
+    max_steps = min(int(max_steps), int(np.iinfo(_LONG).max))
     if max_steps < 1:
         raise SimulationError(f"max_steps must be >= 1, got {max_steps}")
     return m, rtol, atol, fixed, first, hmax, max_steps

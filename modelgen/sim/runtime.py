@@ -110,10 +110,11 @@ class CompiledModel:
     def _vector(self, value, size, what):
         """``value`` as a contiguous float vector of ``size``; never broadcast, never
         silently drop an imaginary part."""
-        if np.iscomplexobj(value):
-            raise SimulationError(f"{self.name}: {what} must be real, got a complex value")
         try:
-            a = np.asarray(value, dtype=float)
+            raw = np.asarray(value)
+            if np.iscomplexobj(raw):
+                raise SimulationError(f"{self.name}: {what} must be real, got a complex value")
+            a = raw.astype(float)
         except (TypeError, ValueError) as exc:
             raise SimulationError(f"{self.name}: {what} must be numbers: {exc}") from None
         if a.shape != (size,):
@@ -121,9 +122,12 @@ class CompiledModel:
         return np.ascontiguousarray(a)
 
     def _time(self, t) -> float:
-        if np.iscomplexobj(t) or np.ndim(t) != 0:
-            raise SimulationError(f"{self.name}: t must be a real number, got {t!r}")
-        t = float(t)
+        try:
+            if np.iscomplexobj(t) or np.ndim(t) != 0:
+                raise TypeError(t)
+            t = float(t)
+        except (TypeError, ValueError):
+            raise SimulationError(f"{self.name}: t must be a real number, got {t!r}") from None
         if not np.isfinite(t):
             raise SimulationError(f"{self.name}: t must be finite, got {t!r}")
         return t
@@ -142,7 +146,7 @@ class CompiledModel:
                     raise SimulationError(
                         f"{self.name}: unknown parameter {key!r}; parameters are "
                         f"{', '.join(self.parameters)}")
-                out[self._param_index[key]] = float(value)
+                out[self._param_index[key]] = self._vector([value], 1, f"parameter {key}")[0]
         else:
             out = self._vector(p, len(self.parameters), "p")
         if not np.all(np.isfinite(out)):
@@ -238,10 +242,14 @@ class CompiledModel:
             raise self._mass_matrix_error(status, t, x_buf.copy(), p_arr)
 
         def f(t, x, out=None):
-            if np.shape(x) != (nx,) or np.iscomplexobj(x):
-                x = self._vector(x, nx, "x")     # raises the clear error
-            x_buf[:] = x
-            status = rhs(t, x_ptr, u_ptr, p_ptr, out_ptr)
+            try:
+                if np.shape(x) != (nx,) or np.iscomplexobj(x):
+                    raise ValueError(x)
+                x_buf[:] = x
+                status = rhs(t, x_ptr, u_ptr, p_ptr, out_ptr)
+            except (TypeError, ValueError):      # the clear error, off the fast path
+                x_buf[:] = self._vector(x, nx, "x")
+                status = rhs(self._time(t), x_ptr, u_ptr, p_ptr, out_ptr)
             if status:
                 fail(status, t)
             if out is None:
@@ -250,7 +258,10 @@ class CompiledModel:
             return out
 
         def inplace(t):
-            status = rhs(t, x_ptr, u_ptr, p_ptr, out_ptr)
+            try:
+                status = rhs(t, x_ptr, u_ptr, p_ptr, out_ptr)
+            except TypeError:
+                status = rhs(self._time(t), x_ptr, u_ptr, p_ptr, out_ptr)
             if status:
                 fail(status, t)
 
