@@ -203,3 +203,20 @@ def test_compiled_model_pickles_and_runs_in_another_process(dp):
     with concurrent.futures.ProcessPoolExecutor(1) as pool:
         remote = pool.submit(dp.rhs, 0.0, x).result()
     assert np.array_equal(remote, dp.rhs(0.0, x))
+
+
+@pytest.mark.parametrize("mass, message", [
+    ("1.7e308", "overflows double precision"),
+    ("5e-324", "too small for double precision"),
+])
+def test_defaults_beyond_double_range_are_named_not_called_massless(tmp_path, mass, message):
+    """A mass of 1e308 overflows A, one of 5e-324 underflows it: the error says so and
+    names the parameter, instead of "coordinate 'q' moves no mass"."""
+    from conftest import MODELS
+    text = (MODELS / "double_pendulum.yaml").read_text()
+    path = tmp_path / "extreme.yaml"
+    path.write_text(text.replace("m1: 1.0, m2: 1.0", f"m1: {mass}, m2: {mass}"))
+    assert f"m1: {mass}, m2: {mass}" in path.read_text()
+    with pytest.raises(DerivationError, match=message) as exc:
+        modelgen.load(path, tmp_path / "out")
+    assert "m1 = " in str(exc.value) and "moves no mass" not in str(exc.value)

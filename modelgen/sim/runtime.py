@@ -450,6 +450,7 @@ def check_mass_matrix(cm: CompiledModel, samples: int = 3, seed: int = 0) -> Non
     failing = None
     for _ in range(samples):
         A = cm.mass_matrix(rng.uniform(-np.pi, np.pi, cm.n))
+        _check_representable(cm, A)
         pivot = _cholesky_pivot(A)
         if pivot is None:
             pivot = negligible_diagonal(A)    # zero up to rounding
@@ -462,6 +463,28 @@ def check_mass_matrix(cm: CompiledModel, samples: int = 3, seed: int = 0) -> Non
         f"{name!r} (row {failing + 1} of A) moves no mass or inertia independently of "
         f"the coordinates before it; give the bodies it moves mass and inertia about its "
         f"axis, or remove the coordinate")
+
+
+#: a mass matrix whose largest entry is below this cannot be factorized meaningfully
+#: in double precision (its pivots underflow to subnormal numbers)
+TINY_MASS_MATRIX = 1e-250
+
+
+def _check_representable(cm: CompiledModel, A) -> None:
+    """Refuse default parameters whose mass matrix overflows or underflows double
+    precision, saying so (not "moves no mass")."""
+    extremes = ", ".join(f"{name} = {value:g}" for name, value in cm.parameters.items()
+                         if value != 0 and not 1e-100 < abs(value) < 1e100) or "none"
+    if not np.all(np.isfinite(A)):
+        raise DerivationError(
+            f"{cm.name}: the mass matrix overflows double precision with the default "
+            f"parameters (parameters beyond 1e+-100: {extremes}); choose units in which "
+            f"masses, lengths and inertias are nearer 1")
+    if np.max(np.abs(A)) < TINY_MASS_MATRIX:
+        raise DerivationError(
+            f"{cm.name}: the mass matrix is below {TINY_MASS_MATRIX:g} with the default "
+            f"parameters, too small for double precision (parameters beyond 1e+-100: "
+            f"{extremes}); choose units in which masses, lengths and inertias are nearer 1")
 
 
 def _cholesky_pivot(A, tol=PIVOT_TOL):
