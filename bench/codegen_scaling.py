@@ -382,28 +382,10 @@ def build_mujoco_harness(work: Path):
 # ---------------------------------------------------------------------------------
 
 def chain_mjcf(n: int, params: dict) -> str:
-    """MJCF of ``spatial_chain(n)`` with the given parameter values (see the docstring)."""
-    r, g = params["r"], params["g"]
-    lines = [f'<mujoco model="spatial_chain_{n}">',
-             '  <compiler inertiafromgeom="false"/>',
-             f'  <option timestep="0.001" integrator="RK4" gravity="0 0 {-g!r}">',
-             '    <flag contact="disable"/>',
-             '  </option>',
-             '  <worldbody>']
-    for i in range(1, n + 1):
-        m, l = params[f"m{i}"], params[f"l{i}"]
-        pos = "0 0 0" if i == 1 else f"{params[f'l{i - 1}']!r} 0 0"
-        axis = "0 0 1" if i % 2 else "0 1 0"
-        axial, transverse = m * r ** 2 / 2, m * l ** 2 / 12 + m * r ** 2 / 4
-        pad = "  " * (i + 1)
-        lines += [f'{pad}<body name="rod{i}" pos="{pos}">',
-                  f'{pad}  <joint name="q{i}" type="hinge" axis="{axis}" damping="0" '
-                  f'armature="0"/>',
-                  f'{pad}  <inertial pos="{l / 2!r} 0 0" mass="{m!r}" '
-                  f'diaginertia="{axial!r} {transverse!r} {transverse!r}"/>']
-    lines += ["  " * (i + 1) + "</body>" for i in range(n, 0, -1)]
-    lines += ['  </worldbody>', '</mujoco>', '']
-    return "\n".join(lines)
+    """MJCF of ``spatial_chain(n)`` with the given parameter values (one definition,
+    in :func:`modelgen.bench.hardcase_models.chain_mjcf`)."""
+    from modelgen.bench.hardcase_models import chain_mjcf as mjcf
+    return mjcf(n, params)
 
 
 def mujoco_check(cm, n: int, states, work: Path):
