@@ -28,9 +28,13 @@ from modelgen.version import __version__
 
 
 def _generate(args) -> int:
-    from modelgen.model import as_spec
+    from modelgen.model import as_spec, is_scene_file
     from modelgen.sim.load import generate_model
     t0 = time.perf_counter()
+    if is_scene_file(args.model):
+        raise ModelgenError(f"{args.model} is a scene file, not a model; fix: run it with "
+                            f"`modelgen simulate {args.model}` (which builds its reduced model), "
+                            f"or generate the model file it names")
     spec = as_spec(args.model)
     t_load = time.perf_counter() - t0
     g = generate_model(spec, args.output, force=args.force, jacobian=args.jacobian,
@@ -211,9 +215,17 @@ def _simulate(args) -> int:
 
 def _bench(args) -> int:
     import modelgen.bench as wp
+    from modelgen.model import is_scene_file
 
     def progress(message):
         print(f"... {message}", file=sys.stderr, flush=True)
+    if not Path(args.scene).is_file():
+        raise ModelgenError(f"{args.scene}: no such file; fix: give a scene file, e.g. "
+                            f"models/scenes/dp_free.yaml")
+    if not is_scene_file(args.scene):
+        raise ModelgenError(f"{args.scene} is a model file, not a scene; fix: `modelgen bench` "
+                            f"takes a scene (it names the initial state, time span and "
+                            f"effects), e.g. models/scenes/dp_free.yaml")
     t0 = time.perf_counter()
     progress(f"{args.scene}: building the model and the reference (two methods at 1e-14)")
     problem = wp.scene_problem(args.scene, args.build_dir, quick=args.quick)

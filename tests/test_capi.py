@@ -72,3 +72,11 @@ def test_work_size_macro_and_function_equal_the_python_formula(sp, tmp_path):
     # and the module's mg_work_size agrees
     assert sp.lib.mg_work_size(4, 1, 3) == capi.work_size(4, 1, 3)
     assert np.all([sp.lib.mg_work_size(n, 0, 0) == capi.work_size(n, 0, 0) for n in (1, 2, 60)])
+
+
+def test_the_scene_format_names_the_methods_of_the_c_table():
+    """Scene files are read by the model stage, which cannot import codegen: its method
+    vocabulary must equal the C interface table's, method for method."""
+    from modelgen.model import scene
+    assert scene.METHODS == tuple(capi.METHODS)
+    assert set(scene.FIXED_STEP_METHODS) == {m.name for m in capi.METHOD_LIST if not m.adaptive}

@@ -132,3 +132,16 @@ def test_builds_go_to_the_user_cache_not_the_current_directory(tmp_path):
     assert list(cwd.iterdir()) == []
     assert (cache / "models" / "simple_pendulum" / "simple_pendulum.c").is_file()
     assert str(cache / "models" / "simple_pendulum") in proc.stdout
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["generate", "models/scenes/dp_free.yaml"], "is a scene file, not a model; fix: run it with"),
+    (["bench", "models/double_pendulum.yaml"], "is a model file, not a scene"),
+    (["bench", "models/nonexistent.yaml"], "no such file"),
+])
+def test_the_wrong_kind_of_file_says_which_command_to_use(argv, message, capsys):
+    from conftest import ROOT
+    argv = [argv[0], str(ROOT / argv[1])]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert message in err and "building" not in err
