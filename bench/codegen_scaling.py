@@ -321,7 +321,9 @@ def build_rhs_harness(cm, x0, work: Path):
     _run_checked([*cc, "-O2", "-std=c99", f"-I{src_dir}", "-c", str(harness),
                   "-o", str(work / "rhs_bench.o")])
     exe = work / "rhs_bench"
-    _run_checked([*cc, str(work / "rhs_bench.o"), str(work / "model_rhs.o"), "-o", str(exe),
+    # the model's integrate wrappers call the shared integrators, copied beside it
+    _run_checked([*cc, "-O2", "-std=c99", f"-I{src_dir}", str(work / "rhs_bench.o"),
+                  str(work / "model_rhs.o"), str(src_dir / "mg_integrate.c"), "-o", str(exe),
                   "-lm"])
     return exe, shlex.join(cmd)
 

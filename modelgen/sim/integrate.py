@@ -280,7 +280,7 @@ def c_constants(cm) -> dict:
 
 def simulate(cm, x0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10, u=None,
              p=None, events=None, *, step=None, first_step=None, max_step=None,
-             max_steps=100_000, chunk=2048, interrupt=None) -> Result:
+             max_steps=100_000, chunk=2048, interrupt=None, outputs=True) -> Result:
     """Integrate the compiled model ``cm`` in C from ``x0`` over ``t_span``.
 
     ``t_eval`` samples the solution through each method's dense output (the
@@ -296,7 +296,8 @@ def simulate(cm, x0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10
     call when every step is recorded.  ``interrupt`` is None or a writable
     numpy ``intc`` array of one element that the C polls every step: set it
     nonzero (from another thread, a signal handler or a callback) to stop with
-    status INTERRUPTED and the trajectory so far.  A failure returns what was
+    status INTERRUPTED and the trajectory so far.  With ``outputs`` a scene's
+    outputs are recorded by the C at every row (``res.outputs``).  A failure returns what was
     computed up to it, with ``status < 0`` and a message naming the time (and
     the state).
 
@@ -358,7 +359,8 @@ def simulate(cm, x0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10
     out = ffi.new("mg_output *")
     out.stop = ptr(stop)
     resume = None
-    t_parts, x_parts, ev_t, ev_x, ev_i = [], [], [], [], []
+    t_parts, x_parts, y_parts, ev_t, ev_x, ev_i = [], [], [], [], [], []
+    ny = len(cm.output_columns) if outputs else 0
     capacity, ev_capacity = int(max(chunk, 2)), 64 * max(n_ev, 1)
     remaining = times
     steps_left = max_steps
@@ -370,11 +372,13 @@ def simulate(cm, x0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10
         else:
             rows_max, t_eval_arg = len(remaining), (remaining if len(remaining) else np.array([t1]))
         t_out, x_out = np.empty(max(rows_max, 1)), np.empty((max(rows_max, 1), nx))
+        y_out = np.empty((max(rows_max, 1), max(ny, 1)))
         t_found, x_found = np.empty(ev_capacity), np.empty((ev_capacity, nx))
         which = np.empty(ev_capacity, dtype=np.intc)
         out.capacity = rows_max
         out.t_eval = ffi.NULL if t_eval_arg is None else ptr(t_eval_arg)
         out.t, out.x = ptr(t_out), ptr(x_out)
+        out.y = ptr(y_out) if ny else ffi.NULL      # the scene's outputs, from the C
         out.events_capacity = ev_capacity
         out.t_events, out.x_events = ptr(t_found), ptr(x_found)
         out.which_events = ffi.from_buffer("int[]", which)
@@ -386,6 +390,7 @@ def simulate(cm, x0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10
         skip = 1 if (times is None and t_parts) else 0   # a continuation repeats its start
         t_parts.append(t_out[skip:rows].copy())
         x_parts.append(x_out[skip:rows].copy())
+        y_parts.append(y_out[skip:rows, :ny].copy())
         ev_t.append(t_found[:k].copy())
         ev_x.append(x_found[:k].copy())
         ev_i.append(which[:k].copy())
@@ -430,6 +435,11 @@ def simulate(cm, x0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10
         y_events=[ex[ei == i] for i in range(n_ev)] if n_ev else None,
         t_fail=float(stop[2]) if status < 0 else None,
         **{name: int(stats_total[name]) for name in STAT_NAMES if name != "pivot"})
+    if ny:
+        y = np.concatenate(y_parts).reshape(-1, ny)
+        res.outputs = {name: y[:, [cm.output_columns.index(c) for c in cols]]
+                       for name, cols in cm.outputs.items()}
+        res.output_columns = dict(cm.outputs)
     if failure is not None:
         res.info["exception"] = failure
     return res

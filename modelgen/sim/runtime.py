@@ -335,7 +335,7 @@ class CompiledModel:
             options["max_steps"] = max_steps
         def run(times):
             return integrate.simulate(self, x0, t_span, times, method, rtol, atol, u, p,
-                                      events, **options)
+                                      events, outputs=outputs, **options)
         res = run(t_eval)
         if step is not None:
             warning = self.stability_warning(method, step, t_span[0], x0, u, p)
@@ -345,8 +345,6 @@ class CompiledModel:
         if dense_output:
             steps = res if t_eval is None else run(None)
             res.sol = self._dense(steps, run)
-        if outputs and self.output_columns:
-            self._record_outputs(res, u, p)
         return res
 
     @staticmethod
@@ -393,14 +391,6 @@ class CompiledModel:
                 f"h |lambda|max = {float(step) * lam:.3g} > {limit:g} (|lambda|max = "
                 f"{lam:.3g} 1/s at the start), so the result is unreliable; use a step "
                 f"below {limit / lam:.3g} s or an implicit method (rodas, gauss4)")
-
-    def _record_outputs(self, res, u, p) -> None:
-        """The scene's outputs at every recorded time (res.outputs, res.output_columns)."""
-        y = np.array([self.output_values(t, x, _input_at(self, u, t, x), p)
-                      for t, x in zip(res.t, res.y.T)]).reshape(len(res.t), -1)
-        res.outputs = {name: y[:, [self.output_columns.index(c) for c in cols]]
-                       for name, cols in self.outputs.items()}
-        res.output_columns = dict(self.outputs)
 
     def energies(self, res, p=None) -> np.ndarray:
         """Kinetic and potential energy at every time of a result, shape (n_times, 2)."""

@@ -89,16 +89,18 @@ class Scene:
         method = method_of(s.method)
         lam = self.stiffness()
         span = s.t_end - s.t_start
-        stability_steps = lam * span / STABILITY_LIMIT.get(method.name, 3.0)
+        # implicit methods have no limit: a nominal 3 (about the explicit ones') says how
+        # many steps an explicit method would need
+        limit = STABILITY_LIMIT.get(method.name, 3.0)
+        stability_steps = lam * span / limit
         head = (f"stiff-prone effects: {', '.join(s.stiff_effects)}; |lambda|max = "
                 f"{lam:.3g} 1/s at the start (moving and at rest)")
         if method.implicit:
             stiff = "STIFF, " if stability_steps > STIFF_STEPS else ""
             return f"{head} ({stiff}handled by {method.name}, which is implicit)"
-        if not method.adaptive and s.step * lam > STABILITY_LIMIT.get(method.name, 2.8):
+        if not method.adaptive and s.step * lam > limit:
             return (f"{head}: WARNING the step {s.step:g} s is beyond {method.name}'s "
-                    f"stability limit ({STABILITY_LIMIT.get(method.name, 2.8):g}/|lambda|max "
-                    f"= {STABILITY_LIMIT.get(method.name, 2.8) / lam:.3g} s): the result "
+                    f"stability limit ({limit:g}/|lambda|max = {limit / lam:.3g} s): the result "
                     f"will be wrong; use a smaller step or method: rodas")
         if stability_steps > STIFF_STEPS:
             return (f"{head}: STIFF, {method.name} needs about {stability_steps:.2g} steps for "
