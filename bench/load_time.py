@@ -218,7 +218,7 @@ def main(argv=None) -> int:
         for name, built in (("double pendulum", dp), (f"chain {CHAIN_LINKS}", chain)):
             for part, level, seconds, cpu in compile_breakdown(built):
                 print(f"| {name} | {part} | {level} | {seconds * 1e3:.0f} | {cpu * 1e3:.0f} |")
-        print("\n(the builds run these and the cffi wrapper in parallel, then link)")
+        print("\n(the builds run the two parts in parallel, then link; no per-model cffi wrapper is compiled: Python calls the library through the runtime module, built once)")
         if args.profile:
             profile(lambda: edit_round(path, text, 2.0, out_dir), args.profile,
                     "edited double pendulum -> loaded")

@@ -23,6 +23,7 @@ import pytest
 
 import modelgen
 from modelgen.codegen import build
+from modelgen.codegen.pipeline import runtime
 from modelgen.errors import BuildError
 from modelgen.sim.runtime import CompiledModel
 
@@ -191,16 +192,30 @@ def test_unsplittable_cflags_are_a_build_error(monkeypatch, tmp_path):
 
 
 def test_missing_python_headers_name_the_package_to_install(monkeypatch, tmp_path):
+    """Only the runtime module (built once, by cffi through setuptools) includes
+    Python.h; a model's own library never does."""
     fake = tmp_path / "fakecc"
     fake.write_text('#!/bin/sh\necho "x.c:1:10: fatal error: Python.h: No such file or '
                     'directory"\nexit 1\n')
     fake.chmod(0o755)
     monkeypatch.setenv("CC", str(fake))
+    monkeypatch.setenv("MODELGEN_CACHE_DIR", str(tmp_path / "cache"))
     with pytest.raises(BuildError) as info:
-        modelgen.generate_model(PENDULUM, tmp_path / "out")
+        runtime()
     message = str(info.value)
-    assert "python3-dev" in message and "exit status: 1" in message
-    assert str(fake) in message and "fatal error: Python.h" in message
+    assert "python3-dev" in message and "fatal error: Python.h" in message
+
+
+def test_a_model_library_includes_no_python(pristine):
+    """The model's code compiles without Python's headers: its C includes none,
+    and its library needs no symbol of Python's."""
+    out, generated = pristine
+    for path in out.glob("*.[ch]"):
+        assert "Python.h" not in path.read_text(), path
+    symbols = subprocess.run(["nm", "-D", "--undefined-only", str(generated.build.module_path)],
+                             capture_output=True, text=True)
+    if symbols.returncode == 0:
+        assert "Py" not in symbols.stdout, symbols.stdout
 
 
 def test_a_file_where_the_output_directory_should_be_is_a_build_error(tmp_path):
@@ -246,7 +261,7 @@ def test_old_modules_are_removed_and_variants_do_not_rebuild_each_other(tmp_path
                 for i in range(build.KEEP_BUILDS + 1)]
     first = [modelgen.generate_model(v, tmp_path) for v in variants]
     assert not any(g.build.cached for g in first)
-    modules = sorted(p.name for p in tmp_path.glob("_mg_simple_pendulum_*"))
+    modules = sorted(p.name for p in tmp_path.glob("lib_mg_simple_pendulum_*"))
     assert len(modules) == build.KEEP_BUILDS
     assert first[0].build.module_path.name not in modules
     assert len(list(tmp_path.glob("manifest*.json"))) == build.KEEP_BUILDS

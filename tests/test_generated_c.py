@@ -57,7 +57,7 @@ LARGE_CHAIN = 12
 HASH_ENV = ("CC", "MODELGEN_CFLAGS")
 #: Every function a model exports, without the "<name>_" prefix; written out
 #: here rather than taken from modelgen.codegen.emit.public_api, which renders the header.
-EXPORTED = ("abi_version", "default_parameters", "mass_matrix", "velocity_terms",
+EXPORTED = ("abi_version", "dimensions", "default_parameters", "mass_matrix", "velocity_terms",
             "generalized_forces", "rhs", "energy", "body_poses",
             "system", "jacobian_fd", "integrate", "integrate_batch")
 #: The model-independent integrator files copied next to every model's C.
@@ -236,6 +236,16 @@ def _checker(model_dir: Path, name: str) -> str:
                 f"        double J[{N}_NX * {N}_NX];",
                 f"        if ({fn}(0.25, x, u, p, J) != 0) ++failures;",
                 f"        for (i = 0; i < {N}_NX * {N}_NX; ++i) if (!(J[i] - J[i] == 0.0)) ++failures;",
+                "    }",
+                f'    printf("called {fn}\\n");']
+            continue
+        if fn == f"{name}_dimensions":
+            lines += [
+                "    {",
+                "        int d[6];",
+                f"        {fn}(d);",
+                f"        if (d[0] != {N}_NQ || d[1] != {N}_NX || d[2] != {N}_NP || d[3] != {N}_NU"
+                f" || d[4] != {N}_NBODIES || d[5] != {N}_NY) ++failures;",
                 "    }",
                 f'    printf("called {fn}\\n");']
             continue
@@ -566,17 +576,16 @@ print("cached", modelgen.generate_model(spec, sys.argv[2]).build.cached)
 """
 
 _CHECK_MODULE = """
-import importlib.util, json, sys
+import ctypes, json, sys
 from pathlib import Path
 d = Path(sys.argv[1])
 m = json.loads((d / "manifest.json").read_text())
-spec = importlib.util.spec_from_file_location(m["module_name"], d / m["module_file"])
-mod = importlib.util.module_from_spec(spec)
-spec.loader.exec_module(mod)
-ffi, lib = mod.ffi, mod.lib
-p, u, out = ffi.new("double[5]"), ffi.new("double[1]"), ffi.new("double[4]")
+lib = ctypes.CDLL(str(d / m["module_file"]))     # a plain C library: no modelgen needed
+D = ctypes.c_double
+p, u, out = (D * 5)(), (D * 1)(), (D * 4)()
 lib.double_pendulum_default_parameters(p)
-status = lib.double_pendulum_rhs(0.0, ffi.new("double[]", [-0.5, 0.5, 0.0, 0.0]), u, p, out)
+lib.double_pendulum_rhs.argtypes = [D] + [ctypes.POINTER(D)] * 4
+status = lib.double_pendulum_rhs(0.0, (D * 4)(-0.5, 0.5, 0.0, 0.0), u, p, out)
 print(status, *[repr(v) for v in out])
 """
 

@@ -1,8 +1,21 @@
-"""Build stage: C sources -> a per-model cffi extension module.
+"""Build stage: C sources -> a model's plain shared library, plus one runtime module.
 
-cffi runs in API mode, but we drive the compiler ourselves instead of going
-through setuptools: it is faster, it lets the model source and the wrapper
-compile in parallel, and a failure raises :class:`BuildError` with the exact
+A model compiles into a plain C shared library (``lib_mg_<name>_<hash>.so``:
+the model's code linked with the cached integrators), with no Python in it:
+no ``Python.h``, no per-model extension module.  Python calls its functions
+through the *runtime module* (:func:`runtime_module`), a cffi extension that
+is the same for every model and is built once per compiler, Python and
+interface version into the cache: it declares the interface of
+``mg_integrate.h`` and holds one trampoline per function signature of
+:data:`modelgen.codegen.capi.SIGNATURES`, which the loader
+(:mod:`modelgen.sim.library`) binds to the model's function pointers.  So a
+changed model costs one compile of its own C and a link (the double
+pendulum: about 0.15 s instead of 0.45 s with a cffi wrapper of its own).
+
+The runtime module is compiled by cffi through setuptools' compiler driver
+(which knows the platform's flags for Python extensions); a model's library
+is compiled by calling the C compiler directly (two parts in parallel for
+large models), and a failure raises :class:`BuildError` with the exact
 command and the compiler's full output (nothing is swallowed).
 
 The integrators (``mg_integrate.c``, the same for every model) are compiled
@@ -42,6 +55,7 @@ import re
 import shlex
 import shutil
 import subprocess
+import sys
 import sysconfig
 import tempfile
 import time
@@ -66,10 +80,11 @@ from modelgen.errors import BuildError
 #: to -O1 as soon as its routines are cut into parts.
 O1_ABOVE = {0: 400, 1: 400, 2: 4000}
 #: Models whose largest routine has more statements are compiled as two parts
-#: in parallel (MG_PART 1 and 2); smaller ones in one process (part 0: the
-#: whole file), which beside the cffi wrapper's compile keeps both cores busy
-#: without a third process.
-SPLIT_ABOVE = 400
+#: in parallel (MG_PART 1: everything but the rhs, 2: the rhs and the
+#: integrators' entry points) when the machine has two cores; smaller ones in
+#: one process (part 0: the whole file).  Even the double pendulum gains: its
+#: file takes 0.09-0.10 s of compiler CPU at -O2, each part 0.05-0.06 s.
+SPLIT_ABOVE = 0
 BASE_FLAGS = ("-std=c99", "-fPIC", "-Wall", "-Wextra")
 #: Flags of mg_integrate.c (compiled once, on the integration hot path).
 INTEGRATOR_FLAGS = ("-O2", *BASE_FLAGS, "-Werror")
@@ -82,7 +97,8 @@ STALE_SECONDS = 3600
 MANIFEST_KEYS = {"name": str, "build_hash": str, "abi_version": int, "n": int,
                  "coordinates": list, "parameters": list, "inputs": list, "bodies": list,
                  "outputs": list, "module_name": str, "module_file": str,
-                 "module_size": int, "module_sha256": str, "manifest_sha256": str}
+                 "module_size": int, "module_sha256": str, "manifest_sha256": str,
+                 "functions": dict}
 FIX_COMPILER = "install a C compiler (e.g. apt install gcc) or set CC to one"
 FIX_PYTHON_H = ("install the Python development headers (e.g. apt install python3-dev, "
                 "dnf install python3-devel)")
@@ -323,7 +339,7 @@ def _locked(directory: Path):
 def _remove_old_builds(directory: Path, name: str, keep: str) -> None:
     """Keep the newest :data:`KEEP_BUILDS` modules of model ``name`` that have a
     manifest (``keep`` always among them); delete the others and their manifests."""
-    pattern = re.compile(rf"_mg_{re.escape(name)}_([0-9a-f]{{16}})\.")
+    pattern = re.compile(rf"lib_mg_{re.escape(name)}_([0-9a-f]{{16}})\.")
     modules = []
     for path in directory.iterdir():
         match = pattern.match(path.name)
@@ -357,11 +373,7 @@ def _run(commands: list, cwd: Path) -> None:
     for cmd, proc in procs:
         out, _ = proc.communicate()
         if proc.returncode != 0 and failure is None:
-            python_h = "Python.h" in out
-            failure = BuildError(
-                "the Python headers (Python.h) are missing" if python_h else "C compiler failed",
-                cmd, out, returncode=proc.returncode,
-                fix=FIX_PYTHON_H if python_h else None)
+            failure = BuildError("C compiler failed", cmd, out, returncode=proc.returncode)
     if failure:
         raise failure
 
@@ -379,19 +391,121 @@ def _write_if_changed(path: Path, text: str, tmpdir: Path) -> None:
     os.replace(tmp, path)
 
 
+class _Log:
+    def __init__(self, path: Path):
+        self.path = path
+
+    def read(self) -> str:
+        try:
+            return self.path.read_text(errors="replace")
+        except OSError:
+            return ""
+
+
+@contextlib.contextmanager
+def _captured_output(path: Path):
+    """Send this process's stdout and stderr (file descriptors 1 and 2, which the
+    compilers setuptools starts inherit) to ``path`` for the duration."""
+    saved = []
+    with open(path, "w") as sink:
+        for fd in (1, 2):
+            try:
+                saved.append((fd, os.dup(fd)))
+                os.dup2(sink.fileno(), fd)
+            except OSError:
+                pass
+        try:
+            with contextlib.redirect_stdout(sink), contextlib.redirect_stderr(sink):
+                yield _Log(path)
+        finally:
+            for fd, copy in saved:
+                os.dup2(copy, fd)
+                os.close(copy)
+
+
+def runtime_hash(integrator: dict, runtime: dict) -> str:
+    """Cache key of the runtime module: its sources, the integrators', the compiler,
+    flags, cffi and the Python ABI it is built for."""
+    h = hashlib.sha256()
+    for part in (runtime["cdef"], runtime["mg_runtime.c"], integrator_hash(integrator),
+                 cffi.__version__, sysconfig.get_config_var("EXT_SUFFIX") or "",
+                 sys.version):
+        h.update(part.encode())
+        h.update(b"\0")
+    return h.hexdigest()
+
+
+def runtime_module(integrator: dict, runtime: dict) -> tuple:
+    """(module name, path) of the compiled runtime module for these sources, from
+    the cache (``runtime/`` in :func:`cache_dir`) or built now (once: about 2 s)."""
+    directory = cache_dir() / "runtime"
+    module_name = f"_mg_runtime_{runtime_hash(integrator, runtime)[:16]}"
+    suffix = sysconfig.get_config_var("EXT_SUFFIX") or ".so"
+    target = directory / (module_name + suffix)
+    if target.is_file():
+        return module_name, target
+    tmp = _private_dir(directory, ".build-")
+    try:
+        with _locked(directory):
+            if target.is_file():                  # built by another process meanwhile
+                return module_name, target
+            for fname in ("mg_integrate.h", "mg_integrate.c"):
+                (tmp / fname).write_text(integrator[fname])
+            ffi = cffi.FFI()
+            ffi.cdef(runtime["cdef"])
+            ffi.set_source(module_name, runtime["mg_runtime.c"],
+                           sources=[str(tmp / "mg_integrate.c")], include_dirs=[str(tmp)],
+                           extra_compile_args=["-O2"],
+                           libraries=["m"] if os.name == "posix" else [])
+            include = Path(sysconfig.get_paths()["include"])
+            if not (include / "Python.h").is_file():
+                raise BuildError(f"the Python headers (Python.h) are missing from {include}",
+                                 fix=FIX_PYTHON_H)
+            try:
+                with _captured_output(tmp / "compiler.log") as log:
+                    built = tmp / ffi.compile(tmpdir=str(tmp), verbose=False)
+            except Exception as exc:              # setuptools' and cffi's errors alike
+                text = f"{log.read()}{exc}"
+                python_h = "Python.h" in text
+                raise BuildError(
+                    "the Python headers (Python.h) are missing" if python_h
+                    else "the runtime module (cffi) failed to build",
+                    ["cffi", "compile", module_name], text,
+                    fix=FIX_PYTHON_H if python_h else FIX_COMPILER) from None
+            os.replace(built, target)
+    except OSError as exc:
+        raise BuildError(f"the runtime module cannot be written to {directory} "
+                         f"({exc.strerror or exc})",
+                         fix="choose a writable cache (MODELGEN_CACHE_DIR)") from None
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    return module_name, target
+
+
+def library_suffix() -> str:
+    """File suffix of a model's shared library on this platform."""
+    return sysconfig.get_config_var("SHLIB_SUFFIX") or ".so"
+
+
+def link_command(objects: list, output: str) -> list:
+    """The command linking ``objects`` into the shared library ``output``."""
+    shared = ["-dynamiclib"] if sys.platform == "darwin" else ["-shared"]
+    return [*compiler(), *shared, *objects, "-o", output, "-lm"]
+
+
 def build_module(directory: Path, name: str, sources: dict, manifest: dict,
                  statements: int, integrator: dict) -> BuildResult:
-    """Compile ``sources`` (``<name>.c``, ``<name>.h``, ``cdef``) into ``directory``
-    and link them with the cached object of ``integrator`` (``mg_integrate.h``/``.c``).
+    """Compile ``sources`` (``<name>.c``, ``<name>.h``) into a shared library in
+    ``directory``, linked with the cached object of ``integrator``
+    (``mg_integrate.h``/``.c``).
 
-    ``manifest`` must hold ``build_hash``; the module is named after it so a
-    changed model never collides with an already imported one.
+    ``manifest`` must hold ``build_hash``; the library is named after it so a
+    changed model never collides with an already loaded one.
     """
     start = time.perf_counter()
     directory = Path(directory)
-    module_name = f"_mg_{name}_{manifest['build_hash'][:16]}"
-    suffix = sysconfig.get_config_var("EXT_SUFFIX") or ".so"
-    module_file = module_name + suffix
+    module_name = f"lib_mg_{name}_{manifest['build_hash'][:16]}"
+    module_file = module_name + library_suffix()
 
     tmp = _private_dir(directory, ".build-")
     remove_stale_builds(directory)
@@ -400,27 +514,14 @@ def build_module(directory: Path, name: str, sources: dict, manifest: dict,
         for fname in (f"{name}.c", f"{name}.h"):
             (tmp / fname).write_text(sources[fname])
         (tmp / "mg_integrate.h").write_text(integrator["mg_integrate.h"])
-        ffi = cffi.FFI()
-        ffi.cdef(sources["cdef"])
-        ffi.set_source(module_name, f'#include "{name}.h"')
-        with contextlib.redirect_stdout(io.StringIO()):   # cffi announces the file
-            ffi.emit_c_code(str(tmp / f"{module_name}.c"))
-
         cc = compiler()
-        py_include = sysconfig.get_paths()["include"]
-        parts = (1, 2) if statements > SPLIT_ABOVE else (0,)
+        parts = (1, 2) if statements > SPLIT_ABOVE and (os.cpu_count() or 1) > 1 else (0,)
         model_objs = [[*cc, *compile_flags(statements, part), "-Werror",
                        *([f"-DMG_PART={part}"] if part else []), "-c", f"{name}.c",
                        "-o", f"{name}_{part}.o"] for part in parts]
-        # the wrapper only converts arguments and calls the model: -O0 compiles it in
-        # 0.34 s instead of 0.51 s (edit-to-load of the double pendulum, min of 5) and the
-        # arm7 in-place rhs call measured 1.34 us against 1.42 us at -O1 (noise)
-        wrap_obj = [*cc, "-O0", "-fPIC", "-w", f"-I{py_include}", "-I.", "-c",
-                    f"{module_name}.c", "-o", f"{module_name}.o"]
-        _run([*model_objs, wrap_obj], tmp)
-        link = [*cc, "-shared", f"{module_name}.o", *(f"{name}_{part}.o" for part in parts),
-                str(integrator_obj), "-o", module_file, "-lm"]
-        _run([link], tmp)
+        _run(model_objs, tmp)
+        _run([link_command([*(f"{name}_{part}.o" for part in parts), str(integrator_obj)],
+                           module_file)], tmp)
 
         manifest = dict(manifest, module_name=module_name, module_file=module_file,
                         module_size=(tmp / module_file).stat().st_size,

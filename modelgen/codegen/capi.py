@@ -18,10 +18,11 @@ code for a failure), return ``MG_STATUS_<NAME>`` from the C, bump
 """
 from __future__ import annotations
 
+import re
 from typing import NamedTuple
 
 #: Version of the C interface (model functions and mg_integrate), checked by the loader.
-ABI_VERSION = 2
+ABI_VERSION = 3
 #: Prefix of every constant, type and function of the model-independent C.
 PREFIX = "MG"
 
@@ -209,6 +210,72 @@ FUNCTIONS = (
 )
 
 
+# -- the signatures of the model's exported functions ----------------------------------
+
+class Signature(NamedTuple):
+    """One C signature shared by exported model functions.  Python calls a model's
+    plain shared library through the model-independent runtime module's trampoline
+    ``mg_call_<name>(mg_fn_<name> fn, ...)``, one per signature, so no model needs
+    a compiled Python extension of its own."""
+    name: str
+    ret: str
+    params: tuple       # C parameter declarations, with names
+
+    @property
+    def types(self) -> tuple:
+        return tuple(_parameter_type(p) for p in self.params)
+
+
+_RHS_ARGS = ("double t", "const double *x", "const double *u", "const double *p")
+SIGNATURES = (
+    Signature("version", "int", ()),
+    Signature("p", "void", ("double *p",)),
+    Signature("dimensions", "void", ("int *d",)),
+    Signature("q_p", "void", ("const double *q", "const double *p", "double *out")),
+    Signature("q_qd_p", "void", ("const double *q", "const double *qd", "const double *p",
+                                 "double *out")),
+    Signature("t_q_qd_u_p", "void", ("double t", "const double *q", "const double *qd",
+                                     "const double *u", "const double *p", "double *out")),
+    Signature("t_x_u_p", "int", (*_RHS_ARGS, "double *out")),
+    Signature("t_x_u_p_void", "void", (*_RHS_ARGS, "double *out")),
+    Signature("linearize", "int", (*_RHS_ARGS, "double *A", "double *B", "double *C",
+                                   "double *D")),
+    Signature("system", "void", ("mg_system *system",)),
+    Signature("integrate", "int", (
+        "double t0", "double t1", "const double *x0", "const double *p",
+        "const mg_inputs *inputs", "const mg_options *options", "mg_output *output",
+        "mg_stats *stats", "double *work")),
+    Signature("integrate_batch", "int", (
+        "long n_runs", "double t0", "double t1", "const double *x0", "const double *p",
+        "long p_stride", "const mg_inputs *inputs", "const mg_options *options",
+        "long n_eval", "const double *t_eval", "double *x_out", "long *n_out", "int *status",
+        "mg_stats *stats", "double *stop", "double *work")),
+)
+
+
+def _parameter_type(declaration: str) -> str:
+    """``'const double *x'`` -> ``'const double *'``: the declaration without its name."""
+    match = re.fullmatch(r"\s*(.*?[\s*])(\w+)\s*", declaration)
+    if not match:
+        raise ValueError(f"not a C parameter declaration: {declaration!r}")
+    return " ".join(match.group(1).replace("*", " * ").split()).replace(" *", "*")
+
+
+def signature_of(ret: str, params: str) -> Signature:
+    """The :class:`Signature` of a prototype given as its return type and parameter text.
+
+    >>> signature_of("int", "double t, const double *x, const double *u, const double *p, double *J").name
+    't_x_u_p'
+    """
+    decls = () if params.strip() in ("", "void") else tuple(params.split(","))
+    types = tuple(_parameter_type(d) for d in decls)
+    for sig in SIGNATURES:
+        if sig.ret == ret and sig.types == types:
+            return sig
+    raise KeyError(f"no Signature in capi.SIGNATURES for {ret} ({params}); add one and bump "
+                   f"ABI_VERSION")
+
+
 def struct_fields(name: str) -> tuple:
     """The (declaration, field, comment) rows of one struct of ``STRUCTS``."""
     for struct, _, fields in STRUCTS:
@@ -264,4 +331,8 @@ def context() -> dict:
         "stop_slots": list(STOP_SLOTS),
         "work_size": WORK_SIZE_C,
         "functions": [{"ret": r, "name": n, "params": a, "doc": d} for r, n, a, d in FUNCTIONS],
+        "signatures": [{"name": s.name, "ret": s.ret, "params": ", ".join(s.params) or "void",
+                        "types": ", ".join(s.types) or "void",
+                        "args": ", ".join(p.split()[-1].lstrip("*") for p in s.params)}
+                       for s in SIGNATURES],
     }

@@ -29,7 +29,7 @@ from modelgen.codegen.printer import ModelPrinter
 #: Version of the generated C ABI, checked by the Python loader (the C interface table's).
 ABI_VERSION = capi.ABI_VERSION
 #: The templates of a model's own code (the model hash covers these only).
-MODEL_TEMPLATES = ("model.c.j2", "model.h.j2", "cdef.h.j2", "macros.j2")
+MODEL_TEMPLATES = ("model.c.j2", "model.h.j2", "macros.j2")
 #: The model-independent integrator files, rendered from modelgen.codegen.capi alone.
 INTEGRATOR_FILES = ("mg_integrate.h", "mg_integrate.c")
 #: Statements per noinline part of a large routine.
@@ -83,6 +83,15 @@ def integrator_sources() -> dict:
         path = templates_dir() / (name if name.endswith(".j2") else f"{name}.j2")
         h.update(path.read_bytes())
     return dict(_integrator_sources(h.hexdigest()))
+
+
+def runtime_sources() -> dict:
+    """The runtime module's cffi ``cdef`` and C source (``mg_runtime.c``): the
+    trampolines of :data:`modelgen.codegen.capi.SIGNATURES` and the interface of
+    ``mg_integrate.h``; the same for every model."""
+    context = dict(capi=capi.context(), version=__version__, template="mg_runtime.c.j2")
+    return {"cdef": render("mg_runtime.c.j2", dict(context, cdef=True)),
+            "mg_runtime.c": render("mg_runtime.c.j2", dict(context, cdef=False))}
 
 
 def render(template: str, context: dict) -> str:
@@ -279,7 +288,8 @@ def public_api(name: str, n: int, n_p: int, n_u: int, n_b: int, n_y: int = 0,
                has_jacobian: bool = False) -> list:
     """Prototypes and documentation of every exported function.
 
-    The header and the cffi ``cdef`` are both rendered from this one list.
+    The header is rendered from this one list, and the manifest records each
+    function's :class:`~modelgen.codegen.capi.Signature` (how Python calls it).
     """
     P = f"p: {n_p} parameters (see {name}_default_parameters)"
     extra = []
@@ -298,6 +308,9 @@ def public_api(name: str, n: int, n_p: int, n_u: int, n_b: int, n_y: int = 0,
     return extra + [
         {"ret": "int", "name": f"{name}_abi_version", "params": "void",
          "doc": [f"Returns the ABI version ({ABI_VERSION}) this file was generated for."]},
+        {"ret": "void", "name": f"{name}_dimensions", "params": "int *d",
+         "doc": [f"Writes the sizes d[6] = {{{name.upper()}_NQ, _NX, _NP, _NU, _NBODIES, _NY}}",
+                 "(what the loader checks a library against its manifest with)."]},
         {"ret": "void", "name": f"{name}_default_parameters", "params": "double *p",
          "doc": [f"Writes the {n_p} default parameter values into p, in declaration order."]},
         {"ret": "void", "name": f"{name}_mass_matrix",
@@ -366,10 +379,9 @@ def _integrator_api(name: str, n: int, n_p: int, n_u: int, n_y: int, has_jacobia
 
 
 def emit_sources(context: dict) -> dict:
-    """Render ``<name>.h``, ``<name>.c`` and the cffi cdef text."""
+    """Render ``<name>.h`` and ``<name>.c``."""
     name = context["name"]
     return {
         f"{name}.h": render("model.h.j2", dict(context, template="model.h.j2")),
         f"{name}.c": render("model.c.j2", dict(context, template="model.c.j2")),
-        "cdef": render("cdef.h.j2", dict(context, template="cdef.h.j2")),
     }

@@ -13,14 +13,15 @@ from pathlib import Path
 
 from modelgen.version import __version__
 from modelgen.codegen.build import (BuildResult, build_module, cache_dir, cache_lookup,
-                                    compiler, integrator_hash)
+                                    compiler, integrator_hash, runtime_module)
+from modelgen.codegen.capi import signature_of
 from modelgen.codegen.cse import make_routines
 from modelgen.derive.aba import ForwardDynamics, derive_aba, derive_aba_jacobian
 from modelgen.derive.dynamics import Equations, derive_equations
 from modelgen.derive.joint_tree import JointTree, extract_joint_tree
 from modelgen.errors import ModelError
 from modelgen.codegen.emit import (ABI_VERSION, emit_sources, integrator_sources, print_routine,
-                                   template_context, templates_digest)
+                                   runtime_sources, template_context, templates_digest)
 from modelgen.derive.jacobian import derive_jacobian_terms
 from modelgen.derive.kinematics import derive_kinematics
 from modelgen.derive.outputs import derive_outputs
@@ -78,12 +79,23 @@ def model_hash(spec: ModelSpec, outputs=(), jacobian: bool = False,
     return h.hexdigest()
 
 
+#: How a model is built and loaded (part of the cache key): a plain shared library
+#: called through the runtime module's trampolines.
+LIBRARY_FORMAT = "shared-library+runtime-trampolines"
+
+
+def runtime() -> tuple:
+    """(module name, path) of the compiled runtime module, built on first use."""
+    return runtime_module(integrator_sources(), runtime_sources())
+
+
 def build_hash(spec: ModelSpec, outputs=(), jacobian: bool = False,
                formulation: str = "crba") -> str:
     """Cache key of the compiled module: the model hash, the compiler and its flags,
     and the integrators it links (so a changed mg_integrate rebuilds every module)."""
     h = hashlib.sha256()
-    for part in (model_hash(spec, outputs, jacobian, formulation), " ".join(compiler()),
+    for part in (LIBRARY_FORMAT, model_hash(spec, outputs, jacobian, formulation),
+                 " ".join(compiler()),
                  os.environ.get("MODELGEN_CFLAGS", ""), integrator_hash(integrator_sources())):
         h.update(part.encode())
         h.update(b"\0")
@@ -238,6 +250,8 @@ def generate(spec: ModelSpec, out_dir=None, *, force: bool = False, outputs=(),
         "bodies": list(eqs.bodies),
         "outputs": [{"name": name, "columns": list(cols)}
                     for name, cols in zip(columns.names, columns.columns)] if columns else [],
+        "functions": {f["name"]: signature_of(f["ret"], f["params"]).name
+                      for f in context["api"]},
         "ops": {f.name: {"before_cse": f.ops_before, "after_cse": f.ops_after,
                          "statements": f.statements} for f in functions.values()},
     }

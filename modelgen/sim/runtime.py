@@ -1,14 +1,13 @@
 """Runtime stage: the compiled model as numpy-in, numpy-out Python callables.
 
-:class:`CompiledModel` wraps one generated cffi module.  Every method checks
+:class:`CompiledModel` wraps one model's compiled library (see
+:mod:`modelgen.sim.library`).  Every method checks
 its arguments (length, finiteness of parameters) and returns fresh arrays.
 For tight loops, :meth:`CompiledModel.rhs_function` returns a low-overhead
 callable with cached pointers and preallocated buffers.
 """
 from __future__ import annotations
 
-import importlib.util
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -17,19 +16,10 @@ from modelgen.codegen.build import manifest_problem
 from modelgen.codegen.emit import ABI_VERSION
 from modelgen.errors import BuildError, DerivationError, MassMatrixError, SimulationError
 from modelgen.sim import integrate
+from modelgen.sim.library import ModelLibrary
 from modelgen.sim.conditioning import (PIVOT_TOL, failing_pivot, failure_kind,
                                        negligible_diagonal)
 from modelgen.sim.result import DenseOutput, Result
-
-
-def _import(module_name: str, path: Path):
-    if module_name in sys.modules:
-        return sys.modules[module_name]
-    spec = importlib.util.spec_from_file_location(module_name, str(path))
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    sys.modules[module_name] = module
-    return module
 
 
 class CompiledModel:
@@ -58,8 +48,8 @@ class CompiledModel:
         #: names of the state x = [q, qd]: the coordinates, then their speeds
         self.state_names = self.coordinates + tuple(f"{c}_dot" for c in self.coordinates)
         self.path = Path(module_path)
-        module = _import(manifest["module_name"], self.path)
-        self.ffi, self.lib = module.ffi, module.lib
+        self.lib = ModelLibrary(manifest, self.path)
+        self.ffi = self.lib.ffi
         self._check_module()
         fn = lambda suffix: getattr(self.lib, f"{self.name}_{suffix}")   # noqa: E731
         self._mass_matrix = fn("mass_matrix")
@@ -75,27 +65,27 @@ class CompiledModel:
         self._param_index = {name: i for i, name in enumerate(self.parameters)}
 
     def _check_module(self) -> None:
-        """The module's own constants against the manifest: every buffer is sized
-        by names from the manifest, so a count that differs would overrun one."""
-        prefix = self.name.upper()
-        expected = {"ABI_VERSION": ABI_VERSION, "NQ": self.n, "NX": 2 * self.n,
-                    "NP": len(self.parameters), "NU": len(self.inputs),
-                    "NBODIES": len(self.bodies),
-                    "NY": sum(len(o["columns"]) for o in self.manifest["outputs"])}
-        for key, value in expected.items():
-            got = getattr(self.lib, f"{prefix}_{key}", None)
-            if got != value:
-                raise BuildError(f"{self.path}: the module's {prefix}_{key} is {got}, the "
-                                 f"manifest says {value}; the build is damaged, rebuild "
-                                 f"the model (force=True)")
+        """The library's own sizes against the manifest: every buffer is sized by
+        names from the manifest, so a count that differs would overrun one."""
         got = getattr(self.lib, f"{self.name}_abi_version")()
         if got != ABI_VERSION:
             raise BuildError(f"{self.path}: generated ABI version {got}, this modelgen "
                              f"expects {ABI_VERSION}; regenerate the model")
+        dims = self.ffi.new("int[6]")
+        getattr(self.lib, f"{self.name}_dimensions")(dims)
+        prefix = self.name.upper()
+        expected = {"NQ": self.n, "NX": 2 * self.n, "NP": len(self.parameters),
+                    "NU": len(self.inputs), "NBODIES": len(self.bodies),
+                    "NY": sum(len(o["columns"]) for o in self.manifest["outputs"])}
+        for got, (key, value) in zip(dims, expected.items()):
+            if got != value:
+                raise BuildError(f"{self.path}: the library's {prefix}_{key} is {got}, the "
+                                 f"manifest says {value}; the build is damaged, rebuild "
+                                 f"the model (force=True)")
 
     def __reduce__(self):
-        """Pickle as (manifest, module path): the unpickled model imports the same
-        compiled module, so it crosses process boundaries (multiprocessing,
+        """Pickle as (manifest, library path): the unpickled model loads the same
+        compiled library, so it crosses process boundaries (multiprocessing,
         concurrent.futures, joblib) on machines that share the build."""
         return (CompiledModel, (self.manifest, str(self.path)))
 
@@ -236,7 +226,10 @@ class CompiledModel:
         out_buf = np.zeros(nx)
         p_ptr, u_ptr = ffi.from_buffer("double[]", p_arr), ffi.from_buffer("double[]", u_arr)
         x_ptr, out_ptr = ffi.from_buffer("double[]", x_buf), ffi.from_buffer("double[]", out_buf)
-        rhs = self._rhs
+        call, pointer = self.lib.unbound(f"{self.name}_rhs")
+
+        def rhs(*args):          # only off the fast path (errors)
+            return call(pointer, *args)
 
         def fail(status, t):
             raise self._mass_matrix_error(status, t, x_buf.copy(), p_arr)
@@ -246,7 +239,7 @@ class CompiledModel:
                 if np.shape(x) != (nx,) or np.iscomplexobj(x):
                     raise ValueError(x)
                 x_buf[:] = x
-                status = rhs(t, x_ptr, u_ptr, p_ptr, out_ptr)
+                status = call(pointer, t, x_ptr, u_ptr, p_ptr, out_ptr)
             except (TypeError, ValueError):      # the clear error, off the fast path
                 x_buf[:] = self._vector(x, nx, "x")
                 status = rhs(self._time(t), x_ptr, u_ptr, p_ptr, out_ptr)
@@ -259,7 +252,7 @@ class CompiledModel:
 
         def inplace(t):
             try:
-                status = rhs(t, x_ptr, u_ptr, p_ptr, out_ptr)
+                status = call(pointer, t, x_ptr, u_ptr, p_ptr, out_ptr)
             except TypeError:
                 status = rhs(self._time(t), x_ptr, u_ptr, p_ptr, out_ptr)
             if status:

@@ -1,0 +1,84 @@
+"""Loader: a model's plain shared library, callable from Python through the runtime module.
+
+A built model is a C shared library with no Python in it (see
+:mod:`modelgen.codegen.build`).  :class:`ModelLibrary` opens it with
+:mod:`ctypes` (only to look its symbols up), and binds each exported function
+named in the manifest to the runtime module's cffi trampoline of that
+function's signature: ``lib.double_pendulum_rhs(t, x, u, p, out)`` is
+``runtime.mg_call_t_x_u_p(<pointer to double_pendulum_rhs>, t, x, u, p, out)``,
+a cffi call with one more argument.  Everything else of the runtime module
+(the ``MG_*`` constants, ``mg_work_size``) is reachable as an attribute too,
+and ``ffi`` is the runtime module's, so structs such as ``mg_options`` are
+created with it.
+
+>>> lib = ModelLibrary(manifest, path)                      # doctest: +SKIP
+>>> lib.double_pendulum_abi_version() == lib.MG_ABI_VERSION  # doctest: +SKIP
+True
+"""
+from __future__ import annotations
+
+import ctypes
+import functools
+import importlib.util
+import sys
+from pathlib import Path
+
+from modelgen.codegen.pipeline import runtime
+from modelgen.errors import BuildError
+
+
+@functools.lru_cache(maxsize=None)
+def runtime_module():
+    """The imported runtime module (``ffi``, ``lib``), built on first use."""
+    module_name, path = runtime()
+    if module_name in sys.modules:
+        return sys.modules[module_name]
+    spec = importlib.util.spec_from_file_location(module_name, str(path))
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    sys.modules[module_name] = module
+    return module
+
+
+class ModelLibrary:
+    """The functions of one model's shared library, as cffi callables."""
+
+    def __init__(self, manifest: dict, path: Path):
+        module = runtime_module()
+        self.ffi, self._runtime = module.ffi, module.lib
+        self.path = Path(path)
+        try:
+            self._dll = ctypes.CDLL(str(self.path))
+        except OSError as exc:
+            raise BuildError(f"{self.path} cannot be loaded ({exc}); rebuild the model "
+                             f"(force=True)") from None
+        functions = manifest.get("functions")
+        if not isinstance(functions, dict):
+            raise BuildError(f"{self.path}: the manifest lists no functions; rebuild the "
+                             f"model (force=True)")
+        for symbol, signature in functions.items():
+            trampoline = getattr(self._runtime, f"mg_call_{signature}", None)
+            address = self._address(symbol)
+            if trampoline is None or not isinstance(symbol, str) or address is None:
+                raise BuildError(f"{self.path}: the library has no function {symbol!r} of "
+                                 f"signature {signature!r}; rebuild the model (force=True)")
+            pointer = self.ffi.cast(f"mg_fn_{signature}", address)
+            setattr(self, symbol, functools.partial(trampoline, pointer))
+
+    def unbound(self, symbol: str) -> tuple:
+        """(trampoline, function pointer) of ``symbol``, for hot loops that pass
+        the pointer themselves (saves the partial's indirection)."""
+        bound = getattr(self, symbol)
+        return bound.func, bound.args[0]
+
+    def _address(self, symbol):
+        try:
+            return ctypes.cast(getattr(self._dll, symbol), ctypes.c_void_p).value
+        except (AttributeError, TypeError):
+            return None
+
+    def __getattr__(self, name):
+        # the runtime module's constants (MG_*) and functions (mg_work_size, ...)
+        if name.startswith("_"):
+            raise AttributeError(name)
+        return getattr(self._runtime, name)
