@@ -269,8 +269,17 @@ def _hard_cases(args) -> int:
     return 0
 
 
+class _Parser(argparse.ArgumentParser):
+    """An argument parser whose errors end with the fix: the help of the command at fault."""
+
+    def error(self, message):
+        self.print_usage(sys.stderr)
+        self.exit(EXIT["input"], f"{self.prog}: error: {message}; fix: see "
+                                 f"`{self.prog} --help` for the options\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="modelgen",
         description="Generate fast C code for the equations of motion of multibody models.")
     parser.add_argument("--version", action="version", version=f"modelgen {__version__}")
@@ -378,6 +387,8 @@ def build_parser() -> argparse.ArgumentParser:
     h.add_argument("--build-dir", default=None,
                    help="where the models are built (default: the per-user build cache)")
     h.set_defaults(func=_hard_cases)
+    for command in sub.choices.values():
+        command.set_defaults(command_parser=command)
     return parser
 
 
@@ -401,7 +412,9 @@ def exit_status(exc: BaseException) -> int:
 def main(argv=None) -> int:
     """Entry point; returns the exit status (see :data:`EXIT`)."""
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args, extra = parser.parse_known_args(argv)
+    if extra:     # the subcommand's own usage, not the top-level one
+        args.command_parser.error(f"unrecognized arguments: {' '.join(extra)}")
     try:
         return args.func(args)
     except KeyboardInterrupt:

@@ -145,3 +145,19 @@ def test_the_wrong_kind_of_file_says_which_command_to_use(argv, message, capsys)
     assert main(argv) == 2
     err = capsys.readouterr().err
     assert message in err and "building" not in err
+
+
+@pytest.mark.parametrize("argv, command", [
+    (["simulate", "--bogus", "x.yaml"], "simulate"),
+    (["generate", "--dt", "x", "m.yaml"], "generate"),
+    (["simulate", "m.yaml", "--t-end", "abc"], "simulate"),
+    (["bench", "s.yaml", "--quick", "--nope"], "bench"),
+    (["import"], "import"),
+])
+def test_bad_subcommand_flags_print_that_subcommands_usage_and_exit_2(argv, command):
+    proc = _modelgen(*argv)
+    assert proc.returncode == 2, proc.stderr
+    assert proc.stderr.startswith(f"usage: modelgen {command} "), proc.stderr
+    assert f"modelgen {command}: error: " in proc.stderr
+    assert f"fix: see `modelgen {command} --help`" in proc.stderr
+    assert "Traceback" not in proc.stderr
