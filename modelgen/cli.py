@@ -18,6 +18,7 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -107,7 +108,17 @@ def _parameter_overrides(parameters, items) -> dict:
     return values
 
 
+def _quietly(run, *args, **kwargs):
+    """``run(*args, **kwargs)`` without the max_steps RuntimeWarning: the CLI prints
+    the result's message (which says the same) itself."""
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message=".*max_steps", category=RuntimeWarning)
+        return run(*args, **kwargs)
+
+
 def _check_times(args) -> None:
+    if args.max_steps is not None and args.max_steps < 1:
+        raise ModelgenError(f"--max-steps must be a positive count, got {args.max_steps}")
     for flag, value in (("--t-end", args.t_end), ("--dt", args.dt), ("--sample", args.sample)):
         if value is not None and not (value > 0 and value < float("inf")):
             raise ModelgenError(f"{flag} must be a positive number of seconds, got {value!r}")
@@ -183,7 +194,7 @@ def _simulate_scene(args) -> int:
     x0 = scene.initial_state(init)
     print(scene.summary())
     progress(f"{spec.name}: integrating ({time.perf_counter() - t0:.2f} s so far)")
-    result = scene.run(p=p, x0=x0)
+    result = _quietly(scene.run, p=p, x0=x0, max_steps=args.max_steps)
     return _report(result, Path(args.output), spec.name, args, f"scene {spec.name}",
                    scene.conservative, animation=(spec.model, scene.model, p))
 
@@ -204,8 +215,8 @@ def _simulate(args) -> int:
     t_end, dt = args.t_end or 10.0, args.dt or 1e-3
     sample = args.sample or dt
     times = np.linspace(0.0, t_end, int(round(t_end / sample)) + 1)
-    result = cm.simulate(x0, (0.0, t_end), t_eval=times, method=method.name,
-                         step=None if method.adaptive else dt, p=p)
+    result = _quietly(cm.simulate, x0, (0.0, t_end), t_eval=times, method=method.name,
+                      step=None if method.adaptive else dt, p=p, max_steps=args.max_steps)
     result.energy = cm.energies(result, p)
     how = f"step {dt:g} s" if not method.adaptive else "rtol 1e-8"
     print(f"{cm.name}: {method.name}, {how}, t = 0..{t_end:g} s, {len(result.t)} samples")
@@ -323,6 +334,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--method", default=None,
                    help="integration method: rk4, dopri5, dop853, rodas, midpoint, gauss4 "
                         "(default: the scene's, or rk4 for a model)")
+    s.add_argument("--max-steps", type=int, default=None, metavar="N",
+                   help="most steps of the integrator (default 100000); a run that needs "
+                        "more stops with a warning saying so")
     s.add_argument("--init", action="append", metavar="NAME=VALUE",
                    help="initial coordinate or speed, e.g. q1=1.2 or q1_dot=0 (repeatable; "
                         "default 0)")

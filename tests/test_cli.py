@@ -161,3 +161,15 @@ def test_bad_subcommand_flags_print_that_subcommands_usage_and_exit_2(argv, comm
     assert f"modelgen {command}: error: " in proc.stderr
     assert f"fix: see `modelgen {command} --help`" in proc.stderr
     assert "Traceback" not in proc.stderr
+
+
+def test_max_steps_truncation_is_printed_with_the_flag_that_raises_it(tmp_path):
+    args = ("simulate", MODELS / "double_pendulum.yaml", "--init", "q1=1.5", "--method",
+            "dop853", "--t-end", "20", "--no-plot", "--build-dir", tmp_path / "b",
+            "-o", tmp_path / "out")
+    proc = _modelgen(*args, "--max-steps", "50")
+    assert proc.returncode == 4, proc.stderr
+    assert "simulation stopped: Maximum number of steps (50) reached" in proc.stderr
+    assert "--max-steps" in proc.stderr and "RuntimeWarning" not in proc.stderr
+    assert _modelgen(*args, "--max-steps", "0").returncode == 2
+    assert _modelgen(*args).returncode == 0

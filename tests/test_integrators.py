@@ -7,6 +7,7 @@ numpy finite differences, and conserved energy.
 from __future__ import annotations
 
 import re
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -374,6 +375,24 @@ def test_max_steps_returns_the_steps_taken(sp, method):
     assert res.message.startswith("Maximum number of steps (10) reached at t=")
     assert res.naccept + res.nreject == 10 and len(res.t) == res.naccept + 1
     assert 0 < res.t[-1] < 10
+
+
+def test_max_steps_truncation_warns_and_says_how_to_raise_it(dp):
+    """A run cut short by max_steps is not silent: a RuntimeWarning naming max_steps
+    (raised at the caller's line), and the message says how far it got and the fix;
+    the suggested budget then reaches t1."""
+    x0 = [1.5, 0.5, 0.0, 0.0]
+    with pytest.warns(RuntimeWarning, match=r"max_steps") as caught:
+        res = dp.simulate(x0, (0, 20), rtol=1e-12, atol=1e-12, max_steps=1000)
+    assert caught[0].filename == __file__
+    assert res.status == -1 and res.t[-1] < 20
+    assert "The run stopped at " in res.message and "% of t_span (0.0, 20.0)" in res.message
+    need = int(re.search(r"max_steps=([\d_]+)", res.message)[1])
+    assert need > 1000 and "--max-steps" in res.message
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        full = dp.simulate(x0, (0, 20), rtol=1e-12, atol=1e-12, max_steps=need)
+    assert full.success and full.t[-1] == 20.0
 
 
 @pytest.mark.parametrize("method", ALL_METHODS)

@@ -26,6 +26,7 @@ import concurrent.futures
 import functools
 import signal
 import threading
+import warnings
 
 import numpy as np
 
@@ -42,6 +43,7 @@ __all__ = ["METHODS", "ALIASES", "STATUS", "Method", "method_of",
 
 #: the C status codes are modelgen.codegen.capi's
 BUFFER_FULL = STATUS_BY_NAME["BUFFER_FULL"].code
+MAX_STEPS = STATUS_BY_NAME["MAX_STEPS"].code
 INTERRUPTED = STATUS_BY_NAME["INTERRUPTED"].code
 #: numpy's C long (the counters of the C API)
 _LONG = np.dtype("l")
@@ -425,6 +427,9 @@ def simulate(cm, x0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10
         message = f"{message.rstrip('.')}: {type(failure).__name__}: {failure}."
     if status < 0:
         message += _conditioning_note(cm, p_vec, x_start, stop[STOP_X:])
+    if status == MAX_STEPS:
+        message += _max_steps_note(max_steps, t_span, float(stop[0]))
+        warnings.warn(f"{cm.name}: {message}", RuntimeWarning, stacklevel=4)
     et, ex, ei = (np.concatenate(ev_t), np.concatenate(ev_x).reshape(-1, nx),
                   np.concatenate(ev_i))
     res = make_result(
@@ -443,6 +448,16 @@ def simulate(cm, x0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10
     if failure is not None:
         res.info["exception"] = failure
     return res
+
+
+def _max_steps_note(max_steps, t_span, t_reached) -> str:
+    """What a run truncated by ``max_steps`` missed and how to raise it."""
+    t0, t1 = (float(v) for v in t_span)
+    done = (t_reached - t0) / (t1 - t0)
+    need = f"{int(10 ** np.ceil(np.log10(1.2 * max_steps / done))):d}" if done > 0 else None
+    return (f" The run stopped at {100 * done:.3g}% of t_span ({t0!r}, {t1!r}); fix: raise "
+            f"max_steps (simulate(..., max_steps={need or 'N'}), or --max-steps "
+            f"{need or 'N'} on the command line), or loosen rtol/atol.")
 
 
 def _interruptible(fn, args, flag):

@@ -135,14 +135,15 @@ class Scene:
                 values[:, j] = np.interp(grid, sig.times, sig.values)
         return (np.array(grid), values, "hold" if hold else "linear")
 
-    def run(self, p=None, x0=None, u=None) -> Result:
+    def run(self, p=None, x0=None, u=None, max_steps=None) -> Result:
         """Integrate the scene with its method, sampled at its times; energies recorded.
 
         ``p`` overrides parameters, ``x0`` the initial state (an array, or a
         mapping of coordinate and speed names to values, missing ones taken
         from the scene), and ``u`` the scene's inputs (anything
         :meth:`CompiledModel.simulate` accepts, including a feedback callable
-        ``u(t, x)``).  Returns a :class:`~modelgen.sim.result.Result`.
+        ``u(t, x)``).  ``max_steps`` overrides the step budget of
+        :meth:`CompiledModel.simulate`.  Returns a :class:`~modelgen.sim.result.Result`.
         """
         s, cm = self.spec, self.model
         x0 = self.initial_state(x0)
@@ -150,7 +151,8 @@ class Scene:
         fixed = not method_of(s.method).adaptive
         times = _scene_times(s.t_start, s.t_end, s.sample_dt)
         res = cm.simulate(x0, (s.t_start, s.t_end), t_eval=times, method=s.method,
-                          rtol=s.rtol, atol=s.atol, u=u, p=p, step=s.step if fixed else None)
+                          rtol=s.rtol, atol=s.atol, u=u, p=p, step=s.step if fixed else None,
+                          max_steps=max_steps)
         res.energy = cm.energies(res, p)
         res.info.update(scene=s.name, conservative=self.conservative)
         return res
