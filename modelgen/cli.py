@@ -332,8 +332,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="sampling interval of the output [s] (default: the scene's, or "
                         "the step)")
     s.add_argument("--method", default=None,
-                   help="integration method: rk4, dopri5, dop853, rodas, midpoint, gauss4 "
-                        "(default: the scene's, or rk4 for a model)")
+                   help="integration method: rk4, dopri5, dop853, rodas, midpoint, gauss4, "
+                        "or solve_ivp's RK45, DOP853, Radau, BDF, LSODA (mapped to dopri5, "
+                        "dop853, rodas) (default: the scene's, or rk4 for a model)")
     s.add_argument("--max-steps", type=int, default=None, metavar="N",
                    help="most steps of the integrator (default 100000); a run that needs "
                         "more stops with a warning saying so")

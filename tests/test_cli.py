@@ -83,7 +83,7 @@ def test_python_dash_m_modelgen_prints_the_version():
     (["--set", "g=abc"], "'abc' is not a number"),
     (["--dt", "-1"], "--dt must be a positive number"),
     (["--init", "q9=1"], "--init q9: unknown state"),
-    (["--method", "rk45"], "unknown method 'rk45'"),
+    (["--method", "rk44"], "unknown method 'rk44'"),
 ])
 def test_scene_overrides_are_checked_with_exit_status_2(tmp_path, flags, message):
     from conftest import SCENES

@@ -566,10 +566,24 @@ def test_ctrl_c_stops_a_long_c_run_and_keeps_what_it_computed(tmp_path, dp):
     assert float(t_last) == 0.0          # no t_eval sample reached yet: the start is kept
 
 
+@pytest.mark.parametrize("name, method", [
+    ("RK45", "dopri5"), ("DOP853", "dop853"), ("Radau", "rodas"), ("BDF", "rodas"),
+    ("LSODA", "rodas"), ("rk45", "dopri5")])
+def test_solve_ivp_method_names_run_modelgens_methods(dp, name, method):
+    """solve_ivp's method names are accepted and run the mapped method, bit for bit."""
+    x0, span, t_eval = [1.5, 0.5, 0.0, 0.0], (0.0, 2.0), np.linspace(0.0, 2.0, 11)
+    alias = dp.simulate(x0, span, t_eval=t_eval, method=name, rtol=1e-9, atol=1e-9)
+    own = dp.simulate(x0, span, t_eval=t_eval, method=method, rtol=1e-9, atol=1e-9)
+    assert alias.success and alias.method == method
+    assert np.array_equal(alias.y, own.y) and alias.nfev == own.nfev
+
+
 @pytest.mark.parametrize("call, message", [
-    (lambda cm: cm.simulate([1, 0], (0, 1), method="rk45"), "unknown method 'rk45'"),
+    (lambda cm: cm.simulate([1, 0], (0, 1), method="rk44"), "unknown method 'rk44'"),
     (lambda cm: cm.simulate([1, 0], (0, 1), method="gauss4"), "has a fixed step: give step="),
-    (lambda cm: cm.simulate([1, 0], (1, 0)), "t_span must be finite and increasing"),
+    (lambda cm: cm.simulate([1, 0], (1, 0)), r"runs backwards in time.*fix: .*solve_ivp"),
+    (lambda cm: cm.simulate([1, 0], (1, 1)), "t_span must be increasing"),
+    (lambda cm: cm.simulate([1, 0], (0, np.inf)), "t_span must be finite"),
     (lambda cm: cm.simulate([1, 0], (0, 1), t_eval=[0.5, 2]), "t_eval must lie within"),
     (lambda cm: cm.simulate([1, 0], (0, 1), t_eval=[0.5, 0.2]), "t_eval must be sorted"),
     (lambda cm: cm.simulate([1, 0], (0, 1), rtol=-1), "rtol must be finite and >= 0"),

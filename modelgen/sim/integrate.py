@@ -13,7 +13,10 @@ of scipy's ``OdeResult``:
 Methods (``METHODS``): ``rk4`` (fixed step), ``dopri5`` and ``dop853``
 (Dormand-Prince, Hairer's step control and dense output), ``rodas``
 (Rosenbrock RODAS4, stiff, uses the Jacobian), ``midpoint`` and ``gauss4``
-(Gauss-Legendre, implicit, symplectic, fixed step).  Fixed-step methods need
+(Gauss-Legendre, implicit, symplectic, fixed step).  solve_ivp's names are
+aliases of these (``ALIASES``, case-insensitive): "RK45" runs dopri5, "DOP853"
+dop853, and "Radau", "BDF" and "LSODA" run rodas -- modelgen's own methods, not
+scipy's.  ``t_span`` must increase: the C integrators step forward only.  Fixed-step methods need
 ``step=``; the adaptive ones run with fixed steps too when given ``step=``.
 
 The method codes, C status codes and their messages, and the statistics are
@@ -132,8 +135,15 @@ def _span(t_span):
         t0, t1 = (float(v) for v in t_span)
     except (TypeError, ValueError) as exc:
         raise SimulationError(f"t_span must be (t0, t1), got {t_span!r}") from exc
-    if not (np.isfinite(t0) and np.isfinite(t1) and t1 > t0):
-        raise SimulationError(f"t_span must be finite and increasing, got {t_span!r}")
+    if not (np.isfinite(t0) and np.isfinite(t1)):
+        raise SimulationError(f"t_span must be finite, got {t_span!r}")
+    if t1 < t0:
+        raise SimulationError(
+            f"t_span ({t0!r}, {t1!r}) runs backwards in time, which the C integrators do not "
+            f"do (they step forward only); fix: integrate backwards with scipy on the compiled "
+            f"model, solve_ivp(cm.rhs, ({t0!r}, {t1!r}), x0, method='DOP853', jac=cm.jac)")
+    if not t1 > t0:
+        raise SimulationError(f"t_span must be increasing, got {t_span!r}")
     return t0, t1
 
 

@@ -312,6 +312,10 @@ class CompiledModel:
         ``dop853`` (default), ``rodas`` (stiff, uses the Jacobian), ``midpoint``,
         ``gauss4`` (see :data:`modelgen.sim.integrate.METHODS`); the fixed-step
         ones need ``step``, which also runs the adaptive ones with fixed steps.
+        solve_ivp's names are accepted and mapped to these, modelgen's own
+        methods: ``"RK45"`` -> dopri5, ``"DOP853"`` -> dop853, ``"Radau"``,
+        ``"BDF"``, ``"LSODA"`` -> rodas.  ``t_span`` must increase (the C
+        integrators step forward only; backwards, use ``solve_ivp(cm.rhs, ...)``).
         ``t_eval`` samples through each method's dense output (otherwise every
         step is recorded); ``events`` are ``g(t, x)`` callables with
         ``terminal``/``direction`` attributes, as in ``solve_ivp``.  ``u`` is None
