@@ -149,6 +149,11 @@ def _report(result, out: Path, name: str, args, title: str, conservative,
         label = "relative energy error" if conservative else "relative energy change"
         print(f"{label} {change:.3e} (against the initial energies); {len(result.t)} samples "
               f"to t = {result.t[-1]:g} s")
+        if result.work:
+            balance = float(np.max(np.abs(result.info["energy_balance"])))
+            work = ", ".join(f"{name} {w[-1]:.6g} J" for name, w in result.work.items())
+            print(f"work done: {work}; energy balance E - E(0) - sum of work: max "
+                  f"{balance:.3e} J (relative {balance / scale:.3e})")
     if result.info.get("stability_warning"):
         print(f"modelgen: warning: {result.info['stability_warning']}", file=sys.stderr)
     if not result.success:
