@@ -464,7 +464,11 @@ def _max_steps_note(max_steps, t_span, t_reached) -> str:
     """What a run truncated by ``max_steps`` missed and how to raise it."""
     t0, t1 = (float(v) for v in t_span)
     done = (t_reached - t0) / (t1 - t0)
-    need = f"{int(10 ** np.ceil(np.log10(1.2 * max_steps / done))):d}" if done > 0 else None
+    need = None
+    if done > 0:        # 1.2 times the steps at the pace so far, rounded up to 2 digits
+        estimate = 1.2 * max_steps / done
+        unit = 10.0 ** max(np.floor(np.log10(estimate)) - 1, 0)
+        need = f"{int(np.ceil(estimate / unit) * unit):d}"
     return (f" The run stopped at {100 * done:.3g}% of t_span ({t0!r}, {t1!r}); fix: raise "
             f"max_steps (simulate(..., max_steps={need or 'N'}), or --max-steps "
             f"{need or 'N'} on the command line), or loosen rtol/atol.")
