@@ -16,7 +16,10 @@ unexpected internal error; 130 interrupted.  Errors print one line,
 from __future__ import annotations
 
 import argparse
+import contextlib
+import os
 import sys
+import threading
 import time
 import warnings
 from pathlib import Path
@@ -26,6 +29,67 @@ import numpy as np
 from modelgen.codegen.capi import STATUS_BY_NAME
 from modelgen.errors import (BuildError, ModelgenError, SimulationError, TemplateError)
 from modelgen.version import __version__
+
+
+#: a progress bar appears only once its task has run this long [s]
+#: (``MODELGEN_PROGRESS_DELAY`` overrides it)
+PROGRESS_DELAY = 2.0
+
+
+@contextlib.contextmanager
+def _progress_bar(args, total, desc, **options):
+    """A tqdm bar on stderr, or None when stderr is not a terminal or with --quiet.
+
+    It is drawn only after PROGRESS_DELAY seconds (short tasks show nothing) and
+    redrawn by a ticker, so a long stage without updates still shows it."""
+    if getattr(args, "quiet", False) or not sys.stderr.isatty():
+        yield None
+        return
+    from tqdm import tqdm
+    delay = float(os.environ.get("MODELGEN_PROGRESS_DELAY", PROGRESS_DELAY))
+    bar = tqdm(total=total, desc=desc, delay=delay, file=sys.stderr, leave=False,
+               dynamic_ncols=True, **options)
+    stop = threading.Event()
+
+    def tick():
+        while not stop.wait(0.25):
+            bar.update(0)
+    ticker = threading.Thread(target=tick, daemon=True)
+    ticker.start()
+    try:
+        yield bar
+    finally:
+        stop.set()
+        ticker.join()
+        bar.close()
+
+
+@contextlib.contextmanager
+def _generation_progress(args, name):
+    """``stages(stage)`` for :func:`modelgen.codegen.pipeline.generate`, drawing the
+    stages of a build on a progress bar (see :func:`_progress_bar`)."""
+    from modelgen.codegen.pipeline import STAGES
+    with _progress_bar(args, len(STAGES), f"{name}: generating",
+                       bar_format="{desc} {n_fmt}/{total_fmt} stages |{bar}| "
+                                  "[{elapsed}]") as bar:
+        def stages(stage):
+            if bar is not None:
+                bar.set_description(f"{name}: {stage}", refresh=False)
+                bar.update(STAGES.index(stage) - bar.n)
+        yield stages
+
+
+@contextlib.contextmanager
+def _simulation_progress(args, name, t0, t1):
+    """``progress(t)`` for ``simulate``: the simulated time on a progress bar."""
+    span = float(t1 - t0)
+    with _progress_bar(args, span, f"{name}: integrating",
+                       bar_format="{desc} |{bar}| {percentage:3.0f}% of "
+                                  f"{t0:g}..{t1:g} s [{{elapsed}}<{{remaining}}]") as bar:
+        def progress(t):
+            if bar is not None:
+                bar.update(min(max(t - t0, 0.0), span) - bar.n)
+        yield progress
 
 
 def _generate(args) -> int:
@@ -38,8 +102,9 @@ def _generate(args) -> int:
                             f"or generate the model file it names")
     spec = as_spec(args.model)
     t_load = time.perf_counter() - t0
-    g = generate_model(spec, args.output, force=args.force, jacobian=args.jacobian,
-                       formulation=args.formulation)
+    with _generation_progress(args, spec.name) as stages:
+        g = generate_model(spec, args.output, force=args.force, jacobian=args.jacobian,
+                           formulation=args.formulation, progress=stages)
     b = g.build
     print(f"model      {spec.name}  ({args.model})")
     print(f"n          {spec.n} coordinates, {len(spec.parameters)} parameters, "
@@ -178,7 +243,8 @@ def _simulate_scene(args) -> int:
     from modelgen.sim.scene import Scene
 
     def progress(message):
-        print(message, file=sys.stderr, flush=True)
+        if not args.quiet:
+            print(message, file=sys.stderr, flush=True)
     t0 = time.perf_counter()
     spec = load_scene(args.model)
     # every override is checked before anything is built
@@ -195,11 +261,13 @@ def _simulate_scene(args) -> int:
     if changes.get("t_end", spec.t_end) <= spec.t_start:
         raise ModelgenError(f"--t-end must be after the scene's start {spec.t_start:g} s")
     spec = replace(spec, **changes)
-    scene = Scene(spec, args.build_dir, progress=progress)
+    with _generation_progress(args, spec.name) as stages:
+        scene = Scene(spec, args.build_dir, progress=progress, stages=stages)
     x0 = scene.initial_state(init)
     print(scene.summary())
     progress(f"{spec.name}: integrating ({time.perf_counter() - t0:.2f} s so far)")
-    result = _quietly(scene.run, p=p, x0=x0, max_steps=args.max_steps)
+    with _simulation_progress(args, spec.name, spec.t_start, spec.t_end) as advance:
+        result = _quietly(scene.run, p=p, x0=x0, max_steps=args.max_steps, progress=advance)
     return _report(result, Path(args.output), spec.name, args, f"scene {spec.name}",
                    scene.conservative, animation=(spec.model, scene.model, p))
 
@@ -211,7 +279,8 @@ def _simulate(args) -> int:
     if is_scene_file(args.model):
         return _simulate_scene(args)
     model = as_spec(args.model)
-    cm = load(model, args.build_dir)
+    with _generation_progress(args, model.name) as stages:
+        cm = load(model, args.build_dir, progress=stages)
     x0 = np.zeros(2 * cm.n)
     for key, value in _state_overrides(cm.state_names, args.init).items():
         x0[cm.state_names.index(key)] = value
@@ -220,8 +289,10 @@ def _simulate(args) -> int:
     t_end, dt = args.t_end or 10.0, args.dt or 1e-3
     sample = args.sample or dt
     times = np.linspace(0.0, t_end, int(round(t_end / sample)) + 1)
-    result = _quietly(cm.simulate, x0, (0.0, t_end), t_eval=times, method=method.name,
-                      step=None if method.adaptive else dt, p=p, max_steps=args.max_steps)
+    with _simulation_progress(args, cm.name, 0.0, t_end) as advance:
+        result = _quietly(cm.simulate, x0, (0.0, t_end), t_eval=times, method=method.name,
+                          step=None if method.adaptive else dt, p=p,
+                          max_steps=args.max_steps, progress=advance)
     result.energy = cm.energies(result, p)
     how = f"step {dt:g} s" if not method.adaptive else "rtol 1e-8"
     print(f"{cm.name}: {method.name}, {how}, t = 0..{t_end:g} s, {len(result.t)} samples")
@@ -312,6 +383,9 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("-o", "--output", default=None,
                    help="output directory (default: the per-user cache, see modelgen.codegen.pipeline.default_output)")
     g.add_argument("--force", action="store_true", help="rebuild even if cached")
+    g.add_argument("-q", "--quiet", action="store_true",
+                   help="no progress bar (one is drawn on a terminal when the build takes "
+                        "more than 2 s)")
     g.add_argument("--jacobian", action="store_true",
                    help="also generate <name>_jacobian, the symbolic d(xdot)/dx")
     g.add_argument("--formulation", choices=("auto", "aba", "crba"), default="auto",
@@ -349,6 +423,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--set", action="append", metavar="NAME=VALUE",
                    help="override a parameter (repeatable)")
     s.add_argument("--no-plot", action="store_true", help="do not write the PNG")
+    s.add_argument("-q", "--quiet", action="store_true",
+                   help="no progress bars or messages on stderr (bars are drawn on a "
+                        "terminal for a build or a run taking more than 2 s)")
     s.add_argument("--animate", action="store_true",
                    help="also write OUT/<name>.gif (the bodies' frames, the points as a "
                         "stick figure, traces) and OUT/<name>.html (a 3D viewer that plays "

@@ -173,3 +173,58 @@ def test_max_steps_truncation_is_printed_with_the_flag_that_raises_it(tmp_path):
     assert "--max-steps" in proc.stderr and "RuntimeWarning" not in proc.stderr
     assert _modelgen(*args, "--max-steps", "0").returncode == 2
     assert _modelgen(*args).returncode == 0
+
+
+def _in_a_terminal(argv, env, timeout=300) -> str:
+    """Run the real entry point with stdout and stderr on a pseudo-terminal; its output."""
+    import fcntl
+    import os
+    import pty
+    import struct
+    import subprocess
+    import sys
+    import termios
+    import time
+    master, slave = pty.openpty()
+    # a terminal of 30 rows and 120 columns (a fresh pty has 0 columns: no room for a bar)
+    fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 30, 120, 0, 0))
+    proc = subprocess.Popen([sys.executable, "-m", "modelgen", *map(str, argv)],
+                            stdin=subprocess.DEVNULL, stdout=slave, stderr=slave, env=env)
+    os.close(slave)
+    chunks, deadline = [], time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        try:
+            data = os.read(master, 65536)
+        except OSError:              # EIO: the child closed the terminal
+            break
+        if not data:
+            break
+        chunks.append(data)
+    os.close(master)
+    assert proc.wait(timeout=60) == 0, b"".join(chunks).decode(errors="replace")
+    return b"".join(chunks).decode(errors="replace")
+
+
+def test_progress_bars_on_a_terminal_and_not_in_a_pipe_or_with_quiet(tmp_path):
+    """On a terminal a build shows its stages and a run its simulated time as tqdm bars
+    (here from the first moment: MODELGEN_PROGRESS_DELAY=0 instead of 2 s); through a
+    pipe, or with --quiet, nothing of the kind is written."""
+    import os
+    import subprocess
+    import sys
+    from conftest import SCENES
+    pytest.importorskip("tqdm")
+    env = dict(os.environ, MODELGEN_PROGRESS_DELAY="0")
+    argv = ["simulate", SCENES / "dp_damped.yaml", "--no-plot", "-o", tmp_path / "out",
+            "--t-end", "2"]
+    tty = _in_a_terminal([*argv, "--build-dir", tmp_path / "b1"], env)
+    assert "stages |" in tty and "dp_damped: derive" in tty, tty
+    assert "dp_damped: integrating |" in tty and "% of 0..2 s" in tty, tty
+    quiet = _in_a_terminal([*argv, "--build-dir", tmp_path / "b2", "--quiet"], env)
+    assert "stages |" not in quiet and "integrating |" not in quiet, quiet
+    piped = subprocess.run([sys.executable, "-m", "modelgen", *map(str, argv),
+                            "--build-dir", str(tmp_path / "b3")], env=env,
+                           capture_output=True, text=True, timeout=300)
+    assert piped.returncode == 0, piped.stderr
+    assert "stages |" not in piped.stderr and "integrating |" not in piped.stderr, piped.stderr
+    assert "work done: hinge_damping" in piped.stdout        # the run itself is the same

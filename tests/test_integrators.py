@@ -377,6 +377,18 @@ def test_max_steps_returns_the_steps_taken(sp, method):
     assert 0 < res.t[-1] < 10
 
 
+@pytest.mark.parametrize("method", ["dop853", "rk4"])
+def test_progress_hears_the_time_the_c_reached(dp, method):
+    """The C writes the time reached to options.progress after every step; simulate
+    passes it to progress(t) while it waits and after each C call (the buffer starts
+    at t0, so ending at t1 proves the C wrote it)."""
+    seen = []
+    res = dp.simulate([1.5, 0.5, 0.0, 0.0], (0.5, 3.0), method=method, progress=seen.append,
+                      **fixed_step(method), chunk=64)
+    assert res.success and seen[-1] == res.t[-1] == 3.0
+    assert len(seen) >= 2 and np.all(np.diff(seen) >= 0) and seen[0] > 0.5  # chunked: >1 call
+
+
 def test_max_steps_truncation_warns_and_says_how_to_raise_it(dp):
     """A run cut short by max_steps is not silent: a RuntimeWarning naming max_steps
     (raised at the caller's line), and the message says how far it got and the fix;

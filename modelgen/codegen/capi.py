@@ -21,7 +21,7 @@ from __future__ import annotations
 from typing import NamedTuple
 
 #: Version of the C interface (model functions and mg_integrate), checked by the loader.
-ABI_VERSION = 2
+ABI_VERSION = 3
 #: Prefix of every constant, type and function of the model-independent C.
 PREFIX = "MG"
 
@@ -160,6 +160,7 @@ STRUCTS = (
         ("const int *", "terminal", "terminal[n_events]: stop at this occurrence (0: never)"),
         ("const double *", "resume", "NULL, or the stop array of a call that returned BUFFER_FULL"),
         ("const volatile int *", "interrupt", "NULL, or polled every step: nonzero stops (INTERRUPTED)"),
+        ("volatile double *", "progress", "NULL, or set to t after every accepted step (read from another thread to show progress)"),
     )),
     ("mg_output", "Where the trajectory goes (arrays of the caller).", (
         ("long", "capacity", "rows of t, x, y; with t_eval: its length"),

@@ -292,7 +292,8 @@ def c_constants(cm) -> dict:
 
 def simulate(cm, x0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10, u=None,
              p=None, events=None, *, step=None, first_step=None, max_step=None,
-             max_steps=100_000, chunk=2048, interrupt=None, outputs=True) -> Result:
+             max_steps=100_000, chunk=2048, interrupt=None, outputs=True,
+             progress=None) -> Result:
     """Integrate the compiled model ``cm`` in C from ``x0`` over ``t_span``.
 
     ``t_eval`` samples the solution through each method's dense output (the
@@ -308,7 +309,10 @@ def simulate(cm, x0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10
     call when every step is recorded.  ``interrupt`` is None or a writable
     numpy ``intc`` array of one element that the C polls every step: set it
     nonzero (from another thread, a signal handler or a callback) to stop with
-    status INTERRUPTED and the trajectory so far.  With ``outputs`` a scene's
+    status INTERRUPTED and the trajectory so far.  ``progress`` is None or a
+    callable ``progress(t)`` given the time reached about every 0.05 s while the C
+    runs (from the calling thread, when that is the main thread) and after each
+    C call: for a progress bar.  With ``outputs`` a scene's
     outputs are recorded by the C at every row (``res.outputs``).  A failure returns what was
     computed up to it, with ``status < 0`` and a message naming the time (and
     the state).
@@ -361,6 +365,9 @@ def simulate(cm, x0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10
             raise SimulationError("interrupt must be a writable numpy intc array of one element")
     flag = interrupt if interrupt is not None else np.zeros(1, dtype=np.intc)
     opt.interrupt = ffi.from_buffer("int[]", flag)
+    reached = np.array([t0])                  # the C writes the time reached here
+    opt.progress = ffi.from_buffer("double[]", reached)
+    poll = None if progress is None else (lambda: progress(float(reached[0])))
 
     fn = getattr(cm.lib, f"{cm.name}_integrate")
     ptr = cm._ptr
@@ -397,7 +404,9 @@ def simulate(cm, x0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10
         opt.max_steps = steps_left
         opt.resume = ffi.NULL if resume is None else ptr(resume)
         status = _interruptible(fn, (t0, t1, ptr(x), ptr(p_vec), inputs.struct, opt, out, stats,
-                                     ptr(work)), flag)
+                                     ptr(work)), flag, poll)
+        if poll is not None:
+            poll()
         rows, k = out.n, out.n_events
         skip = 1 if (times is None and t_parts) else 0   # a continuation repeats its start
         t_parts.append(t_out[skip:rows].copy())
@@ -474,8 +483,9 @@ def _max_steps_note(max_steps, t_span, t_reached) -> str:
             f"{need or 'N'} on the command line), or loosen rtol/atol.")
 
 
-def _interruptible(fn, args, flag):
-    """``fn(*args)``, a C integration loop that polls ``flag``, stopped by Ctrl-C.
+def _interruptible(fn, args, flag, poll=None):
+    """``fn(*args)``, a C integration loop that polls ``flag``, stopped by Ctrl-C
+    (and ``poll()`` called between the short joins, for progress).
 
     In the main thread, with Python's default SIGINT handler in place, the C
     call runs in a worker thread while the main thread waits in short joins;
@@ -497,6 +507,8 @@ def _interruptible(fn, args, flag):
         worker.start()
         while worker.is_alive():
             worker.join(0.05)
+            if poll is not None:
+                poll()
     finally:
         signal.signal(signal.SIGINT, previous)
     return box[0]

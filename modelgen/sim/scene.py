@@ -29,16 +29,20 @@ class Scene:
     >>> res.t, res.y, res["q1"], res["elbow"]                         # doctest: +SKIP
     """
 
-    def __init__(self, spec, out_dir=None, *, force: bool = False, progress=None):
+    def __init__(self, spec, out_dir=None, *, force: bool = False, progress=None,
+                 stages=None):
+        """``progress(message)`` hears what is being done; ``stages(stage)`` is
+        called as each stage of a build starts (see :func:`generate`)."""
         self.spec = spec
         if progress:
             progress(f"{spec.name}: generating (or reusing) the model")
-        # stiff scenes get the symbolic Jacobian, for implicit integrators
         # the power of every effect outside the energy, for the energy balance
         self.powers = _power_outputs(spec)
         extra = tuple(out for out in self.powers.values() if out not in spec.outputs)
+        # stiff scenes get the symbolic Jacobian, for implicit integrators
         generated = generate(spec.model, out_dir, force=force, outputs=spec.outputs + extra,
-                             jacobian=bool(spec.stiff_effects) and spec.model.n <= 12)
+                             jacobian=bool(spec.stiff_effects) and spec.model.n <= 12,
+                             progress=stages)
         self.generated = generated
         self.model = CompiledModel(generated.manifest, generated.build.module_path)
         check_mass_matrix(self.model)          # on every load: the cache hides nothing
@@ -137,7 +141,7 @@ class Scene:
                 values[:, j] = np.interp(grid, sig.times, sig.values)
         return (np.array(grid), values, "hold" if hold else "linear")
 
-    def run(self, p=None, x0=None, u=None, max_steps=None) -> Result:
+    def run(self, p=None, x0=None, u=None, max_steps=None, progress=None) -> Result:
         """Integrate the scene with its method, sampled at its times; energies recorded.
 
         ``p`` overrides parameters, ``x0`` the initial state (an array, or a
@@ -145,7 +149,8 @@ class Scene:
         from the scene), and ``u`` the scene's inputs (anything
         :meth:`CompiledModel.simulate` accepts, including a feedback callable
         ``u(t, x)``).  ``max_steps`` overrides the step budget of
-        :meth:`CompiledModel.simulate`.  Returns a :class:`~modelgen.sim.result.Result`.
+        :meth:`CompiledModel.simulate`; ``progress(t)`` hears the time reached while
+        the C runs (see :func:`modelgen.sim.integrate.simulate`).  Returns a :class:`~modelgen.sim.result.Result`.
         """
         s, cm = self.spec, self.model
         x0 = self.initial_state(x0)
@@ -156,7 +161,8 @@ class Scene:
         grid = quadrature_times(times) if self.powers else times
         res = cm.simulate(x0, (s.t_start, s.t_end), t_eval=grid, method=s.method,
                           rtol=s.rtol, atol=s.atol, u=u, p=p, step=s.step if fixed else None,
-                          max_steps=max_steps)
+                          max_steps=max_steps, **({} if progress is None else
+                                                  {"progress": progress}))
         powers = {}
         if self.powers:
             reached = res.t
