@@ -389,6 +389,21 @@ def test_progress_hears_the_time_the_c_reached(dp, method):
     assert len(seen) >= 2 and np.all(np.diff(seen) >= 0) and seen[0] > 0.5  # chunked: >1 call
 
 
+@pytest.mark.parametrize("method", ["rk4", "gauss4", "dop853"])
+def test_fixed_steps_get_the_budget_they_need_by_default(sp, method):
+    """200 s at h = 1e-3 are 200,000 steps, beyond the default budget of 100,000: a
+    fixed-step run is given the steps its span needs (an explicit max_steps still
+    counts)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        res = sp.simulate([1.0, 0.0], (0, 200), t_eval=[200.0], method=method, step=1e-3)
+    assert res.success and res.t[-1] == 200.0 and res.naccept == 200_000
+    with pytest.warns(RuntimeWarning, match="max_steps"):
+        capped = sp.simulate([1.0, 0.0], (0, 200), method=method, step=1e-3,
+                             max_steps=100_000)
+    assert capped.status == -1
+
+
 def test_max_steps_truncation_warns_and_says_how_to_raise_it(dp):
     """A run cut short by max_steps is not silent: a RuntimeWarning naming max_steps
     (raised at the caller's line), and the message says how far it got and the fix;

@@ -48,6 +48,9 @@ __all__ = ["METHODS", "ALIASES", "STATUS", "Method", "method_of",
 BUFFER_FULL = STATUS_BY_NAME["BUFFER_FULL"].code
 MAX_STEPS = STATUS_BY_NAME["MAX_STEPS"].code
 INTERRUPTED = STATUS_BY_NAME["INTERRUPTED"].code
+#: the step budget of a run when max_steps is not given (fixed-step runs get at
+#: least the steps they need)
+DEFAULT_MAX_STEPS = 100_000
 #: numpy's C long (the counters of the C API)
 _LONG = np.dtype("l")
 #: fixed step counts from here on do not fit the C integrator's counter (a C long)
@@ -292,7 +295,7 @@ def c_constants(cm) -> dict:
 
 def simulate(cm, x0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10, u=None,
              p=None, events=None, *, step=None, first_step=None, max_step=None,
-             max_steps=100_000, chunk=2048, interrupt=None, outputs=True,
+             max_steps=None, chunk=2048, interrupt=None, outputs=True,
              progress=None) -> Result:
     """Integrate the compiled model ``cm`` in C from ``x0`` over ``t_span``.
 
@@ -305,7 +308,9 @@ def simulate(cm, x0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10
     ``(times, values, "linear" | "hold")``, or a feedback callable
     ``u(t, x)`` (called from the C; any method).  ``p`` is None, a dict of
     overrides or a vector.  ``rtol``/``atol`` are scalars or one value per
-    state; ``step`` selects fixed steps.  ``chunk`` is the number of rows per C
+    state; ``step`` selects fixed steps.  ``max_steps`` (attempted steps) defaults
+    to :data:`DEFAULT_MAX_STEPS`, or for fixed steps to the steps the span needs if
+    that is more.  ``chunk`` is the number of rows per C
     call when every step is recorded.  ``interrupt`` is None or a writable
     numpy ``intc`` array of one element that the C polls every step: set it
     nonzero (from another thread, a signal handler or a callback) to stop with
@@ -321,10 +326,14 @@ def simulate(cm, x0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10
     >>> res.t_events[0], res.y.shape, res.message                             # doctest: +SKIP
     """
     ffi, nx = cm.ffi, 2 * cm.n
-    m, rtol, atol, fixed, first, hmax, max_steps = _options(
-        cm, method, rtol, atol, step, first_step, max_step, max_steps)
+    m, rtol, atol, fixed, first, hmax, budget = _options(
+        cm, method, rtol, atol, step, first_step, max_step,
+        DEFAULT_MAX_STEPS if max_steps is None else max_steps)
     t0, t1 = _span(t_span)
     _check_step_count(fixed, t0, t1)
+    if max_steps is None and fixed > 0:      # a fixed-step run's step count is known
+        budget = max(budget, int(np.ceil((t1 - t0) / fixed)) + 2)
+    max_steps = budget
     x = cm._vector(x0, nx, "x0").copy()
     if not np.all(np.isfinite(x)):
         raise SimulationError(f"{cm.name}: x0 must be finite")
