@@ -16,8 +16,12 @@ unexpected internal error; 130 interrupted.  Errors print one line,
 from __future__ import annotations
 
 import argparse
+import contextlib
+import os
 import sys
+import threading
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -25,6 +29,67 @@ import numpy as np
 from modelgen.codegen.capi import STATUS_BY_NAME
 from modelgen.errors import (BuildError, ModelgenError, SimulationError, TemplateError)
 from modelgen.version import __version__
+
+
+#: a progress bar appears only once its task has run this long [s]
+#: (``MODELGEN_PROGRESS_DELAY`` overrides it)
+PROGRESS_DELAY = 2.0
+
+
+@contextlib.contextmanager
+def _progress_bar(args, total, desc, **options):
+    """A tqdm bar on stderr, or None when stderr is not a terminal or with --quiet.
+
+    It is drawn only after PROGRESS_DELAY seconds (short tasks show nothing) and
+    redrawn by a ticker, so a long stage without updates still shows it."""
+    if getattr(args, "quiet", False) or not sys.stderr.isatty():
+        yield None
+        return
+    from tqdm import tqdm
+    delay = float(os.environ.get("MODELGEN_PROGRESS_DELAY", PROGRESS_DELAY))
+    bar = tqdm(total=total, desc=desc, delay=delay, file=sys.stderr, leave=False,
+               dynamic_ncols=True, **options)
+    stop = threading.Event()
+
+    def tick():
+        while not stop.wait(0.25):
+            bar.update(0)
+    ticker = threading.Thread(target=tick, daemon=True)
+    ticker.start()
+    try:
+        yield bar
+    finally:
+        stop.set()
+        ticker.join()
+        bar.close()
+
+
+@contextlib.contextmanager
+def _generation_progress(args, name):
+    """``stages(stage)`` for :func:`modelgen.codegen.pipeline.generate`, drawing the
+    stages of a build on a progress bar (see :func:`_progress_bar`)."""
+    from modelgen.codegen.pipeline import STAGES
+    with _progress_bar(args, len(STAGES), f"{name}: generating",
+                       bar_format="{desc} {n_fmt}/{total_fmt} stages |{bar}| "
+                                  "[{elapsed}]") as bar:
+        def stages(stage):
+            if bar is not None:
+                bar.set_description(f"{name}: {stage}", refresh=False)
+                bar.update(STAGES.index(stage) - bar.n)
+        yield stages
+
+
+@contextlib.contextmanager
+def _simulation_progress(args, name, t0, t1):
+    """``progress(t)`` for ``simulate``: the simulated time on a progress bar."""
+    span = float(t1 - t0)
+    with _progress_bar(args, span, f"{name}: integrating",
+                       bar_format="{desc} |{bar}| {percentage:3.0f}% of "
+                                  f"{t0:g}..{t1:g} s [{{elapsed}}<{{remaining}}]") as bar:
+        def progress(t):
+            if bar is not None:
+                bar.update(min(max(t - t0, 0.0), span) - bar.n)
+        yield progress
 
 
 def _generate(args) -> int:
@@ -37,8 +102,9 @@ def _generate(args) -> int:
                             f"or generate the model file it names")
     spec = as_spec(args.model)
     t_load = time.perf_counter() - t0
-    g = generate_model(spec, args.output, force=args.force, jacobian=args.jacobian,
-                       formulation=args.formulation)
+    with _generation_progress(args, spec.name) as stages:
+        g = generate_model(spec, args.output, force=args.force, jacobian=args.jacobian,
+                           formulation=args.formulation, progress=stages)
     b = g.build
     print(f"model      {spec.name}  ({args.model})")
     print(f"n          {spec.n} coordinates, {len(spec.parameters)} parameters, "
@@ -107,7 +173,17 @@ def _parameter_overrides(parameters, items) -> dict:
     return values
 
 
+def _quietly(run, *args, **kwargs):
+    """``run(*args, **kwargs)`` without the max_steps RuntimeWarning: the CLI prints
+    the result's message (which says the same) itself."""
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message=".*max_steps", category=RuntimeWarning)
+        return run(*args, **kwargs)
+
+
 def _check_times(args) -> None:
+    if args.max_steps is not None and args.max_steps < 1:
+        raise ModelgenError(f"--max-steps must be a positive count, got {args.max_steps}")
     for flag, value in (("--t-end", args.t_end), ("--dt", args.dt), ("--sample", args.sample)):
         if value is not None and not (value > 0 and value < float("inf")):
             raise ModelgenError(f"{flag} must be a positive number of seconds, got {value!r}")
@@ -138,6 +214,11 @@ def _report(result, out: Path, name: str, args, title: str, conservative,
         label = "relative energy error" if conservative else "relative energy change"
         print(f"{label} {change:.3e} (against the initial energies); {len(result.t)} samples "
               f"to t = {result.t[-1]:g} s")
+        if result.work:
+            balance = float(np.max(np.abs(result.info["energy_balance"])))
+            work = ", ".join(f"{name} {w[-1]:.6g} J" for name, w in result.work.items())
+            print(f"work done: {work}; energy balance E - E(0) - sum of work: max "
+                  f"{balance:.3e} J (relative {balance / scale:.3e})")
     if result.info.get("stability_warning"):
         print(f"modelgen: warning: {result.info['stability_warning']}", file=sys.stderr)
     if not result.success:
@@ -162,7 +243,8 @@ def _simulate_scene(args) -> int:
     from modelgen.sim.scene import Scene
 
     def progress(message):
-        print(message, file=sys.stderr, flush=True)
+        if not args.quiet:
+            print(message, file=sys.stderr, flush=True)
     t0 = time.perf_counter()
     spec = load_scene(args.model)
     # every override is checked before anything is built
@@ -179,11 +261,13 @@ def _simulate_scene(args) -> int:
     if changes.get("t_end", spec.t_end) <= spec.t_start:
         raise ModelgenError(f"--t-end must be after the scene's start {spec.t_start:g} s")
     spec = replace(spec, **changes)
-    scene = Scene(spec, args.build_dir, progress=progress)
+    with _generation_progress(args, spec.name) as stages:
+        scene = Scene(spec, args.build_dir, progress=progress, stages=stages)
     x0 = scene.initial_state(init)
     print(scene.summary())
     progress(f"{spec.name}: integrating ({time.perf_counter() - t0:.2f} s so far)")
-    result = scene.run(p=p, x0=x0)
+    with _simulation_progress(args, spec.name, spec.t_start, spec.t_end) as advance:
+        result = _quietly(scene.run, p=p, x0=x0, max_steps=args.max_steps, progress=advance)
     return _report(result, Path(args.output), spec.name, args, f"scene {spec.name}",
                    scene.conservative, animation=(spec.model, scene.model, p))
 
@@ -195,7 +279,8 @@ def _simulate(args) -> int:
     if is_scene_file(args.model):
         return _simulate_scene(args)
     model = as_spec(args.model)
-    cm = load(model, args.build_dir)
+    with _generation_progress(args, model.name) as stages:
+        cm = load(model, args.build_dir, progress=stages)
     x0 = np.zeros(2 * cm.n)
     for key, value in _state_overrides(cm.state_names, args.init).items():
         x0[cm.state_names.index(key)] = value
@@ -204,8 +289,10 @@ def _simulate(args) -> int:
     t_end, dt = args.t_end or 10.0, args.dt or 1e-3
     sample = args.sample or dt
     times = np.linspace(0.0, t_end, int(round(t_end / sample)) + 1)
-    result = cm.simulate(x0, (0.0, t_end), t_eval=times, method=method.name,
-                         step=None if method.adaptive else dt, p=p)
+    with _simulation_progress(args, cm.name, 0.0, t_end) as advance:
+        result = _quietly(cm.simulate, x0, (0.0, t_end), t_eval=times, method=method.name,
+                          step=None if method.adaptive else dt, p=p,
+                          max_steps=args.max_steps, progress=advance)
     result.energy = cm.energies(result, p)
     how = f"step {dt:g} s" if not method.adaptive else "rtol 1e-8"
     print(f"{cm.name}: {method.name}, {how}, t = 0..{t_end:g} s, {len(result.t)} samples")
@@ -269,8 +356,17 @@ def _hard_cases(args) -> int:
     return 0
 
 
+class _Parser(argparse.ArgumentParser):
+    """An argument parser whose errors end with the fix: the help of the command at fault."""
+
+    def error(self, message):
+        self.print_usage(sys.stderr)
+        self.exit(EXIT["input"], f"{self.prog}: error: {message}; fix: see "
+                                 f"`{self.prog} --help` for the options\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="modelgen",
         description="Generate fast C code for the equations of motion of multibody models.")
     parser.add_argument("--version", action="version", version=f"modelgen {__version__}")
@@ -287,6 +383,9 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("-o", "--output", default=None,
                    help="output directory (default: the per-user cache, see modelgen.codegen.pipeline.default_output)")
     g.add_argument("--force", action="store_true", help="rebuild even if cached")
+    g.add_argument("-q", "--quiet", action="store_true",
+                   help="no progress bar (one is drawn on a terminal when the build takes "
+                        "more than 2 s)")
     g.add_argument("--jacobian", action="store_true",
                    help="also generate <name>_jacobian, the symbolic d(xdot)/dx")
     g.add_argument("--formulation", choices=("auto", "aba", "crba"), default="auto",
@@ -312,14 +411,21 @@ def build_parser() -> argparse.ArgumentParser:
                    help="sampling interval of the output [s] (default: the scene's, or "
                         "the step)")
     s.add_argument("--method", default=None,
-                   help="integration method: rk4, dopri5, dop853, rodas, midpoint, gauss4 "
-                        "(default: the scene's, or rk4 for a model)")
+                   help="integration method: rk4, dopri5, dop853, rodas, midpoint, gauss4, "
+                        "or solve_ivp's RK45, DOP853, Radau, BDF, LSODA (mapped to dopri5, "
+                        "dop853, rodas) (default: the scene's, or rk4 for a model)")
+    s.add_argument("--max-steps", type=int, default=None, metavar="N",
+                   help="most steps of the integrator (default 100000); a run that needs "
+                        "more stops with a warning saying so")
     s.add_argument("--init", action="append", metavar="NAME=VALUE",
                    help="initial coordinate or speed, e.g. q1=1.2 or q1_dot=0 (repeatable; "
                         "default 0)")
     s.add_argument("--set", action="append", metavar="NAME=VALUE",
                    help="override a parameter (repeatable)")
     s.add_argument("--no-plot", action="store_true", help="do not write the PNG")
+    s.add_argument("-q", "--quiet", action="store_true",
+                   help="no progress bars or messages on stderr (bars are drawn on a "
+                        "terminal for a build or a run taking more than 2 s)")
     s.add_argument("--animate", action="store_true",
                    help="also write OUT/<name>.gif (the bodies' frames, the points as a "
                         "stick figure, traces) and OUT/<name>.html (a 3D viewer that plays "
@@ -378,6 +484,8 @@ def build_parser() -> argparse.ArgumentParser:
     h.add_argument("--build-dir", default=None,
                    help="where the models are built (default: the per-user build cache)")
     h.set_defaults(func=_hard_cases)
+    for command in sub.choices.values():
+        command.set_defaults(command_parser=command)
     return parser
 
 
@@ -401,7 +509,9 @@ def exit_status(exc: BaseException) -> int:
 def main(argv=None) -> int:
     """Entry point; returns the exit status (see :data:`EXIT`)."""
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args, extra = parser.parse_known_args(argv)
+    if extra:     # the subcommand's own usage, not the top-level one
+        args.command_parser.error(f"unrecognized arguments: {' '.join(extra)}")
     try:
         return args.func(args)
     except KeyboardInterrupt:

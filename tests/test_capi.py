@@ -79,4 +79,5 @@ def test_the_scene_format_names_the_methods_of_the_c_table():
     vocabulary must equal the C interface table's, method for method."""
     from modelgen.model import scene
     assert scene.METHODS == tuple(capi.METHODS)
+    assert scene.METHOD_ALIASES == capi.ALIASES
     assert set(scene.FIXED_STEP_METHODS) == {m.name for m in capi.METHOD_LIST if not m.adaptive}

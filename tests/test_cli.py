@@ -83,7 +83,7 @@ def test_python_dash_m_modelgen_prints_the_version():
     (["--set", "g=abc"], "'abc' is not a number"),
     (["--dt", "-1"], "--dt must be a positive number"),
     (["--init", "q9=1"], "--init q9: unknown state"),
-    (["--method", "rk45"], "unknown method 'rk45'"),
+    (["--method", "rk44"], "unknown method 'rk44'"),
 ])
 def test_scene_overrides_are_checked_with_exit_status_2(tmp_path, flags, message):
     from conftest import SCENES
@@ -145,3 +145,86 @@ def test_the_wrong_kind_of_file_says_which_command_to_use(argv, message, capsys)
     assert main(argv) == 2
     err = capsys.readouterr().err
     assert message in err and "building" not in err
+
+
+@pytest.mark.parametrize("argv, command", [
+    (["simulate", "--bogus", "x.yaml"], "simulate"),
+    (["generate", "--dt", "x", "m.yaml"], "generate"),
+    (["simulate", "m.yaml", "--t-end", "abc"], "simulate"),
+    (["bench", "s.yaml", "--quick", "--nope"], "bench"),
+    (["import"], "import"),
+])
+def test_bad_subcommand_flags_print_that_subcommands_usage_and_exit_2(argv, command):
+    proc = _modelgen(*argv)
+    assert proc.returncode == 2, proc.stderr
+    assert proc.stderr.startswith(f"usage: modelgen {command} "), proc.stderr
+    assert f"modelgen {command}: error: " in proc.stderr
+    assert f"fix: see `modelgen {command} --help`" in proc.stderr
+    assert "Traceback" not in proc.stderr
+
+
+def test_max_steps_truncation_is_printed_with_the_flag_that_raises_it(tmp_path):
+    args = ("simulate", MODELS / "double_pendulum.yaml", "--init", "q1=1.5", "--method",
+            "dop853", "--t-end", "20", "--no-plot", "--build-dir", tmp_path / "b",
+            "-o", tmp_path / "out")
+    proc = _modelgen(*args, "--max-steps", "50")
+    assert proc.returncode == 4, proc.stderr
+    assert "simulation stopped: Maximum number of steps (50) reached" in proc.stderr
+    assert "--max-steps" in proc.stderr and "RuntimeWarning" not in proc.stderr
+    assert _modelgen(*args, "--max-steps", "0").returncode == 2
+    assert _modelgen(*args).returncode == 0
+
+
+def _in_a_terminal(argv, env, timeout=300) -> str:
+    """Run the real entry point with stdout and stderr on a pseudo-terminal; its output."""
+    import fcntl
+    import os
+    import pty
+    import struct
+    import subprocess
+    import sys
+    import termios
+    import time
+    master, slave = pty.openpty()
+    # a terminal of 30 rows and 120 columns (a fresh pty has 0 columns: no room for a bar)
+    fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 30, 120, 0, 0))
+    proc = subprocess.Popen([sys.executable, "-m", "modelgen", *map(str, argv)],
+                            stdin=subprocess.DEVNULL, stdout=slave, stderr=slave, env=env)
+    os.close(slave)
+    chunks, deadline = [], time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        try:
+            data = os.read(master, 65536)
+        except OSError:              # EIO: the child closed the terminal
+            break
+        if not data:
+            break
+        chunks.append(data)
+    os.close(master)
+    assert proc.wait(timeout=60) == 0, b"".join(chunks).decode(errors="replace")
+    return b"".join(chunks).decode(errors="replace")
+
+
+def test_progress_bars_on_a_terminal_and_not_in_a_pipe_or_with_quiet(tmp_path):
+    """On a terminal a build shows its stages and a run its simulated time as tqdm bars
+    (here from the first moment: MODELGEN_PROGRESS_DELAY=0 instead of 2 s); through a
+    pipe, or with --quiet, nothing of the kind is written."""
+    import os
+    import subprocess
+    import sys
+    from conftest import SCENES
+    pytest.importorskip("tqdm")
+    env = dict(os.environ, MODELGEN_PROGRESS_DELAY="0")
+    argv = ["simulate", SCENES / "dp_damped.yaml", "--no-plot", "-o", tmp_path / "out",
+            "--t-end", "2"]
+    tty = _in_a_terminal([*argv, "--build-dir", tmp_path / "b1"], env)
+    assert "stages |" in tty and "dp_damped: derive" in tty, tty
+    assert "dp_damped: integrating |" in tty and "% of 0..2 s" in tty, tty
+    quiet = _in_a_terminal([*argv, "--build-dir", tmp_path / "b2", "--quiet"], env)
+    assert "stages |" not in quiet and "integrating |" not in quiet, quiet
+    piped = subprocess.run([sys.executable, "-m", "modelgen", *map(str, argv),
+                            "--build-dir", str(tmp_path / "b3")], env=env,
+                           capture_output=True, text=True, timeout=300)
+    assert piped.returncode == 0, piped.stderr
+    assert "stages |" not in piped.stderr and "integrating |" not in piped.stderr, piped.stderr
+    assert "work done: hinge_damping" in piped.stdout        # the run itself is the same

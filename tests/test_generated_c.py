@@ -188,6 +188,40 @@ def test_embedded_example_builds_and_runs(generated, tmp_path):
     assert np.linalg.norm(tight["x"] - x_ref) < 1e-9
 
 
+@pytest.fixture(scope="module")
+def example_binary(generated, tmp_path_factory) -> Path:
+    """The embedded example, built once with its Makefile."""
+    build = tmp_path_factory.mktemp("example")
+    r = _run(["make", "-C", EXAMPLE, f"MODEL_DIR={generated['double_pendulum']}",
+              f"BUILD_DIR={build}"])
+    assert r.returncode == 0, r.stdout
+    return build / "double_pendulum_sim"
+
+
+@pytest.mark.parametrize("args, why", [
+    (["abc"], "t_end 'abc' is not a finite number"),
+    (["2x"], "t_end '2x' is not a finite number"),
+    ([""], "t_end '' is not a finite number"),
+    (["0"], "need t_end > 0"),
+    (["-1"], "need t_end > 0"),
+    (["1e999"], "t_end '1e999' is not a finite number"),
+    (["inf"], "t_end 'inf' is not a finite number"),
+    (["1", "-1e-3"], "need t_end > 0, h >= 0"),
+    (["1", "nan"], "h 'nan' is not a finite number"),
+    (["1e9", "1e-3"], "t_end / h <= 1e8 steps"),
+    (["1", "1e-3", "0.1"], "expected 0, 1, 2 or 6 arguments, got 3"),
+    (["1", "1e-3", "0", "0", "0", "0", "7"], "expected 0, 1, 2 or 6 arguments, got 7"),
+    (["1", "1e-3", "0", "zero", "0", "0"], "state 'zero' is not a number"),
+])
+def test_embedded_example_refuses_bad_arguments_with_its_usage(example_binary, args, why):
+    """Bad arguments are refused with the usage line and a non-zero exit before
+    anything runs (atof read 'abc' as 0 and quietly ran 0 steps)."""
+    r = _run([example_binary, *args])
+    assert r.returncode != 0, r.stdout
+    assert why in r.stdout and "usage: " in r.stdout, r.stdout
+    assert "steps:" not in r.stdout and "final state" not in r.stdout
+
+
 # -- compiling the C on its own -----------------------------------------------------
 
 PROTOTYPE = re.compile(r"^(int|void) (\w+)\((.*)\);$", re.M)   # params may hold a function pointer

@@ -7,6 +7,7 @@ numpy finite differences, and conserved energy.
 from __future__ import annotations
 
 import re
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -376,6 +377,51 @@ def test_max_steps_returns_the_steps_taken(sp, method):
     assert 0 < res.t[-1] < 10
 
 
+@pytest.mark.parametrize("method", ["dop853", "rk4"])
+def test_progress_hears_the_time_the_c_reached(dp, method):
+    """The C writes the time reached to options.progress after every step; simulate
+    passes it to progress(t) while it waits and after each C call (the buffer starts
+    at t0, so ending at t1 proves the C wrote it)."""
+    seen = []
+    res = dp.simulate([1.5, 0.5, 0.0, 0.0], (0.5, 3.0), method=method, progress=seen.append,
+                      **fixed_step(method), chunk=64)
+    assert res.success and seen[-1] == res.t[-1] == 3.0
+    assert len(seen) >= 2 and np.all(np.diff(seen) >= 0) and seen[0] > 0.5  # chunked: >1 call
+
+
+@pytest.mark.parametrize("method", ["rk4", "gauss4", "dop853"])
+def test_fixed_steps_get_the_budget_they_need_by_default(sp, method):
+    """200 s at h = 1e-3 are 200,000 steps, beyond the default budget of 100,000: a
+    fixed-step run is given the steps its span needs (an explicit max_steps still
+    counts)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        res = sp.simulate([1.0, 0.0], (0, 200), t_eval=[200.0], method=method, step=1e-3)
+    assert res.success and res.t[-1] == 200.0 and res.naccept == 200_000
+    with pytest.warns(RuntimeWarning, match="max_steps"):
+        capped = sp.simulate([1.0, 0.0], (0, 200), method=method, step=1e-3,
+                             max_steps=100_000)
+    assert capped.status == -1
+
+
+def test_max_steps_truncation_warns_and_says_how_to_raise_it(dp):
+    """A run cut short by max_steps is not silent: a RuntimeWarning naming max_steps
+    (raised at the caller's line), and the message says how far it got and the fix;
+    the suggested budget then reaches t1."""
+    x0 = [1.5, 0.5, 0.0, 0.0]
+    with pytest.warns(RuntimeWarning, match=r"max_steps") as caught:
+        res = dp.simulate(x0, (0, 20), rtol=1e-12, atol=1e-12, max_steps=1000)
+    assert caught[0].filename == __file__
+    assert res.status == -1 and res.t[-1] < 20
+    assert "The run stopped at " in res.message and "% of t_span (0.0, 20.0)" in res.message
+    need = int(re.search(r"max_steps=([\d_]+)", res.message)[1])
+    assert need > 1000 and "--max-steps" in res.message
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        full = dp.simulate(x0, (0, 20), rtol=1e-12, atol=1e-12, max_steps=need)
+    assert full.success and full.t[-1] == 20.0
+
+
 @pytest.mark.parametrize("method", ALL_METHODS)
 def test_step_size_underflow_when_t_is_too_large_to_resolve_the_step(sp, method):
     """At t = 1e15 consecutive doubles are 0.125 apart: no step the pendulum needs
@@ -547,10 +593,24 @@ def test_ctrl_c_stops_a_long_c_run_and_keeps_what_it_computed(tmp_path, dp):
     assert float(t_last) == 0.0          # no t_eval sample reached yet: the start is kept
 
 
+@pytest.mark.parametrize("name, method", [
+    ("RK45", "dopri5"), ("DOP853", "dop853"), ("Radau", "rodas"), ("BDF", "rodas"),
+    ("LSODA", "rodas"), ("rk45", "dopri5")])
+def test_solve_ivp_method_names_run_modelgens_methods(dp, name, method):
+    """solve_ivp's method names are accepted and run the mapped method, bit for bit."""
+    x0, span, t_eval = [1.5, 0.5, 0.0, 0.0], (0.0, 2.0), np.linspace(0.0, 2.0, 11)
+    alias = dp.simulate(x0, span, t_eval=t_eval, method=name, rtol=1e-9, atol=1e-9)
+    own = dp.simulate(x0, span, t_eval=t_eval, method=method, rtol=1e-9, atol=1e-9)
+    assert alias.success and alias.method == method
+    assert np.array_equal(alias.y, own.y) and alias.nfev == own.nfev
+
+
 @pytest.mark.parametrize("call, message", [
-    (lambda cm: cm.simulate([1, 0], (0, 1), method="rk45"), "unknown method 'rk45'"),
+    (lambda cm: cm.simulate([1, 0], (0, 1), method="rk44"), "unknown method 'rk44'"),
     (lambda cm: cm.simulate([1, 0], (0, 1), method="gauss4"), "has a fixed step: give step="),
-    (lambda cm: cm.simulate([1, 0], (1, 0)), "t_span must be finite and increasing"),
+    (lambda cm: cm.simulate([1, 0], (1, 0)), r"runs backwards in time.*fix: .*solve_ivp"),
+    (lambda cm: cm.simulate([1, 0], (1, 1)), "t_span must be increasing"),
+    (lambda cm: cm.simulate([1, 0], (0, np.inf)), "t_span must be finite"),
     (lambda cm: cm.simulate([1, 0], (0, 1), t_eval=[0.5, 2]), "t_eval must lie within"),
     (lambda cm: cm.simulate([1, 0], (0, 1), t_eval=[0.5, 0.2]), "t_eval must be sorted"),
     (lambda cm: cm.simulate([1, 0], (0, 1), rtol=-1), "rtol must be finite and >= 0"),

@@ -245,7 +245,7 @@ def test_numbers_must_be_finite(value, shown):
     ("{tip: {positon: P1}}",
      "s.yaml:11: outputs.tip.positon: unknown output kind 'positon'; fix: did you mean "
      "'position'? output kinds: position, velocity, orientation, angular_velocity, energy, "
-     "generalized_force, pose"),
+     "generalized_force, power, pose"),
     ("{tip: {position: P1, velocity: P1}}",
      "s.yaml:11: outputs.tip.velocity: output 'tip' has two kinds, 'position' and 'velocity'; "
      "fix: give each output one kind (make two outputs)"),
@@ -296,9 +296,10 @@ def test_potential_energy_is_refused_with_gravity_in_a_moving_base():
     ({"integrator": "{method: rk4, step: -0.001}"},
      "s.yaml:9: integrator.step: the step must be positive but is -0.001; fix: give the "
      "integration step in seconds, e.g. step: 0.001"),
-    ({"integrator": "{method: rk45, step: 0.001}"},
-     "s.yaml:9: integrator.method: unknown integration method 'rk45'; fix: did you mean "
-     "'rk4'? methods: rk4, dopri5, dop853, rodas, midpoint, gauss4"),
+    ({"integrator": "{method: rk44, step: 0.001}"},
+     "s.yaml:9: integrator.method: unknown integration method 'rk44'; fix: did you mean "
+     "'rk4'? methods: rk4, dopri5, dop853, rodas, midpoint, gauss4 (or solve_ivp's RK45, "
+     "DOP853, Radau, BDF, LSODA)"),
     ({"integrator": "{method: rk4, step: 0.003}"},
      "s.yaml:8: time.sample: the sample interval 0.01 is not a whole multiple of the step "
      "0.003; fix: samples are taken at steps: use e.g. sample: 0.009, or change "
@@ -387,3 +388,10 @@ def test_scene_level_errors():
         parse_scene("", "s.yaml")
     assert str(info.value) == ("s.yaml:1: the scene file is empty; fix: start with 'scene: "
                                "<scene name>' and 'model: <model file>'")
+
+
+@pytest.mark.parametrize("given, method", [("RK45", "dopri5"), ("DOP853", "dop853"),
+                                           ("Radau", "rodas"), ("BDF", "rodas"),
+                                           ("LSODA", "rodas"), ("Gauss4", "gauss4")])
+def test_scene_methods_accept_solve_ivps_names(given, method):
+    assert scene(integrator=f"{{method: {given}, step: 0.001}}").method == method

@@ -13,8 +13,11 @@
  *        h = 0 selects dop853 at rtol = atol = 1e-12 instead.  q1 is the angle
  *        of rod 1 from the x axis of E, q2 that of rod 2 from rod 1, in rad;
  *        gravity is along -y, so the pendulum hangs straight down at
- *        q1 = -pi/2, q2 = 0.
+ *        q1 = -pi/2, q2 = 0.  Arguments that are not numbers, t_end <= 0,
+ *        h < 0, more than 1e8 steps or a wrong count are refused with the usage
+ *        line and EXIT_FAILURE.
  */
+#include <errno.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -32,6 +35,19 @@ static double total_energy(const double *x, const double *p)
     return e[0] + e[1];
 }
 
+#define USAGE "usage: %s [t_end [h [q1 q2 q1_dot q2_dot]]]\n" \
+              "  t_end > 0 [s], h >= 0 [s] (0 selects dop853), at most 1e8 steps of h\n"
+
+/* Parse the whole of text as a double into *value; 0 if it is not a number
+ * (empty, trailing characters, out of range) or not finite. */
+static int parse_number(const char *text, double *value)
+{
+    char *end;
+    errno = 0;
+    *value = strtod(text, &end);
+    return end != text && *end == '\0' && errno != ERANGE && isfinite(*value);
+}
+
 int main(int argc, char **argv)
 {
     double p[DOUBLE_PENDULUM_NP];
@@ -43,15 +59,30 @@ int main(int argc, char **argv)
     mg_stats stats;
     int i, status;
 
-    if (argc > 1) t_end = atof(argv[1]);
-    if (argc > 2) h = atof(argv[2]);
     if (argc > 3 && argc != 3 + NX) {
-        fprintf(stderr, "usage: %s [t_end [h [q1 q2 q1_dot q2_dot]]]\n", argv[0]);
+        fprintf(stderr, "%s: expected 0, 1, 2 or %d arguments, got %d\n" USAGE,
+                argv[0], 2 + NX, argc - 1, argv[0]);
         return EXIT_FAILURE;
     }
-    for (i = 0; argc > 3 && i < NX; ++i) x0[i] = atof(argv[3 + i]);
-    if (!(t_end >= 0.0) || !(h >= 0.0)) {
-        fprintf(stderr, "need t_end >= 0 and h >= 0\n");
+    for (i = 1; i < argc && i <= 2; ++i) {
+        if (!parse_number(argv[i], i == 1 ? &t_end : &h)) {
+            fprintf(stderr, "%s: %s '%s' is not a finite number\n" USAGE, argv[0],
+                    i == 1 ? "t_end" : "h", argv[i], argv[0]);
+            return EXIT_FAILURE;
+        }
+    }
+    /* the state may be NaN on purpose (the integrator reports it), not text */
+    for (i = 0; argc > 3 && i < NX; ++i) {
+        char *end;
+        x0[i] = strtod(argv[3 + i], &end);
+        if (end == argv[3 + i] || *end != '\0') {
+            fprintf(stderr, "%s: state '%s' is not a number\n" USAGE, argv[0], argv[3 + i], argv[0]);
+            return EXIT_FAILURE;
+        }
+    }
+    if (!(t_end > 0.0) || !(h >= 0.0) || (h > 0.0 && t_end / h > 1e8)) {
+        fprintf(stderr, "%s: need t_end > 0, h >= 0 and t_end / h <= 1e8 steps, got t_end = %g, h = %g\n"
+                USAGE, argv[0], t_end, h, argv[0]);
         return EXIT_FAILURE;
     }
     if (double_pendulum_abi_version() != DOUBLE_PENDULUM_ABI_VERSION ||

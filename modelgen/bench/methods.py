@@ -174,9 +174,11 @@ def c_method(name: str, *, label: str | None = None) -> Method:
     def run(problem, setting, budget):
         cm = problem.model
         options = {"step": setting} if fixed else {"rtol": setting, "atol": setting}
-        res = cm.simulate(problem.x0, problem.t_span, problem.t_eval, method=name,
-                          u=problem.u, p=problem.p, **options,
-                          max_steps=budget.max_fixed_steps if fixed else budget.max_steps)
+        with warnings.catch_warnings():     # the budget is a point's outcome, not news
+            warnings.filterwarnings("ignore", message=".*max_steps", category=RuntimeWarning)
+            res = cm.simulate(problem.x0, problem.t_span, problem.t_eval, method=name,
+                              u=problem.u, p=problem.p, **options,
+                              max_steps=budget.max_fixed_steps if fixed else budget.max_steps)
         status = int(res.status)
         return Outcome(np.asarray(res.t), np.asarray(res.y), int(res.nfev), int(res.njev),
                        status, str(res.message), status == C_MAX_STEPS)

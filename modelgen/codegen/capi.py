@@ -38,11 +38,16 @@ class Method(NamedTuple):
     aliases: tuple = ()
 
 
+#: Aliases are lower case (names are matched case-insensitively).  solve_ivp's
+#: names map to modelgen's own methods: "RK45" is the same Dormand-Prince 5(4)
+#: pair as dopri5, "DOP853" is dop853, and the stiff "Radau", "BDF" and "LSODA"
+#: all run rodas (RODAS4, L-stable, order 4; not Radau IIA's 5 nor BDF's variable
+#: order, and LSODA's switching is not reproduced: rodas handles both regimes).
 METHOD_LIST = (
     Method("rk4", 0, 4, 3, False, False),
-    Method("dopri5", 1, 5, 4, True, False),
+    Method("dopri5", 1, 5, 4, True, False, ("rk45",)),
     Method("dop853", 2, 8, 7, True, False),
-    Method("rodas", 3, 4, 3, True, True, ("rodas4",)),
+    Method("rodas", 3, 4, 3, True, True, ("rodas4", "radau", "bdf", "lsoda")),
     Method("midpoint", 4, 2, 3, False, True, ("implicit_midpoint",)),
     Method("gauss4", 5, 4, 3, False, True, ("gauss_legendre4",)),
 )
@@ -156,6 +161,7 @@ STRUCTS = (
         ("const int *", "terminal", "terminal[n_events]: stop at this occurrence (0: never)"),
         ("const double *", "resume", "NULL, or the stop array of a call that returned BUFFER_FULL"),
         ("const volatile int *", "interrupt", "NULL, or polled every step: nonzero stops (INTERRUPTED)"),
+        ("volatile double *", "progress", "NULL, or set to t after every accepted step (read from another thread to show progress)"),
     )),
     ("mg_output", "Where the trajectory goes (arrays of the caller).", (
         ("long", "capacity", "rows of t, x, y; with t_eval: its length"),

@@ -174,8 +174,12 @@ def _check_generable(spec: ModelSpec) -> None:
                          fix="declare at least one body with a mass under 'bodies'")
 
 
+#: the stages of a build, in order (the keys of ``Generated.seconds``)
+STAGES = ("derive", "cse", "emit", "compile")
+
+
 def generate(spec: ModelSpec, out_dir=None, *, force: bool = False, outputs=(),
-             jacobian: bool = False, formulation: str = "auto") -> Generated:
+             jacobian: bool = False, formulation: str = "auto", progress=None) -> Generated:
     """Generate, compile and cache the model; reuse an unchanged build.
 
     ``out_dir`` defaults to :func:`default_output` (the per-user cache).  ``outputs`` (a tuple of
@@ -184,6 +188,8 @@ def generate(spec: ModelSpec, out_dir=None, *, force: bool = False, outputs=(),
     ``jacobian=True`` adds ``<name>_jacobian``, the symbolic d(xdot)/dx.
     ``formulation`` (one of :data:`FORMULATIONS`) chooses how ``<name>_rhs``
     computes q_ddot; the Jacobian is derived from the same program.
+    ``progress`` is None or a callable ``progress(stage)`` called as each of
+    :data:`STAGES` starts (not at all when the build is reused).
 
     >>> g = generate(load_model("models/double_pendulum.yaml"))   # doctest: +SKIP
     >>> g.manifest["n"]                                             # doctest: +SKIP
@@ -199,7 +205,11 @@ def generate(spec: ModelSpec, out_dir=None, *, force: bool = False, outputs=(),
         if hit is not None:
             return Generated(hit, hit.manifest)
 
+    def stage(name):
+        if progress is not None:
+            progress(name)
     seconds = {}
+    stage("derive")
     t0 = time.perf_counter()
     kin = derive_kinematics(spec)
     eqs = derive_equations(kin)
@@ -215,10 +225,12 @@ def generate(spec: ModelSpec, out_dir=None, *, force: bool = False, outputs=(),
     graph = terms.graph if terms else graph
     t1 = time.perf_counter()
     seconds["derive"] = t1 - t0
+    stage("cse")
     routines = make_routines(graph, routines_for(eqs, columns.exprs if columns else (), terms,
                                                  forward))
     t2 = time.perf_counter()
     seconds["cse"] = t2 - t1
+    stage("emit")
     outputs_c = {"A": "A", "h": "h", "tau": "tau", "b": "b", "out": "out", "T": "T", "y": "y",
                  "D": "D", "qdd": "qdd"}
     functions = {r.name: print_routine(r, outputs_c) for r in routines}
@@ -234,6 +246,7 @@ def generate(spec: ModelSpec, out_dir=None, *, force: bool = False, outputs=(),
                                 aba_inward=list(forward.inward) if forward else []))
     t3 = time.perf_counter()
     seconds["emit"] = t3 - t2
+    stage("compile")
     statements = max(f.statements for f in functions.values())
     manifest = {
         "name": spec.name,

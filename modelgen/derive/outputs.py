@@ -71,6 +71,10 @@ def derive_outputs(kin: Kinematics, eqs: Equations, outputs) -> OutputColumns:
         elif out.kind == "generalized_force":
             values = list(parts[a["effect"]])
             cols = [f"{out.name}.{c}" for c in kin.spec.coordinates]
+        elif out.kind == "power":
+            # the power of the effect's forces: its generalized force . q_dot
+            values = [sympy.Add(*[f * v for f, v in zip(parts[a["effect"]], eqs.qd)])]
+            cols = [out.name]
         elif out.kind == "pose":
             values = list(eqs.poses[body_index[a["body"]]])
             cols = [f"{out.name}[{i},{j}]" for i in range(4) for j in range(4)]

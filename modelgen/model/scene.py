@@ -30,12 +30,18 @@ from modelgen.model.spec import (CANONICAL_BASE, CANONICAL_POINT, EFFECT_KINDS, 
                                  InputSignal, ModelSpec, OutputSpec, SceneSpec, symbol)
 from modelgen.model.writer import yaml_float
 
-__all__ = ["METHODS", "TOP_LEVEL_KEYS", "INTERPOLATIONS", "ENERGIES", "OUTPUT_DEFAULTS",
+__all__ = ["METHODS", "METHOD_ALIASES", "TOP_LEVEL_KEYS", "INTERPOLATIONS", "ENERGIES", "OUTPUT_DEFAULTS",
            "GRAVITY", "load_scene", "parse_scene"]
 
 #: Integration methods a scene may ask for (see modelgen.sim.integrate); rk4 runs
 #: the scene's own C loop, the others the adaptive/implicit C integrators.
 METHODS = ("rk4", "dopri5", "dop853", "rodas", "midpoint", "gauss4")
+#: Other accepted spellings (matched case-insensitively) -> method; equal to
+#: modelgen.codegen.capi.ALIASES (a test keeps them so): solve_ivp's "RK45",
+#: "Radau", "BDF", "LSODA" run modelgen's dopri5 and rodas.
+METHOD_ALIASES = {"rk45": "dopri5", "rodas4": "rodas", "radau": "rodas", "bdf": "rodas",
+                  "lsoda": "rodas", "implicit_midpoint": "midpoint",
+                  "gauss_legendre4": "gauss4"}
 #: Methods that take a fixed step (the others adapt theirs to rtol/atol).
 FIXED_STEP_METHODS = ("rk4", "midpoint", "gauss4")
 #: Default integrator settings.
@@ -335,13 +341,16 @@ class _SceneReader:
         """(method, step, rtol, atol); fixed-step methods sample at whole steps."""
         settings = self.mapping("integrator", "{method: rk4, step: 0.001}")
         self.check_keys(settings, INTEGRATOR_KEYS, "integrator", "integrator")
-        method = settings.get("method", DEFAULT_METHOD)
+        given = settings.get("method", DEFAULT_METHOD)
+        method = METHOD_ALIASES.get(given.lower(), given.lower()) if isinstance(given, str) \
+            else given
         if not isinstance(method, str) or method not in METHODS:
-            shown = f"'{method}'" if isinstance(method, str) else describe(method)
+            shown = f"'{given}'" if isinstance(given, str) else describe(given)
             close = closest(method, METHODS) if isinstance(method, str) else None
             fix = f"did you mean '{close}'? " if close else ""
             raise self.error(f"unknown integration method {shown}", "integrator.method",
-                             fix + "methods: " + ", ".join(METHODS))
+                             fix + "methods: " + ", ".join(METHODS) + " (or solve_ivp's "
+                             "RK45, DOP853, Radau, BDF, LSODA)")
         step = self.number(settings.get("step", DEFAULT_STEP), "integrator.step", "the step")
         if not step > 0:
             raise self.error(f"the step must be positive but is {step!r}", "integrator.step",

@@ -376,6 +376,7 @@ OUTPUT_KINDS = {
     "angular_velocity": ("base", "relative_to", "components"),
     "energy": ("which",),                         # kinetic | potential | total
     "generalized_force": ("effect",),             # tau of one effect (n values)
+    "power": ("effect",),                         # its power tau . q_dot (1 value, W)
     "pose": ("body",),                            # 4x4 pose, row-major
 }
 

@@ -13,7 +13,10 @@ of scipy's ``OdeResult``:
 Methods (``METHODS``): ``rk4`` (fixed step), ``dopri5`` and ``dop853``
 (Dormand-Prince, Hairer's step control and dense output), ``rodas``
 (Rosenbrock RODAS4, stiff, uses the Jacobian), ``midpoint`` and ``gauss4``
-(Gauss-Legendre, implicit, symplectic, fixed step).  Fixed-step methods need
+(Gauss-Legendre, implicit, symplectic, fixed step).  solve_ivp's names are
+aliases of these (``ALIASES``, case-insensitive): "RK45" runs dopri5, "DOP853"
+dop853, and "Radau", "BDF" and "LSODA" run rodas -- modelgen's own methods, not
+scipy's.  ``t_span`` must increase: the C integrators step forward only.  Fixed-step methods need
 ``step=``; the adaptive ones run with fixed steps too when given ``step=``.
 
 The method codes, C status codes and their messages, and the statistics are
@@ -26,6 +29,7 @@ import concurrent.futures
 import functools
 import signal
 import threading
+import warnings
 
 import numpy as np
 
@@ -42,7 +46,11 @@ __all__ = ["METHODS", "ALIASES", "STATUS", "Method", "method_of",
 
 #: the C status codes are modelgen.codegen.capi's
 BUFFER_FULL = STATUS_BY_NAME["BUFFER_FULL"].code
+MAX_STEPS = STATUS_BY_NAME["MAX_STEPS"].code
 INTERRUPTED = STATUS_BY_NAME["INTERRUPTED"].code
+#: the step budget of a run when max_steps is not given (fixed-step runs get at
+#: least the steps they need)
+DEFAULT_MAX_STEPS = 100_000
 #: numpy's C long (the counters of the C API)
 _LONG = np.dtype("l")
 #: fixed step counts from here on do not fit the C integrator's counter (a C long)
@@ -130,8 +138,15 @@ def _span(t_span):
         t0, t1 = (float(v) for v in t_span)
     except (TypeError, ValueError) as exc:
         raise SimulationError(f"t_span must be (t0, t1), got {t_span!r}") from exc
-    if not (np.isfinite(t0) and np.isfinite(t1) and t1 > t0):
-        raise SimulationError(f"t_span must be finite and increasing, got {t_span!r}")
+    if not (np.isfinite(t0) and np.isfinite(t1)):
+        raise SimulationError(f"t_span must be finite, got {t_span!r}")
+    if t1 < t0:
+        raise SimulationError(
+            f"t_span ({t0!r}, {t1!r}) runs backwards in time, which the C integrators do not "
+            f"do (they step forward only); fix: integrate backwards with scipy on the compiled "
+            f"model, solve_ivp(cm.rhs, ({t0!r}, {t1!r}), x0, method='DOP853', jac=cm.jac)")
+    if not t1 > t0:
+        raise SimulationError(f"t_span must be increasing, got {t_span!r}")
     return t0, t1
 
 
@@ -280,7 +295,8 @@ def c_constants(cm) -> dict:
 
 def simulate(cm, x0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10, u=None,
              p=None, events=None, *, step=None, first_step=None, max_step=None,
-             max_steps=100_000, chunk=2048, interrupt=None, outputs=True) -> Result:
+             max_steps=None, chunk=2048, interrupt=None, outputs=True,
+             progress=None) -> Result:
     """Integrate the compiled model ``cm`` in C from ``x0`` over ``t_span``.
 
     ``t_eval`` samples the solution through each method's dense output (the
@@ -292,11 +308,16 @@ def simulate(cm, x0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10
     ``(times, values, "linear" | "hold")``, or a feedback callable
     ``u(t, x)`` (called from the C; any method).  ``p`` is None, a dict of
     overrides or a vector.  ``rtol``/``atol`` are scalars or one value per
-    state; ``step`` selects fixed steps.  ``chunk`` is the number of rows per C
+    state; ``step`` selects fixed steps.  ``max_steps`` (attempted steps) defaults
+    to :data:`DEFAULT_MAX_STEPS`, or for fixed steps to the steps the span needs if
+    that is more.  ``chunk`` is the number of rows per C
     call when every step is recorded.  ``interrupt`` is None or a writable
     numpy ``intc`` array of one element that the C polls every step: set it
     nonzero (from another thread, a signal handler or a callback) to stop with
-    status INTERRUPTED and the trajectory so far.  With ``outputs`` a scene's
+    status INTERRUPTED and the trajectory so far.  ``progress`` is None or a
+    callable ``progress(t)`` given the time reached about every 0.05 s while the C
+    runs (from the calling thread, when that is the main thread) and after each
+    C call: for a progress bar.  With ``outputs`` a scene's
     outputs are recorded by the C at every row (``res.outputs``).  A failure returns what was
     computed up to it, with ``status < 0`` and a message naming the time (and
     the state).
@@ -305,10 +326,14 @@ def simulate(cm, x0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10
     >>> res.t_events[0], res.y.shape, res.message                             # doctest: +SKIP
     """
     ffi, nx = cm.ffi, 2 * cm.n
-    m, rtol, atol, fixed, first, hmax, max_steps = _options(
-        cm, method, rtol, atol, step, first_step, max_step, max_steps)
+    m, rtol, atol, fixed, first, hmax, budget = _options(
+        cm, method, rtol, atol, step, first_step, max_step,
+        DEFAULT_MAX_STEPS if max_steps is None else max_steps)
     t0, t1 = _span(t_span)
     _check_step_count(fixed, t0, t1)
+    if max_steps is None and fixed > 0:      # a fixed-step run's step count is known
+        budget = max(budget, int(np.ceil((t1 - t0) / fixed)) + 2)
+    max_steps = budget
     x = cm._vector(x0, nx, "x0").copy()
     if not np.all(np.isfinite(x)):
         raise SimulationError(f"{cm.name}: x0 must be finite")
@@ -349,6 +374,9 @@ def simulate(cm, x0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10
             raise SimulationError("interrupt must be a writable numpy intc array of one element")
     flag = interrupt if interrupt is not None else np.zeros(1, dtype=np.intc)
     opt.interrupt = ffi.from_buffer("int[]", flag)
+    reached = np.array([t0])                  # the C writes the time reached here
+    opt.progress = ffi.from_buffer("double[]", reached)
+    poll = None if progress is None else (lambda: progress(float(reached[0])))
 
     fn = getattr(cm.lib, f"{cm.name}_integrate")
     ptr = cm._ptr
@@ -385,7 +413,9 @@ def simulate(cm, x0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10
         opt.max_steps = steps_left
         opt.resume = ffi.NULL if resume is None else ptr(resume)
         status = _interruptible(fn, (t0, t1, ptr(x), ptr(p_vec), inputs.struct, opt, out, stats,
-                                     ptr(work)), flag)
+                                     ptr(work)), flag, poll)
+        if poll is not None:
+            poll()
         rows, k = out.n, out.n_events
         skip = 1 if (times is None and t_parts) else 0   # a continuation repeats its start
         t_parts.append(t_out[skip:rows].copy())
@@ -425,6 +455,9 @@ def simulate(cm, x0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10
         message = f"{message.rstrip('.')}: {type(failure).__name__}: {failure}."
     if status < 0:
         message += _conditioning_note(cm, p_vec, x_start, stop[STOP_X:])
+    if status == MAX_STEPS:
+        message += _max_steps_note(max_steps, t_span, float(stop[0]))
+        warnings.warn(f"{cm.name}: {message}", RuntimeWarning, stacklevel=4)
     et, ex, ei = (np.concatenate(ev_t), np.concatenate(ev_x).reshape(-1, nx),
                   np.concatenate(ev_i))
     res = make_result(
@@ -445,8 +478,23 @@ def simulate(cm, x0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10
     return res
 
 
-def _interruptible(fn, args, flag):
-    """``fn(*args)``, a C integration loop that polls ``flag``, stopped by Ctrl-C.
+def _max_steps_note(max_steps, t_span, t_reached) -> str:
+    """What a run truncated by ``max_steps`` missed and how to raise it."""
+    t0, t1 = (float(v) for v in t_span)
+    done = (t_reached - t0) / (t1 - t0)
+    need = None
+    if done > 0:        # 1.2 times the steps at the pace so far, rounded up to 2 digits
+        estimate = 1.2 * max_steps / done
+        unit = 10.0 ** max(np.floor(np.log10(estimate)) - 1, 0)
+        need = f"{int(np.ceil(estimate / unit) * unit):d}"
+    return (f" The run stopped at {100 * done:.3g}% of t_span ({t0!r}, {t1!r}); fix: raise "
+            f"max_steps (simulate(..., max_steps={need or 'N'}), or --max-steps "
+            f"{need or 'N'} on the command line), or loosen rtol/atol.")
+
+
+def _interruptible(fn, args, flag, poll=None):
+    """``fn(*args)``, a C integration loop that polls ``flag``, stopped by Ctrl-C
+    (and ``poll()`` called between the short joins, for progress).
 
     In the main thread, with Python's default SIGINT handler in place, the C
     call runs in a worker thread while the main thread waits in short joins;
@@ -468,6 +516,8 @@ def _interruptible(fn, args, flag):
         worker.start()
         while worker.is_alive():
             worker.join(0.05)
+            if poll is not None:
+                poll()
     finally:
         signal.signal(signal.SIGINT, previous)
     return box[0]

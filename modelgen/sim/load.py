@@ -13,14 +13,16 @@ from modelgen.sim.scene import Scene
 
 
 def generate_model(source, out_dir=None, *, force: bool = False,
-                   jacobian: bool = False, formulation: str = "auto") -> Generated:
+                   jacobian: bool = False, formulation: str = "auto",
+                   progress=None) -> Generated:
     """Generate and compile a model (or reuse the cache); returns the report.
 
     Like :func:`load`, it refuses (:class:`~modelgen.errors.DerivationError`)
     a model whose mass matrix is singular for every configuration, cached or not.
+    ``progress(stage)`` is called as each stage of a build starts.
     """
     generated = generate(as_spec(source), out_dir, force=force, jacobian=jacobian,
-                         formulation=formulation)
+                         formulation=formulation, progress=progress)
     _loaded(generated)
     return generated
 
@@ -37,7 +39,7 @@ def _loaded(generated: Generated) -> CompiledModel:
 
 
 def load(source, out_dir=None, *, force: bool = False, jacobian: bool = False,
-         formulation: str = "auto") -> CompiledModel:
+         formulation: str = "auto", progress=None) -> CompiledModel:
     """Build (on first use) and import a model; returns a :class:`CompiledModel`.
 
     ``source`` is a YAML path, a :class:`modelgen.model.Model` or a ModelSpec.
@@ -47,12 +49,13 @@ def load(source, out_dir=None, *, force: bool = False, jacobian: bool = False,
     (for stiff integrators; it costs generation and compile time).
     ``formulation`` (``auto``, ``aba`` or ``crba``) chooses how the rhs computes
     q_ddot (see :data:`modelgen.codegen.pipeline.FORMULATIONS`).
+    ``progress(stage)`` is called as each stage of a build starts.
 
     >>> cm = load("models/double_pendulum.yaml")             # doctest: +SKIP
     >>> cm.rhs(0.0, [0.1, 0.2, 0.0, 0.0])                    # doctest: +SKIP
     """
     return _loaded(generate(as_spec(source), out_dir, force=force, jacobian=jacobian,
-                            formulation=formulation))
+                            formulation=formulation, progress=progress))
 
 
 def load_scene(path, out_dir=None, *, force: bool = False, progress=None) -> Scene:

@@ -17,9 +17,13 @@ def result_figure(res, *, title: str = "", conservative=None):
     """The figure :meth:`Result.plot` returns.
 
     Panels: the coordinates; one per recorded output; the energy when it was
-    recorded, with the relative change of the total energy when the run is
-    ``conservative`` (a conserved quantity: its drift is the integration
-    error) and the energy itself otherwise.
+    recorded.  With the work of non-conservative effects (``res.work``, from a
+    scene with damping, friction or actions) the energy panel also draws each
+    effect's work W_k(t) and E(0) + sum W_k, and a panel below draws the balance
+    error E(t) - E(0) - sum W_k(t) [J], which only the integration (and the
+    work's quadrature) makes nonzero.  A ``conservative`` run without work gets
+    the relative change of the total energy instead (its drift is the
+    integration error).
     """
     from matplotlib.figure import Figure
 
@@ -30,7 +34,9 @@ def result_figure(res, *, title: str = "", conservative=None):
     panels = ["coordinates"] + [("output", name) for name in plotted]
     if res.energy is not None:
         panels.append("energy")
-        if conservative:
+        if res.work:
+            panels.append("energy_balance")
+        elif conservative:
             panels.append("energy_error")
     fig = Figure(figsize=(8, 1.7 * len(panels) + 0.9), layout="constrained")
     axes = fig.subplots(len(panels), 1, sharex=True, squeeze=False)[:, 0]
@@ -44,8 +50,17 @@ def result_figure(res, *, title: str = "", conservative=None):
             total = res.energy.sum(axis=1)
             ax.plot(t, res.energy[:, 0], label="kinetic")
             ax.plot(t, res.energy[:, 1], label="potential")
-            ax.plot(t, total, label="total", color="k")
-            ax.set_ylabel("energy [J]")
+            ax.plot(t, total, label="total E", color="k")
+            for name, w in res.work.items():
+                ax.plot(t, w, label=f"work of {name}", ls="--")
+            if res.work:
+                supplied = total[0] + sum(res.work.values())
+                ax.plot(t, supplied, label="E(0) + sum of work", color="0.5", ls=":", lw=2)
+            ax.set_ylabel("energy, work [J]")
+        elif panel == "energy_balance":
+            balance = res.energy.sum(axis=1) - res.energy.sum(axis=1)[0] - sum(res.work.values())
+            ax.plot(t, balance, color="k", label="E - E(0) - sum of work")
+            ax.set_ylabel("energy balance\nerror [J]")
         elif panel == "energy_error":
             total = res.energy.sum(axis=1)
             scale = max(np.max(np.abs(res.energy[0])), 1e-300)

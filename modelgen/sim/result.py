@@ -52,6 +52,10 @@ class Result:
     output_columns: dict = field(default_factory=dict)
     #: kinetic and potential energy at each time (n_times, 2), when recorded
     energy: Optional[np.ndarray] = None
+    #: work of each effect outside the energy (damping, friction, actions): name ->
+    #: W_k(t) = integral of its power (n_times,) [J], recorded by scenes; the energy
+    #: balance E(t) - E(0) - sum W_k(t) is in ``info["energy_balance"]``
+    work: dict = field(default_factory=dict)
     #: what else the run knows (scene name, parameters...)
     info: dict = field(default_factory=dict)
 
@@ -93,6 +97,7 @@ class Result:
             names += list(self.output_columns.get(name, [name]))
         if self.energy is not None:
             names += ["kinetic", "potential", "total"]
+        names += [f"work.{name}" for name in self.work]
         return names
 
     def table(self) -> np.ndarray:
@@ -101,6 +106,7 @@ class Result:
         parts += [np.asarray(v).reshape(len(self.t), -1) for v in self.outputs.values()]
         if self.energy is not None:
             parts += [self.energy, self.energy.sum(axis=1, keepdims=True)]
+        parts += [np.asarray(w).reshape(-1, 1) for w in self.work.values()]
         return np.hstack(parts)
 
     def to_csv(self, path) -> Path:
@@ -114,12 +120,14 @@ class Result:
         return path
 
     def to_npz(self, path) -> Path:
-        """t, y, the state names, every output (``output:<name>``) and the energies."""
+        """t, y, the state names, every output (``output:<name>``), the energies and the
+        work of each effect (``work:<name>``)."""
         path = Path(path)
         arrays = {"t": self.t, "y": self.y, "x": self.y.T,
                   **{f"output:{k}": v for k, v in self.outputs.items()}}
         if self.energy is not None:
             arrays["energy"] = self.energy
+        arrays.update({f"work:{k}": v for k, v in self.work.items()})
         np.savez(path, status=self.status, message=self.message,
                  state_names=np.array(self.state_names), **arrays)
         return path
@@ -148,7 +156,8 @@ class Result:
 
     def __repr__(self) -> str:
         """One line per field, as scipy prints an OdeResult (arrays by their shape)."""
-        shown = [f for f in _FIELDS if f != "energy" or self.energy is not None]
+        shown = [f for f in _FIELDS if (f != "energy" or self.energy is not None)
+                 and (f != "work" or self.work)]
         shown += ["state_names"] + (["outputs"] if self.outputs else [])
         width = max(map(len, shown)) + 1
         lines = []
@@ -156,7 +165,7 @@ class Result:
             value = getattr(self, name)
             if isinstance(value, np.ndarray):
                 text = f"array{value.shape}"
-            elif name == "outputs":
+            elif name in ("outputs", "work"):
                 text = "{" + ", ".join(f"{k!r}: array{np.shape(v)}" for k, v in value.items()) + "}"
             else:
                 text = repr(value)

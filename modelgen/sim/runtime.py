@@ -305,13 +305,18 @@ class CompiledModel:
         ``dop853`` (default), ``rodas`` (stiff, uses the Jacobian), ``midpoint``,
         ``gauss4`` (see :data:`modelgen.sim.integrate.METHODS`); the fixed-step
         ones need ``step``, which also runs the adaptive ones with fixed steps.
+        solve_ivp's names are accepted and mapped to these, modelgen's own
+        methods: ``"RK45"`` -> dopri5, ``"DOP853"`` -> dop853, ``"Radau"``,
+        ``"BDF"``, ``"LSODA"`` -> rodas.  ``t_span`` must increase (the C
+        integrators step forward only; backwards, use ``solve_ivp(cm.rhs, ...)``).
         ``t_eval`` samples through each method's dense output (otherwise every
         step is recorded); ``events`` are ``g(t, x)`` callables with
         ``terminal``/``direction`` attributes, as in ``solve_ivp``.  ``u`` is None
         (zeros), a vector or dict of constant inputs, a tuple ``(times, values,
         "linear" | "hold")`` of samples, or a callable ``u(t, x)`` (feedback).
-        ``p`` overrides parameters.  ``max_steps`` defaults to 100,000 (a run
-        that hits it stops with status -1 and says so).  ``dense_output=True``
+        ``p`` overrides parameters.  ``max_steps`` defaults to 100,000, or for a
+        fixed ``step`` to the steps the span needs if that is more (a run that
+        hits it stops with status -1, warns and says how to raise it).  ``dense_output=True``
         sets ``res.sol`` (:class:`~modelgen.sim.result.DenseOutput`), the method's
         own continuous extension on every step (it costs a second run).
         With ``outputs=True`` a scene's outputs are recorded at each time.

@@ -9,11 +9,12 @@ import numpy as np
 
 from modelgen.codegen.pipeline import generate
 from modelgen.errors import SimulationError
-from modelgen.model.spec import CONSERVATIVE_KINDS
+from modelgen.model.spec import CANONICAL_BASE, CONSERVATIVE_KINDS, OutputSpec
 from modelgen.sim.animate import animate
 from modelgen.sim.integrate import method_of
 from modelgen.sim.result import Result
 from modelgen.sim.runtime import STABILITY_LIMIT, CompiledModel, check_mass_matrix
+from modelgen.sim.work import PER, energy_balance, quadrature_times
 
 
 #: a run needing more steps than this for stability alone is called stiff
@@ -28,24 +29,29 @@ class Scene:
     >>> res.t, res.y, res["q1"], res["elbow"]                         # doctest: +SKIP
     """
 
-    def __init__(self, spec, out_dir=None, *, force: bool = False, progress=None):
+    def __init__(self, spec, out_dir=None, *, force: bool = False, progress=None,
+                 stages=None):
+        """``progress(message)`` hears what is being done; ``stages(stage)`` is
+        called as each stage of a build starts (see :func:`generate`)."""
         self.spec = spec
         if progress:
             progress(f"{spec.name}: generating (or reusing) the model")
+        # the power of every effect outside the energy, for the energy balance
+        self.powers = _power_outputs(spec)
+        extra = tuple(out for out in self.powers.values() if out not in spec.outputs)
         # stiff scenes get the symbolic Jacobian, for implicit integrators
-        generated = generate(spec.model, out_dir, force=force, outputs=spec.outputs,
-                             jacobian=bool(spec.stiff_effects) and spec.model.n <= 12)
+        generated = generate(spec.model, out_dir, force=force, outputs=spec.outputs + extra,
+                             jacobian=bool(spec.stiff_effects) and spec.model.n <= 12,
+                             progress=stages)
         self.generated = generated
         self.model = CompiledModel(generated.manifest, generated.build.module_path)
         check_mass_matrix(self.model)          # on every load: the cache hides nothing
 
     @property
     def conservative(self) -> bool:
-        """True when every selected effect derives from a potential."""
-        kinds = {e.name: e.kind for e in self.spec.full_model.effects}
-        kinds.update({a.name: "action" for a in self.spec.full_model.actions})
-        kinds["gravity"] = "gravity"
-        return all(kinds.get(name) in CONSERVATIVE_KINDS for name in self.spec.effects)
+        """True when every selected effect derives from a potential (and the energy
+        counts it: gravity in a base other than E does not)."""
+        return not self.powers
 
     def summary(self) -> str:
         """What the scene simulates: effects, stiff ones flagged, outputs, ops."""
@@ -135,24 +141,44 @@ class Scene:
                 values[:, j] = np.interp(grid, sig.times, sig.values)
         return (np.array(grid), values, "hold" if hold else "linear")
 
-    def run(self, p=None, x0=None, u=None) -> Result:
+    def run(self, p=None, x0=None, u=None, max_steps=None, progress=None) -> Result:
         """Integrate the scene with its method, sampled at its times; energies recorded.
 
         ``p`` overrides parameters, ``x0`` the initial state (an array, or a
         mapping of coordinate and speed names to values, missing ones taken
         from the scene), and ``u`` the scene's inputs (anything
         :meth:`CompiledModel.simulate` accepts, including a feedback callable
-        ``u(t, x)``).  Returns a :class:`~modelgen.sim.result.Result`.
+        ``u(t, x)``).  ``max_steps`` overrides the step budget of
+        :meth:`CompiledModel.simulate`; ``progress(t)`` hears the time reached while
+        the C runs (see :func:`modelgen.sim.integrate.simulate`).  Returns a :class:`~modelgen.sim.result.Result`.
         """
         s, cm = self.spec, self.model
         x0 = self.initial_state(x0)
         u = self._inputs() if u is None else u
         fixed = not method_of(s.method).adaptive
         times = _scene_times(s.t_start, s.t_end, s.sample_dt)
-        res = cm.simulate(x0, (s.t_start, s.t_end), t_eval=times, method=s.method,
-                          rtol=s.rtol, atol=s.atol, u=u, p=p, step=s.step if fixed else None)
+        # with work to integrate, the run also samples the quadrature nodes between
+        grid = quadrature_times(times) if self.powers else times
+        res = cm.simulate(x0, (s.t_start, s.t_end), t_eval=grid, method=s.method,
+                          rtol=s.rtol, atol=s.atol, u=u, p=p, step=s.step if fixed else None,
+                          max_steps=max_steps, **({} if progress is None else
+                                                  {"progress": progress}))
+        powers = {}
+        if self.powers:
+            reached = res.t
+            powers = {effect: res.outputs[out.name][:, 0] for effect, out in self.powers.items()}
+            _keep_samples(res, slice(0, None, PER))
         res.energy = cm.energies(res, p)
         res.info.update(scene=s.name, conservative=self.conservative)
+        if powers:
+            balance = energy_balance(reached, res.energy.sum(axis=1), powers)
+            res.work = balance.work
+            res.info.update(energy_balance=balance.error,
+                            work_quadrature_check=balance.quadrature_check)
+        for out in self.powers.values():        # recorded for the balance only
+            if out not in s.outputs:
+                res.outputs.pop(out.name, None)
+                res.output_columns.pop(out.name, None)
         return res
 
     def animate(self, res: Result, path, **options):
@@ -179,6 +205,38 @@ class Scene:
                 x[cm.state_names.index(name)] = float(value)
             return x
         return np.array(x0, dtype=float)
+
+
+def _keep_samples(res: Result, rows: slice) -> None:
+    """Keep only ``rows`` of a result's times, states and outputs (in place)."""
+    res.t = res.t[rows]
+    res.y = res.y[:, rows]
+    res.outputs = {name: values[rows] for name, values in res.outputs.items()}
+
+
+def _power_outputs(spec) -> dict:
+    """effect -> the ``power`` output recording it, for every switched-on effect whose
+    energy the total energy leaves out (non-conservative ones, gravity in a base
+    other than E); a ``power`` output the scene already asks for is reused."""
+    kinds = {e.name: e for e in spec.model.effects}
+    kinds.update({a.name: a for a in spec.model.actions})
+    taken = {out.name for out in spec.outputs}
+    powers = {}
+    for name in spec.effects:
+        effect = kinds.get(name)
+        if effect is None:            # the top-level gravity (always in base E)
+            continue
+        if effect.kind in CONSERVATIVE_KINDS and getattr(effect, "base",
+                                                         CANONICAL_BASE) == CANONICAL_BASE:
+            continue
+        asked = [out for out in spec.outputs if out.kind == "power"
+                 and out.arg("effect") == name]
+        label = f"power_{name}"
+        while label in taken:
+            label += "_"
+        powers[name] = asked[0] if asked else OutputSpec(label, "power", (("effect", name),))
+        taken.add(powers[name].name)
+    return powers
 
 
 def _scene_times(t0, t1, dt):
