@@ -28,13 +28,15 @@ class Scene:
     >>> res.t, res.y, res["q1"], res["elbow"]                         # doctest: +SKIP
     """
 
-    def __init__(self, spec, out_dir=None, *, force: bool = False, progress=None):
+    def __init__(self, spec, out_dir=None, *, force: bool = False, progress=None,
+                 linearize: bool = False):
         self.spec = spec
         if progress:
             progress(f"{spec.name}: generating (or reusing) the model")
         # stiff scenes get the symbolic Jacobian, for implicit integrators
         generated = generate(spec.model, out_dir, force=force, outputs=spec.outputs,
-                             jacobian=bool(spec.stiff_effects) and spec.model.n <= 12)
+                             jacobian=bool(spec.stiff_effects) and spec.model.n <= 12,
+                             linearize=linearize)
         self.generated = generated
         self.model = CompiledModel(generated.manifest, generated.build.module_path)
         check_mass_matrix(self.model)          # on every load: the cache hides nothing
