@@ -126,8 +126,9 @@ class Linearization:
         return path
 
     def to_control(self):
-        """A ``control.StateSpace`` with the names of states, inputs and outputs; without
-        outputs, y = x (C = I, D = 0).  Needs python-control (extra ``control``)."""
+        """A ``control.StateSpace`` with the names of states, inputs and outputs (python-control
+        allows no ``.`` in a name: ``tip.x`` becomes ``tip_x``); without outputs,
+        y = x (C = I, D = 0).  Needs python-control (extra ``control``)."""
         try:
             import control
         except ImportError as exc:
@@ -138,7 +139,8 @@ class Linearization:
             C, D, outputs = np.eye(len(self.states)), np.zeros((len(self.states),
                                                                  len(self.inputs))), self.states
         return control.ss(self.A, self.B, C, D, states=list(self.states),
-                          inputs=list(self.inputs), outputs=list(outputs), name=self.model)
+                          inputs=list(self.inputs),
+                          outputs=[name.replace(".", "_") for name in outputs], name=self.model)
 
     def __str__(self):
         with np.printoptions(precision=6, suppress=False, linewidth=120):

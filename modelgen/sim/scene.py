@@ -137,6 +137,20 @@ class Scene:
                 values[:, j] = np.interp(grid, sig.times, sig.values)
         return (np.array(grid), values, "hold" if hold else "linear")
 
+    def inputs_at(self, t: float) -> dict:
+        """The scene's inputs at time ``t`` by name (a sampled input interpolated as the
+        integrators do, its end values held outside the samples; missing inputs 0)."""
+        out = dict.fromkeys(self.model.inputs, 0.0)
+        for sig in self.spec.inputs:
+            if sig.constant is not None:
+                out[sig.name] = float(sig.constant)
+            elif sig.interpolation == "hold":
+                k = int(np.searchsorted(sig.times, t, side="right")) - 1
+                out[sig.name] = float(sig.values[min(max(k, 0), len(sig.times) - 1)])
+            else:
+                out[sig.name] = float(np.interp(t, sig.times, sig.values))
+        return out
+
     def run(self, p=None, x0=None, u=None) -> Result:
         """Integrate the scene with its method, sampled at its times; energies recorded.
 
