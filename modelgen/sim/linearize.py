@@ -33,10 +33,11 @@ class Mode:
 
     @property
     def stable(self) -> bool | None:
-        """True when Re(lambda) < 0, False when > 0, None for a zero eigenvalue."""
-        if np.isnan(self.damping):
+        """True when Re(lambda) < 0, False when > 0, None when zero or purely imaginary
+        (|Re| up to ZERO_EIGENVALUE |lambda|: rounding)."""
+        if np.isnan(self.damping) or abs(self.damping) <= ZERO_EIGENVALUE:
             return None
-        return bool(self.damping > 0) if self.damping != 0 else None
+        return bool(self.damping > 0)
 
 
 @dataclass(frozen=True, eq=False)
@@ -87,13 +88,12 @@ class Linearization:
                  f"{'damping':>10}  note"]
         for m in self.modes():
             e = m.eigenvalue
-            text = f"{e.real:+.9g} {'+' if e.imag >= 0 else '-'} {abs(e.imag):.9g}j"
+            text = f"{e.real + 0.0:+.9g} {'+' if e.imag >= 0 else '-'} {abs(e.imag):.9g}j"
             if np.isnan(m.damping):
                 zeta, note = "-", "zero (neutral)"
             else:
-                zeta = f"{m.damping:.6g}"
-                note = ("unstable" if m.damping < 0 else "undamped" if m.damping == 0
-                        or abs(e.real) <= ZERO_EIGENVALUE * m.frequency else "")
+                zeta = f"{m.damping + 0.0:.6g}"
+                note = {None: "undamped", True: "", False: "unstable"}[m.stable]
             lines.append(f"{text:>34} {m.frequency:>16.9g} {m.frequency / (2 * np.pi):>11.6g} "
                          f"{zeta:>10}  {note}".rstrip())
         return "\n".join(lines)
