@@ -92,8 +92,9 @@ def relative(a, b) -> float:
     return float(np.max(np.abs(a - b)) / max(1.0, np.max(np.abs(b))))
 
 
-@pytest.mark.parametrize("formulation", ["crba", "aba"])
-def test_A_and_B_match_central_differences_of_the_rhs(build, formulation):
+def test_A_and_B_match_central_differences_of_the_rhs(build):
+    """crba: the residual's derivatives solved with A in C (aba: the scene's test below)."""
+    formulation = "crba"
     cm = build(f"dp_{formulation}", MODELS / "double_pendulum.yaml", formulation=formulation)
     assert cm.manifest["formulation"] == formulation
     rng = np.random.default_rng(1)
@@ -112,17 +113,22 @@ def test_A_and_B_match_central_differences_of_the_rhs(build, formulation):
     assert worst < 1e-7
 
 
-def test_C_and_D_of_scene_outputs_match_central_differences(scene):
+def test_A_B_C_D_of_a_scene_match_central_differences(scene):
     cm = scene.model
+    assert cm.manifest["formulation"] == "aba"
     x, u = np.array([0.3, 0.4, -0.7, 1.1]), np.array([2.5])
     lin = cm.linearize(x, u, t=0.25)
     ny = len(cm.output_columns)
     assert lin.C.shape == (ny, 4) and lin.D.shape == (ny, 1) and lin.outputs == cm.output_columns
+    fd_A = central(lambda z: cm.rhs(0.25, z, u), x)
+    fd_B = central(lambda v: cm.rhs(0.25, x, v), u)
     fd_C = central(lambda z: cm.output_values(0.25, z, u), x)
     fd_D = central(lambda v: cm.output_values(0.25, x, v), u)
+    worst_AB = max(relative(lin.A, fd_A), relative(lin.B, fd_B))
     worst = max(relative(lin.C, fd_C), relative(lin.D, fd_D))
-    SUMMARY.append(f"linearize outputs: C, D against central differences {worst:.1e}")
-    assert worst < 1e-7
+    SUMMARY.append(f"linearize aba: A, B against central differences {worst_AB:.1e}; "
+                   f"outputs: C, D {worst:.1e}")
+    assert worst < 1e-7 and worst_AB < 1e-7
     # the push's generalized force is F along x: D has exactly that column
     push = lin.outputs.index("push.x")
     assert lin.D[push, 0] == 1.0 and np.all(lin.C[push] == 0)
@@ -276,6 +282,18 @@ def test_a_build_without_linearize_says_how_to_get_it(compiled):
     cm = compiled("simple_pendulum")
     with pytest.raises(SimulationError, match="linearize=True"):
         cm.linearize([0.0])
+
+
+def test_a_state_where_the_model_is_not_differentiable_is_an_error(build):
+    cm = build("springs", MODELS / "spring_chain.yaml")   # zero-length springs at x = 0
+    with pytest.raises(SimulationError, match="A is not finite .* rows of x1_dot"):
+        cm.linearize(np.zeros(6))
+    lin = cm.linearize([1.0, 2.0, 3.0])                   # at rest at their rest lengths
+    k, m = cm.parameters["k"], cm.parameters["m"]
+    # the fixed-free chain of three equal springs: omega^2 = 2 (k/m) (1 - cos((2j-1) pi/7))
+    w = np.sqrt(2 * k / m * (1 - np.cos((2 * np.arange(1, 4) - 1) * np.pi / 7)))
+    np.testing.assert_allclose(np.sort(np.linalg.eigvals(lin.A[3:, :3]).real),
+                               -w[::-1] ** 2, rtol=1e-13)
 
 
 def test_cli_linearize_prints_eigenvalues_and_writes_npz(tmp_path):

@@ -19,8 +19,12 @@ from modelgen.errors import MassMatrixError, SimulationError
 from modelgen.sim.conditioning import failure_kind
 from modelgen.sim.integrate import jacobian_source
 
-#: an eigenvalue below this times the largest |eigenvalue| (or 1) counts as zero
+#: an eigenvalue below this times the largest |eigenvalue| (or 1) counts as zero, and a
+#: real part below it times |lambda| as none
 ZERO_EIGENVALUE = 1e-10
+#: ... and so does one below this times sqrt(eps ||A||_1): a neutral coordinate (no
+#: stiffness: a double zero eigenvalue, a Jordan block) splits by that much in rounding
+JORDAN_ZERO = 10.0
 
 
 @dataclass(frozen=True)
@@ -72,13 +76,17 @@ class Linearization:
         return np.sort_complex(np.linalg.eigvals(self.A).astype(complex))
 
     def modes(self) -> list:
-        """One :class:`Mode` per eigenvalue (same order as :meth:`eigenvalues`)."""
+        """One :class:`Mode` per eigenvalue (same order as :meth:`eigenvalues`); an
+        eigenvalue at the level of rounding (see :data:`JORDAN_ZERO`) is zero, its
+        damping ratio NaN."""
         lam = self.eigenvalues()
         scale = max(1.0, float(np.max(np.abs(lam)))) if lam.size else 1.0
+        norm = float(np.linalg.norm(self.A, 1)) if self.A.size else 0.0
+        zero = max(ZERO_EIGENVALUE * scale, JORDAN_ZERO * np.sqrt(np.finfo(float).eps * norm))
         out = []
         for e in lam:
             w = float(abs(e))
-            zeta = float("nan") if w <= ZERO_EIGENVALUE * scale else float(-e.real / w)
+            zeta = float("nan") if w <= zero else float(-e.real / w)
             out.append(Mode(complex(e), w, zeta))
         return out
 
@@ -92,7 +100,7 @@ class Linearization:
             if np.isnan(m.damping):
                 zeta, note = "-", "zero (neutral)"
             else:
-                zeta = f"{m.damping + 0.0:.6g}"
+                zeta = "0" if m.stable is None else f"{m.damping:.6g}"
                 note = {None: "undamped", True: "", False: "unstable"}[m.stable]
             lines.append(f"{text:>34} {m.frequency:>16.9g} {m.frequency / (2 * np.pi):>11.6g} "
                          f"{zeta:>10}  {note}".rstrip())
@@ -217,6 +225,14 @@ def linearize(cm, x, u=None, t=0.0, p=None, outputs=None) -> Linearization:
     if status:
         raise MassMatrixError(status, cm.coordinates[status - 1], t, x,
                               failure_kind(cm.mass_matrix(x[:cm.n], p_vec), status - 1))
+    for label, M, names in (("A", A, cm.state_names), ("B", B, cm.state_names),
+                            ("C", C, cm.output_columns), ("D", D, cm.output_columns)):
+        bad = [names[i] for i in range(M.shape[0]) if not np.all(np.isfinite(M[i]))]
+        if bad:
+            raise SimulationError(
+                f"{cm.name}: {label} is not finite at x = {list(map(float, x))} in the rows "
+                f"of {', '.join(bad)} (the model is not differentiable there, e.g. a spring "
+                f"or damper of zero length); fix: linearize at another state")
     rows = _rows(cm, outputs)
     return Linearization(A, B, C[rows], D[rows], t, x, u_vec.copy(), p_vec.copy(),
                          cm.state_names, cm.inputs,
