@@ -178,10 +178,10 @@ def state_at(cm, x) -> np.ndarray:
                 raise SimulationError(f"{cm.name}: unknown state {name!r}; states are "
                                       f"{', '.join(cm.state_names)}")
             out[cm.state_names.index(name)] = cm._vector([value], 1, f"state {name}")[0]
-        return out
-    if np.ndim(x) == 1 and np.shape(x)[0] == n:
-        return np.concatenate([cm._vector(x, n, "q"), np.zeros(n)])
-    out = cm._vector(x, 2 * n, "x")
+    elif np.ndim(x) == 1 and np.shape(x)[0] == n:
+        out = np.concatenate([cm._vector(x, n, "q"), np.zeros(n)])
+    else:
+        out = cm._vector(x, 2 * n, "x")
     if not np.all(np.isfinite(out)):
         raise SimulationError(f"{cm.name}: the state must be finite, got {out}")
     return out
