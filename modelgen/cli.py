@@ -300,6 +300,53 @@ def _simulate(args) -> int:
                    conservative=None, animation=(model, cm, p))
 
 
+def _linearize(args) -> int:
+    """Linearize a model or scene at --at (over the scene's initial state, or zero) and
+    --u (over the scene's inputs at --t, or zero); print A, B, the modes; write -o."""
+    from modelgen.model import as_spec, is_scene_file
+    from modelgen.model.scene import load_scene
+    from modelgen.sim.load import load
+    from modelgen.sim.scene import Scene
+    out = Path(args.output) if args.output else None
+    if out is not None and out.suffix.lower() not in (".npz", ".mat"):
+        raise ModelgenError(f"-o {out}: the file must end in .npz or .mat")
+    if is_scene_file(args.model):
+        spec = load_scene(args.model)
+        model, x0 = spec.model, np.array(spec.initial, dtype=float)
+        t = spec.t_start if args.t is None else args.t
+    else:
+        spec, model = None, as_spec(args.model)
+        x0, t = np.zeros(2 * model.n), args.t or 0.0
+    # every value is checked before anything is built
+    states = list(model.coordinates) + [f"{c}_dot" for c in model.coordinates]
+    at = _parse_assignments(args.at, "at")
+    for key, value in at.items():
+        if key not in states:
+            raise ModelgenError(f"--at {key}: unknown state; the state is {', '.join(states)}")
+        x0[states.index(key)] = value
+    u = _parse_assignments(args.u, "u")
+    for key in u:
+        if key not in model.inputs:
+            raise ModelgenError(f"--u {key}: unknown input; inputs are "
+                                f"{', '.join(model.inputs) or 'none'}")
+    p = _parameter_overrides([name for name, _ in model.parameters], args.set) or None
+    if spec is not None:
+        scene = Scene(spec, args.build_dir, linearize=True)
+        cm, u = scene.model, dict(scene.inputs_at(t), **u)
+    else:
+        cm = load(model, args.build_dir, linearize=True)
+    if args.equilibrium:
+        q = cm.equilibrium(x0[:cm.n], u=u, p=p, t=t)
+        print("equilibrium " + ", ".join(f"{c}={v:.12g}" for c, v in zip(cm.coordinates, q)))
+        x0 = np.concatenate([q, np.zeros(cm.n)])
+    lin = cm.linearize(x0, u=u, t=t, p=p)
+    print(lin)
+    if out is not None:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        print(f"wrote {lin.to_npz(out) if out.suffix.lower() == '.npz' else lin.to_mat(out)}")
+    return 0
+
+
 def _bench(args) -> int:
     import modelgen.bench as wp
     from modelgen.model import is_scene_file
@@ -469,6 +516,33 @@ def build_parser() -> argparse.ArgumentParser:
                    help="where the model is built (default: the per-user cache)")
     b.add_argument("-v", "--verbose", action="store_true", help="report every run on stderr")
     b.set_defaults(func=_bench)
+
+    lz = sub.add_parser("linearize", help="linearize a model or scene at an operating point: "
+                                          "A, B, C, D and the modes",
+                        description="Build (or reuse) the model with its symbolic "
+                                    "linearization, evaluate A = d xdot/dx and B = d xdot/du "
+                                    "(and, for a scene's outputs, C and D) at --at and --u, "
+                                    "and print them with the eigenvalues, their natural "
+                                    "frequencies and damping ratios.")
+    lz.add_argument("model", help="model or scene YAML file")
+    lz.add_argument("--at", action="append", metavar="NAME=VALUE",
+                    help="coordinate or speed of the operating point, e.g. q1=3.14159 "
+                         "(repeatable; default: the scene's initial state, or 0)")
+    lz.add_argument("--u", action="append", metavar="NAME=VALUE",
+                    help="input at the operating point (repeatable; default: the scene's "
+                         "input at --t, or 0)")
+    lz.add_argument("--set", action="append", metavar="NAME=VALUE",
+                    help="override a parameter (repeatable)")
+    lz.add_argument("--t", type=float, default=None,
+                    help="time of the operating point [s] (default: the scene's start, or 0)")
+    lz.add_argument("--equilibrium", action="store_true",
+                    help="first find the rest point (q_ddot = 0 at zero speeds) by Newton "
+                         "from the --at coordinates, and linearize there")
+    lz.add_argument("-o", "--output", default=None, metavar="FILE.npz|FILE.mat",
+                    help="write A, B, C, D, the operating point and the names")
+    lz.add_argument("--build-dir", default=None,
+                    help="where the model is built (default: the per-user cache)")
+    lz.set_defaults(func=_linearize)
 
     h = sub.add_parser("hard-cases", help="run the hard-case suite: each case against an "
                                           "independent reference, a table and a figure",

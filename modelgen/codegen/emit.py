@@ -255,7 +255,8 @@ def _comment_safe(text: str) -> str:
 
 def template_context(*, name: str, description: str, model_hash: str, n: int,
                      coordinates, parameters, inputs, bodies,
-                     functions: dict, output_columns=(), has_jacobian=False) -> dict:
+                     functions: dict, output_columns=(), has_jacobian=False,
+                     has_linearize=False) -> dict:
     """The plain dict every C template receives."""
     return {
         "name": name,
@@ -276,16 +277,18 @@ def template_context(*, name: str, description: str, model_hash: str, n: int,
         "functions": {k: asdict(f) for k, f in functions.items()},
         "ny": len(output_columns),
         "has_jacobian": bool(has_jacobian),
+        "has_linearize": bool(has_linearize),
+        "nc": 2 * n + len(inputs),
         "output_columns": list(output_columns),
         "api": public_api(name, n, len(parameters), len(inputs), len(bodies),
-                          len(output_columns), has_jacobian),
+                          len(output_columns), has_jacobian, has_linearize),
         "solve_lines": unrolled_ldlt(n, f"{name.upper()}_PIVOT_TOL") if n <= UNROLL_SOLVE else [],
         "capi": capi.context(),
     }
 
 
 def public_api(name: str, n: int, n_p: int, n_u: int, n_b: int, n_y: int = 0,
-               has_jacobian: bool = False) -> list:
+               has_jacobian: bool = False, has_linearize: bool = False) -> list:
     """Prototypes and documentation of every exported function.
 
     The header is rendered from this one list, and the manifest records each
@@ -305,6 +308,19 @@ def public_api(name: str, n: int, n_p: int, n_u: int, n_b: int, n_y: int = 0,
              "params": "double t, const double *x, const double *u, const double *p, double *J",
              "doc": [f"Jacobian J[{2 * n}*{2 * n}] = d xdot / d x, row-major, derived symbolically",
                      "(forward mode over the generated program). Returns the rhs status."]})
+    if has_linearize:
+        nx = 2 * n
+        extra.append(
+            {"ret": "int", "name": f"{name}_linearize",
+             "params": "double t, const double *x, const double *u, const double *p, "
+                       "double *A, double *B, double *C, double *D",
+             "doc": [f"State space model about (t, x[{nx}], u[{n_u}], p[{n_p}]), derived",
+                     "symbolically (forward mode over the generated program), row-major:",
+                     f"A[{nx}*{nx}] = d xdot / d x, B[{nx}*{n_u}] = d xdot / d u,",
+                     f"C[{n_y}*{nx}] = d y / d x, D[{n_y}*{n_u}] = d y / d u (y: the outputs).",
+                     "B and D are untouched (may be NULL) when there are no inputs, C and D",
+                     "when there are no outputs.  Returns the rhs status (0, or the failing",
+                     "pivot; the arrays are then not written)."]})
     return extra + [
         {"ret": "int", "name": f"{name}_abi_version", "params": "void",
          "doc": [f"Returns the ABI version ({ABI_VERSION}) this file was generated for."]},

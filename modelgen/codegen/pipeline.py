@@ -23,6 +23,7 @@ from modelgen.errors import ModelError
 from modelgen.codegen.emit import (ABI_VERSION, emit_sources, integrator_sources, print_routine,
                                    runtime_sources, template_context, templates_digest)
 from modelgen.derive.jacobian import derive_jacobian_terms
+from modelgen.derive.linearize import derive_linearization_terms
 from modelgen.derive.kinematics import derive_kinematics
 from modelgen.derive.outputs import derive_outputs
 from modelgen.model.spec import ModelSpec
@@ -63,7 +64,7 @@ class Generated:
 
 
 def model_hash(spec: ModelSpec, outputs=(), jacobian: bool = False,
-               formulation: str = "crba") -> str:
+               formulation: str = "crba", linearize: bool = False) -> str:
     """Hash of what determines the model's generated C: the model, modelgen, the
     model templates (not the integrators', which every model shares), the formulation.
 
@@ -72,7 +73,8 @@ def model_hash(spec: ModelSpec, outputs=(), jacobian: bool = False,
     """
     h = hashlib.sha256()
     for part in (repr(replace(spec, source=None, lines=())),
-                 repr(tuple(outputs)) + (" jacobian" if jacobian else ""),
+                 repr(tuple(outputs)) + (" jacobian" if jacobian else "")
+                 + (" linearize" if linearize else ""),
                  formulation, __version__, str(ABI_VERSION), templates_digest()):
         h.update(part.encode())
         h.update(b"\0")
@@ -90,11 +92,11 @@ def runtime() -> tuple:
 
 
 def build_hash(spec: ModelSpec, outputs=(), jacobian: bool = False,
-               formulation: str = "crba") -> str:
+               formulation: str = "crba", linearize: bool = False) -> str:
     """Cache key of the compiled module: the model hash, the compiler and its flags,
     and the integrators it links (so a changed mg_integrate rebuilds every module)."""
     h = hashlib.sha256()
-    for part in (LIBRARY_FORMAT, model_hash(spec, outputs, jacobian, formulation),
+    for part in (LIBRARY_FORMAT, model_hash(spec, outputs, jacobian, formulation, linearize),
                  " ".join(compiler()),
                  os.environ.get("MODELGEN_CFLAGS", ""), integrator_hash(integrator_sources())):
         h.update(part.encode())
@@ -130,12 +132,14 @@ def choose_formulation(spec: ModelSpec, formulation: str = "auto"):
 
 
 def routines_for(eqs: Equations, output_exprs=(), jacobian=None,
-                 forward: ForwardDynamics | None = None):
+                 forward: ForwardDynamics | None = None, linearization=None):
     """The C routines of a model: (name, inputs, outputs) for make_routines.
 
     With ``forward`` (the ABA program) the ``rhs`` routine writes q_ddot and
     the articulated inertias D (in the order of ``forward.inward``), and
-    ``jacobian_terms`` is d(q_ddot)/dx.
+    ``jacobian_terms`` is d(q_ddot)/dx.  With ``linearization``
+    (:class:`~modelgen.derive.linearize.LinearizationTerms`) ``linearize_terms``
+    writes its R and Y (derivatives with respect to [x, u]).
     """
     n = len(eqs.q)
     t = (("t", (eqs.t,)),)
@@ -150,6 +154,13 @@ def routines_for(eqs: Equations, output_exprs=(), jacobian=None,
     else:
         rhs = ("rhs", t + (x, u, p), (("A", A_flat), ("b", b)))
         jac_inputs = t + (x, u, p, ("a", jacobian.a)) if jacobian else ()
+    lin = []
+    if linearization is not None:
+        lin_inputs = t + (x, u, p) + ((("a", linearization.a),) if linearization.a else ())
+        lin = [("linearize_terms", lin_inputs,
+                (("R", tuple(e for row in linearization.R for e in row)),)
+                + ((("Y", tuple(e for row in linearization.Y for e in row)),)
+                   if linearization.Y else ()))]
     return [
         ("mass_matrix", (q, p), (("A", A_flat),)),
         ("velocity_terms", (q, qd, p), (("h", eqs.h),)),
@@ -159,7 +170,8 @@ def routines_for(eqs: Equations, output_exprs=(), jacobian=None,
         ("body_poses", (q, p), (("T", tuple(e for pose in eqs.poses for e in pose)),)),
     ] + ([("outputs", t + (x, u, p), (("y", tuple(output_exprs)),))] if output_exprs else []) \
       + ([("jacobian_terms", jac_inputs,
-           (("D", tuple(e for row in jacobian.D for e in row)),))] if jacobian else [])
+           (("D", tuple(e for row in jacobian.D for e in row)),))] if jacobian else []) \
+      + lin
 
 
 def _check_generable(spec: ModelSpec) -> None:
@@ -179,7 +191,8 @@ STAGES = ("derive", "cse", "emit", "compile")
 
 
 def generate(spec: ModelSpec, out_dir=None, *, force: bool = False, outputs=(),
-             jacobian: bool = False, formulation: str = "auto", progress=None) -> Generated:
+             jacobian: bool = False, formulation: str = "auto", progress=None,
+             linearize: bool = False) -> Generated:
     """Generate, compile and cache the model; reuse an unchanged build.
 
     ``out_dir`` defaults to :func:`default_output` (the per-user cache).  ``outputs`` (a tuple of
@@ -190,6 +203,9 @@ def generate(spec: ModelSpec, out_dir=None, *, force: bool = False, outputs=(),
     computes q_ddot; the Jacobian is derived from the same program.
     ``progress`` is None or a callable ``progress(stage)`` called as each of
     :data:`STAGES` starts (not at all when the build is reused).
+    ``linearize=True`` adds ``<name>_linearize`` (A, B and, for the scene's
+    outputs, C and D, symbolic; see :mod:`modelgen.derive.linearize`) and
+    implies ``jacobian``.
 
     >>> g = generate(load_model("models/double_pendulum.yaml"))   # doctest: +SKIP
     >>> g.manifest["n"]                                             # doctest: +SKIP
@@ -197,8 +213,9 @@ def generate(spec: ModelSpec, out_dir=None, *, force: bool = False, outputs=(),
     """
     _check_generable(spec)
     formulation, tree = choose_formulation(spec, formulation)
+    jacobian = bool(jacobian or linearize)
     directory = Path(out_dir) if out_dir is not None else default_output(spec.name)
-    key = build_hash(spec, outputs, jacobian, formulation)
+    key = build_hash(spec, outputs, jacobian, formulation, linearize)
     damage = ""
     if not force:
         hit, damage = cache_lookup(directory, key)
@@ -217,7 +234,12 @@ def generate(spec: ModelSpec, out_dir=None, *, force: bool = False, outputs=(),
     graph = columns.graph if columns else eqs.graph
     forward = derive_aba(eqs, tree, spec, graph) if tree is not None else None
     graph = forward.graph if forward else graph
-    if jacobian:
+    linearization = None
+    if linearize:       # one pass for A, B, C, D; the Jacobian is its state columns
+        linearization = derive_linearization_terms(
+            eqs, graph, columns.exprs if columns else (), forward.qdd if forward else None)
+        terms = linearization.jacobian_terms()
+    elif jacobian:
         terms = (derive_aba_jacobian(forward, eqs) if forward else
                  derive_jacobian_terms(eqs, graph))
     else:
@@ -227,21 +249,21 @@ def generate(spec: ModelSpec, out_dir=None, *, force: bool = False, outputs=(),
     seconds["derive"] = t1 - t0
     stage("cse")
     routines = make_routines(graph, routines_for(eqs, columns.exprs if columns else (), terms,
-                                                 forward))
+                                                 forward, linearization))
     t2 = time.perf_counter()
     seconds["cse"] = t2 - t1
     stage("emit")
     outputs_c = {"A": "A", "h": "h", "tau": "tau", "b": "b", "out": "out", "T": "T", "y": "y",
-                 "D": "D", "qdd": "qdd"}
+                 "D": "D", "qdd": "qdd", "R": "R", "Y": "Y"}
     functions = {r.name: print_routine(r, outputs_c) for r in routines}
     context = template_context(
         name=spec.name, description=spec.description,
-        model_hash=model_hash(spec, outputs, jacobian, formulation)[:16],
+        model_hash=model_hash(spec, outputs, jacobian, formulation, linearize)[:16],
         n=spec.n,
         coordinates=spec.coordinates, parameters=spec.parameters, inputs=spec.inputs,
         bodies=eqs.bodies, functions=functions,
         output_columns=[c for cols in columns.columns for c in cols] if columns else (),
-        has_jacobian=bool(jacobian))
+        has_jacobian=bool(jacobian), has_linearize=bool(linearize))
     sources = emit_sources(dict(context, formulation=formulation,
                                 aba_inward=list(forward.inward) if forward else []))
     t3 = time.perf_counter()
@@ -259,6 +281,7 @@ def generate(spec: ModelSpec, out_dir=None, *, force: bool = False, outputs=(),
         "parameters": [[name, float(value)] for name, value in spec.parameters],
         "inputs": list(spec.inputs),
         "jacobian": bool(jacobian),
+        "linearize": bool(linearize),
         "formulation": formulation,
         "bodies": list(eqs.bodies),
         "outputs": [{"name": name, "columns": list(cols)}

@@ -81,11 +81,16 @@ def differentiate(graph: Graph, outputs, wrt) -> tuple:
     return builder.freeze(), tuple(rows)
 
 
-def derive_jacobian_terms(eqs: Equations, graph: Graph | None = None) -> JacobianTerms:
-    """d(tau - h - A a)/dx for the equations ``eqs`` (graph defaults to eqs.graph)."""
+def residual(eqs: Equations) -> tuple:
+    """``(a, r)``: the qdd symbols and ``r = tau - h - A a``, zero at the solution."""
     n = len(eqs.q)
     a = accelerations(n)
-    residual = [eqs.tau[k] - eqs.h[k] - sympy.Add(*[eqs.A[k][l] * a[l] for l in range(n)])
-                for k in range(n)]
-    g, rows = differentiate(graph or eqs.graph, residual, eqs.q + eqs.qd)
+    return a, tuple(eqs.tau[k] - eqs.h[k] - sympy.Add(*[eqs.A[k][l] * a[l] for l in range(n)])
+                    for k in range(n))
+
+
+def derive_jacobian_terms(eqs: Equations, graph: Graph | None = None) -> JacobianTerms:
+    """d(tau - h - A a)/dx for the equations ``eqs`` (graph defaults to eqs.graph)."""
+    a, r = residual(eqs)
+    g, rows = differentiate(graph or eqs.graph, r, eqs.q + eqs.qd)
     return JacobianTerms(g, a, rows)

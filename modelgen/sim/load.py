@@ -14,7 +14,7 @@ from modelgen.sim.scene import Scene
 
 def generate_model(source, out_dir=None, *, force: bool = False,
                    jacobian: bool = False, formulation: str = "auto",
-                   progress=None) -> Generated:
+                   progress=None, linearize: bool = False) -> Generated:
     """Generate and compile a model (or reuse the cache); returns the report.
 
     Like :func:`load`, it refuses (:class:`~modelgen.errors.DerivationError`)
@@ -22,7 +22,7 @@ def generate_model(source, out_dir=None, *, force: bool = False,
     ``progress(stage)`` is called as each stage of a build starts.
     """
     generated = generate(as_spec(source), out_dir, force=force, jacobian=jacobian,
-                         formulation=formulation, progress=progress)
+                         formulation=formulation, progress=progress, linearize=linearize)
     _loaded(generated)
     return generated
 
@@ -39,7 +39,7 @@ def _loaded(generated: Generated) -> CompiledModel:
 
 
 def load(source, out_dir=None, *, force: bool = False, jacobian: bool = False,
-         formulation: str = "auto", progress=None) -> CompiledModel:
+         formulation: str = "auto", progress=None, linearize: bool = False) -> CompiledModel:
     """Build (on first use) and import a model; returns a :class:`CompiledModel`.
 
     ``source`` is a YAML path, a :class:`modelgen.model.Model` or a ModelSpec.
@@ -50,20 +50,26 @@ def load(source, out_dir=None, *, force: bool = False, jacobian: bool = False,
     ``formulation`` (``auto``, ``aba`` or ``crba``) chooses how the rhs computes
     q_ddot (see :data:`modelgen.codegen.pipeline.FORMULATIONS`).
     ``progress(stage)`` is called as each stage of a build starts.
+    With ``linearize=True`` the symbolic ``<name>_linearize`` is generated too, for
+    :meth:`CompiledModel.linearize` and :meth:`CompiledModel.equilibrium`.
 
     >>> cm = load("models/double_pendulum.yaml")             # doctest: +SKIP
     >>> cm.rhs(0.0, [0.1, 0.2, 0.0, 0.0])                    # doctest: +SKIP
     """
     return _loaded(generate(as_spec(source), out_dir, force=force, jacobian=jacobian,
-                            formulation=formulation, progress=progress))
+                            formulation=formulation, progress=progress,
+                            linearize=linearize))
 
 
-def load_scene(path, out_dir=None, *, force: bool = False, progress=None) -> Scene:
+def load_scene(path, out_dir=None, *, force: bool = False, progress=None,
+               linearize: bool = False) -> Scene:
     """Load a scene file and build its reduced model; returns a :class:`Scene`.
 
     Only the effects and outputs the scene selects are generated.  Output goes
-    to ``out_dir`` (default: the per-user cache).
+    to ``out_dir`` (default: the per-user cache).  ``linearize=True`` adds the
+    symbolic linearization, outputs included (``scene.model.linearize(...)``).
 
     >>> res = load_scene("models/scenes/dp_damped.yaml").run()   # doctest: +SKIP
     """
-    return Scene(load_scene_spec(path), out_dir, force=force, progress=progress)
+    return Scene(load_scene_spec(path), out_dir, force=force, progress=progress,
+                 linearize=linearize)

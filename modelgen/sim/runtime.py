@@ -17,6 +17,7 @@ from modelgen.codegen.emit import ABI_VERSION
 from modelgen.errors import BuildError, DerivationError, MassMatrixError, SimulationError
 from modelgen.sim import integrate
 from modelgen.sim.library import ModelLibrary
+from modelgen.sim import linearize as linearization
 from modelgen.sim.conditioning import (PIVOT_TOL, failing_pivot, failure_kind,
                                        negligible_diagonal)
 from modelgen.sim.result import DenseOutput, Result
@@ -417,6 +418,39 @@ class CompiledModel:
         >>> scipy.integrate.solve_ivp(cm.rhs, (0, 1), x0, method="Radau", jac=cm.jac)  # doctest: +SKIP
         """
         return integrate.jacobian(self, t, x, u, p)
+
+    # -- linearization (modelgen/sim/linearize.py) -------------------------------------
+    def linearize(self, x, u=None, t=0.0, p=None, outputs=None):
+        """State space model about (t, x, u, p): a :class:`~modelgen.sim.linearize.Linearization`
+        with A, B, C, D from the symbolic ``<name>_linearize`` (load with ``linearize=True``).
+
+        ``x`` is the state, q alone (speeds zero) or a dict of state names;
+        ``outputs`` selects output names or columns for C and D (default: all).
+
+        >>> lin = modelgen.load("models/cart_pole.yaml", linearize=True).linearize([0, 0])  # doctest: +SKIP
+        >>> lin.A, lin.B, lin.eigenvalues()                                                 # doctest: +SKIP
+        """
+        return linearization.linearize(self, x, u, t, p, outputs)
+
+    def equilibrium(self, q_guess, u=None, p=None, t=0.0, **options) -> np.ndarray:
+        """A rest point q (q_ddot(q, 0, u) = 0) near ``q_guess``; see
+        :func:`modelgen.sim.linearize.equilibrium` (``tol``, ``max_iter``).
+
+        >>> q = cm.equilibrium([2.9]); cm.linearize(q).eigenvalues()    # doctest: +SKIP
+        """
+        return linearization.equilibrium(self, q_guess, u, p, t, **options)
+
+    def linearize_call(self, t: float, x, u, p):
+        """``(status, A, B, C, D)`` from the compiled ``<name>_linearize`` (checked
+        contiguous float arrays in), or None when the build has none."""
+        fn = getattr(self.lib, f"{self.name}_linearize", None)
+        if fn is None:
+            return None
+        nx, nu, ny = 2 * self.n, len(self.inputs), len(self.output_columns)
+        out = [np.zeros((nx, nx)), np.zeros((nx, nu)), np.zeros((ny, nx)), np.zeros((ny, nu))]
+        ptrs = [self._ptr(a) if a.size else self.ffi.NULL for a in out]
+        status = fn(t, self._ptr(x), self._ptr(u), self._ptr(p), *ptrs)
+        return (status, *out)
 
     def body_poses(self, q, p=None) -> np.ndarray:
         """4x4 pose of every body, shape (n_bodies, 4, 4)."""

@@ -30,7 +30,7 @@ class Scene:
     """
 
     def __init__(self, spec, out_dir=None, *, force: bool = False, progress=None,
-                 stages=None):
+                 stages=None, linearize: bool = False):
         """``progress(message)`` hears what is being done; ``stages(stage)`` is
         called as each stage of a build starts (see :func:`generate`)."""
         self.spec = spec
@@ -42,7 +42,7 @@ class Scene:
         # stiff scenes get the symbolic Jacobian, for implicit integrators
         generated = generate(spec.model, out_dir, force=force, outputs=spec.outputs + extra,
                              jacobian=bool(spec.stiff_effects) and spec.model.n <= 12,
-                             progress=stages)
+                             progress=stages, linearize=linearize)
         self.generated = generated
         self.model = CompiledModel(generated.manifest, generated.build.module_path)
         check_mass_matrix(self.model)          # on every load: the cache hides nothing
@@ -140,6 +140,20 @@ class Scene:
             else:
                 values[:, j] = np.interp(grid, sig.times, sig.values)
         return (np.array(grid), values, "hold" if hold else "linear")
+
+    def inputs_at(self, t: float) -> dict:
+        """The scene's inputs at time ``t`` by name (a sampled input interpolated as the
+        integrators do, its end values held outside the samples; missing inputs 0)."""
+        out = dict.fromkeys(self.model.inputs, 0.0)
+        for sig in self.spec.inputs:
+            if sig.constant is not None:
+                out[sig.name] = float(sig.constant)
+            elif sig.interpolation == "hold":
+                k = int(np.searchsorted(sig.times, t, side="right")) - 1
+                out[sig.name] = float(sig.values[min(max(k, 0), len(sig.times) - 1)])
+            else:
+                out[sig.name] = float(np.interp(t, sig.times, sig.values))
+        return out
 
     def run(self, p=None, x0=None, u=None, max_steps=None, progress=None) -> Result:
         """Integrate the scene with its method, sampled at its times; energies recorded.
