@@ -455,7 +455,8 @@ def build_fmu(source, out_path, *, method: str | None = None, rtol: float | None
     """Export a model or scene as an FMI 2.0 FMU (Model Exchange and Co-Simulation).
 
     ``source``: a model or scene YAML path, a :class:`~modelgen.model.Model`, a
-    ModelSpec or a SceneSpec.  ``method``, ``rtol``, ``atol`` and ``step`` choose
+    ModelSpec or a SceneSpec.  ``out_path``: the ``.fmu`` file, or a directory to
+    write ``<name>.fmu`` into.  ``method``, ``rtol``, ``atol`` and ``step`` choose
     the integrator of Co-Simulation's ``fmi2DoStep`` (default: a scene's own,
     else dop853 at rtol 1e-8, atol 1e-10); they are recorded in the model
     description.  ``out_dir``: where the model is generated (default: the
@@ -501,6 +502,8 @@ def build_fmu(source, out_path, *, method: str | None = None, rtol: float | None
             target = "fmi2-headers-LICENSE.txt" if fname == FMI2_LICENSE else fname
             files[f"sources/{target}"] = text.encode()
         out_path = Path(out_path)
+        if out_path.suffix.lower() != ".fmu":
+            out_path = out_path / f"{spec.name}.fmu"
         _write_archive(out_path, files)
     return Fmu(out_path, spec.name, guid, folder, settings, variables,
                time.perf_counter() - start)
