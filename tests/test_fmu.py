@@ -70,7 +70,7 @@ def _steps(times, values):
 # -- the archive and its model description ---------------------------------------------
 
 @pytest.mark.parametrize("name", ["dp_free", "cart_pole", "arm7"])
-def test_fmpy_validates_the_fmu_with_no_problem(fmus, name):
+def test_fmpy_validates_the_fmu_with_no_problem(fmus, name, capsys):
     fmu = fmus(name)
     problems = validate_fmu(str(fmu.path))
     assert problems == []
@@ -85,6 +85,8 @@ def test_fmpy_validates_the_fmu_with_no_problem(fmus, name):
     assert states[n:] == [f"{q}_dot" for q in states[:n]]
     assert [d.variable.name for d in md.derivatives] == [f"der({s})" for s in states]
     assert md.numberOfContinuousStates == 2 * n
+    fmpy.dump(str(fmu.path))                        # FMPy's summary reads it too
+    assert "Model Exchange, Co-Simulation" in capsys.readouterr().out
     SUMMARY.append(f"fmu {name}: FMPy validate_fmu problems: {len(problems)}; "
                    f"{len(names)} variables, {2 * n} states")
 
@@ -268,6 +270,19 @@ def test_the_sources_rebuild_the_binary(fmus, tmp_path):
     original = simulate_fmu(str(fmu.path), **kwargs)
     assert np.max(np.abs(rebuilt["theta"] - original["theta"])) < 1e-12
     assert np.max(np.abs(original["theta"] - start["theta"])) > 0.01   # it did move
+
+
+def test_the_wrapper_compiles_as_strict_c99_and_as_cpp(fmus, tmp_path):
+    fmu = fmus("dp_free")
+    with zipfile.ZipFile(fmu.path) as z:
+        z.extractall(tmp_path)
+    sources = tmp_path / "sources"
+    for command in ([*compiler(), "-std=c99", "-pedantic"],
+                    ["c++", "-x", "c++", "-std=c++11"]):
+        proc = subprocess.run([*command, "-Wall", "-Wextra", "-Werror", "-I.", "-c",
+                               "dp_free_fmi2.c", "-o", "wrapper.o"], cwd=sources,
+                              capture_output=True, text=True)
+        assert proc.returncode == 0, proc.stdout + proc.stderr
 
 
 # -- misuse: fmi2Error and a logged message, never a crash -----------------------------
