@@ -417,7 +417,13 @@ def test_misuse_of_a_co_simulation_instance_is_an_error_with_a_reason(fmus, tmp_
         assert "is a Model Exchange function" in log.last()
         assert "continuous state" in _fails(log, cs.setReal, [vr["x"]], [1.0])
         cs.setReal([vr["F"], vr["m"]], [1.0, 0.2])            # inputs and parameters: fine
+        assert 'unknown log category "logAll"' in _fails(log, cs.setDebugLogging, True,
+                                                         ["logAll"])
+        cs.setDebugLogging(True, ["logDebug"])
         cs.doStep(0.0, 0.1)
+        status, category, message = log.messages[-1]
+        assert (status, category) == (0, "logDebug") and message.startswith("fmi2DoStep: t = 0.1")
+        assert "rhs evaluations" in message
         assert cs.getReal([vr["x"]])[0] > 0
         assert "not supported" in _fails(log, cs.getFMUstate)
     finally:
