@@ -287,6 +287,20 @@ def test_the_wrapper_compiles_as_strict_c99_and_as_cpp(fmus, tmp_path):
         assert proc.returncode == 0, proc.stdout + proc.stderr
 
 
+def test_the_fmu_carries_the_c_of_its_own_variant(tmp_path):
+    """A build directory keeps several variants of one model, and <name>.c is the
+    newest one's: the export checks the model hash and regenerates when it differs."""
+    build = tmp_path / "build"
+    modelgen.load(MODELS / "simple_pendulum.yaml", build)
+    modelgen.load(MODELS / "simple_pendulum.yaml", build, jacobian=True)
+    assert "simple_pendulum_jacobian(" in (build / "simple_pendulum.c").read_text()
+    fmu = build_fmu(MODELS / "simple_pendulum.yaml", tmp_path / "sp.fmu", out_dir=build)
+    with zipfile.ZipFile(fmu.path) as z:
+        c = z.read("sources/simple_pendulum.c").decode()
+    assert "simple_pendulum_jacobian(" not in c      # dop853 needs no Jacobian
+    assert validate_fmu(str(fmu.path)) == []
+
+
 # -- misuse: fmi2Error and a logged message, never a crash -----------------------------
 
 class _Log:
