@@ -412,6 +412,51 @@ class _Parser(argparse.ArgumentParser):
                                  f"`{self.prog} --help` for the options\n")
 
 
+def _fmu(args) -> int:
+    from modelgen.codegen.fmu import build_fmu
+    if not Path(args.model).is_file():
+        raise ModelgenError(f"{args.model}: no such file; fix: give a model or scene file, "
+                            f"e.g. models/cart_pole.yaml")
+    fmu = build_fmu(args.model, args.output, method=args.method, rtol=args.rtol,
+                    atol=args.atol, step=args.step, out_dir=args.build_dir)
+    count = {kind: len(fmu.names(kind)) for kind in ("parameter", "input", "output")}
+    print(f"fmu        {fmu.path}  ({args.model})")
+    print(f"interfaces Model Exchange and Co-Simulation (FMI 2.0), binary {fmu.platform}")
+    print(f"variables  {sum(v.derivative_of is not None for v in fmu.variables)} states, "
+          f"{count['parameter']} parameters, {count['input']} inputs, "
+          f"{count['output']} outputs")
+    print(f"co-sim     {fmu.settings.describe()} (fixed at export)")
+    print(f"seconds    {fmu.seconds:.2f}")
+    return 0
+
+
+def _fmu_parser(sub) -> None:
+    f = sub.add_parser("fmu", help="export a model or scene as an FMI 2.0 FMU (Model Exchange "
+                                   "and Co-Simulation)",
+                       description="Write an FMI 2.0 FMU for Model Exchange and Co-Simulation "
+                                   "in one archive: modelDescription.xml (states q.., q.._dot "
+                                   "and their derivatives, tunable parameters, inputs, a "
+                                   "scene's outputs), the C sources and the binary for this "
+                                   "platform. Co-Simulation steps with modelgen's own "
+                                   "integrator, chosen here.")
+    f.add_argument("model", help="model or scene YAML file")
+    f.add_argument("-o", "--output", default="out",
+                   help="the .fmu file, or a directory for <name>.fmu (default: out)")
+    f.add_argument("--method", default=None,
+                   help="Co-Simulation integrator: rk4, dopri5, dop853, rodas, midpoint, gauss4 "
+                        "(default: the scene's, or dop853)")
+    f.add_argument("--rtol", type=float, default=None,
+                   help="relative tolerance of an adaptive method (default: the scene's, "
+                        "or 1e-8)")
+    f.add_argument("--atol", type=float, default=None,
+                   help="absolute tolerance (default: the scene's, or 1e-10)")
+    f.add_argument("--step", type=float, default=None,
+                   help="step of a fixed-step method [s] (default: the scene's)")
+    f.add_argument("--build-dir", default=None,
+                   help="where the model is built (default: the per-user cache)")
+    f.set_defaults(func=_fmu)
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(
         prog="modelgen",
@@ -558,6 +603,7 @@ def build_parser() -> argparse.ArgumentParser:
     h.add_argument("--build-dir", default=None,
                    help="where the models are built (default: the per-user build cache)")
     h.set_defaults(func=_hard_cases)
+    _fmu_parser(sub)
     for command in sub.choices.values():
         command.set_defaults(command_parser=command)
     return parser
