@@ -274,6 +274,8 @@ def _hard_cases(args) -> int:
 
 def _sweep(args) -> int:
     """``modelgen sweep``: a grid of parameters and initial values, in-process or on Dask."""
+    from modelgen.model import is_scene_file
+    from modelgen.model.scene import load_scene
     from modelgen.sim import sweep as sw
 
     def axis(item, flag):
@@ -297,6 +299,17 @@ def _sweep(args) -> int:
         raise ModelgenError(f"--plot takes HOW:VARIABLE with HOW one of "
                             f"{', '.join(sw.REDUCTIONS)}, got {args.plot!r}")
     sw.require("xarray", *(["distributed"] if args.scheduler else []))
+    _check_times(args)
+    t_eval = None
+    scene = is_scene_file(args.scene)
+    if not scene or args.t_end is not None or args.sample is not None:
+        spec = load_scene(args.scene) if scene else None
+        t0 = spec.t_start if scene else 0.0
+        t1 = args.t_end or (spec.t_end if scene else 10.0)
+        if t1 <= t0:
+            raise ModelgenError(f"--t-end must be after the scene's start {t0:g} s")
+        dt = args.sample or (spec.sample_dt if scene else 0.01)
+        t_eval = np.linspace(t0, t1, max(int(round((t1 - t0) / dt)), 1) + 1)
     g = sw.grid(**axes, **inits)
     bar = None
     if not args.quiet and sys.stderr.isatty():
@@ -308,7 +321,7 @@ def _sweep(args) -> int:
             bar.update(done - bar.n)
     try:
         ds = sw.sweep(args.scene, {k: g[k] for k in axes}, {k: g[k] for k in inits},
-                      method=args.method, rtol=args.rtol, step=args.dt,
+                      t_eval=t_eval, method=args.method, rtol=args.rtol, step=args.dt,
                       client=args.scheduler, chunk=args.chunk,
                       progress=progress if bar is not None else None,
                       build_dir=args.build_dir)
@@ -443,6 +456,10 @@ def build_parser() -> argparse.ArgumentParser:
     w.add_argument("--method", default=None, help="integration method (default: the scene's)")
     w.add_argument("--rtol", type=float, default=None, help="relative tolerance")
     w.add_argument("--dt", type=float, default=None, help="fixed step [s]")
+    w.add_argument("--t-end", type=float, default=None,
+                   help="final time [s] (default: the scene's, or 10 for a model)")
+    w.add_argument("--sample", type=float, default=None,
+                   help="sampling interval [s] (default: the scene's, or 0.01 for a model)")
     w.add_argument("-o", "--output", default="out/sweep.nc",
                    help="netCDF file to write (default: out/sweep.nc)")
     w.add_argument("--plot", default=None, metavar="HOW:VARIABLE",

@@ -307,12 +307,12 @@ class CompiledModel:
         u_vec = np.zeros(len(self.inputs)) if varying else self.input_vector(u).copy()
         ptr, f = self._ptr, self._outputs
         xp, yp, pp, up = ptr(X), ptr(out), ptr(p_vec), ptr(u_vec)
-        finite = np.all(np.isfinite(X), axis=1)
-        for i in range(len(t)):
+        finite = np.all(np.isfinite(X), axis=1).tolist()
+        for i, ti in enumerate(t.tolist()):
             if finite[i]:
                 if varying:
-                    u_vec[:] = self.input_vector(_input_at(self, u, t[i], X[i]))
-                f(t[i], xp + i * nx, up, pp, yp + i * ny)
+                    u_vec[:] = self.input_vector(_input_at(self, u, ti, X[i]))
+                f(ti, xp + i * nx, up, pp, yp + i * ny)
         return out
 
     def _input_samples(self, u):
