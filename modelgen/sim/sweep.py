@@ -419,18 +419,24 @@ def _distributed(client, cm, study, chunk, progress) -> tuple:
 
 def _dataset(xr, cm, study, swept, results, defaults, timing):
     """The sweep's ``xarray.Dataset`` from its chunks' results, in run order."""
-    y = np.concatenate([r["y"] for r in results]) if results else \
-        np.empty((0, 2 * cm.n, len(study.t_eval)))
     coords = {"run": np.arange(study.n_runs), "time": study.t_eval}
     for name, (_, values) in swept.items():
         coords[name] = ("run", np.broadcast_to(values, (study.n_runs,)).copy())
-    data = {name: (("run", "time"), y[:, i, :]) for i, name in enumerate(cm.state_names)}
+    # one contiguous block per state, filled chunk by chunk (one copy): xarray is slow on
+    # strided views (6.8 s instead of 0.02 s for four 10,000 x 101 views, xarray 2026.9)
+    by_state = np.empty((2 * cm.n, study.n_runs, len(study.t_eval)))
+    lo = 0
+    for r in results:
+        hi = lo + r["y"].shape[0]
+        by_state[:, lo:hi] = r["y"].transpose(1, 0, 2)
+        lo = hi
+    data = {name: (("run", "time"), by_state[i]) for i, name in enumerate(cm.state_names)}
     if study.outputs and cm.output_columns:
         ys = np.concatenate([r["outputs"] for r in results])
         for name, cols in cm.outputs.items():
             idx = [cm.output_columns.index(c) for c in cols]
             if len(cols) == 1:
-                data[name] = (("run", "time"), ys[:, :, idx[0]])
+                data[name] = (("run", "time"), np.ascontiguousarray(ys[:, :, idx[0]]))
             else:
                 dim = f"{name}_column"
                 coords[dim] = list(cols)
