@@ -370,6 +370,8 @@ def sweep(source, parameters=None, initial=None, *, t_eval=None, t_span=None, me
                           atol, step, max_steps, u, outputs)
     loaded = time.perf_counter()
     dask_client, owned = _client(client)
+    scheduler = "in-process" if dask_client is None else \
+        str(getattr(dask_client.scheduler, "address", None) or "dask")
     try:
         if dask_client is None:
             parts = PROGRESS_CHUNKS if (progress and not chunk) else 1
@@ -391,9 +393,7 @@ def sweep(source, parameters=None, initial=None, *, t_eval=None, t_span=None, me
     return _dataset(xr, cm, study, swept, results, defaults, dict(
         seconds=seconds, load_seconds=loaded - start, workers=workers, chunks=len(bounds),
         chunk=max(hi - lo for lo, hi in bounds) if bounds else 0,
-        compute_seconds=float(sum(r["seconds"] for r in results)),
-        scheduler="in-process" if dask_client is None else str(
-            getattr(dask_client.scheduler, "address", "dask"))))
+        compute_seconds=float(sum(r["seconds"] for r in results)), scheduler=scheduler))
 
 
 def _distributed(client, cm, study, chunk, progress) -> tuple:
