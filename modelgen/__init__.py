@@ -16,14 +16,15 @@ from modelgen.errors import (BuildError, DerivationError, MassMatrixError, Model
                              ModelgenError, SimulationError, TemplateError)
 from modelgen.version import __version__
 
-__all__ = ["load", "load_scene", "generate_model", "as_spec", "is_scene_file",
+__all__ = ["load", "load_scene", "generate_model", "as_spec", "is_scene_file", "sweep", "grid",
            "ModelgenError", "ModelError", "BuildError", "DerivationError", "SimulationError",
            "MassMatrixError", "TemplateError", "__version__"]
 
 #: public name -> the module that defines it (imported on first use)
 _LAZY = {"load": "modelgen.sim.load", "load_scene": "modelgen.sim.load",
          "generate_model": "modelgen.sim.load", "as_spec": "modelgen.model",
-         "is_scene_file": "modelgen.model"}
+         "is_scene_file": "modelgen.model", "sweep": "modelgen.sim.sweep",
+         "grid": "modelgen.sim.sweep"}
 
 
 def __getattr__(name):

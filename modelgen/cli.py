@@ -3,6 +3,9 @@
 ``modelgen generate MODEL.yaml [-o DIR]``  writes the C, header and compiled
 module and prints n, the operation counts and the time of each stage.
 
+``modelgen sweep SCENE.yaml --param m2=0.5:2:64 --init q1=0.1:3:32 [--scheduler local]``
+runs a grid of runs (in-process or on Dask) into a netCDF dataset.
+
 ``modelgen simulate SCENE.yaml [-o OUT]``  builds (or reuses) the scene's
 reduced model, integrates it in C and writes CSV, NPZ and PNG; given a model
 file instead of a scene, integrates it with RK4 from ``--init`` values.
@@ -457,6 +460,74 @@ def _fmu_parser(sub) -> None:
     f.set_defaults(func=_fmu)
 
 
+def _sweep(args) -> int:
+    """``modelgen sweep``: a grid of parameters and initial values, in-process or on Dask."""
+    from modelgen.model import is_scene_file
+    from modelgen.model.scene import load_scene
+    from modelgen.sim import sweep as sw
+
+    def axis(item, flag):
+        name, sep, text = item.partition("=")
+        parts = text.split(":")
+        try:
+            values = [float(v) for v in parts]
+            if not sep or len(parts) not in (1, 3) or (len(parts) == 3 and values[2] < 1):
+                raise ValueError
+        except ValueError:
+            raise ModelgenError(f"{flag} takes NAME=VALUE or NAME=START:STOP:COUNT, "
+                                f"got {item!r}") from None
+        return name.strip(), (values if len(parts) == 1
+                              else np.linspace(values[0], values[1], int(values[2])))
+    axes = dict(axis(i, "--param") for i in args.param or ())
+    inits = dict(axis(i, "--init") for i in args.init or ())
+    if set(axes) & set(inits):
+        raise ModelgenError(f"{sorted(set(axes) & set(inits))} given to both --param and --init")
+    how, _, variable = (args.plot or "final:").partition(":")
+    if args.plot and (how not in sw.REDUCTIONS or not variable):
+        raise ModelgenError(f"--plot takes HOW:VARIABLE with HOW one of "
+                            f"{', '.join(sw.REDUCTIONS)}, got {args.plot!r}")
+    sw.require("xarray", *(["distributed"] if args.scheduler else []))
+    _check_times(args)
+    t_eval = None
+    scene = is_scene_file(args.scene)
+    if not scene or args.t_end is not None or args.sample is not None:
+        spec = load_scene(args.scene) if scene else None
+        t0 = spec.t_start if scene else 0.0
+        t1 = args.t_end or (spec.t_end if scene else 10.0)
+        if t1 <= t0:
+            raise ModelgenError(f"--t-end must be after the scene's start {t0:g} s")
+        dt = args.sample or (spec.sample_dt if scene else 0.01)
+        t_eval = np.linspace(t0, t1, max(int(round((t1 - t0) / dt)), 1) + 1)
+    g = sw.grid(**axes, **inits)
+    bar = None
+    if not args.quiet and sys.stderr.isatty():
+        from tqdm import tqdm
+        bar = tqdm(total=len(next(iter(g.values()))) if g else 1, unit="run", file=sys.stderr)
+
+    def progress(done, total):
+        if bar is not None:
+            bar.update(done - bar.n)
+    try:
+        ds = sw.sweep(args.scene, {k: g[k] for k in axes}, {k: g[k] for k in inits},
+                      t_eval=t_eval, method=args.method, rtol=args.rtol, step=args.dt,
+                      client=args.scheduler, chunk=args.chunk,
+                      progress=progress if bar is not None else None,
+                      build_dir=args.build_dir)
+    finally:
+        if bar is not None:
+            bar.close()
+    out = Path(args.output)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    ds.to_netcdf(out)
+    print(sw.summary(ds))
+    print(f"wrote {out}")
+    if args.plot:
+        png = out.with_suffix(".png")
+        sw.plot_scalar(ds, how, variable, png)
+        print(f"wrote {png}")
+    return EXIT["simulation"] if ds.attrs["failed"] and args.strict else 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(
         prog="modelgen",
@@ -588,6 +659,42 @@ def build_parser() -> argparse.ArgumentParser:
     lz.add_argument("--build-dir", default=None,
                     help="where the model is built (default: the per-user cache)")
     lz.set_defaults(func=_linearize)
+    w = sub.add_parser("sweep", help="run a scene over a grid of parameters and initial "
+                                     "values, in-process or on a Dask cluster",
+                       description="Run a scene (or a model) over the product of --param and "
+                                   "--init ranges (one simulate_batch call per chunk, on Dask "
+                                   "workers with --scheduler) and write an xarray dataset "
+                                   "(netCDF): a variable per state and output, dims run and "
+                                   "time, per-run status. Needs the sweep extra "
+                                   "(pip install 'modelgen[sweep]').")
+    w.add_argument("scene", help="scene YAML file (or model YAML file)")
+    w.add_argument("--param", action="append", metavar="NAME=START:STOP:COUNT",
+                   help="sweep a parameter over COUNT values (or one NAME=VALUE); repeatable")
+    w.add_argument("--init", action="append", metavar="NAME=START:STOP:COUNT",
+                   help="sweep an initial value (q1, q1_dot, ...); repeatable")
+    w.add_argument("--scheduler", default=None, metavar="local|tcp://HOST:8786",
+                   help="run on Dask: 'local' starts a LocalCluster with one worker per "
+                        "core; an address joins a running scheduler (default: in-process)")
+    w.add_argument("--chunk", type=int, default=None,
+                   help="runs per simulate_batch call (default: 4 chunks per worker)")
+    w.add_argument("--method", default=None, help="integration method (default: the scene's)")
+    w.add_argument("--rtol", type=float, default=None, help="relative tolerance")
+    w.add_argument("--dt", type=float, default=None, help="fixed step [s]")
+    w.add_argument("--t-end", type=float, default=None,
+                   help="final time [s] (default: the scene's, or 10 for a model)")
+    w.add_argument("--sample", type=float, default=None,
+                   help="sampling interval [s] (default: the scene's, or 0.01 for a model)")
+    w.add_argument("-o", "--output", default="out/sweep.nc",
+                   help="netCDF file to write (default: out/sweep.nc)")
+    w.add_argument("--plot", default=None, metavar="HOW:VARIABLE",
+                   help="also write OUTPUT.png: final|max|min|mean of a state or scalar "
+                        "output against the swept values, e.g. final:q2")
+    w.add_argument("--build-dir", default=None,
+                   help="where the model is built (default: the per-user cache)")
+    w.add_argument("--quiet", action="store_true", help="no progress bar")
+    w.add_argument("--strict", action="store_true",
+                   help="exit with status 4 when a run failed (default: 0, failures are data)")
+    w.set_defaults(func=_sweep)
 
     h = sub.add_parser("hard-cases", help="run the hard-case suite: each case against an "
                                           "independent reference, a table and a figure",

@@ -286,6 +286,8 @@ def generate(spec: ModelSpec, out_dir=None, *, force: bool = False, outputs=(),
         "bodies": list(eqs.bodies),
         "outputs": [{"name": name, "columns": list(cols)}
                     for name, cols in zip(columns.names, columns.columns)] if columns else [],
+        "sources_sha256": {fname: hashlib.sha256(text.encode()).hexdigest()
+                           for fname, text in sources.items()},
         "functions": {f["name"]: signature_of(f["ret"], f["params"]).name
                       for f in context["api"]},
         "ops": {f.name: {"before_cse": f.ops_before, "after_cse": f.ops_after,

@@ -155,6 +155,16 @@ class Scene:
                 out[sig.name] = float(np.interp(t, sig.times, sig.values))
         return out
 
+    def input_signal(self):
+        """The scene's inputs in a form :meth:`CompiledModel.simulate` takes: None, a
+        dict of constants, or samples ``(times, values, "linear" | "hold")``."""
+        return self._inputs()
+
+    def times(self) -> np.ndarray:
+        """The scene's sample times, start to end every ``sample`` seconds (the end included)."""
+        s = self.spec
+        return _scene_times(s.t_start, s.t_end, s.sample_dt)
+
     def run(self, p=None, x0=None, u=None, max_steps=None, progress=None) -> Result:
         """Integrate the scene with its method, sampled at its times; energies recorded.
 

@@ -1,0 +1,549 @@
+"""Sweeps: parameter studies and Monte Carlo runs, in-process or on a Dask cluster.
+
+:func:`sweep` runs one model over many parameter sets and initial states and
+returns an ``xarray.Dataset`` with dimensions ``(run, time)``: a variable per
+state and per scene output, the swept values as coordinates along ``run``,
+and per run ``status``, ``message`` and the integrator's counters.  A run that
+fails keeps its trajectory up to the failure (NaN after it) and its status;
+it never fails the sweep.
+
+In-process, the runs go through :meth:`CompiledModel.simulate_batch` (one C
+call per chunk).  With a ``dask.distributed`` client (or ``client="local"``,
+a ``LocalCluster`` with one single-threaded worker per core) each chunk is one
+``simulate_batch`` call on a worker.  The model travels as a
+:class:`ModelPayload` (manifest, module path and the generated sources),
+scattered once to every worker; a worker loads it at most once per process
+(:func:`worker_model`: from the shared build when the module path exists and
+verifies, else rebuilt from the sources into the worker's own build cache)
+and keeps it for every later chunk.
+
+Dask and xarray are the ``sweep`` extra (``pip install 'modelgen[sweep]'``).
+
+>>> import numpy as np, modelgen
+>>> g = modelgen.grid(m2=np.linspace(0.5, 2.0, 64), q1=np.linspace(0.1, 3.0, 32))
+>>> ds = modelgen.sweep("models/scenes/dp_damped.yaml", parameters={"m2": g["m2"]},
+...                     initial={"q1": g["q1"]})                       # doctest: +SKIP
+>>> ds["q2"].isel(time=-1), ds.status, ds.to_netcdf("study.nc")      # doctest: +SKIP
+"""
+from __future__ import annotations
+
+import math
+import hashlib
+import os
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from modelgen.codegen.build import build_module, cache_lookup
+from modelgen.codegen.emit import integrator_sources
+from modelgen.codegen.pipeline import default_output
+from modelgen.errors import ModelgenError, SimulationError
+from modelgen.model import as_spec, is_scene_file
+from modelgen.sim.integrate import STATUS, method_of
+from modelgen.sim.load import load, load_scene
+from modelgen.sim.runtime import CompiledModel
+from modelgen.sim.scene import Scene
+from modelgen.version import __version__
+
+__all__ = ["grid", "sweep", "Study", "ModelPayload", "payload_of", "worker_model",
+           "builds_in_this_process", "run_chunk", "summary", "scalar", "plot_scalar",
+           "require"]
+
+#: what ``pip install`` line provides the optional dependencies
+EXTRA = "pip install 'modelgen[sweep]'"
+#: chunks per worker thread when no chunk size is given (load balance against overhead)
+CHUNKS_PER_WORKER = 4
+#: chunks of an in-process sweep with a progress callback (one C call otherwise)
+PROGRESS_CHUNKS = 50
+#: per-run counters of the integrator kept in the dataset
+COUNTERS = ("nfev", "naccept", "nreject")
+
+
+def require(*modules: str):
+    """Import the optional modules a sweep needs; a :class:`ModelgenError` naming the
+    ``sweep`` extra when one is missing.  Returns the modules."""
+    import importlib
+    out = []
+    for name in modules:
+        try:
+            out.append(importlib.import_module(name))
+        except ImportError as exc:
+            raise ModelgenError(f"sweeps need {name.split('.')[0]} ({exc}); fix: {EXTRA}") \
+                from None
+    return out[0] if len(out) == 1 else out
+
+
+def grid(**axes) -> dict:
+    """The Cartesian product of named 1-D axes as flat arrays of equal length (the
+    last axis varies fastest).
+
+    >>> g = grid(m2=[1.0, 2.0], q1=[0.1, 0.2, 0.3])
+    >>> g["m2"].tolist(), g["q1"].tolist()
+    ([1.0, 1.0, 1.0, 2.0, 2.0, 2.0], [0.1, 0.2, 0.3, 0.1, 0.2, 0.3])
+    """
+    arrays = {}
+    for name, values in axes.items():
+        a = np.atleast_1d(np.asarray(values, dtype=float))
+        if a.ndim != 1 or a.size == 0:
+            raise SimulationError(f"grid axis {name!r} must be a non-empty 1-D array")
+        arrays[name] = a
+    if not arrays:
+        return {}
+    mesh = np.meshgrid(*arrays.values(), indexing="ij")
+    return {name: m.ravel().copy() for name, m in zip(arrays, mesh)}
+
+
+# -- the model, on the driver and on the workers --------------------------------------
+
+def load_model(source, build_dir=None):
+    """``(CompiledModel, defaults)`` of a sweep's source: a scene file or
+    :class:`Scene` (defaults: its times, method, tolerances, step, inputs and initial
+    state), a model file or spec, or a :class:`CompiledModel` (no defaults).
+
+    The one place a sweep loads a model.
+    """
+    if isinstance(source, CompiledModel):
+        return source, {}
+    if isinstance(source, (str, os.PathLike)) and is_scene_file(source):
+        source = load_scene(source, build_dir)
+    if isinstance(source, Scene):
+        s = source.spec
+        fixed = not method_of(s.method).adaptive
+        return source.model, {"t_eval": source.times(), "t_span": (s.t_start, s.t_end),
+                              "method": s.method, "rtol": s.rtol, "atol": s.atol,
+                              "step": s.step if fixed else None, "u": source.input_signal(),
+                              "x0": source.initial_state(), "scene": s.name}
+    return load(as_spec(source), build_dir), {}
+
+
+@dataclass(frozen=True)
+class ModelPayload:
+    """What a worker needs to load a compiled model: its manifest and module path,
+    and the generated sources to rebuild it where that path does not exist."""
+    manifest: dict
+    module_path: str
+    sources: dict | None = field(repr=False)   # None: they could not be verified
+
+    @property
+    def build_hash(self) -> str:
+        return self.manifest["build_hash"]
+
+
+def payload_of(cm: CompiledModel) -> ModelPayload:
+    """The :class:`ModelPayload` of a loaded model (its sources read from its build
+    directory, where the pipeline wrote them next to the module)."""
+    directory, name = cm.path.parent, cm.name
+    try:
+        sources = {f"{name}.c": (directory / f"{name}.c").read_text(),
+                   f"{name}.h": (directory / f"{name}.h").read_text()}
+    except OSError as exc:
+        raise SimulationError(f"{name}: the generated sources are not next to {cm.path} "
+                              f"({exc.strerror or exc}); fix: load the model again so "
+                              f"they are rewritten") from None
+    expected = cm.manifest.get("sources_sha256", {})
+    if any(expected.get(fname) != hashlib.sha256(text.encode()).hexdigest()
+           for fname, text in sources.items()):
+        # another variant of the model was built into that directory since: its
+        # sources are not this build's, so none travel (workers need the shared path)
+        sources = None
+    return ModelPayload(cm.manifest, str(cm.path), sources)
+
+
+_LOADED: dict = {}
+_LOCK = threading.Lock()
+_BUILDS = {"count": 0}
+
+
+def builds_in_this_process() -> int:
+    """How many models :func:`worker_model` compiled in this process (a test's count)."""
+    return _BUILDS["count"]
+
+
+def worker_model(payload: ModelPayload, build_dir=None) -> CompiledModel:
+    """The compiled model of ``payload`` in this process, loaded once and kept.
+
+    From the payload's module path when it exists and its build verifies (a
+    shared file system or the driver's own machine), else from this process's
+    build cache (``build_dir`` or the per-user default), compiling the shipped
+    sources there if no verified build is found: at most once per process.
+    """
+    key = payload.build_hash
+    with _LOCK:
+        cm = _LOADED.get(key)
+        if cm is not None:
+            return cm
+        manifest, path = payload.manifest, Path(payload.module_path)
+        hit = cache_lookup(path.parent, key)[0] if path.is_file() else None
+        if hit is None:
+            directory = Path(build_dir) if build_dir else default_output(manifest["name"])
+            hit = cache_lookup(directory, key)[0]
+            if hit is None and payload.sources is None:
+                raise SimulationError(
+                    f"{manifest['name']}: {path} is not reachable from this worker and the "
+                    f"model's sources could not be shipped (another variant was built into "
+                    f"its directory since); fix: build the model into a directory of its own "
+                    f"(build_dir=...) or share the build directory with the workers")
+            if hit is None:
+                statements = max((o["statements"] for o in manifest["ops"].values()), default=0)
+                keep = {k: v for k, v in manifest.items()
+                        if k not in ("module_name", "module_file", "module_size", "module_sha256",
+                                     "manifest_sha256", "compile_commands", "integrators",
+                                     "seconds")}
+                hit = build_module(directory, manifest["name"], payload.sources, keep,
+                                   statements, integrator_sources())
+                _BUILDS["count"] += 1
+        cm = CompiledModel(hit.manifest, hit.module_path)
+        _LOADED[key] = cm
+        return cm
+
+
+# -- one chunk ---------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class Study:
+    """A sweep's runs, resolved: initial states ``X0`` (n_runs, nx), parameter rows
+    ``P`` (n_runs, np), times and integrator settings."""
+    X0: np.ndarray
+    P: np.ndarray
+    t_span: tuple
+    t_eval: np.ndarray
+    method: str
+    rtol: float
+    atol: float
+    step: float | None
+    max_steps: int
+    u: object
+    outputs: bool
+
+    @property
+    def n_runs(self) -> int:
+        return self.X0.shape[0]
+
+
+def run_chunk(model, study: Study, lo: int, hi: int) -> dict:
+    """Runs ``lo:hi`` of ``study`` in one :meth:`~CompiledModel.simulate_batch` call on
+    ``model`` (a :class:`CompiledModel`, or a :class:`ModelPayload` loaded with
+    :func:`worker_model`); plain arrays: ``y`` (runs, nx, times), ``outputs``
+    (runs, times, ny) or None, ``status``, ``message``, counters, ``seconds``."""
+    start = time.perf_counter()
+    cm = model if isinstance(model, CompiledModel) else worker_model(model)
+    res = cm.simulate_batch(study.X0[lo:hi], study.t_span, t_eval=study.t_eval,
+                            method=study.method, rtol=study.rtol, atol=study.atol, u=study.u,
+                            P=study.P[lo:hi], step=study.step, max_steps=study.max_steps)
+    out = {"y": res.y, "status": np.asarray(res.status, dtype=np.int32),
+           "message": list(res.message), "outputs": None}
+    for name in COUNTERS:
+        out[name] = np.asarray(getattr(res, name), dtype=np.int64)
+    if study.outputs and cm.output_columns:
+        out["outputs"] = np.stack([cm.output_rows(study.t_eval, res.y[r].T, study.u,
+                                                  study.P[lo + r])
+                                   for r in range(hi - lo)]) if hi > lo else \
+            np.empty((0, len(study.t_eval), len(cm.output_columns)))
+    out["seconds"] = time.perf_counter() - start
+    out["pid"] = os.getpid()
+    return out
+
+
+# -- the sweep ---------------------------------------------------------------------------
+
+def _columns(values: dict | None, names, what: str, n_runs: int | None) -> tuple:
+    """(dict name -> float array, n_runs) from a mapping of names to scalars or arrays."""
+    out = {}
+    for name, value in (values or {}).items():
+        if name not in names:
+            raise SimulationError(f"unknown {what} {name!r}; {what}s are {', '.join(names)}")
+        a = np.atleast_1d(np.asarray(value, dtype=float))
+        if a.ndim != 1:
+            raise SimulationError(f"{what} {name!r}: give a 1-D array, got shape {a.shape}")
+        out[name] = a
+    for name, a in out.items():
+        if a.size != 1:
+            if n_runs not in (None, a.size):
+                raise SimulationError(f"{what} {name!r} has {a.size} values, others "
+                                      f"{n_runs}; fix: give every swept name one value per "
+                                      f"run (modelgen.grid makes a product)")
+            n_runs = a.size
+    return out, n_runs
+
+
+def _study(cm, defaults, parameters, initial, x0, t_eval, t_span, method, rtol, atol, step,
+           max_steps, u, outputs) -> tuple:
+    """(Study, swept coordinates) from a sweep's arguments and the source's defaults."""
+    params, n_runs = _columns(parameters, tuple(cm.parameters), "parameter", None)
+    inits, n_runs = _columns(initial, cm.state_names, "state", n_runs)
+    n_runs = 1 if n_runs is None else n_runs
+    base = np.zeros(2 * cm.n) if x0 is None and "x0" not in defaults else \
+        np.array(defaults["x0"] if x0 is None else x0, dtype=float)
+    if base.shape != (2 * cm.n,):
+        raise SimulationError(f"{cm.name}: x0 must have {2 * cm.n} values, got {base.shape}")
+    X0 = np.tile(base, (n_runs, 1))
+    for name, a in inits.items():
+        X0[:, cm.state_names.index(name)] = a
+    P = np.tile(cm.params(None), (n_runs, 1))
+    for name, a in params.items():
+        P[:, list(cm.parameters).index(name)] = a
+    if t_eval is None:
+        if "t_eval" not in defaults:
+            raise SimulationError(f"{cm.name}: give t_eval (the sample times); a scene "
+                                  f"gives its own")
+        t_eval, t_span = defaults["t_eval"], defaults["t_span"] if t_span is None else t_span
+    t_eval = np.ascontiguousarray(np.atleast_1d(np.asarray(t_eval, dtype=float)))
+    if t_span is None:
+        t_span = (float(t_eval[0]), float(t_eval[-1]))
+    method = method_of(method or defaults.get("method", "dop853")).name
+    if step is None and not method_of(method).adaptive:
+        step = defaults.get("step")
+        if step is None:
+            raise SimulationError(f"method {method!r} has a fixed step: give step=")
+    study = Study(X0=np.ascontiguousarray(X0), P=np.ascontiguousarray(P),
+                  t_span=tuple(float(v) for v in t_span), t_eval=t_eval, method=method,
+                  rtol=defaults.get("rtol", 1e-8) if rtol is None else rtol,
+                  atol=defaults.get("atol", 1e-10) if atol is None else atol,
+                  step=step, max_steps=int(max_steps), u=defaults.get("u") if u is None else u,
+                  outputs=bool(outputs))
+    swept = {name: ("parameter", a) for name, a in params.items()}
+    swept.update({f"initial_{name}": ("initial", a) for name, a in inits.items()})
+    return study, swept
+
+
+def _client(client):
+    """``(client, owned)``: a Client from ``"local"``, an address or a Client."""
+    if client is None:
+        return None, False
+    distributed = require("distributed")
+    if isinstance(client, str):
+        if client == "local":
+            cluster = distributed.LocalCluster(n_workers=os.cpu_count() or 1,
+                                               threads_per_worker=1, processes=True,
+                                               dashboard_address=None)
+            return distributed.Client(cluster), True
+        return distributed.Client(client), True
+    return client, False
+
+
+def _chunks(n_runs: int, chunk: int | None, parts: int) -> list:
+    size = int(chunk) if chunk else max(1, math.ceil(n_runs / max(parts, 1)))
+    if size < 1:
+        raise SimulationError(f"chunk must be >= 1 runs, got {chunk!r}")
+    return [(lo, min(lo + size, n_runs)) for lo in range(0, n_runs, size)]
+
+
+def sweep(source, parameters=None, initial=None, *, t_eval=None, t_span=None, method=None,
+          rtol=None, atol=None, step=None, max_steps=100_000, u=None, x0=None, client=None,
+          chunk=None, outputs=True, progress=None, build_dir=None):
+    """Run ``source`` over swept parameters and initial values; an ``xarray.Dataset``.
+
+    ``source`` is a scene file (or :class:`Scene`), a model file (or spec) or a
+    :class:`CompiledModel`.  ``parameters`` and ``initial`` map parameter and
+    state names (``q1``, ``q1_dot``) to one value or one value per run (a
+    product with :func:`grid`, or paired samples, e.g. from ``scipy.stats.qmc``).
+    A scene gives the defaults of ``t_eval``, ``t_span``, ``method``, ``rtol``,
+    ``atol``, ``step``, ``u`` and ``x0``; a model starts from ``x0`` (default
+    zeros) and needs ``t_eval``.  ``client`` is None (in-process), a
+    ``dask.distributed.Client``, an address (``"tcp://host:8786"``) or
+    ``"local"`` (a ``LocalCluster`` with one worker per core, closed after);
+    ``chunk`` is the runs per ``simulate_batch`` call (default: all in-process,
+    else about :data:`CHUNKS_PER_WORKER` chunks per worker thread).
+    ``progress(done, total)`` is called as runs finish.  ``outputs=False``
+    skips the scene outputs (evaluated per sample after the C run).
+
+    The dataset: dims ``run`` and ``time``; a variable per state and per scene
+    output (outputs with several columns get a ``<name>_column`` dim); the
+    swept values as coordinates along ``run`` (parameters by name, initial
+    values as ``initial_<state>``); ``status``, ``message``, ``nfev``,
+    ``naccept``, ``nreject`` per run; settings and timings in ``attrs``
+    (``seconds``: the runs, a local cluster's start included; ``load_seconds``:
+    loading or building the model; ``compute_seconds``: the chunks' own time).
+
+    >>> ds = sweep("models/double_pendulum.yaml", initial={"q1": np.linspace(0, 1, 100)},
+    ...            t_eval=np.linspace(0, 10, 101))                          # doctest: +SKIP
+    """
+    xr = require("xarray")
+    start = time.perf_counter()
+    cm, defaults = load_model(source, build_dir)
+    study, swept = _study(cm, defaults, parameters, initial, x0, t_eval, t_span, method, rtol,
+                          atol, step, max_steps, u, outputs)
+    loaded = time.perf_counter()
+    dask_client, owned = _client(client)
+    scheduler = "in-process" if dask_client is None else \
+        str(getattr(dask_client.scheduler, "address", None) or "dask")
+    try:
+        if dask_client is None:
+            parts = PROGRESS_CHUNKS if (progress and not chunk) else 1
+            bounds = _chunks(study.n_runs, chunk, parts)
+            results, workers = [], 1
+            for lo, hi in bounds:
+                results.append(run_chunk(cm, study, lo, hi))
+                if progress:
+                    progress(hi, study.n_runs)
+        else:
+            results, workers, bounds = _distributed(dask_client, cm, study, chunk, progress)
+    finally:
+        if owned:
+            cluster = getattr(dask_client, "cluster", None)
+            dask_client.close()
+            if cluster is not None:
+                cluster.close()
+    seconds = time.perf_counter() - loaded
+    return _dataset(xr, cm, study, swept, results, defaults, dict(
+        seconds=seconds, load_seconds=loaded - start, workers=workers, chunks=len(bounds),
+        chunk=max(hi - lo for lo, hi in bounds) if bounds else 0,
+        compute_seconds=float(sum(r["seconds"] for r in results)), scheduler=scheduler))
+
+
+def _distributed(client, cm, study, chunk, progress) -> tuple:
+    """Scatter the model and the study once, run one task per chunk; results in order."""
+    distributed = require("distributed")
+    threads = sum(client.nthreads().values()) or 1
+    bounds = _chunks(study.n_runs, chunk, CHUNKS_PER_WORKER * threads)
+    payload = client.scatter(payload_of(cm), broadcast=True)
+    shared = client.scatter(study, broadcast=True)
+    futures = [client.submit(run_chunk, payload, shared, lo, hi, pure=False)
+               for lo, hi in bounds]
+    index = {f.key: k for k, f in enumerate(futures)}
+    results = [None] * len(futures)
+    done = 0
+    for future in distributed.as_completed(futures):
+        k = index[future.key]
+        results[k] = future.result()
+        done += bounds[k][1] - bounds[k][0]
+        if progress:
+            progress(done, study.n_runs)
+    return results, len(client.nthreads()), bounds
+
+
+def _dataset(xr, cm, study, swept, results, defaults, timing):
+    """The sweep's ``xarray.Dataset`` from its chunks' results, in run order."""
+    coords = {"run": np.arange(study.n_runs), "time": study.t_eval}
+    for name, (_, values) in swept.items():
+        coords[name] = ("run", np.broadcast_to(values, (study.n_runs,)).copy())
+    # one contiguous block per state, filled chunk by chunk (one copy): xarray is slow on
+    # strided views (6.8 s instead of 0.02 s for four 10,000 x 101 views, xarray 2026.9)
+    by_state = np.empty((2 * cm.n, study.n_runs, len(study.t_eval)))
+    lo = 0
+    for r in results:
+        hi = lo + r["y"].shape[0]
+        by_state[:, lo:hi] = r["y"].transpose(1, 0, 2)
+        lo = hi
+    data = {name: (("run", "time"), by_state[i]) for i, name in enumerate(cm.state_names)}
+    if study.outputs and cm.output_columns:
+        ys = np.concatenate([r["outputs"] for r in results])
+        for name, cols in cm.outputs.items():
+            idx = [cm.output_columns.index(c) for c in cols]
+            if len(cols) == 1:
+                data[name] = (("run", "time"), np.ascontiguousarray(ys[:, :, idx[0]]))
+            else:
+                dim = f"{name}_column"
+                coords[dim] = list(cols)
+                data[name] = (("run", "time", dim), ys[:, :, idx])
+    per_run = {"status": np.concatenate([r["status"] for r in results]),
+               "message": np.array([m for r in results for m in r["message"]], dtype=str)}
+    for name in COUNTERS:
+        per_run[name] = np.concatenate([r[name] for r in results])
+    clash = (set(data) | set(coords)) & set(per_run)
+    if clash or set(data) & set(coords):
+        raise SimulationError(f"{cm.name}: the names {sorted(clash or set(data) & set(coords))} "
+                              f"are used twice in the sweep's dataset; fix: rename the output")
+    data.update({name: ("run", values) for name, values in per_run.items()})
+    attrs = {"model": cm.name, "scene": defaults.get("scene", ""), "method": study.method,
+             "rtol": float(np.max(study.rtol)), "atol": float(np.max(study.atol)),
+             "step": float(study.step or 0.0), "t_span": list(study.t_span),
+             "max_steps": study.max_steps, "build_hash": cm.manifest["build_hash"],
+             "modelgen_version": __version__, "swept": " ".join(swept),
+             "runs": study.n_runs, "failed": int(np.count_nonzero(per_run["status"] < 0)),
+             **timing}
+    ds = xr.Dataset(data, coords=coords, attrs=attrs)
+    for name in cm.state_names:
+        ds[name].attrs["kind"] = "state"
+    return ds
+
+
+# -- what the CLI shows ----------------------------------------------------------------
+
+def summary(ds) -> str:
+    """A text table of a sweep: runs, failures by status, wall time and runs per second."""
+    status = np.asarray(ds["status"])
+    seconds = float(ds.attrs.get("seconds", float("nan")))
+    lines = [f"{'runs':<24}{status.size:>12}",
+             f"{'succeeded':<24}{int(np.count_nonzero(status >= 0)):>12}"]
+    for code in sorted(set(status[status < 0].tolist())):
+        name = STATUS[code].name if code in STATUS else "unknown"
+        lines.append(f"{f'failed: {code} {name}':<24}{int(np.count_nonzero(status == code)):>12}")
+    lines += [f"{'wall time [s]':<24}{seconds:>12.3f}",
+              f"{'runs per second':<24}{status.size / seconds if seconds > 0 else 0.0:>12.1f}",
+              f"{'workers':<24}{ds.attrs.get('workers', 1):>12}",
+              f"{'chunks x runs':<24}{ds.attrs.get('chunks', 1):>6} x {ds.attrs.get('chunk', 0):<5}",
+              f"{'scheduler':<24}{ds.attrs.get('scheduler', ''):>12}"]
+    return "\n".join(lines)
+
+
+#: how a trajectory becomes one number per run, for :func:`scalar`
+REDUCTIONS = ("final", "max", "min", "mean")
+
+
+def scalar(ds, how: str, variable: str) -> np.ndarray:
+    """One number per run: the ``final`` (last finite sample), ``max``, ``min`` or
+    ``mean`` of ``variable`` (a state or a single-column output) over time; NaN for
+    a run that failed."""
+    if how not in REDUCTIONS:
+        raise SimulationError(f"unknown reduction {how!r}; use one of {', '.join(REDUCTIONS)}")
+    if variable not in ds or ds[variable].dims != ("run", "time"):
+        names = [k for k, v in ds.data_vars.items() if v.dims == ("run", "time")]
+        raise SimulationError(f"{variable!r} is not a state or single-column output of the "
+                              f"sweep; choose one of {', '.join(names)}")
+    a = np.asarray(ds[variable])
+    ok = np.asarray(ds["status"]) >= 0
+    with np.errstate(all="ignore"):
+        value = {"final": a[:, -1] if a.shape[1] else np.full(a.shape[0], np.nan),
+                 "max": np.max(a, axis=1), "min": np.min(a, axis=1),
+                 "mean": np.mean(a, axis=1)}[how]
+    return np.where(ok, value, np.nan)
+
+
+def plot_scalar(ds, how: str, variable: str, path=None):
+    """A figure of :func:`scalar` against the swept values: a curve for one swept
+    name, a colour map for a product of two (from :func:`grid`), else points against
+    the first; failed runs are marked.  Saved to ``path`` when given."""
+    from matplotlib.figure import Figure
+    values = scalar(ds, how, variable)
+    swept = str(ds.attrs.get("swept", "")).split()
+    fig = Figure(figsize=(6.4, 4.4), layout="constrained")
+    ax = fig.add_subplot()
+    label = f"{how} {variable}"
+    failed = np.asarray(ds["status"]) < 0
+    if len(swept) == 2:
+        a, b = (np.asarray(ds[name]) for name in swept)
+        ua, ub = np.unique(a), np.unique(b)
+        if ua.size * ub.size == a.size and ua.size > 1 and ub.size > 1:
+            Z = np.full((ub.size, ua.size), np.nan)
+            Z[np.searchsorted(ub, b), np.searchsorted(ua, a)] = values
+            mesh = ax.pcolormesh(ua, ub, Z, shading="nearest")
+            fig.colorbar(mesh, ax=ax, label=label)
+            ax.set_xlabel(swept[0])
+            ax.set_ylabel(swept[1])
+            if failed.any():
+                ax.plot(a[failed], b[failed], "rx", label="failed")
+                ax.legend()
+            swept = []
+    if swept:
+        x = np.asarray(ds[swept[0]])
+        order = np.argsort(x, kind="stable")
+        style = "-" if len(swept) == 1 else "."
+        ax.plot(x[order], values[order], style, label=label)
+        if failed.any():
+            ax.plot(x[failed], np.zeros(failed.sum()), "rx", label="failed")
+        ax.set_xlabel(swept[0])
+        ax.set_ylabel(label)
+        ax.legend()
+    elif not ax.collections:
+        ax.plot(values, ".")
+        ax.set_xlabel("run")
+        ax.set_ylabel(label)
+    ax.set_title(f"{ds.attrs.get('scene') or ds.attrs.get('model')}: {label} over "
+                 f"{ds.attrs.get('runs')} runs")
+    if path is not None:
+        fig.savefig(path, dpi=100)
+    return fig
