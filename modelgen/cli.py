@@ -185,8 +185,9 @@ def _quietly(run, *args, **kwargs):
 
 
 def _check_times(args) -> None:
-    if args.max_steps is not None and args.max_steps < 1:
-        raise ModelgenError(f"--max-steps must be a positive count, got {args.max_steps}")
+    max_steps = getattr(args, "max_steps", None)     # sweep has no --max-steps
+    if max_steps is not None and max_steps < 1:
+        raise ModelgenError(f"--max-steps must be a positive count, got {max_steps}")
     for flag, value in (("--t-end", args.t_end), ("--dt", args.dt), ("--sample", args.sample)):
         if value is not None and not (value > 0 and value < float("inf")):
             raise ModelgenError(f"{flag} must be a positive number of seconds, got {value!r}")

@@ -158,7 +158,7 @@ def test_worker_compiles_a_model_missing_from_its_file_system_once(tmp_path, clu
     builds = {w: n - before[w] for w, n in cluster.run(sw.builds_in_this_process).items()}
     assert ds.attrs["chunks"] == 8
     assert all(n <= 1 for n in builds.values()) and 1 <= sum(builds.values()) <= 2, builds
-    assert payload.sources["cdef"] and payload.build_hash == cm.manifest["build_hash"]
+    assert payload.sources[f"{cm.name}.c"] and payload.build_hash == cm.manifest["build_hash"]
     ref = cm.simulate_batch(X0, (0.0, 2.0), t_eval=T)
     assert np.array_equal(bits(ds["q2"].values), bits(ref.y[:, 1, :]))
 
