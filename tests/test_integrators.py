@@ -608,8 +608,9 @@ def test_solve_ivp_method_names_run_modelgens_methods(dp, name, method):
 @pytest.mark.parametrize("call, message", [
     (lambda cm: cm.simulate([1, 0], (0, 1), method="rk44"), "unknown method 'rk44'"),
     (lambda cm: cm.simulate([1, 0], (0, 1), method="gauss4"), "has a fixed step: give step="),
-    (lambda cm: cm.simulate([1, 0], (1, 0)), r"runs backwards in time.*fix: .*solve_ivp"),
-    (lambda cm: cm.simulate([1, 0], (1, 1)), "t_span must be increasing"),
+    (lambda cm: cm.simulate([1, 0], (1, 1)), "t_span must not be empty"),
+    (lambda cm: cm.simulate([1, 0], (1, 0), t_eval=[0.2, 0.5]),
+     r"sorted in decreasing order \(t_span runs backwards\)"),
     (lambda cm: cm.simulate([1, 0], (0, np.inf)), "t_span must be finite"),
     (lambda cm: cm.simulate([1, 0], (0, 1), t_eval=[0.5, 2]), "t_eval must lie within"),
     (lambda cm: cm.simulate([1, 0], (0, 1), t_eval=[0.5, 0.2]), "t_eval must be sorted"),

@@ -16,7 +16,8 @@ Methods (``METHODS``): ``rk4`` (fixed step), ``dopri5`` and ``dop853``
 (Gauss-Legendre, implicit, symplectic, fixed step).  solve_ivp's names are
 aliases of these (``ALIASES``, case-insensitive): "RK45" runs dopri5, "DOP853"
 dop853, and "Radau", "BDF" and "LSODA" run rodas -- modelgen's own methods, not
-scipy's.  ``t_span`` must increase: the C integrators step forward only.  Fixed-step methods need
+scipy's.  A decreasing ``t_span`` runs backwards in time on the system in s = -t
+(the C integrators step forward only).  Fixed-step methods need
 ``step=``; the adaptive ones run with fixed steps too when given ``step=``.
 
 The method codes, C status codes and their messages, and the statistics are
@@ -134,32 +135,33 @@ def _tolerance(value, nx, what):
 
 
 def _span(t_span):
+    """``(t0, t1, sign)``: the span as floats and its direction (``sign`` -1 when
+    t1 < t0: the run goes backwards in time, integrated forward in s = -t)."""
     try:
         t0, t1 = (float(v) for v in t_span)
     except (TypeError, ValueError) as exc:
         raise SimulationError(f"t_span must be (t0, t1), got {t_span!r}") from exc
     if not (np.isfinite(t0) and np.isfinite(t1)):
         raise SimulationError(f"t_span must be finite, got {t_span!r}")
-    if t1 < t0:
-        raise SimulationError(
-            f"t_span ({t0!r}, {t1!r}) runs backwards in time, which the C integrators do not "
-            f"do (they step forward only); fix: integrate backwards with scipy on the compiled "
-            f"model, solve_ivp(cm.rhs, ({t0!r}, {t1!r}), x0, method='DOP853', jac=cm.jac)")
-    if not t1 > t0:
-        raise SimulationError(f"t_span must be increasing, got {t_span!r}")
-    return t0, t1
+    if t1 == t0:
+        raise SimulationError(f"t_span must not be empty, got {t_span!r}")
+    return t0, t1, (-1.0 if t1 < t0 else 1.0)
 
 
 @_checked
-def _times(t_eval, t0, t1):
+def _times(t_eval, t0, t1, sign=1.0):
+    """``t_eval`` checked against the span (t0, t1) and mapped to s = sign * t, where
+    it must increase."""
     t_eval = np.ascontiguousarray(t_eval, dtype=float)
     if t_eval.ndim != 1 or t_eval.size == 0:
         raise SimulationError("t_eval must be a non-empty 1-D array")
-    if np.any(np.diff(t_eval) < 0):
-        raise SimulationError("t_eval must be sorted in increasing order")
-    if t_eval[0] < t0 or t_eval[-1] > t1 or not np.all(np.isfinite(t_eval)):
+    if np.any(sign * np.diff(t_eval) < 0):
+        raise SimulationError("t_eval must be sorted in " + (
+            "increasing order" if sign > 0 else "decreasing order (t_span runs backwards)"))
+    lo, hi = min(t0, t1), max(t0, t1)
+    if t_eval.min() < lo or t_eval.max() > hi or not np.all(np.isfinite(t_eval)):
         raise SimulationError(f"t_eval must lie within t_span ({t0!r}, {t1!r})")
-    return t_eval
+    return np.ascontiguousarray(sign * t_eval)
 
 
 @_checked
@@ -197,7 +199,7 @@ class _Inputs:
     trajectory up to it is kept and the exception is named in the message.
     """
 
-    def __init__(self, cm, u):
+    def __init__(self, cm, u, sign=1.0):
         ffi = cm.ffi
         self.struct = ffi.new("mg_inputs *")
         self.errors = []
@@ -207,7 +209,7 @@ class _Inputs:
 
             def call(ctx, t, x_ptr, u_ptr):
                 x = np.frombuffer(ffi.buffer(x_ptr, 8 * nx), dtype=float).copy()
-                value = cm.input_vector(u(t, x))
+                value = cm.input_vector(u(sign * t, x))
                 for k in range(nu):
                     u_ptr[k] = value[k]
                 return 0
@@ -221,6 +223,14 @@ class _Inputs:
             self.struct.callback = callback
             return
         times, values, hold = cm._input_samples(u)
+        if sign < 0 and len(times):
+            # the samples in s = -t: reversed; a held value covers the interval to the
+            # *left* of its sample in s, so each takes its successor's value
+            times = np.ascontiguousarray(-times[::-1])
+            rows = values.reshape(len(times), -1)[::-1]
+            if hold:
+                rows = np.concatenate([rows[1:], rows[-1:]])
+            values = np.ascontiguousarray(rows).reshape(values.shape)
         self._keep += [times, values]
         self.struct.n = len(times)
         self.struct.times = ffi.from_buffer("double[]", times)
@@ -329,7 +339,9 @@ def simulate(cm, x0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10
     m, rtol, atol, fixed, first, hmax, budget = _options(
         cm, method, rtol, atol, step, first_step, max_step,
         DEFAULT_MAX_STEPS if max_steps is None else max_steps)
-    t0, t1 = _span(t_span)
+    t0, t1, sign = _span(t_span)
+    times = None if t_eval is None else _times(t_eval, t0, t1, sign)
+    t0, t1 = sign * t0, sign * t1          # from here on s = sign * t, increasing
     _check_step_count(fixed, t0, t1)
     if max_steps is None and fixed > 0:      # a fixed-step run's step count is known
         budget = max(budget, int(np.ceil((t1 - t0) / fixed)) + 2)
@@ -338,8 +350,7 @@ def simulate(cm, x0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10
     if not np.all(np.isfinite(x)):
         raise SimulationError(f"{cm.name}: x0 must be finite")
     x_start = x.copy()
-    times = None if t_eval is None else _times(t_eval, t0, t1)
-    inputs = _Inputs(cm, u)
+    inputs = _Inputs(cm, u, sign)
     p_vec = cm.params(p).copy()
     events = _events(events)
     n_ev = len(events)
@@ -352,7 +363,7 @@ def simulate(cm, x0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10
         def call_events(ctx, t, x_ptr, g_ptr):
             xs = np.frombuffer(ffi.buffer(x_ptr, 8 * nx), dtype=float).copy()
             for i, ev in enumerate(events):
-                value = float(ev(t, xs))
+                value = float(ev(sign * t, xs))
                 if not np.isfinite(value):   # a NaN never changes sign: it would never fire
                     raise ValueError(f"event function {i} ({getattr(ev, '__name__', ev)!s}) "
                                      f"returned {value!r}")
@@ -376,9 +387,9 @@ def simulate(cm, x0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10
     opt.interrupt = ffi.from_buffer("int[]", flag)
     reached = np.array([t0])                  # the C writes the time reached here
     opt.progress = ffi.from_buffer("double[]", reached)
-    poll = None if progress is None else (lambda: progress(float(reached[0])))
+    poll = None if progress is None else (lambda: progress(sign * float(reached[0])))
 
-    fn = getattr(cm.lib, f"{cm.name}_integrate")
+    fn = cm.lib.integrate_function(cm.name, backward=sign < 0)
     ptr = cm._ptr
     work = np.empty(work_size(nx, len(cm.inputs), n_ev))
     stats = ffi.new("mg_stats *")
@@ -445,8 +456,9 @@ def simulate(cm, x0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10
 
     pivot = int(stats_total["pivot"])
     failure = errors[0] if errors else inputs.error()
+    t_reached, t_fail = sign * float(stop[0]), sign * float(stop[2])
     message = status_message(
-        int(status), t=float(stop[0]), h=float(stop[1]), t_fail=float(stop[2]),
+        int(status), t=t_reached, h=sign * float(stop[1]), t_fail=t_fail,
         x=_vector_text(stop[STOP_X:]), pivot=pivot,
         coordinate=cm.coordinates[pivot - 1] if 0 < pivot <= cm.n else "?", max_steps=max_steps,
         kind=_mass_matrix_kind(cm, status, pivot, p_vec, x_start,
@@ -456,17 +468,17 @@ def simulate(cm, x0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10
     if status < 0:
         message += _conditioning_note(cm, p_vec, x_start, stop[STOP_X:])
     if status == MAX_STEPS:
-        message += _max_steps_note(max_steps, t_span, float(stop[0]))
+        message += _max_steps_note(max_steps, t_span, t_reached)
         warnings.warn(f"{cm.name}: {message}", RuntimeWarning, stacklevel=4)
     et, ex, ei = (np.concatenate(ev_t), np.concatenate(ev_x).reshape(-1, nx),
                   np.concatenate(ev_i))
     res = make_result(
-        t=np.concatenate(t_parts), y=np.ascontiguousarray(np.concatenate(x_parts)
+        t=sign * np.concatenate(t_parts), y=np.ascontiguousarray(np.concatenate(x_parts)
                                                           .reshape(-1, nx).T),
         state_names=cm.state_names, status=int(status), message=message, method=m.name,
-        t_events=[et[ei == i] for i in range(n_ev)] if n_ev else None,
+        t_events=[sign * et[ei == i] for i in range(n_ev)] if n_ev else None,
         y_events=[ex[ei == i] for i in range(n_ev)] if n_ev else None,
-        t_fail=float(stop[2]) if status < 0 else None,
+        t_fail=t_fail if status < 0 else None,
         **{name: int(stats_total[name]) for name in STAT_NAMES if name != "pivot"})
     if ny:
         y = np.concatenate(y_parts).reshape(-1, ny)
@@ -588,15 +600,16 @@ def simulate_batch(cm, X0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol
     nx = 2 * cm.n
     m, rtol, atol, fixed, first, hmax, max_steps = _options(
         cm, method, rtol, atol, step, first_step, max_step, max_steps)
-    t0, t1 = _span(t_span)
+    t0, t1, sign = _span(t_span)
     X0 = np.ascontiguousarray(X0, dtype=float)
     if X0.ndim != 2 or X0.shape[1] != nx:
         raise SimulationError(f"{cm.name}: X0 must have shape (n_runs, {nx}), got {X0.shape}")
     if not np.all(np.isfinite(X0)):
         raise SimulationError(f"{cm.name}: X0 must be finite")
     n_runs = X0.shape[0]
-    times = _times([t1] if t_eval is None else t_eval, t0, t1)
-    inputs = _Inputs(cm, u)
+    times = _times([t1] if t_eval is None else t_eval, t0, t1, sign)
+    t0, t1 = sign * t0, sign * t1          # from here on s = sign * t, increasing
+    inputs = _Inputs(cm, u, sign)
     P_rows, p_stride = _parameter_rows(cm, P, n_runs)
     threads = max(1, min(int(threads), max(n_runs, 1)))
 
@@ -607,7 +620,7 @@ def simulate_batch(cm, X0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol
     status = np.zeros(n_runs, dtype=np.intc)
     stats = cm.ffi.new("mg_stats[]", max(n_runs, 1))
     stop = np.zeros((n_runs, STOP_X + nx))
-    fn = getattr(cm.lib, f"{cm.name}_integrate_batch")
+    fn = cm.lib.integrate_function(cm.name, batch=True, backward=sign < 0)
     ffi, ptr = cm.ffi, cm._ptr
     opt = _c_options(cm, m, rtol, atol, fixed, first, hmax, max_steps)
 
@@ -632,7 +645,8 @@ def simulate_batch(cm, X0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol
     for r in range(n_runs):
         pivot = int(stats[r].pivot)
         messages.append(status_message(
-            int(status[r]), t=float(stop[r, 0]), h=float(stop[r, 1]), t_fail=float(stop[r, 2]),
+            int(status[r]), t=sign * float(stop[r, 0]), h=sign * float(stop[r, 1]),
+            t_fail=sign * float(stop[r, 2]),
             x=_vector_text(stop[r, STOP_X:]), pivot=pivot,
             coordinate=cm.coordinates[pivot - 1] if 0 < pivot <= cm.n else "?",
             max_steps=max_steps,
@@ -643,7 +657,7 @@ def simulate_batch(cm, X0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol
             messages[-1] += _conditioning_note(cm, P_rows[r] if p_stride else P_rows, X0[r],
                                                stop[r, STOP_X:])
     res = make_result(
-        t=times, y=np.ascontiguousarray(x_out.transpose(0, 2, 1)), state_names=cm.state_names,
+        t=sign * times, y=np.ascontiguousarray(x_out.transpose(0, 2, 1)), state_names=cm.state_names,
         status=status.astype(int), message=messages, method=m.name,
         **{name: np.array([getattr(stats[r], name) for r in range(n_runs)], dtype=_LONG)
            for name in STAT_NAMES if name != "pivot"})

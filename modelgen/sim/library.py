@@ -71,6 +71,21 @@ class ModelLibrary:
         bound = getattr(self, symbol)
         return bound.func, bound.args[0]
 
+    def integrate_function(self, name: str, batch: bool = False, backward: bool = False):
+        """``<name>_integrate`` (or ``_integrate_batch``); with ``backward`` the same
+        integrators on the model reversed in time (``mg_reverse_system``: dx/ds =
+        -f(-s, x), so a run from t0 down to t1 < t0 is one from -t0 up to -t1)."""
+        if not backward:
+            return getattr(self, f"{name}_integrate_batch" if batch else f"{name}_integrate")
+        forward = self.ffi.new("mg_system *")
+        getattr(self, f"{name}_system")(forward)
+        reversed_ = self.ffi.new("mg_system *")
+        self._runtime.mg_reverse_system(forward, reversed_)
+        bound = functools.partial(self._runtime.mg_integrate_batch if batch
+                                  else self._runtime.mg_integrate, reversed_)
+        bound.keep = forward                 # reversed_ points at it
+        return bound
+
     def _address(self, symbol):
         try:
             return ctypes.cast(getattr(self._dll, symbol), ctypes.c_void_p).value

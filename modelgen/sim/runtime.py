@@ -337,8 +337,9 @@ class CompiledModel:
         ones need ``step``, which also runs the adaptive ones with fixed steps.
         solve_ivp's names are accepted and mapped to these, modelgen's own
         methods: ``"RK45"`` -> dopri5, ``"DOP853"`` -> dop853, ``"Radau"``,
-        ``"BDF"``, ``"LSODA"`` -> rodas.  ``t_span`` must increase (the C
-        integrators step forward only; backwards, use ``solve_ivp(cm.rhs, ...)``).
+        ``"BDF"``, ``"LSODA"`` -> rodas.  A decreasing ``t_span`` integrates
+        backwards in time (the C integrators run on the system in s = -t; ``t_eval``
+        then decreases too), as ``solve_ivp`` does.
         ``t_eval`` samples through each method's dense output (otherwise every
         step is recorded); ``events`` are ``g(t, x)`` callables with
         ``terminal``/``direction`` attributes, as in ``solve_ivp``.  ``u`` is None
@@ -379,13 +380,14 @@ class CompiledModel:
     def _dense(steps, run) -> DenseOutput | None:
         """Sample the method's own dense output inside every accepted step (a second,
         identical run with those times as t_eval) and wrap it as ``sol``."""
-        keep = np.concatenate([[True], np.diff(steps.t) > 0])
+        sign = 1.0 if len(steps.t) < 2 or steps.t[-1] >= steps.t[0] else -1.0
+        keep = np.concatenate([[True], sign * np.diff(steps.t) > 0])
         ts, ys = steps.t[keep], steps.y[:, keep]
         if len(ts) < 2:
             return None
         inner = DenseOutput.NODES[1:-1]
         times = (ts[:-1, None] + np.diff(ts)[:, None] * inner[None, :]).ravel()
-        times = np.minimum(np.maximum.accumulate(times), ts[-1])
+        times = sign * np.minimum(np.maximum.accumulate(sign * times), sign * ts[-1])
         sampled = run(times)
         nx = ys.shape[0]
         values = np.empty((len(ts) - 1, len(DenseOutput.NODES), nx))
@@ -394,7 +396,9 @@ class CompiledModel:
         if got.shape[0] != times.size:      # the second run stopped early: no sol
             return None
         values[:, 1:-1] = got.reshape(len(ts) - 1, len(inner), nx)
-        return DenseOutput(ts, values)
+        if sign < 0:        # steps and nodes ascending in t (the nodes are symmetric)
+            ts, values = ts[::-1], values[::-1, ::-1]
+        return DenseOutput(np.ascontiguousarray(ts), np.ascontiguousarray(values))
 
     def stability_warning(self, method, step, t0, x0, u=None, p=None) -> str | None:
         """Why a fixed ``step`` of an explicit ``method`` is unstable at (t0, x0), or None.
