@@ -329,7 +329,7 @@ def _checker(model_dir: Path, name: str) -> str:
                 "        memset(&opt, 0, sizeof opt);",
                 f"        for (i = 0; i < {N}_NX; ++i) X[i] = X[{N}_NX + i] = x[i];",
                 "        opt.method = MG_METHOD_RK4; opt.fixed_step = 1e-3; opt.max_steps = 100;",
-                f"        if ({fn}(2, 0.0, 0.01, X, p, 0, 0, &opt, 1, te, xo, n_o, sts, st, stop, work) != 0) ++failures;",
+                f"        if ({fn}(2, 0.0, 0.01, X, p, 0, 0, &opt, 1, te, xo, 0, n_o, sts, st, stop, work) != 0) ++failures;",
                 f"        if (n_o[0] != 1 || n_o[1] != 1 || sts[0] != 0 || xo[0] != xo[{N}_NX] || st[0].naccept != 10) ++failures;",
                 "    }",
                 f'    printf("called {fn}\\n");']

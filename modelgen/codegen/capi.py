@@ -201,10 +201,11 @@ FUNCTIONS = (
     ("int", "mg_integrate_batch",
      "const mg_system *system, long n_runs, double t0, double t1, const double *x0, "
      "const double *p, long p_stride, const mg_inputs *inputs, const mg_options *options, "
-     "long n_eval, const double *t_eval, double *x_out, long *n_out, int *status, "
-     "mg_stats *stats, double *stop, double *work",
+     "long n_eval, const double *t_eval, double *x_out, double *y_out, long *n_out, "
+     "int *status, mg_stats *stats, double *stop, double *work",
      ["mg_integrate for n_runs states x0[n_runs][nx] with parameters p + r * p_stride,",
       "sampled at t_eval[n_eval] (required) into x_out[n_runs][n_eval][nx]; no events.",
+      "y_out[n_runs][n_eval][ny]: the outputs at those times (NULL: none recorded).",
       "n_out[n_runs], status[n_runs], stats[n_runs], stop[n_runs][MG_STOP_X + nx].",
       "Returns the number of runs that failed (status < 0)."]),
     ("int", "mg_jacobian_fd",
@@ -254,8 +255,8 @@ SIGNATURES = (
     Signature("integrate_batch", "int", (
         "long n_runs", "double t0", "double t1", "const double *x0", "const double *p",
         "long p_stride", "const mg_inputs *inputs", "const mg_options *options",
-        "long n_eval", "const double *t_eval", "double *x_out", "long *n_out", "int *status",
-        "mg_stats *stats", "double *stop", "double *work")),
+        "long n_eval", "const double *t_eval", "double *x_out", "double *y_out", "long *n_out",
+        "int *status", "mg_stats *stats", "double *stop", "double *work")),
 )
 
 

@@ -386,10 +386,12 @@ def _integrator_api(name: str, n: int, n_p: int, n_u: int, n_y: int, has_jacobia
         {"ret": "int", "name": f"{name}_integrate_batch",
          "params": "long n_runs, double t0, double t1, const double *x0, const double *p, "
                    "long p_stride, const mg_inputs *inputs, const mg_options *options, "
-                   "long n_eval, const double *t_eval, double *x_out, long *n_out, int *status, "
-                   "mg_stats *stats, double *stop, double *work",
+                   "long n_eval, const double *t_eval, double *x_out, double *y_out, long *n_out, "
+                   "int *status, mg_stats *stats, double *stop, double *work",
          "doc": [f"mg_integrate_batch on this model: x0[n_runs][{nx}], parameters",
                  f"p + r * p_stride (0: one set, {n_p}: one per run), x_out[n_runs][n_eval][{nx}],",
+                 f"y_out[n_runs][n_eval][{n_y}] the outputs (NULL: none)," if n_y
+                 else "y_out NULL (this model records no outputs),",
                  f"stop[n_runs][MG_STOP_X + {nx}].  Returns the number of failed runs."]},
     ]
 

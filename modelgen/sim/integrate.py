@@ -585,7 +585,7 @@ def _parameter_rows(cm, P, n_runs):
 
 def simulate_batch(cm, X0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10,
                    u=None, P=None, *, step=None, first_step=None, max_step=None,
-                   max_steps=100_000, threads=1) -> Result:
+                   max_steps=100_000, threads=1, outputs=True) -> Result:
     """Integrate many initial states (rows of ``X0``), each with its own parameters.
 
     One C call loops over the runs (``threads`` > 1 splits them between Python
@@ -593,7 +593,9 @@ def simulate_batch(cm, X0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol
     None (defaults), one parameter vector, an array (n_runs, n_p) or a dict of
     parameter -> value or per-run values.  ``t_eval`` defaults to ``[t1]``
     (final states).  Returns ``t`` (n_t,), ``y`` (n_runs, nx, n_t) (NaN after a
-    failure), and per run ``status``, ``success``, ``message``, ``nfev``...
+    failure), and per run ``status``, ``success``, ``message``, ``nfev``...; with
+    ``outputs`` a scene's outputs, recorded by the C at every time, in
+    ``res.outputs[name]`` of shape (n_runs, n_t, columns).
 
     >>> res = simulate_batch(cm, X0, (0, 5), P={"m2": np.linspace(0.5, 2, len(X0))})  # doctest: +SKIP
     """
@@ -616,6 +618,8 @@ def simulate_batch(cm, X0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol
     _check_step_count(fixed, t0, t1)
     n_t = len(times)
     x_out = np.full((n_runs, n_t, nx), np.nan)
+    ny = len(cm.output_columns) if outputs else 0
+    y_out = np.full((n_runs, n_t, max(ny, 1)), np.nan)
     n_out = np.zeros(n_runs, dtype=_LONG)
     status = np.zeros(n_runs, dtype=np.intc)
     stats = cm.ffi.new("mg_stats[]", max(n_runs, 1))
@@ -630,7 +634,8 @@ def simulate_batch(cm, X0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol
         work = np.empty(work_size(nx, len(cm.inputs), 0))     # one per thread
         p_block = P_rows[lo:hi] if p_stride else P_rows
         fn(hi - lo, t0, t1, ptr(X0[lo:hi]), ptr(p_block), p_stride, inputs.struct, opt, n_t,
-           ptr(times), ptr(x_out[lo:hi]), ffi.from_buffer("long[]", n_out[lo:hi]),
+           ptr(times), ptr(x_out[lo:hi]), ptr(y_out[lo:hi]) if ny else ffi.NULL,
+           ffi.from_buffer("long[]", n_out[lo:hi]),
            ffi.from_buffer("int[]", status[lo:hi]), stats + lo, ptr(stop[lo:hi]), ptr(work))
 
     bounds = np.linspace(0, n_runs, threads + 1).astype(int)
@@ -641,6 +646,7 @@ def simulate_batch(cm, X0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol
             list(pool.map(run, bounds[:-1], bounds[1:]))
     for r in range(n_runs):    # rows after a failure stay NaN
         x_out[r, n_out[r]:] = np.nan
+        y_out[r, n_out[r]:] = np.nan
     messages = []
     for r in range(n_runs):
         pivot = int(stats[r].pivot)
@@ -661,6 +667,10 @@ def simulate_batch(cm, X0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol
         status=status.astype(int), message=messages, method=m.name,
         **{name: np.array([getattr(stats[r], name) for r in range(n_runs)], dtype=_LONG)
            for name in STAT_NAMES if name != "pivot"})
+    if ny:
+        res.outputs = {name: y_out[:, :, [cm.output_columns.index(c) for c in cols]]
+                       for name, cols in cm.outputs.items()}
+        res.output_columns = dict(cm.outputs)
     if inputs.error() is not None:
         res.info["exception"] = inputs.error()
     return res

@@ -280,35 +280,6 @@ class CompiledModel:
                       self._ptr(self.params(p)), self._ptr(out))
         return out
 
-    def output_rows(self, t, X, u=None, p=None) -> np.ndarray:
-        """The scene's outputs along a trajectory: ``X`` (n_times, nx) at times ``t``
-        -> (n_times, ny), ``output_columns`` order; a row whose state has a NaN
-        (after a failure) stays NaN.  ``u`` is anything :meth:`simulate` takes.
-
-        >>> cm.output_rows(res.t, res.y.T)                          # doctest: +SKIP
-        """
-        if self._outputs is None:
-            raise SimulationError(f"{self.name}: this model was generated without outputs")
-        nx, ny = 2 * self.n, len(self.output_columns)
-        t = np.ascontiguousarray(t, dtype=float)
-        X = np.ascontiguousarray(X, dtype=float)
-        if X.shape != (len(t), nx):
-            raise SimulationError(f"{self.name}: X must have shape ({len(t)}, {nx}), "
-                                  f"got {X.shape}")
-        out = np.full((len(t), ny), np.nan)
-        p_vec = self.params(p).copy()
-        varying = callable(u) or (isinstance(u, tuple) and len(u) == 3 and isinstance(u[2], str))
-        u_vec = np.zeros(len(self.inputs)) if varying else self.input_vector(u).copy()
-        ptr, f = self._ptr, self._outputs
-        xp, yp, pp, up = ptr(X), ptr(out), ptr(p_vec), ptr(u_vec)
-        finite = np.all(np.isfinite(X), axis=1).tolist()
-        for i, ti in enumerate(t.tolist()):
-            if finite[i]:
-                if varying:
-                    u_vec[:] = self.input_vector(_input_at(self, u, ti, X[i]))
-                f(ti, xp + i * nx, up, pp, yp + i * ny)
-        return out
-
     def _input_samples(self, u):
         """(times, values (n, nu) C-ordered, hold) for the C integrator."""
         nu = len(self.inputs)

@@ -232,16 +232,14 @@ def run_chunk(model, study: Study, lo: int, hi: int) -> dict:
     cm = model if isinstance(model, CompiledModel) else worker_model(model)
     res = cm.simulate_batch(study.X0[lo:hi], study.t_span, t_eval=study.t_eval,
                             method=study.method, rtol=study.rtol, atol=study.atol, u=study.u,
-                            P=study.P[lo:hi], step=study.step, max_steps=study.max_steps)
+                            P=study.P[lo:hi], step=study.step, max_steps=study.max_steps,
+                            outputs=study.outputs)
     out = {"y": res.y, "status": np.asarray(res.status, dtype=np.int32),
            "message": list(res.message), "outputs": None}
     for name in COUNTERS:
         out[name] = np.asarray(getattr(res, name), dtype=np.int64)
-    if study.outputs and cm.output_columns:
-        out["outputs"] = np.stack([cm.output_rows(study.t_eval, res.y[r].T, study.u,
-                                                  study.P[lo + r])
-                                   for r in range(hi - lo)]) if hi > lo else \
-            np.empty((0, len(study.t_eval), len(cm.output_columns)))
+    if study.outputs and cm.output_columns:     # recorded by the C at every sample
+        out["outputs"] = np.concatenate([res.outputs[name] for name in cm.outputs], axis=2)
     out["seconds"] = time.perf_counter() - start
     out["pid"] = os.getpid()
     return out
