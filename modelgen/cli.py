@@ -688,8 +688,8 @@ def build_parser() -> argparse.ArgumentParser:
     w.add_argument("-o", "--output", default="out/sweep.nc",
                    help="netCDF file to write (default: out/sweep.nc)")
     w.add_argument("--plot", default=None, metavar="HOW:VARIABLE",
-                   help="also write OUTPUT.png: final|max|min|mean of a state or scalar "
-                        "output against the swept values, e.g. final:q2")
+                   help="also write OUTPUT.png: final|max|min|mean|period of a state or "
+                        "scalar output against the swept values, e.g. final:q2, period:q1")
     w.add_argument("--build-dir", default=None,
                    help="where the model is built (default: the per-user cache)")
     w.add_argument("--quiet", action="store_true", help="no progress bar")

@@ -479,13 +479,54 @@ def summary(ds) -> str:
 
 
 #: how a trajectory becomes one number per run, for :func:`scalar`
-REDUCTIONS = ("final", "max", "min", "mean")
+REDUCTIONS = ("final", "max", "min", "mean", "period")
+
+
+def crossings(t, y, dy=None) -> np.ndarray:
+    """Times at which samples ``y(t)`` cross zero upwards.  With the derivative
+    ``dy`` (a coordinate's speed, from the same samples) each crossing is the root
+    of the cubic Hermite interpolant on its interval (error O(h^4), found by
+    safeguarded Newton steps), else of the linear one.
+
+    >>> t = np.linspace(0, 20, 201)
+    >>> f"{float(np.diff(crossings(t, np.sin(t), np.cos(t))).mean()) - 2 * np.pi:.0e}"
+    '1e-09'
+    """
+    t, y = np.asarray(t, dtype=float), np.asarray(y, dtype=float)
+    k = np.flatnonzero((y[:-1] < 0) & (y[1:] >= 0))
+    out = []
+    for i in k:
+        h, y0, y1 = t[i + 1] - t[i], y[i], y[i + 1]
+        s = y0 / (y0 - y1)                   # the linear root, a start and a fallback
+        if dy is not None and np.isfinite(dy[i]) and np.isfinite(dy[i + 1]):
+            d0, d1 = dy[i] * h, dy[i + 1] * h
+            lo, hi = 0.0, 1.0
+            for _ in range(30):
+                h00, h10 = 2 * s**3 - 3 * s**2 + 1, s**3 - 2 * s**2 + s
+                h01, h11 = -2 * s**3 + 3 * s**2, s**3 - s**2
+                f = h00 * y0 + h10 * d0 + h01 * y1 + h11 * d1
+                df = ((6 * s**2 - 6 * s) * y0 + (3 * s**2 - 4 * s + 1) * d0
+                      + (-6 * s**2 + 6 * s) * y1 + (3 * s**2 - 2 * s) * d1)
+                if f < 0:
+                    lo = s
+                else:
+                    hi = s
+                step = s - f / df if df > 0 else 0.5 * (lo + hi)
+                s_new = step if lo < step < hi else 0.5 * (lo + hi)
+                if abs(s_new - s) < 1e-15:
+                    s = s_new
+                    break
+                s = s_new
+        out.append(t[i] + s * h)
+    return np.array(out)
 
 
 def scalar(ds, how: str, variable: str) -> np.ndarray:
     """One number per run: the ``final`` (last finite sample), ``max``, ``min`` or
-    ``mean`` of ``variable`` (a state or a single-column output) over time; NaN for
-    a run that failed."""
+    ``mean`` of ``variable`` (a state or a single-column output) over time, or its
+    ``period``: the mean interval between its upward zero crossings (located on
+    the cubic Hermite interpolant when ``variable`` is a coordinate, whose speed
+    is sampled too; NaN with fewer than two).  NaN for a run that failed."""
     if how not in REDUCTIONS:
         raise SimulationError(f"unknown reduction {how!r}; use one of {', '.join(REDUCTIONS)}")
     if variable not in ds or ds[variable].dims != ("run", "time"):
@@ -494,6 +535,16 @@ def scalar(ds, how: str, variable: str) -> np.ndarray:
                               f"sweep; choose one of {', '.join(names)}")
     a = np.asarray(ds[variable])
     ok = np.asarray(ds["status"]) >= 0
+    if how == "period":
+        t = np.asarray(ds["time"], dtype=float)
+        speed = f"{variable}_dot"
+        d = np.asarray(ds[speed]) if speed in ds and ds[speed].dims == ("run", "time") else None
+        value = np.full(a.shape[0], np.nan)
+        for r in range(a.shape[0]):
+            times = crossings(t, a[r], None if d is None else d[r])
+            if len(times) >= 2:
+                value[r] = (times[-1] - times[0]) / (len(times) - 1)
+        return np.where(ok, value, np.nan)
     with np.errstate(all="ignore"):
         value = {"final": a[:, -1] if a.shape[1] else np.full(a.shape[0], np.nan),
                  "max": np.max(a, axis=1), "min": np.min(a, axis=1),
