@@ -270,3 +270,22 @@ def test_old_modules_are_removed_and_variants_do_not_rebuild_each_other(tmp_path
         assert again.build.cached and again.build.module_path == g.build.module_path
         assert modelgen.load(v, tmp_path).parameters["L"] == v.parameters[0][1]
     assert not modelgen.generate_model(variants[0], tmp_path).build.cached
+
+
+def test_the_link_is_the_platforms_with_cc_in_the_compilers_place(monkeypatch):
+    """The shared library is linked with sysconfig's LDSHARED (the platform's flags
+    as Python was configured), $CC replacing its compiler, or $LDSHARED verbatim."""
+    import sysconfig
+    configured = sysconfig.get_config_var("LDSHARED").split()
+    monkeypatch.delenv("LDSHARED", raising=False)
+    monkeypatch.setenv("CC", "mycc -m64")
+    cmd = build.link_command(["a.o", "b.o"], "lib.so")
+    cc_words = len(sysconfig.get_config_var("CC").split())
+    assert cmd[:2] == ["mycc", "-m64"] and cmd[2:2 + len(configured) - cc_words] \
+        == configured[cc_words:]
+    assert cmd[-5:] == ["a.o", "b.o", "-o", "lib.so", "-lm"]
+    monkeypatch.setenv("LDSHARED", "ld.gold -shared -z defs")
+    assert build.link_command(["a.o"], "x.so")[:4] == ["ld.gold", "-shared", "-z", "defs"]
+    monkeypatch.setenv("LDSHARED", "")
+    with pytest.raises(BuildError, match="LDSHARED"):
+        build.link_command(["a.o"], "x.so")

@@ -187,7 +187,7 @@ def integrator_object(sources: dict) -> tuple:
     try:
         for name in ("mg_integrate.h", "mg_integrate.c"):
             (tmp / name).write_text(sources[name])
-        _run([[*compiler(), *integrator_flags(), "-c", "mg_integrate.c", "-o", "mg_integrate.o"]],
+        run_commands([[*compiler(), *integrator_flags(), "-c", "mg_integrate.c", "-o", "mg_integrate.o"]],
              tmp)
         os.replace(tmp / "mg_integrate.o", target)
     finally:
@@ -356,8 +356,9 @@ def _remove_old_builds(directory: Path, name: str, keep: str) -> None:
                 manifest_path(directory, short).unlink()
 
 
-def _run(commands: list, cwd: Path) -> None:
-    """Run compiler commands in parallel; raise BuildError on the first failure."""
+def run_commands(commands: list, cwd: Path, what: str = "C compiler failed") -> None:
+    """Run compiler commands in parallel; raise BuildError (``what``, the command, its
+    full output and exit status) on the first failure."""
     procs = []
     try:
         for cmd in commands:
@@ -373,7 +374,7 @@ def _run(commands: list, cwd: Path) -> None:
     for cmd, proc in procs:
         out, _ = proc.communicate()
         if proc.returncode != 0 and failure is None:
-            failure = BuildError("C compiler failed", cmd, out, returncode=proc.returncode)
+            failure = BuildError(what, cmd, out, returncode=proc.returncode)
     if failure:
         raise failure
 
@@ -488,9 +489,25 @@ def library_suffix() -> str:
 
 
 def link_command(objects: list, output: str) -> list:
-    """The command linking ``objects`` into the shared library ``output``."""
-    shared = ["-dynamiclib"] if sys.platform == "darwin" else ["-shared"]
-    return [*compiler(), *shared, *objects, "-o", output, "-lm"]
+    """The command linking ``objects`` into the shared library ``output``: the
+    platform's shared-object link as this Python was configured (sysconfig's
+    ``LDSHARED``: ``gcc -shared ...`` on Linux, ``clang -bundle -undefined
+    dynamic_lookup ...`` on macOS), or ``$LDSHARED``; with ``$CC`` set (and not
+    ``$LDSHARED``) its compiler takes the configured one's place, as distutils does.
+
+    >>> link_command(["m.o"], "libm.so")[-4:]
+    ['m.o', '-o', 'libm.so', '-lm']
+    """
+    command = _split_env("LDSHARED", sysconfig.get_config_var("LDSHARED") or "")
+    if not command:
+        raise BuildError("this Python's configuration names no command to link a shared "
+                         "library (sysconfig's LDSHARED is empty)",
+                         fix="set LDSHARED to one, e.g. LDSHARED='gcc -shared'")
+    configured = shlex.split(sysconfig.get_config_var("CC") or "")
+    if "CC" in os.environ and "LDSHARED" not in os.environ and configured \
+            and command[:len(configured)] == configured:
+        command = [*compiler(), *command[len(configured):]]
+    return [*command, *objects, "-o", output, "-lm"]
 
 
 def build_module(directory: Path, name: str, sources: dict, manifest: dict,
@@ -519,8 +536,8 @@ def build_module(directory: Path, name: str, sources: dict, manifest: dict,
         model_objs = [[*cc, *compile_flags(statements, part), "-Werror",
                        *([f"-DMG_PART={part}"] if part else []), "-c", f"{name}.c",
                        "-o", f"{name}_{part}.o"] for part in parts]
-        _run(model_objs, tmp)
-        _run([link_command([*(f"{name}_{part}.o" for part in parts), str(integrator_obj)],
+        run_commands(model_objs, tmp)
+        run_commands([link_command([*(f"{name}_{part}.o" for part in parts), str(integrator_obj)],
                            module_file)], tmp)
 
         manifest = dict(manifest, module_name=module_name, module_file=module_file,

@@ -31,7 +31,6 @@ import math
 import os
 import platform
 import struct
-import subprocess
 import tempfile
 import time
 import uuid
@@ -41,7 +40,8 @@ from pathlib import Path
 from xml.etree import ElementTree as ET
 
 from modelgen.codegen import capi
-from modelgen.codegen.build import FIX_COMPILER, compile_flags, compiler, integrator_object
+from modelgen.codegen.build import (compile_flags, compiler, integrator_object, link_command,
+                                    run_commands)
 from modelgen.codegen.emit import render
 from modelgen.codegen.pipeline import generate, model_hash
 from modelgen.errors import BuildError, ModelError, ModelgenError
@@ -388,30 +388,6 @@ def _model_sources(spec: ModelSpec, outputs, jacobian: bool, out_dir) -> tuple:
     return texts, manifest, hash16
 
 
-def _compile(commands: list, cwd: Path) -> None:
-    """Run compiler commands in parallel; BuildError (command, full output) on a failure."""
-    procs = []
-    try:
-        for cmd in commands:
-            procs.append((cmd, subprocess.Popen(cmd, cwd=cwd, stdout=subprocess.PIPE,
-                                                stderr=subprocess.STDOUT, text=True)))
-    except OSError as exc:
-        for _, proc in procs:
-            proc.kill()
-            proc.communicate()
-        raise BuildError(f"the C compiler {commands[0][0]!r} cannot be run "
-                         f"({exc.strerror or exc})", commands[len(procs)],
-                         fix=FIX_COMPILER) from None
-    failure = None
-    for cmd, proc in procs:
-        out, _ = proc.communicate()
-        if proc.returncode != 0 and failure is None:
-            failure = BuildError("C compiler failed building the FMU", cmd, out,
-                                 returncode=proc.returncode)
-    if failure:
-        raise failure
-
-
 def compile_library(directory: Path, name: str, sources: list, statements: int,
                     suffix: str, objects=()) -> Path:
     """Compile the C files ``sources`` in ``directory`` (``-Werror``) and link them with
@@ -421,14 +397,13 @@ def compile_library(directory: Path, name: str, sources: list, statements: int,
     cc = compiler()
     commands = [[*cc, *compile_flags(statements, 0), "-Werror", "-fvisibility=hidden", "-I.",
                  "-c", source, "-o", source[:-2] + ".o"] for source in sources]
-    _compile(commands, directory)
+    run_commands(commands, directory, "C compiler failed building the FMU")
     library = f"{name}{suffix}"
-    link = [*cc, "-shared", *(s[:-2] + ".o" for s in sources), *map(str, objects),
-            "-o", library, "-lm"]
+    link = link_command([*(s[:-2] + ".o" for s in sources), *map(str, objects)], library)
     if platform.system() == "Linux":
         (directory / "exports.map").write_text("{\n  global: fmi2*;\n  local: *;\n};\n")
         link.insert(-3, "-Wl,--version-script=exports.map")
-    _compile([link], directory)
+    run_commands([link], directory, "the FMU's library failed to link")
     return directory / library
 
 
