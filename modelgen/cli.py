@@ -276,10 +276,21 @@ def _simulate_scene(args) -> int:
                    scene.conservative, animation=(spec.model, scene.model, p))
 
 
+def _check_output_dir(path) -> None:
+    """Refuse an output directory that cannot be one before anything is built or run."""
+    for parent in (Path(path), *Path(path).parents):
+        if parent.exists():
+            if not parent.is_dir():
+                raise ModelgenError(f"-o {path}: {parent} is a file, not a directory; fix: "
+                                    f"give a directory (it is created if missing)")
+            break
+
+
 def _simulate(args) -> int:
     from modelgen.model import as_spec, is_scene_file
     from modelgen.sim.load import load
     _check_times(args)
+    _check_output_dir(args.output)
     if is_scene_file(args.model):
         return _simulate_scene(args)
     model = as_spec(args.model)

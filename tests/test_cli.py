@@ -228,3 +228,13 @@ def test_progress_bars_on_a_terminal_and_not_in_a_pipe_or_with_quiet(tmp_path):
     assert piped.returncode == 0, piped.stderr
     assert "stages |" not in piped.stderr and "integrating |" not in piped.stderr, piped.stderr
     assert "work done: hinge_damping" in piped.stdout        # the run itself is the same
+
+
+def test_an_output_path_that_is_a_file_is_refused_before_anything_runs(tmp_path):
+    taken = tmp_path / "taken"
+    taken.write_text("a file")
+    for source in (MODELS / "double_pendulum.yaml", MODELS / "scenes" / "dp_free.yaml"):
+        proc = _modelgen("simulate", source, "-o", taken / "sub", "--t-end", "0.1", cwd=tmp_path)
+        assert proc.returncode == 2, proc.stderr
+        assert "is a file, not a directory; fix:" in proc.stderr
+        assert "integrating" not in proc.stderr and "generating" not in proc.stderr
