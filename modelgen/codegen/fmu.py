@@ -97,6 +97,7 @@ class FmuVariable:
     start: float | None
     description: str
     derivative_of: int | None = None    # value reference of the state it is der() of
+    unit: str = ""                      # from the model's units: (a speed: its coordinate's/s)
 
 
 @dataclass(frozen=True)
@@ -197,23 +198,28 @@ def _variables(src: _Source, output_columns) -> tuple:
     spec = src.spec
     speeds = list(spec.speeds)
     states = list(spec.coordinates) + speeds
+    units = dict(spec.units)
+    per_s = lambda unit, k: unit and (unit + ("/s" if k == 1 else f"/s{k}"))   # noqa: E731
+    state_units = [units.get(c, "") for c in spec.coordinates]
+    state_units += [per_s(u, 1) for u in state_units]
     out = []
     for i, name in enumerate(states):
         what = (f"generalized coordinate {i + 1}" if i < spec.n
                 else f"speed, the time derivative of {states[i - spec.n]}")
         out.append(FmuVariable(name, len(out), "local", "continuous", "exact",
-                               float(src.initial[i]), what))
+                               float(src.initial[i]), what, unit=state_units[i]))
     for i, name in enumerate(states):
         what = (f"= {speeds[i]}" if i < spec.n
                 else f"acceleration of {spec.coordinates[i - spec.n]}")
+        unit = state_units[i + spec.n] if i < spec.n else per_s(state_units[i - spec.n], 2)
         out.append(FmuVariable(f"der({name})", len(out), "local", "continuous", "calculated",
-                               None, what, derivative_of=i))
+                               None, what, derivative_of=i, unit=unit))
     for name, value in spec.parameters:
         out.append(FmuVariable(name, len(out), "parameter", "tunable", "exact", float(value),
-                               "parameter"))
+                               "parameter", unit=units.get(name, "")))
     for name, value in zip(spec.inputs, src.input_starts):
         out.append(FmuVariable(name, len(out), "input", "continuous", None, float(value),
-                               "input"))
+                               "input", unit=units.get(name, "")))
     kinds = {o.name: o for o in src.outputs}
     for column in output_columns:
         head = column.split(".")[0].split("[")[0]
@@ -276,6 +282,11 @@ def model_description(name: str, description: str, guid: str, variables, setting
         files = ET.SubElement(kind, "SourceFiles")
         for source in sources:
             ET.SubElement(files, "File", {"name": source})
+    unit_names = sorted({v.unit for v in variables if v.unit})
+    if unit_names:
+        definitions = ET.SubElement(root, "UnitDefinitions")
+        for unit in unit_names:
+            ET.SubElement(definitions, "Unit", {"name": unit})
     categories = ET.SubElement(root, "LogCategories")
     for category, text in LOG_CATEGORIES:
         ET.SubElement(categories, "Category", {"name": category, "description": text})
@@ -306,6 +317,8 @@ def model_description(name: str, description: str, guid: str, variables, setting
             real["derivative"] = str(v.derivative_of + 1)       # 1-based index
         if v.start is not None:
             real["start"] = _number(v.start)
+        if v.unit:
+            real["unit"] = v.unit
         ET.SubElement(scalar, "Real", real)
 
     index = {v.value_reference: v.value_reference + 1 for v in variables}

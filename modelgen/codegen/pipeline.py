@@ -72,7 +72,7 @@ def model_hash(spec: ModelSpec, outputs=(), jacobian: bool = False,
     the same model gives the same C wherever it lies.
     """
     h = hashlib.sha256()
-    for part in (repr(replace(spec, source=None, lines=())),
+    for part in (repr(replace(spec, source=None, lines=(), units=())),
                  repr(tuple(outputs)) + (" jacobian" if jacobian else "")
                  + (" linearize" if linearize else ""),
                  formulation, __version__, str(ABI_VERSION), templates_digest()):

@@ -14,6 +14,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import numbers
+import re
 from typing import Mapping, NamedTuple, Optional
 
 import numpy as np
@@ -43,6 +44,9 @@ __all__ = ["ModelBuilder", "replay", "BaseDecl", "PointDecl", "FrameDecl", "Body
 
 
 # -- declarations: validated entries, before references are resolved ----------
+
+#: What a unit may be written as (see ModelBuilder.set_units).
+UNIT_TEXT = re.compile(r"[A-Za-z0-9_.*/^() -]{1,40}")
 
 class BaseDecl(NamedTuple):
     name: str
@@ -111,6 +115,7 @@ class ModelBuilder:
         self.lines = lines if lines is not None else {}
         self.name: Optional[str] = None
         self.description = ""
+        self.units: list = []
         self.kinds: dict = {}         # name -> (kind, key) for every declared name
         self.speeds: dict = {}        # speed name -> coordinate
         self.symbols: dict = {}       # name -> Symbol (coordinates, speeds, parameters, inputs)
@@ -298,6 +303,29 @@ class ModelBuilder:
             raise self.error(f"expected a string but got {describe(text)}", key,
                              "write the description as text (quote it if needed)")
         self.description = text
+
+    def set_units(self, value, key: str = "units") -> None:
+        """``units: {name: unit, ...}`` for declared coordinates, parameters and inputs;
+        a unit is short plain text (letters, digits, ``_ . * / ^ ( ) -`` and spaces),
+        so it can be written into XML and C comments as it is."""
+        self.units = []
+        if value is None:
+            return
+        if not isinstance(value, dict):
+            raise self.error(f"expected a mapping of names to units but got {describe(value)}",
+                             key, "write e.g. 'units: {L: m, m: kg, q1: rad}'")
+        for name, unit in value.items():
+            entry = f"{key}.{name}"
+            if self.kind_of(name) not in ("coordinate", "parameter", "input"):
+                raise self.error(f"'{name}' is not a declared coordinate, parameter or input",
+                                 entry, "give units of coordinates, parameters and inputs "
+                                 "(a speed's unit is its coordinate's per second)")
+            if not isinstance(unit, str) or not UNIT_TEXT.fullmatch(unit):
+                raise self.error(f"the unit of '{name}' must be short plain text, got "
+                                 f"{describe(unit)}", entry,
+                                 "write it like m, kg, rad, N*m, m/s^2 (at most 40 letters, "
+                                 "digits, spaces and _ . * / ^ ( ) -)")
+            self.units.append((name, unit))
 
     def add_coordinate(self, name, key: str) -> None:
         self.check_new_name(name, "coordinate", key)

@@ -113,6 +113,7 @@ def build_spec(builder) -> ModelSpec:
         actions=tuple(ActionSpec(a.name, a.body, a.point, a.base, a.torque, a.force)
                       for a in actions),
         effects=tuple(effects),
+        units=tuple(builder.units),
         source=None if builder.file == API_FILE else builder.file,
         lines=tuple(builder.lines.items()),
     )

@@ -19,7 +19,8 @@ __all__ = ["TOP_LEVEL_KEYS", "ENTRY_KEYS", "REQUIRED_KEYS", "ExpressionRule",
 #: Any other key is an error; a stage adding a key adds it here and reads it
 #: in ``builder_from_data``.
 TOP_LEVEL_KEYS = ("name", "description", "coordinates", "parameters", "inputs",
-                  "bases", "points", "frames", "bodies", "gravity", "actions", "effects")
+                  "bases", "points", "frames", "bodies", "gravity", "actions", "effects",
+                  "units")
 
 #: Keys of one entry of each mapping section.
 ENTRY_KEYS = {

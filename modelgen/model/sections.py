@@ -136,6 +136,7 @@ def builder_from_data(data, lines: dict, file: str) -> ModelBuilder:
         ctx.add_body(name, e["mass"], e["G"], e["base"], e.get("inertia"), key)
     if "gravity" in data:
         ctx.set_gravity(data["gravity"])
+    ctx.set_units(data.get("units"))
     for name, e, key in entries("actions"):
         ctx.add_action(name, e["body"], e.get("point"), e.get("base"), e.get("frame"),
                        e.get("torque"), e.get("force"), e.get("vector"), key)

@@ -306,6 +306,9 @@ class ModelSpec:
     gravity: Optional[Vec3] = None     # components in E, acting at every G
     actions: tuple = ()                # tuple[ActionSpec, ...]
     effects: tuple = ()                # tuple of the effect dataclasses above
+    #: ((name, unit), ...): units of coordinates, parameters and inputs, for people
+    #: and for exports (an FMU's variables); they never change the equations
+    units: tuple = ()
     #: where the spec came from (file path or None) -- for error messages only
     source: Optional[str] = field(default=None, compare=False)
     #: (dotted key, line) pairs for error messages from later stages

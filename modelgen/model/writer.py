@@ -115,6 +115,8 @@ def spec_to_yaml(spec: ModelSpec) -> str:
     if spec.effects:
         out.append("effects:")
         out += [f"  {name(e.name)}: {{{_yaml_effect(e)}}}" for e in spec.effects]
+    if spec.units:
+        out.append("units: {" + ", ".join(f"{name(n)}: {name(u)}" for n, u in spec.units) + "}")
     return "\n".join(out) + "\n"
 
 
