@@ -441,9 +441,12 @@ def build_mujoco_harness(work: Path):
 
 
 _PIN_HARNESS = r"""// Timing harness for Pinocchio's ABA and CRBA + Cholesky, written by
-// bench/codegen_scaling.py.  Prints: aba_s crba_s, then q_ddot at x0 by each.
+// bench/codegen_scaling.py.  Usage: pin_bench chain.txt, the file holding n,
+// then per link "offset axis(0 = z, 1 = y) mass com_x Ixx Iyy Izz", then g, then
+// x0 (2n numbers).  Prints: aba_s crba_s, then q_ddot at x0 by each.
 #include <cstdio>
 #include <ctime>
+#include <string>
 #include <pinocchio/multibody.hpp>
 #include <pinocchio/algorithm/aba.hpp>
 #include <pinocchio/algorithm/crba.hpp>
@@ -457,7 +460,7 @@ static double now() {
 }
 
 static pinocchio::Model model;
-static const double x0[] = {%(x0)s};
+static double x0[2048];
 
 static void crba_path(pinocchio::Data &data, const Eigen::VectorXd &q, const Eigen::VectorXd &v,
                       const Eigen::VectorXd &tau, Eigen::VectorXd &qdd) {
@@ -499,8 +502,41 @@ template <int WHICH> static double best(pinocchio::Data &data, double &sink) {
     return b;
 }
 
-int main() {
-    %(build)s
+static int read_chain(const char *path) {
+    std::FILE *f = std::fopen(path, "r");
+    int n = 0;
+    if (!f || std::fscanf(f, "%%d", &n) != 1 || n < 1 || n > 1024) return 0;
+    pinocchio::Model::JointIndex parent = 0;
+    for (int i = 0; i < n; ++i) {
+        double offset, m, c, ixx, iyy, izz;
+        int axis;
+        if (std::fscanf(f, "%%lf %%d %%lf %%lf %%lf %%lf %%lf", &offset, &axis, &m, &c, &ixx, &iyy,
+                        &izz) != 7) return 0;
+        const pinocchio::SE3 placement(Eigen::Matrix3d::Identity(),
+                                       Eigen::Vector3d(offset, 0.0, 0.0));
+        const std::string name = "q" + std::to_string(i + 1);
+        if (axis == 0)
+            parent = model.addJoint(parent, pinocchio::JointModelRZ(), placement, name);
+        else
+            parent = model.addJoint(parent, pinocchio::JointModelRY(), placement, name);
+        model.appendBodyToJoint(parent, pinocchio::Inertia(m, Eigen::Vector3d(c, 0.0, 0.0),
+                                Eigen::Vector3d(ixx, iyy, izz).asDiagonal()),
+                                pinocchio::SE3::Identity());
+    }
+    double g;
+    if (std::fscanf(f, "%%lf", &g) != 1) return 0;
+    model.gravity.linear(Eigen::Vector3d(0.0, 0.0, -g));
+    for (int i = 0; i < 2 * n; ++i)
+        if (std::fscanf(f, "%%lf", &x0[i]) != 1) return 0;
+    std::fclose(f);
+    return n;
+}
+
+int main(int argc, char **argv) {
+    if (argc != 2 || !read_chain(argv[1])) {
+        std::fprintf(stderr, "usage: pin_bench chain.txt (see the source)\n");
+        return 2;
+    }
     pinocchio::Data data(model);
     double sink = 0.0;
     const double aba = best<0>(data, sink), crba = best<1>(data, sink);
@@ -536,23 +572,22 @@ def pinocchio_paths():
     return None
 
 
-def build_pinocchio_harness(n: int, params: dict, x0, work: Path):
-    """Compile the Pinocchio harness for ``spatial_chain(n)`` (-O3 -march=native);
-    returns its path, or (None, reason)."""
+def build_pinocchio_harness(work: Path):
+    """Compile the Pinocchio harness (-O3 -march=native) once; it reads the chain
+    from a file (:func:`pinocchio_chain_file`).  Returns (path, None) or (None, reason)."""
     paths = pinocchio_paths()
     if paths is None:
         return None, "pin or cmeel-eigen not installed (pip install '.[bench]')"
     include, lib = paths
-    from modelgen.bench.hardcase_models import chain_pinocchio_cpp
     work.mkdir(parents=True, exist_ok=True)
     src = work / "pin_bench.cpp"
-    src.write_text(_PIN_HARNESS % {"x0": _c_array(x0), "build": chain_pinocchio_cpp(n, params),
-                                   "min_seconds": MIN_SECONDS, "repeats": REPEATS})
+    src.write_text(_PIN_HARNESS % {"min_seconds": MIN_SECONDS, "repeats": REPEATS})
     exe = work / "pin_bench"
     # the definitions are those of Pinocchio's exported CMake target
     cmd = [*shlex.split(os.environ.get("CXX", "c++")), "-O3", "-march=native", "-DNDEBUG",
            "-std=c++17", "-DBOOST_MPL_LIMIT_LIST_SIZE=30", "-DBOOST_MPL_LIMIT_VECTOR_SIZE=30",
-           "-DBOOST_MPL_CFG_NO_PREPROCESSED_HEADERS", "-DBOOST_FUSION_INVOKE_MAX_ARITY=12", f"-I{include}", f"-I{include / 'eigen3'}", str(src), "-o", str(exe),
+           "-DBOOST_MPL_CFG_NO_PREPROCESSED_HEADERS", "-DBOOST_FUSION_INVOKE_MAX_ARITY=12",
+           f"-I{include}", f"-I{include / 'eigen3'}", str(src), "-o", str(exe),
            f"-L{lib}", "-lpinocchio_default", f"-Wl,-rpath,{lib}"]
     try:
         _run_checked(cmd)
@@ -561,10 +596,23 @@ def build_pinocchio_harness(n: int, params: dict, x0, work: Path):
     return exe, None
 
 
-def run_pinocchio_harness(exe: Path) -> tuple:
+def pinocchio_chain_file(n: int, params: dict, x0, path: Path) -> Path:
+    """The input of the Pinocchio harness: ``spatial_chain(n)`` from its written
+    definition (:func:`modelgen.bench.hardcase_models.chain_links`) and the state x0."""
+    from modelgen.bench.hardcase_models import chain_links
+    lines = [str(n)]
+    for offset, axis, m, c, diag in chain_links(n, params):
+        lines.append(" ".join([repr(offset), "0" if axis == "z" else "1", repr(m), repr(c),
+                               *(repr(d) for d in diag)]))
+    lines += [repr(float(params["g"])), " ".join(repr(float(v)) for v in x0)]
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def run_pinocchio_harness(exe: Path, chain_file: Path) -> tuple:
     """One run: (ABA µs, CRBA + Cholesky µs, q_ddot by ABA, q_ddot by CRBA) at x0."""
     import numpy as np
-    lines = _run_checked([str(exe)]).splitlines()
+    lines = _run_checked([str(exe), str(chain_file)]).splitlines()
     aba, crba, _ = lines[0].split()
     return (float(aba) * 1e6, float(crba) * 1e6, np.array(lines[1].split(), float),
             np.array(lines[2].split(), float))
@@ -630,7 +678,7 @@ def per_call_python(stmt: str, namespace: dict) -> float:
     return min(timer.repeat(REPEATS, loops)) / loops * 1e6
 
 
-def child(kind: str, arg: str, work: Path, mj_harness, rounds: int) -> dict:
+def child(kind: str, arg: str, work: Path, mj_harness, rounds: int, pin_harness=None) -> dict:
     """Generate one model and measure it; returns the row as a dict."""
     loadavg = os.getloadavg()[0]
     t = time.perf_counter()
@@ -681,10 +729,9 @@ def child(kind: str, arg: str, work: Path, mj_harness, rounds: int) -> dict:
         row.update(fields)
 
     pin_exe = None
-    if kind == "chain":
-        pin_exe, why = build_pinocchio_harness(cm.n, cm.parameters, x0, work / "pinocchio")
-        if pin_exe is None:
-            row["pin_note"] = why
+    if kind == "chain" and pin_harness:
+        pin_exe = Path(pin_harness)
+        chain_file = pinocchio_chain_file(cm.n, cm.parameters, x0, work / "pin_chain.txt")
 
     # The C timings, alternating modelgen, MuJoCo and Pinocchio over ``rounds``
     # rounds and keeping the minimum of each, so that a slow spell of a shared
@@ -698,7 +745,7 @@ def child(kind: str, arg: str, work: Path, mj_harness, rounds: int) -> dict:
             step.append(stp)
             bad += warnings
         if pin_exe is not None:
-            t_aba, t_crba, qdd_aba, qdd_crba = run_pinocchio_harness(pin_exe)
+            t_aba, t_crba, qdd_aba, qdd_crba = run_pinocchio_harness(pin_exe, chain_file)
             pin_aba.append(t_aba)
             pin_crba.append(t_crba)
     if pin_exe is not None:
@@ -730,10 +777,11 @@ def child(kind: str, arg: str, work: Path, mj_harness, rounds: int) -> dict:
 # The parent: run the children, fit, print
 # ---------------------------------------------------------------------------------
 
-def run_one(kind, arg, work: Path, mj_harness, rounds, timeout) -> dict:
+def run_one(kind, arg, work: Path, mj_harness, rounds, timeout, pin_harness=None) -> dict:
     """Run :func:`child` in a fresh interpreter; a failure becomes an ``error`` row."""
     cmd = [sys.executable, str(Path(__file__).resolve()), "--child", f"{kind}:{arg}",
            "--workdir", str(work), "--mj-harness", str(mj_harness or ""),
+           "--pin-harness", str(pin_harness or ""),
            "--rounds", str(rounds)]
     start = time.perf_counter()
     try:
@@ -927,6 +975,7 @@ def parse_args(argv):
     parser.add_argument("--child", help=argparse.SUPPRESS)
     parser.add_argument("--workdir", help=argparse.SUPPRESS)
     parser.add_argument("--mj-harness", default="", help=argparse.SUPPRESS)
+    parser.add_argument("--pin-harness", default="", help=argparse.SUPPRESS)
     return parser.parse_args(argv)
 
 
@@ -934,7 +983,8 @@ def main(argv=None) -> int:
     args = parse_args(argv)
     if args.child:
         kind, arg = args.child.split(":", 1)
-        row = child(kind, arg, Path(args.workdir), args.mj_harness or None, args.rounds)
+        row = child(kind, arg, Path(args.workdir), args.mj_harness or None, args.rounds,
+                    args.pin_harness or None)
         print(RESULT_MARK + json.dumps(row), flush=True)
         return 0
 
@@ -952,6 +1002,9 @@ def main(argv=None) -> int:
         else:
             notes.append("mujoco is not installed: MuJoCo columns skipped")
 
+        pin_harness, why = build_pinocchio_harness(root / "pinocchio")
+        if pin_harness is None:
+            notes.append(f"Pinocchio not timed: {why}")
         jobs = [("chain", n) for n in ns]
         if args.arm and Path(args.arm).is_file():
             jobs.append(("file", str(Path(args.arm).resolve())))
@@ -961,7 +1014,7 @@ def main(argv=None) -> int:
         for kind, arg in jobs:
             print(f"... {kind} {arg}", file=sys.stderr, flush=True)
             work = root / (f"chain_{arg}" if kind == "chain" else Path(arg).stem)
-            row = run_one(kind, arg, work, harness, args.rounds, args.timeout)
+            row = run_one(kind, arg, work, harness, args.rounds, args.timeout, pin_harness)
             rows.append(row)
             if "error" in row:
                 print(f"    FAILED: {row['error']}", file=sys.stderr, flush=True)
@@ -1002,8 +1055,6 @@ def main(argv=None) -> int:
     for r in rows:
         if "error" in r:
             notes.append(f"{r['kind']} {r['arg']} failed: {r['error']}")
-        elif r.get("pin_note"):
-            notes.append(f"n={r['n']}: Pinocchio not timed: {r['pin_note']}")
         elif r.get("mj_badqacc_warnings"):
             notes.append(f"n={r['n']}: MuJoCo reported bad qacc during mj_step timing")
     if notes:

@@ -240,7 +240,7 @@ def chain_mjcf(n: int, params: dict) -> str:
     return "\n".join(lines)
 
 
-def _chain_links(n: int, params: dict):
+def chain_links(n: int, params: dict):
     """Per link of ``spatial_chain(n)``: (joint offset from the previous joint along
     x, axis 'z' | 'y', mass, centre of mass along x, (Ixx, Iyy, Izz) about it)."""
     r = params["r"]
@@ -265,7 +265,7 @@ def chain_pinocchio(n: int, params: dict):
     import pinocchio as pin
     model = pin.Model()
     parent = 0
-    for i, (offset, axis, m, c, diag) in enumerate(_chain_links(n, params), start=1):
+    for i, (offset, axis, m, c, diag) in enumerate(chain_links(n, params), start=1):
         joint = pin.JointModelRZ() if axis == "z" else pin.JointModelRY()
         placement = pin.SE3(np.eye(3), np.array([offset, 0.0, 0.0]))
         parent = model.addJoint(parent, joint, placement, f"q{i}")
@@ -274,18 +274,3 @@ def chain_pinocchio(n: int, params: dict):
     model.gravity.linear = np.array([0.0, 0.0, -params["g"]])
     return model
 
-
-def chain_pinocchio_cpp(n: int, params: dict) -> str:
-    """C++ statements building the same model as :func:`chain_pinocchio` into a
-    ``pinocchio::Model model`` (for a compiled timing harness)."""
-    lines = ["pinocchio::Model::JointIndex parent = 0;"]
-    for i, (offset, axis, m, c, diag) in enumerate(_chain_links(n, params), start=1):
-        kind = "JointModelRZ" if axis == "z" else "JointModelRY"
-        lines += [
-            f"parent = model.addJoint(parent, pinocchio::{kind}(), pinocchio::SE3("
-            f"Eigen::Matrix3d::Identity(), Eigen::Vector3d({offset!r}, 0.0, 0.0)), \"q{i}\");",
-            f"model.appendBodyToJoint(parent, pinocchio::Inertia({m!r}, "
-            f"Eigen::Vector3d({c!r}, 0.0, 0.0), Eigen::Vector3d({diag[0]!r}, {diag[1]!r}, "
-            f"{diag[2]!r}).asDiagonal()), pinocchio::SE3::Identity());"]
-    lines.append(f"model.gravity.linear(Eigen::Vector3d(0.0, 0.0, {-params['g']!r}));")
-    return "\n".join(lines)
