@@ -334,22 +334,42 @@ def _full_axis_rot_T(g, M, k1, k2, c, s):
     return _name_full(g, rows)
 
 
+def _axis_rot_T(g, I, axis, c, s):
+    """X^T I X for X = rot(E), E a rotation by (c, s) about one base axis."""
+    ss, cs = g.name(s * s), g.name(c * s)
+    trig = (ss, cs, g.name(1 - 2 * ss), g.name(2 * cs))
+    k1, k2 = _PLANE[axis]
+    A, B, C = I
+    return (_sym_axis_rot_T(g, A, k1, k2, c, s, trig),
+            _full_axis_rot_T(g, B, k1, k2, c, s),
+            _sym_axis_rot_T(g, C, k1, k2, c, s, trig))
+
+
+def _elementary(E):
+    """(axis, c, s) if the constant E is a rotation about one base axis (as
+    :func:`_rotation` writes it), else None."""
+    for axis, (k1, k2) in _PLANE.items():
+        j = axis - 1
+        if E[j][j] == 1 and all(E[j][k] == 0 and E[k][j] == 0 for k in (k1, k2)) \
+                and E[k2][k2] == E[k1][k1] and E[k2][k1] == -E[k1][k2]:
+            return axis, E[k1][k1], E[k1][k2]
+    return None
+
+
 def _to_parent_inertia(g, joint, I):
     """X_i^T I X_i."""
     E, r = joint.fixed
     if joint.kind == "revolute":
         c, s = g.name(sympy.cos(joint.angle)), g.name(sympy.sin(joint.angle))
-        ss, cs = g.name(s * s), g.name(c * s)
-        trig = (ss, cs, g.name(1 - 2 * ss), g.name(2 * cs))
-        k1, k2 = _PLANE[joint.axis]
-        A, B, C = I
-        I = (_sym_axis_rot_T(g, A, k1, k2, c, s, trig),
-             _full_axis_rot_T(g, B, k1, k2, c, s),
-             _sym_axis_rot_T(g, C, k1, k2, c, s, trig))
+        I = _axis_rot_T(g, I, joint.axis, c, s)
     else:
         I = _inertia_xlt_T(g, g.vec(joint.offset), I)
     if not _is_identity(E):
-        I = _inertia_rot_T(g, E, I)
+        # a constant rotation about one base axis (a URDF rpy with one angle)
+        # turns the inertia like a joint does; any other goes through E^T I E
+        simple = _elementary(E)
+        I = (_axis_rot_T(g, I, simple[0], g.name(simple[1]), g.name(simple[2])) if simple
+             else _inertia_rot_T(g, E, I))
     if any(x != 0 for x in r):
         I = _inertia_xlt_T(g, r, I)
     return I
