@@ -845,7 +845,8 @@ def runtime_table(rows, with_mujoco) -> str:
                     "rel diff"]
     with_pin = any("pin_aba_us" in r for r in rows)
     if with_pin:
-        headers += ["pin ABA µs", "pin CRBA+chol µs", "**pin/mg**", "agree (4 engines)"]
+        headers += ["pin ABA µs", "pin CRBA+chol µs", "**pin/mg**", "agree (4 engines)",
+                    "mg vs pin ABA"]
     body = []
     for r in rows:
         if "error" in r:
@@ -864,9 +865,10 @@ def runtime_table(rows, with_mujoco) -> str:
         if with_pin:
             if "pin_aba_us" in r:
                 line += [fmt(r["pin_aba_us"]), fmt(r["pin_crba_us"]),
-                         f"**{fmt(r['pin_over_mg'])}**", fmt(r["agreement_4"], ".1e")]
+                         f"**{fmt(r['pin_over_mg'])}**", fmt(r["agreement_4"], ".1e"),
+                         fmt(r["pin_vs_mg"], ".1e")]
             else:
-                line += ["–"] * 4
+                line += ["–"] * 5
         body.append(line)
     return markdown(headers, body)
 
