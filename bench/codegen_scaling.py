@@ -60,6 +60,17 @@ Method
       usable the Python loop ``mujoco.mj_forward(m, d)`` is timed instead
       (marked ``py``); if mujoco is not installed its columns are skipped.
 
+    * Pinocchio (``pin`` and ``cmeel-eigen`` from the package index, the
+      ``bench`` extra).  The chain is built in C++ from the same definition
+      (:func:`modelgen.bench.hardcase_models.chain_pinocchio_cpp`) and a
+      harness compiled with ``-O3 -march=native`` against the wheels'
+      headers times ``pinocchio::aba`` and the CRBA path
+      (``crba`` + ``nonLinearEffects`` + Pinocchio's tree-sparse
+      ``cholesky::decompose/solve``) with the same perturbation rule, in the
+      same alternating rounds.  *agree (4 engines)*: q_ddot at x0 by
+      modelgen, MuJoCo, Pinocchio ABA and Pinocchio CRBA, the largest
+      pairwise max-norm difference over max |q_ddot|.
+
 Reading the tables
     Times in seconds (generation) or microseconds (per call); RSS in MB.
     The header gives the 1-minute load average before the run: on a 2-core
@@ -328,6 +339,56 @@ def build_rhs_harness(cm, x0, work: Path):
     return exe, shlex.join(cmd)
 
 
+_MG_COUNT = r"""/* {name}_rhs called {calls} times, for callgrind (bench/codegen_scaling.py). */
+#include <stdio.h>
+#include "{name}.h"
+static const double x0[{nx}] = {{{x0}}};
+static const double p[{np_}] = {{{p}}};
+static double u[{nu_}];
+int main(void)
+{{
+    double x[{nx}], xdot[{nx}] = {{0}}, sink = 0.0;
+    int k, status = 0;
+    for (k = 0; k < {nx}; ++k)
+        x[k] = x0[k];
+    for (k = 0; k < {calls}; ++k) {{
+        const int j = k % {nx};
+        x[j] = x0[j] + 1e-9 * xdot[{nx} - 1 - j];
+        status |= {name}_rhs(0.0, x, u, p, xdot);
+        sink += xdot[{nx} - 1];
+    }}
+    printf("%d %.17g\n", status, sink);
+    return 0;
+}}
+"""
+
+
+def rhs_instructions(cm, x0, work: Path, calls: int = 2000):
+    """Instructions per ``<name>_rhs`` call (callgrind, inclusive of sin/cos), or None
+    without valgrind.  Machine load does not change this count, unlike a time."""
+    if shutil.which("valgrind") is None:
+        return None
+    exe, _ = build_rhs_harness(cm, x0, work)        # compiles model_rhs.o as the build did
+    src = work / "rhs_count.c"
+    src.write_text(_MG_COUNT.format(name=cm.name, calls=calls, nx=2 * cm.n, x0=_c_array(x0),
+                                    np_=max(len(cm.parameters), 1),
+                                    p=_c_array(cm.params()) or "0.0",
+                                    nu_=max(len(cm.inputs), 1)))
+    from modelgen.codegen.build import compiler
+    src_dir = Path(cm.path).parent
+    counter = work / "rhs_count"
+    _run_checked([*compiler(), "-O2", "-std=c99", f"-I{src_dir}", str(src),
+                  str(work / "model_rhs.o"), str(src_dir / "mg_integrate.c"), "-o",
+                  str(counter), "-lm"])
+    out = work / "callgrind.out"
+    _run_checked(["valgrind", "--tool=callgrind", f"--callgrind-out-file={out}",
+                  f"--toggle-collect={cm.name}_rhs", str(counter)])
+    for line in out.read_text().splitlines():
+        if line.startswith(("summary:", "totals:")):
+            return int(line.split()[1]) / calls
+    return None
+
+
 def run_rhs_harness(exe: Path) -> float:
     """One run of the rhs harness: per-call time in µs (min over REPEATS)."""
     best, _loops, status, _sink = _run_checked([str(exe)]).split()
@@ -379,6 +440,184 @@ def build_mujoco_harness(work: Path):
     return exe, None
 
 
+_PIN_HARNESS = r"""// Timing harness for Pinocchio's ABA and CRBA + Cholesky, written by
+// bench/codegen_scaling.py.  Usage: pin_bench chain.txt, the file holding n,
+// then per link "offset axis(0 = z, 1 = y) mass com_x Ixx Iyy Izz", then g, then
+// x0 (2n numbers).  Prints: aba_s crba_s, then q_ddot at x0 by each.
+#include <cstdio>
+#include <ctime>
+#include <string>
+#include <pinocchio/multibody.hpp>
+#include <pinocchio/algorithm/aba.hpp>
+#include <pinocchio/algorithm/crba.hpp>
+#include <pinocchio/algorithm/rnea.hpp>
+#include <pinocchio/algorithm/cholesky.hpp>
+
+static double now() {
+    timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
+
+static pinocchio::Model model;
+static double x0[2048];
+
+static void crba_path(pinocchio::Data &data, const Eigen::VectorXd &q, const Eigen::VectorXd &v,
+                      const Eigen::VectorXd &tau, Eigen::VectorXd &qdd) {
+    pinocchio::crba(model, data, q);
+    pinocchio::nonLinearEffects(model, data, q, v);
+    qdd = tau - data.nle;
+    pinocchio::cholesky::decompose(model, data);   // reads the upper triangle of M
+    pinocchio::cholesky::solve(model, data, qdd);
+}
+
+template <int WHICH> static double run(pinocchio::Data &data, long loops, double &sink) {
+    const int n = model.nv;
+    Eigen::VectorXd q = Eigen::Map<const Eigen::VectorXd>(x0, n);
+    Eigen::VectorXd v = Eigen::Map<const Eigen::VectorXd>(x0 + n, n);
+    Eigen::VectorXd tau = Eigen::VectorXd::Zero(n), qdd = Eigen::VectorXd::Zero(n);
+    const double start = now();
+    for (long k = 0; k < loops; ++k) {
+        const int j = (int)(k %% n);
+        q[j] = x0[j] + 1e-9 * qdd[n - 1 - j];
+        if (WHICH == 0) {
+            pinocchio::aba(model, data, q, v, tau);
+            qdd = data.ddq;
+        } else {
+            crba_path(data, q, v, tau, qdd);
+        }
+        sink += qdd[n - 1];
+    }
+    return now() - start;
+}
+
+template <int WHICH> static double best(pinocchio::Data &data, double &sink) {
+    long loops = 1;
+    while (run<WHICH>(data, loops, sink) < %(min_seconds)s) loops *= 2;
+    double b = 1e300;
+    for (int r = 0; r < %(repeats)d; ++r) {
+        const double t = run<WHICH>(data, loops, sink) / (double)loops;
+        if (t < b) b = t;
+    }
+    return b;
+}
+
+static int read_chain(const char *path) {
+    std::FILE *f = std::fopen(path, "r");
+    int n = 0;
+    if (!f || std::fscanf(f, "%%d", &n) != 1 || n < 1 || n > 1024) return 0;
+    pinocchio::Model::JointIndex parent = 0;
+    for (int i = 0; i < n; ++i) {
+        double offset, m, c, ixx, iyy, izz;
+        int axis;
+        if (std::fscanf(f, "%%lf %%d %%lf %%lf %%lf %%lf %%lf", &offset, &axis, &m, &c, &ixx, &iyy,
+                        &izz) != 7) return 0;
+        const pinocchio::SE3 placement(Eigen::Matrix3d::Identity(),
+                                       Eigen::Vector3d(offset, 0.0, 0.0));
+        const std::string name = "q" + std::to_string(i + 1);
+        if (axis == 0)
+            parent = model.addJoint(parent, pinocchio::JointModelRZ(), placement, name);
+        else
+            parent = model.addJoint(parent, pinocchio::JointModelRY(), placement, name);
+        model.appendBodyToJoint(parent, pinocchio::Inertia(m, Eigen::Vector3d(c, 0.0, 0.0),
+                                Eigen::Vector3d(ixx, iyy, izz).asDiagonal()),
+                                pinocchio::SE3::Identity());
+    }
+    double g;
+    if (std::fscanf(f, "%%lf", &g) != 1) return 0;
+    model.gravity.linear(Eigen::Vector3d(0.0, 0.0, -g));
+    for (int i = 0; i < 2 * n; ++i)
+        if (std::fscanf(f, "%%lf", &x0[i]) != 1) return 0;
+    std::fclose(f);
+    return n;
+}
+
+int main(int argc, char **argv) {
+    if (argc != 2 || !read_chain(argv[1])) {
+        std::fprintf(stderr, "usage: pin_bench chain.txt (see the source)\n");
+        return 2;
+    }
+    pinocchio::Data data(model);
+    double sink = 0.0;
+    const double aba = best<0>(data, sink), crba = best<1>(data, sink);
+    const int n = model.nv;
+    Eigen::VectorXd q = Eigen::Map<const Eigen::VectorXd>(x0, n);
+    Eigen::VectorXd v = Eigen::Map<const Eigen::VectorXd>(x0 + n, n);
+    Eigen::VectorXd tau = Eigen::VectorXd::Zero(n), qdd(n);
+    std::printf("%%.9e %%.9e %%.3g\n", aba, crba, sink * 0.0);
+    pinocchio::aba(model, data, q, v, tau);
+    for (int i = 0; i < n; ++i) std::printf("%%.17g ", data.ddq[i]);
+    std::printf("\n");
+    crba_path(data, q, v, tau, qdd);
+    for (int i = 0; i < n; ++i) std::printf("%%.17g ", qdd[i]);
+    std::printf("\n");
+    return 0;
+}
+"""
+
+
+def pinocchio_paths():
+    """(include dir, library dir) of the ``pin`` and ``cmeel-eigen`` wheels, or None."""
+    try:
+        import pinocchio
+    except ImportError:
+        return None
+    root = Path(pinocchio.__file__).resolve()
+    for parent in root.parents:
+        prefix = parent / "cmeel.prefix"
+        if (prefix / "include" / "pinocchio").is_dir():
+            if not (prefix / "include" / "eigen3" / "Eigen").is_dir():
+                return None
+            return prefix / "include", prefix / "lib"
+    return None
+
+
+def build_pinocchio_harness(work: Path):
+    """Compile the Pinocchio harness (-O3 -march=native) once; it reads the chain
+    from a file (:func:`pinocchio_chain_file`).  Returns (path, None) or (None, reason)."""
+    paths = pinocchio_paths()
+    if paths is None:
+        return None, "pin or cmeel-eigen not installed (pip install '.[bench]')"
+    include, lib = paths
+    work.mkdir(parents=True, exist_ok=True)
+    src = work / "pin_bench.cpp"
+    src.write_text(_PIN_HARNESS % {"min_seconds": MIN_SECONDS, "repeats": REPEATS})
+    exe = work / "pin_bench"
+    # the definitions are those of Pinocchio's exported CMake target
+    cmd = [*shlex.split(os.environ.get("CXX", "c++")), "-O3", "-march=native", "-DNDEBUG",
+           "-std=c++17", "-DBOOST_MPL_LIMIT_LIST_SIZE=30", "-DBOOST_MPL_LIMIT_VECTOR_SIZE=30",
+           "-DBOOST_MPL_CFG_NO_PREPROCESSED_HEADERS", "-DBOOST_FUSION_INVOKE_MAX_ARITY=12",
+           f"-I{include}", f"-I{include / 'eigen3'}", str(src), "-o", str(exe),
+           f"-L{lib}", "-lpinocchio_default", f"-Wl,-rpath,{lib}"]
+    try:
+        _run_checked(cmd)
+    except RuntimeError as exc:
+        return None, f"Pinocchio harness did not build: {exc}"
+    return exe, None
+
+
+def pinocchio_chain_file(n: int, params: dict, x0, path: Path) -> Path:
+    """The input of the Pinocchio harness: ``spatial_chain(n)`` from its written
+    definition (:func:`modelgen.bench.hardcase_models.chain_links`) and the state x0."""
+    from modelgen.bench.hardcase_models import chain_links
+    lines = [str(n)]
+    for offset, axis, m, c, diag in chain_links(n, params):
+        lines.append(" ".join([repr(offset), "0" if axis == "z" else "1", repr(m), repr(c),
+                               *(repr(d) for d in diag)]))
+    lines += [repr(float(params["g"])), " ".join(repr(float(v)) for v in x0)]
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def run_pinocchio_harness(exe: Path, chain_file: Path) -> tuple:
+    """One run: (ABA µs, CRBA + Cholesky µs, q_ddot by ABA, q_ddot by CRBA) at x0."""
+    import numpy as np
+    lines = _run_checked([str(exe), str(chain_file)]).splitlines()
+    aba, crba, _ = lines[0].split()
+    return (float(aba) * 1e6, float(crba) * 1e6, np.array(lines[1].split(), float),
+            np.array(lines[2].split(), float))
+
+
 # ---------------------------------------------------------------------------------
 # MuJoCo model of the chain
 # ---------------------------------------------------------------------------------
@@ -408,10 +647,12 @@ def mujoco_check(cm, n: int, states, work: Path):
         qdd = cm.rhs(0.0, x)[n:]
         worst = max(worst, float(np.max(np.abs(data.qacc - qdd)) / np.max(np.abs(qdd))))
     data.qpos[:], data.qvel[:] = states[0][:n], states[0][n:]
+    mujoco.mj_forward(model, data)
+    qacc_x0 = [float(v) for v in data.qacc]
     py_us = per_call_python("mj_forward(m, d)", {"mj_forward": mujoco.mj_forward,
                                                  "m": model, "d": data})
     return {"mujoco_version": mujoco.__version__, "mj_rel_diff": worst,
-            "mj_forward_py_us": py_us}, xml_path
+            "mj_forward_py_us": py_us, "mj_qacc_x0": qacc_x0}, xml_path
 
 
 def run_mj_harness(harness: Path, xml_path: Path, x0) -> tuple:
@@ -437,7 +678,7 @@ def per_call_python(stmt: str, namespace: dict) -> float:
     return min(timer.repeat(REPEATS, loops)) / loops * 1e6
 
 
-def child(kind: str, arg: str, work: Path, mj_harness, rounds: int) -> dict:
+def child(kind: str, arg: str, work: Path, mj_harness, rounds: int, pin_harness=None) -> dict:
     """Generate one model and measure it; returns the row as a dict."""
     loadavg = os.getloadavg()[0]
     t = time.perf_counter()
@@ -487,10 +728,15 @@ def child(kind: str, arg: str, work: Path, mj_harness, rounds: int) -> dict:
         fields, xml_path = mujoco_check(cm, cm.n, states, work)
         row.update(fields)
 
-    # The C timings, alternating modelgen and MuJoCo over ``rounds`` rounds and
-    # keeping the minimum of each, so that a slow spell of a shared machine
-    # hits both and the ratio stays meaningful.
-    rhs_c, forward, step, bad = [], [], [], 0
+    pin_exe = None
+    if kind == "chain" and pin_harness:
+        pin_exe = Path(pin_harness)
+        chain_file = pinocchio_chain_file(cm.n, cm.parameters, x0, work / "pin_chain.txt")
+
+    # The C timings, alternating modelgen, MuJoCo and Pinocchio over ``rounds``
+    # rounds and keeping the minimum of each, so that a slow spell of a shared
+    # machine hits all of them and the ratios stay meaningful.
+    rhs_c, forward, step, bad, pin_aba, pin_crba = [], [], [], 0, [], []
     for _ in range(rounds):
         rhs_c.append(run_rhs_harness(rhs_exe))
         if xml_path is not None and mj_harness:
@@ -498,6 +744,23 @@ def child(kind: str, arg: str, work: Path, mj_harness, rounds: int) -> dict:
             forward.append(fwd)
             step.append(stp)
             bad += warnings
+        if pin_exe is not None:
+            t_aba, t_crba, qdd_aba, qdd_crba = run_pinocchio_harness(pin_exe, chain_file)
+            pin_aba.append(t_aba)
+            pin_crba.append(t_crba)
+    if pin_exe is not None:
+        # q_ddot at x0 by the four engines; agreement = the largest pairwise
+        # max-norm difference over the largest |q_ddot|
+        engines = {"modelgen": cm.rhs(0.0, x0)[cm.n:], "pin_aba": qdd_aba, "pin_crba": qdd_crba}
+        if "mj_qacc_x0" in row:
+            engines["mujoco"] = np.array(row["mj_qacc_x0"])
+        scale = max(float(np.max(np.abs(v))) for v in engines.values())
+        names = sorted(engines)
+        row["agreement_4"] = max(float(np.max(np.abs(engines[a] - engines[b]))) / scale
+                                 for i, a in enumerate(names) for b in names[i + 1:])
+        row["pin_vs_mg"] = float(np.max(np.abs(engines["pin_aba"] - engines["modelgen"])) / scale)
+        row.update(pin_aba_us=min(pin_aba), pin_crba_us=min(pin_crba),
+                   pin_over_mg=min(pin_aba) / min(rhs_c))
     row["rhs_c_us"], row["rhs_c_us_rounds"] = min(rhs_c), rhs_c
     if xml_path is not None:
         if forward:
@@ -514,10 +777,11 @@ def child(kind: str, arg: str, work: Path, mj_harness, rounds: int) -> dict:
 # The parent: run the children, fit, print
 # ---------------------------------------------------------------------------------
 
-def run_one(kind, arg, work: Path, mj_harness, rounds, timeout) -> dict:
+def run_one(kind, arg, work: Path, mj_harness, rounds, timeout, pin_harness=None) -> dict:
     """Run :func:`child` in a fresh interpreter; a failure becomes an ``error`` row."""
     cmd = [sys.executable, str(Path(__file__).resolve()), "--child", f"{kind}:{arg}",
            "--workdir", str(work), "--mj-harness", str(mj_harness or ""),
+           "--pin-harness", str(pin_harness or ""),
            "--rounds", str(rounds)]
     start = time.perf_counter()
     try:
@@ -579,6 +843,10 @@ def runtime_table(rows, with_mujoco) -> str:
     if with_mujoco:
         headers += ["mj_forward µs", "mj_step/4 µs", "mj_forward py µs", "**mj/mg**",
                     "rel diff"]
+    with_pin = any("pin_aba_us" in r for r in rows)
+    if with_pin:
+        headers += ["pin ABA µs", "pin CRBA+chol µs", "**pin/mg**", "agree (4 engines)",
+                    "mg vs pin ABA"]
     body = []
     for r in rows:
         if "error" in r:
@@ -592,6 +860,13 @@ def runtime_table(rows, with_mujoco) -> str:
                 line += [fmt(r["mj_forward_us"]) + mark, fmt(r["mj_step4_us"]),
                          fmt(r["mj_forward_py_us"]), f"**{fmt(r['mj_over_mg'])}**",
                          fmt(r["mj_rel_diff"], ".1e")]
+            else:
+                line += ["–"] * 5
+        if with_pin:
+            if "pin_aba_us" in r:
+                line += [fmt(r["pin_aba_us"]), fmt(r["pin_crba_us"]),
+                         f"**{fmt(r['pin_over_mg'])}**", fmt(r["agreement_4"], ".1e"),
+                         fmt(r["pin_vs_mg"], ".1e")]
             else:
                 line += ["–"] * 5
         body.append(line)
@@ -702,6 +977,7 @@ def parse_args(argv):
     parser.add_argument("--child", help=argparse.SUPPRESS)
     parser.add_argument("--workdir", help=argparse.SUPPRESS)
     parser.add_argument("--mj-harness", default="", help=argparse.SUPPRESS)
+    parser.add_argument("--pin-harness", default="", help=argparse.SUPPRESS)
     return parser.parse_args(argv)
 
 
@@ -709,7 +985,8 @@ def main(argv=None) -> int:
     args = parse_args(argv)
     if args.child:
         kind, arg = args.child.split(":", 1)
-        row = child(kind, arg, Path(args.workdir), args.mj_harness or None, args.rounds)
+        row = child(kind, arg, Path(args.workdir), args.mj_harness or None, args.rounds,
+                    args.pin_harness or None)
         print(RESULT_MARK + json.dumps(row), flush=True)
         return 0
 
@@ -727,6 +1004,9 @@ def main(argv=None) -> int:
         else:
             notes.append("mujoco is not installed: MuJoCo columns skipped")
 
+        pin_harness, why = build_pinocchio_harness(root / "pinocchio")
+        if pin_harness is None:
+            notes.append(f"Pinocchio not timed: {why}")
         jobs = [("chain", n) for n in ns]
         if args.arm and Path(args.arm).is_file():
             jobs.append(("file", str(Path(args.arm).resolve())))
@@ -736,7 +1016,7 @@ def main(argv=None) -> int:
         for kind, arg in jobs:
             print(f"... {kind} {arg}", file=sys.stderr, flush=True)
             work = root / (f"chain_{arg}" if kind == "chain" else Path(arg).stem)
-            row = run_one(kind, arg, work, harness, args.rounds, args.timeout)
+            row = run_one(kind, arg, work, harness, args.rounds, args.timeout, pin_harness)
             rows.append(row)
             if "error" in row:
                 print(f"    FAILED: {row['error']}", file=sys.stderr, flush=True)

@@ -227,6 +227,59 @@ def test_aba_matches_crba_when_gravity_is_an_effect_in_a_moving_base():
     _assert_agree(m.spec())
 
 
+# -- agreement with an independent engine (Pinocchio) --------------------------------
+
+def _chain_against_pinocchio(n, seed, mass_matrix=False):
+    """(modelgen, Pinocchio) pairs of q_ddot (ABA), h (RNEA) and A at seeded random
+    states and random parameters of ``spatial_chain(n)``."""
+    pin = pytest.importorskip("pinocchio")
+    from modelgen.bench.hardcase_models import chain_pinocchio
+    from modelgen.derive.graph import GraphBuilder
+    from modelgen.derive.rnea import derive_velocity_terms
+    spec = spatial_chain(n).spec()
+    tree = extract_joint_tree(spec)
+    eqs = derive_equations(derive_kinematics(spec))
+    g = GraphBuilder(eqs.graph)
+    h = derive_velocity_terms(g, tree, eqs.qd)
+    fd = derive_aba(eqs, tree, spec, g.freeze())
+    inputs = (eqs.t,) + eqs.q + eqs.qd + eqs.u + eqs.p
+    f = _program(fd.graph, list(fd.qdd) + list(h)
+                 + ([eqs.A[i][j] for i in range(n) for j in range(n)] if mass_matrix else []),
+                 inputs)
+    rng = np.random.default_rng(seed)
+    out = []
+    for _ in range(3):
+        p = dict(zip((str(s) for s in eqs.p), rng.uniform(0.5, 1.5, len(eqs.p))))
+        p["r"], p["g"] = 0.02 * p["r"], 9.81 * p["g"]
+        model = chain_pinocchio(n, p)
+        data = model.createData()
+        x = rng.uniform(-1, 1, 2 * n)
+        r = np.array(f(0.0, *x, *(p[str(s)] for s in eqs.p)))
+        qdd = pin.aba(model, data, x[:n], x[n:], np.zeros(n))
+        model.gravity.linear = np.zeros(3)
+        h_pin = pin.rnea(model, data, x[:n], x[n:], np.zeros(n))
+        pairs = [(r[:n], qdd), (r[n:2 * n], h_pin)]
+        if mass_matrix:
+            A_pin = pin.crba(model, data, x[:n])
+            pairs.append((r[2 * n:].reshape(n, n), np.triu(A_pin) + np.triu(A_pin, 1).T))
+        out.append(pairs)
+    return out
+
+
+def test_aba_and_rnea_match_pinocchio_on_a_30_link_chain():
+    # ABA against ABA of an independent engine: no cond(A) in the comparison
+    # (the CRBA path's solve limits agreement with it to about n = 20)
+    for pairs in _chain_against_pinocchio(30, seed=7):
+        for ours, theirs in pairs:
+            assert np.max(np.abs(ours - theirs)) <= 1e-12 * np.max(np.abs(theirs))
+
+
+def test_aba_rnea_and_mass_matrix_match_pinocchio_on_a_10_link_chain():
+    for pairs in _chain_against_pinocchio(10, seed=8, mass_matrix=True):
+        for ours, theirs in pairs:
+            assert np.max(np.abs(ours - theirs)) <= 1e-12 * np.max(np.abs(theirs))
+
+
 # -- generated C ----------------------------------------------------------------------
 
 def test_generated_aba_rhs_and_jacobian_match_crba(build_root, capsys):

@@ -82,14 +82,18 @@ def _cse(exprs):
         import symengine
     except ImportError:   # pragma: no cover - symengine is a declared dependency
         return sympy.cse(exprs, symbols=_numbered("mg_c"), order="none")
-    reps, reduced = symengine.cse([symengine.sympify(e) for e in exprs])
+    originals = [symengine.sympify(e) for e in exprs]
+    reps, reduced = symengine.cse(originals)
     rename = {}
     replacements = []
     for i, (sym, value) in enumerate(reps):
         new = sympy.Symbol(f"mg_c{i}")
         rename[sympy.Symbol(str(sym))] = new
         replacements.append((new, sympy.sympify(value).xreplace(rename)))
-    reduced = [sympy.sympify(e).xreplace(rename) for e in reduced]
+    # most statements of a straight-line program come back unchanged: keep the
+    # sympy original (converting back costs ten times the cse itself)
+    reduced = [e if r == o else sympy.sympify(r).xreplace(rename)
+               for e, o, r in zip(exprs, originals, reduced)]
     return replacements, reduced
 
 

@@ -18,7 +18,9 @@ from modelgen.codegen.capi import signature_of
 from modelgen.codegen.cse import make_routines
 from modelgen.derive.aba import ForwardDynamics, derive_aba, derive_aba_jacobian
 from modelgen.derive.dynamics import Equations, derive_equations
+from modelgen.derive.graph import GraphBuilder
 from modelgen.derive.joint_tree import JointTree, extract_joint_tree
+from modelgen.derive.rnea import derive_velocity_terms
 from modelgen.errors import ModelError
 from modelgen.codegen.emit import (ABI_VERSION, emit_sources, integrator_sources, print_routine,
                                    runtime_sources, template_context, templates_digest)
@@ -26,7 +28,7 @@ from modelgen.derive.jacobian import derive_jacobian_terms
 from modelgen.derive.linearize import derive_linearization_terms
 from modelgen.derive.kinematics import derive_kinematics
 from modelgen.derive.outputs import derive_outputs
-from modelgen.model.spec import ModelSpec
+from modelgen.model.spec import TIME, ModelSpec
 
 def default_output(name: str) -> Path:
     """Where a model is built when no output directory is given: the per-user cache
@@ -174,6 +176,16 @@ def routines_for(eqs: Equations, output_exprs=(), jacobian=None,
       + lin
 
 
+def _time_free(tree: JointTree) -> bool:
+    """True if no joint of ``tree`` moves with time t by itself (then h has no t)."""
+    for joint in tree.joints:
+        exprs = (joint.angle,) + tuple(joint.offset) + tuple(joint.fixed[1]) + \
+            tuple(x for row in joint.fixed[0] for x in row)
+        if any(TIME in getattr(e, "free_symbols", ()) for e in exprs):
+            return False
+    return True
+
+
 def _check_generable(spec: ModelSpec) -> None:
     """A model needs a coordinate and a body, or its mass matrix is empty or zero."""
     if not spec.coordinates:
@@ -232,6 +244,11 @@ def generate(spec: ModelSpec, out_dir=None, *, force: bool = False, outputs=(),
     eqs = derive_equations(kin)
     columns = derive_outputs(kin, eqs, outputs) if outputs else None
     graph = columns.graph if columns else eqs.graph
+    if tree is not None and _time_free(tree):
+        # h by RNEA in link frames (O(n), sharing ABA's outward pass)
+        builder = GraphBuilder(graph)
+        eqs = replace(eqs, h=derive_velocity_terms(builder, tree, eqs.qd))
+        graph = builder.freeze()
     forward = derive_aba(eqs, tree, spec, graph) if tree is not None else None
     graph = forward.graph if forward else graph
     linearization = None

@@ -49,6 +49,12 @@ class ModelPrinter(C99CodePrinter):
             raise DerivationError(f"cannot print {_shorten(str(expr))} as C{where} "
                                   f"({first})") from None
 
+    def _handle_UnevaluatedExpr(self, expr):
+        """No rewrite pass: modelgen never builds ``UnevaluatedExpr`` (sympy's pass
+        walks every expression with ``replace``, a sixth of the printing time),
+        and an ``re`` left in would still be refused by the strict printer."""
+        return expr
+
     def _print_Integer(self, expr):
         if abs(expr.p) >= EXACT_INTEGER_LIMIT:
             return self._double(expr)

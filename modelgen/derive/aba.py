@@ -218,7 +218,7 @@ def _zero_row_col(M, j):
     return tuple(tuple(ZERO if j in (r, s) else M[r][s] for s in range(3)) for r in range(3))
 
 
-def _inertia_times(I, m):
+def inertia_times(I, m):
     A, B, C = I
     w, v = m[:3], m[3:]
     return add(_mv(A, w), _mv(B, v)) + add(_mv(_T(B), w), _mv(C, v))
@@ -247,7 +247,7 @@ def _cross_force(a, f):
     return add(cross(a[:3], f[:3]), cross(a[3:], f[3:])) + cross(a[:3], f[3:])
 
 
-def _joint_motion(g, joint, m):
+def joint_motion(g, joint, m):
     """X_i m for the parent->link transform X_i = X_J X_T."""
     E, r = joint.fixed
     if any(x != 0 for x in r):
@@ -270,7 +270,7 @@ def _rotation(axis, c, s):
     return ((c, s, ZERO), (-s, c, ZERO), (ZERO, ZERO, 1))
 
 
-def _to_parent_force(g, joint, f):
+def to_parent_force(g, joint, f):
     """X_i^T f."""
     E, r = joint.fixed
     if joint.kind == "revolute":
@@ -334,22 +334,42 @@ def _full_axis_rot_T(g, M, k1, k2, c, s):
     return _name_full(g, rows)
 
 
+def _axis_rot_T(g, I, axis, c, s):
+    """X^T I X for X = rot(E), E a rotation by (c, s) about one base axis."""
+    ss, cs = g.name(s * s), g.name(c * s)
+    trig = (ss, cs, g.name(1 - 2 * ss), g.name(2 * cs))
+    k1, k2 = _PLANE[axis]
+    A, B, C = I
+    return (_sym_axis_rot_T(g, A, k1, k2, c, s, trig),
+            _full_axis_rot_T(g, B, k1, k2, c, s),
+            _sym_axis_rot_T(g, C, k1, k2, c, s, trig))
+
+
+def _elementary(E):
+    """(axis, c, s) if the constant E is a rotation about one base axis (as
+    :func:`_rotation` writes it), else None."""
+    for axis, (k1, k2) in _PLANE.items():
+        j = axis - 1
+        if E[j][j] == 1 and all(E[j][k] == 0 and E[k][j] == 0 for k in (k1, k2)) \
+                and E[k2][k2] == E[k1][k1] and E[k2][k1] == -E[k1][k2]:
+            return axis, E[k1][k1], E[k1][k2]
+    return None
+
+
 def _to_parent_inertia(g, joint, I):
     """X_i^T I X_i."""
     E, r = joint.fixed
     if joint.kind == "revolute":
         c, s = g.name(sympy.cos(joint.angle)), g.name(sympy.sin(joint.angle))
-        ss, cs = g.name(s * s), g.name(c * s)
-        trig = (ss, cs, g.name(1 - 2 * ss), g.name(2 * cs))
-        k1, k2 = _PLANE[joint.axis]
-        A, B, C = I
-        I = (_sym_axis_rot_T(g, A, k1, k2, c, s, trig),
-             _full_axis_rot_T(g, B, k1, k2, c, s),
-             _sym_axis_rot_T(g, C, k1, k2, c, s, trig))
+        I = _axis_rot_T(g, I, joint.axis, c, s)
     else:
         I = _inertia_xlt_T(g, g.vec(joint.offset), I)
     if not _is_identity(E):
-        I = _inertia_rot_T(g, E, I)
+        # a constant rotation about one base axis (a URDF rpy with one angle)
+        # turns the inertia like a joint does; any other goes through E^T I E
+        simple = _elementary(E)
+        I = (_axis_rot_T(g, I, simple[0], g.name(simple[1]), g.name(simple[2])) if simple
+             else _inertia_rot_T(g, E, I))
     if any(x != 0 for x in r):
         I = _inertia_xlt_T(g, r, I)
     return I
@@ -437,6 +457,44 @@ def _ground_acceleration(eqs_spec) -> tuple:
     return ZERO3 + tuple(-x for x in total), labels
 
 
+@dataclass(frozen=True)
+class Outward:
+    """Pass 1 of ABA and RNEA (Featherstone Table 5.1 / 7.1), per joint, in link frames.
+
+    ``v`` the link velocity, ``c = v x S qd`` the velocity-product acceleration,
+    ``I`` the rigid link inertia as blocks ``(A, B, C)`` at the link origin,
+    ``bias = v x* I v``.
+    """
+    v: tuple
+    c: tuple
+    I: tuple
+    bias: tuple
+
+
+def outward_pass(g: GraphBuilder, tree: JointTree, qd) -> Outward:
+    """Velocities, velocity-product accelerations and bias forces of every link.
+
+    Built in ``g``: a second call with the same ``g`` returns the same symbols
+    (the graph hash-conses), so ABA and RNEA share this pass.
+    """
+    count = len(tree.joints)
+    v, c, I, bias = [None] * count, [None] * count, [None] * count, [None] * count
+    for i, joint in enumerate(tree.joints):
+        vJ = g.vec(_times(s, qd[joint.coordinate]) for s in joint.S)
+        if joint.parent < 0:
+            v[i], c[i] = vJ, (ZERO,) * 6
+        else:
+            v[i] = g.vec(add(joint_motion(g, joint, v[joint.parent]), vJ))
+            c[i] = g.vec(_cross_motion(v[i], vJ))
+        body = tree.inertias[i]
+        A = _sym(g.vec(body.I))
+        h = g.vec(body.h)
+        m = g.name(body.m)
+        I[i] = (A, _skew(h), ((m, ZERO, ZERO), (ZERO, m, ZERO), (ZERO, ZERO, m)))
+        bias[i] = _rigid_bias(g, A, h, m, v[i])
+    return Outward(tuple(v), tuple(c), tuple(I), tuple(bias))
+
+
 def derive_aba(eqs: Equations, tree: JointTree, spec: ModelSpec, graph: Graph | None = None
                ) -> ForwardDynamics:
     """qdd by the articulated-body algorithm over ``graph`` (default ``eqs.graph``).
@@ -471,29 +529,16 @@ def derive_aba(eqs: Equations, tree: JointTree, spec: ModelSpec, graph: Graph | 
 
     joints = tree.joints
     count = len(joints)
-    v, c, IA, pA = [None] * count, [None] * count, [None] * count, [None] * count
-    for i, joint in enumerate(joints):                      # pass 1: outwards
-        vJ = g.vec(_times(s, eqs.qd[joint.coordinate]) for s in joint.S)
-        if joint.parent < 0:
-            v[i], c[i] = vJ, (ZERO,) * 6
-        else:
-            v[i] = g.vec(add(_joint_motion(g, joint, v[joint.parent]), vJ))
-            c[i] = g.vec(_cross_motion(v[i], vJ))
-        body = tree.inertias[i]
-        A = _sym(g.vec(body.I))
-        h = g.vec(body.h)
-        m = g.name(body.m)
-        hx = _skew(h)
-        IA[i] = (A, hx, ((m, ZERO, ZERO), (ZERO, m, ZERO), (ZERO, ZERO, m)))
-        pA[i] = _rigid_bias(g, A, h, m, v[i])
-        if i in external:
-            pA[i] = g.vec(sub(pA[i], external[i]))
+    outward = outward_pass(g, tree, eqs.qd)
+    v, c, IA, pA = outward.v, outward.c, list(outward.I), list(outward.bias)
+    for i, f in external.items():
+        pA[i] = g.vec(sub(pA[i], f))
 
     U, D, invD, u = [None] * count, [None] * count, [None] * count, [None] * count
     for i in reversed(range(count)):                        # pass 2: inwards
         joint = joints[i]
         S = joint.S
-        U[i] = g.vec(_inertia_times(IA[i], S))
+        U[i] = g.vec(inertia_times(IA[i], S))
         D[i] = g.name(dot(S, U[i]))
         invD[i] = g.name(1 / D[i])
         u[i] = g.name(tau[joint.coordinate] - dot(S, pA[i]))
@@ -509,19 +554,19 @@ def derive_aba(eqs: Equations, tree: JointTree, spec: ModelSpec, graph: Graph | 
         A, B, C = _drop_subspace((update(A, 0, 0), update(B, 0, 3), update(C, 3, 3)), S)
         Ia = (_name_sym(g, A), _name_full(g, B), _name_sym(g, C))
         ui = g.name(u[i] * invD[i])
-        pa = g.vec(add(add(pA[i], _inertia_times(Ia, c[i])), tuple(_times(x, ui) for x in U[i])))
+        pa = g.vec(add(add(pA[i], inertia_times(Ia, c[i])), tuple(_times(x, ui) for x in U[i])))
         p = joint.parent
         Ip = _to_parent_inertia(g, joint, Ia)
         IA[p] = tuple(_name_full(g, tuple(tuple(_total((X[r][s], Y[r][s])) for s in range(3))
                                           for r in range(3)))
                       for X, Y in zip(IA[p], Ip))
-        pA[p] = g.vec(add(pA[p], _to_parent_force(g, joint, pa)))
+        pA[p] = g.vec(add(pA[p], to_parent_force(g, joint, pa)))
 
     qdd = [None] * n
     acc = [None] * count
     for i, joint in enumerate(joints):                      # pass 3: outwards
         ap = a0 if joint.parent < 0 else acc[joint.parent]
-        a_prime = g.vec(add(_joint_motion(g, joint, ap), c[i]))
+        a_prime = g.vec(add(joint_motion(g, joint, ap), c[i]))
         k = joint.coordinate
         qdd[k] = g.name((u[i] - dot(U[i], a_prime)) * invD[i])
         acc[i] = g.vec(add(a_prime, tuple(_times(s, qdd[k]) for s in joint.S)))

@@ -14,6 +14,7 @@ the first, cheapest level of common-subexpression elimination.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Iterable
 
 import sympy
@@ -46,20 +47,29 @@ class Graph:
 
     def definitions(self) -> dict:
         """Mapping intermediate symbol -> expression."""
-        return dict(self.assignments)
+        return dict(self._index[0])
+
+    @cached_property
+    def _index(self) -> tuple:
+        """(definitions, position of each symbol, intermediates each expression uses),
+        computed once: a graph is asked for many closures."""
+        defs = dict(self.assignments)
+        order = {sym: i for i, (sym, _) in enumerate(self.assignments)}
+        deps = {sym: tuple(s for s in expr.free_symbols if s in defs)
+                for sym, expr in self.assignments}
+        return defs, order, deps
 
     def closure(self, outputs: Iterable[sympy.Expr]) -> tuple:
         """The assignments needed to evaluate ``outputs``, in program order."""
-        defs = self.definitions()
-        order = {sym: i for i, (sym, _) in enumerate(self.assignments)}
+        defs, order, deps = self._index
         needed = set()
-        stack = [s for e in outputs for s in e.free_symbols if s in defs]
+        stack = [s for e in outputs for s in sympy.sympify(e).free_symbols if s in defs]
         while stack:
             sym = stack.pop()
             if sym in needed:
                 continue
             needed.add(sym)
-            stack.extend(s for s in defs[sym].free_symbols if s in defs and s not in needed)
+            stack.extend(s for s in deps[sym] if s not in needed)
         return tuple(self.assignments[i] for i in sorted(order[s] for s in needed))
 
     def expand(self, expr: sympy.Expr) -> sympy.Expr:

@@ -112,53 +112,37 @@ void double_pendulum_mass_matrix(const double *q, const double *p, double *A)
     double_pendulum_mass_matrix_eval(q, p, A);
 }
 
-/* velocity_terms: 38 statements, 59 operations after CSE (62 before) */
+/* velocity_terms: 22 statements, 33 operations after CSE (33 before) */
 static void double_pendulum_velocity_terms_eval(const double *q, const double *qd, const double *p, double *h)
 {
     (void)q;
     (void)qd;
     (void)p;
 
-    const double v0 = cos(q[0]);
-    const double v1 = sin(q[0]);
-    const double v2 = cos(q[1]);
-    const double v3 = sin(q[1]);
-    const double v4 = v0*v2 - v1*v3;
-    const double v5 = v1*v2;
-    const double v6 = v0*v3;
-    const double v7 = v5 + v6;
-    const double v8 = qd[0] + qd[1];
-    const double v9 = p[2]*v0;
-    const double v10 = p[2]*v1;
-    const double v11 = -v10*qd[0];
-    const double v12 = v9*qd[0];
-    const double v13 = -v12*qd[0];
-    const double v14 = v11*qd[0];
-    const double v15 = (1.0/2.0)*v9;
-    const double v16 = (1.0/2.0)*v10;
-    const double v17 = -v16*qd[0];
-    const double v18 = v15*qd[0];
-    const double v19 = -v18*qd[0];
-    const double v20 = v17*qd[0];
-    const double v21 = (1.0/2.0)*p[3];
-    const double v22 = v4*v21;
-    const double v23 = v7*v21;
-    const double v24 = v22 + v9;
-    const double v25 = v23 + v10;
-    const double v26 = -v23*v8;
-    const double v27 = v22*v8;
-    const double v28 = v13 - v27*v8;
-    const double v29 = v14 + v26*v8;
-    const double v30 = p[0]*v19;
-    const double v31 = p[0]*v20;
-    const double v32 = v15*v31 - v16*v30;
-    const double v33 = p[1]*v28;
-    const double v34 = p[1]*v29;
-    const double v35 = v24*v34 - v25*v33;
-    const double v36 = v32 + v35;
-    const double v37 = v35 + v33*v10 - v34*v9;
-    h[0] = v36;
-    h[1] = v37;
+    const double v0 = cos(q[1]);
+    const double v1 = sin(q[1]);
+    const double v2 = qd[0] + qd[1];
+    const double v3 = (1.0/2.0)*p[1];
+    const double v4 = p[2]*qd[0];
+    const double v5 = v1*v4;
+    const double v6 = v0*v4;
+    const double v7 = v6*qd[1];
+    const double v8 = -v5*qd[1];
+    const double v9 = p[3]*v3;
+    const double v10 = -v9*v2;
+    const double v11 = p[1]*v5;
+    const double v12 = -v10 + p[1]*v6;
+    const double v13 = -v10*v5;
+    const double v14 = -v12*v2;
+    const double v15 = v11*v2;
+    const double v16 = v13 + v9*v8;
+    const double v17 = v14 + p[1]*v7;
+    const double v18 = v15 + p[1]*v8;
+    const double v19 = v17*v1;
+    const double v20 = v19 + v18*v0;
+    const double v21 = v16 + p[2]*v20;
+    h[0] = v21;
+    h[1] = v16;
 }
 
 void double_pendulum_velocity_terms(const double *q, const double *qd, const double *p, double *h)
@@ -321,7 +305,7 @@ void double_pendulum_body_poses(const double *q, const double *p, double *T)
 
 #if !defined(MG_PART) || MG_PART == 2
 
-/* rhs: 53 statements, 92 operations after CSE (92 before) */
+/* rhs: 54 statements, 92 operations after CSE (92 before) */
 static void double_pendulum_rhs_eval(double t, const double *x, const double *u, const double *p, double *qdd, double *D)
 {
     (void)t;
@@ -353,39 +337,40 @@ static void double_pendulum_rhs_eval(double t, const double *x, const double *u,
     const double v21 = -v18*v12;
     const double v22 = -v20*v4;
     const double v23 = v19*v4;
-    const double v24 = 1.0/v16;
-    const double v25 = v17*v24;
-    const double v26 = p[1] - v17*v25;
-    const double v27 = -v21*v24;
-    const double v28 = v21 + v16*v27;
-    const double v29 = v22 + p[1]*v14;
-    const double v30 = v23 + v17*v27 + v26*v15;
-    const double v31 = (v3*v3);
-    const double v32 = v2*v3;
-    const double v33 = p[1] - v26;
-    const double v34 = v31*v33;
-    const double v35 = v26 + v34;
-    const double v36 = v32*v33;
-    const double v37 = p[2]*v36;
-    const double v38 = p[2]*v35;
-    const double v39 = p[2]*v38;
-    const double v40 = v39 + v9;
-    const double v41 = v38 + v10;
-    const double v42 = v29*v3 + v30*v2;
-    const double v43 = v28 + p[2]*v42;
-    const double v44 = v43 - u[0];
-    const double v45 = 1.0/v40;
-    const double v46 = p[4]*v1;
-    const double v47 = p[4]*v0;
-    const double v48 = v45*(-v44 - v37*v46 - v41*v47);
-    const double v49 = v47 + p[2]*v48;
-    const double v50 = v49*v2 - v46*v3;
-    const double v51 = v50 + v15;
-    const double v52 = v24*(-v21 - v16*v48 - v17*v51);
-    qdd[0] = v48;
-    qdd[1] = v52;
+    const double v24 = v22 + p[1]*v14;
+    const double v25 = v24*v3;
+    const double v26 = 1.0/v16;
+    const double v27 = v17*v26;
+    const double v28 = p[1] - v17*v27;
+    const double v29 = -v21*v26;
+    const double v30 = v21 + v16*v29;
+    const double v31 = v23 + v17*v29 + v28*v15;
+    const double v32 = (v3*v3);
+    const double v33 = v2*v3;
+    const double v34 = p[1] - v28;
+    const double v35 = v32*v34;
+    const double v36 = v28 + v35;
+    const double v37 = v33*v34;
+    const double v38 = p[2]*v37;
+    const double v39 = p[2]*v36;
+    const double v40 = p[2]*v39;
+    const double v41 = v40 + v9;
+    const double v42 = v39 + v10;
+    const double v43 = v25 + v31*v2;
+    const double v44 = v30 + p[2]*v43;
+    const double v45 = v44 - u[0];
+    const double v46 = 1.0/v41;
+    const double v47 = p[4]*v1;
+    const double v48 = p[4]*v0;
+    const double v49 = v46*(-v45 - v38*v47 - v42*v48);
+    const double v50 = v48 + p[2]*v49;
+    const double v51 = v50*v2 - v47*v3;
+    const double v52 = v51 + v15;
+    const double v53 = v26*(-v21 - v16*v49 - v17*v52);
+    qdd[0] = v49;
+    qdd[1] = v53;
     D[0] = v16;
-    D[1] = v40;
+    D[1] = v41;
 }
 
 /* Coordinate of each D, in the order the inward pass computes them. */
