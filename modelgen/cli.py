@@ -77,7 +77,7 @@ def _generation_progress(args, name):
                                   "[{elapsed}]") as bar:
         def stages(stage):
             if bar is not None:
-                bar.set_description(f"{name}: {stage}", refresh=False)
+                bar.set_description(f"{name}: {stage}")     # drawn now: a stage may be short
                 bar.update(STAGES.index(stage) - bar.n)
         yield stages
 
