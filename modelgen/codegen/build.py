@@ -71,14 +71,16 @@ except ImportError:   # not POSIX: builds are not serialised
 
 from modelgen.errors import BuildError
 
-#: Optimisation level: -O2, or -O1 above a statement count.  gcc's time grows
-#: faster than linearly with code size; at n = 30 links, part 2 (rhs, 3,800
-#: statements) compiles in 3.4 s at -O2 and runs 12% faster than at -O1, while
-#: part 1 (the other functions) takes 4.7 s at -O2 against 2.3 s at -O1, and
-#: at n = 10 part 1 alone takes 1.1 s at -O2 and 0.66 s at -O1 while the whole
-#: build waits for it.  Part 1 (not the integration hot path) therefore drops
-#: to -O1 as soon as its routines are cut into parts.
-O1_ABOVE = {0: 400, 1: 400, 2: 4000}
+#: Optimisation levels by the statement count of a part's largest routine: part
+#: (level, above this many statements) rows, first match wins, else -O2.  gcc's
+#: time grows faster than linearly with code size.  Part 2 (the integration
+#: path) stays at -O2 up to 4,000 statements: at n = 30 links its rhs (3,800)
+#: compiles in 3.4 s at -O2 and runs 12% faster than at -O1.  Part 1 (A, h, tau,
+#: energies, poses: called from Python or a user's C, never by an integrator)
+#: is at most -O1, and -O0 above 2,000 statements: at n = 50 links it compiles
+#: in 3.2 s at -O0 against 10.7 s at -O1, and A then takes 17.6 us instead of
+#: 7.6 us (h 4.5 against 2.4 us).  Part 0 is the whole file in one process.
+OPT_LEVELS = {0: (("-O1", 400),), 1: (("-O0", 2000), ("-O1", 0)), 2: (("-O1", 4000),)}
 #: Models whose largest routine has more statements are compiled as two parts
 #: in parallel (MG_PART 1: everything but the rhs, 2: the rhs and the
 #: integrators' entry points) when the machine has two cores; smaller ones in
@@ -137,11 +139,15 @@ def compiler() -> list:
 
 
 def compile_flags(statements: int, part: int = 2) -> list:
-    """Compiler flags for one part of a model whose largest routine has ``statements``.
+    """Compiler flags for one part of a model whose largest routine (in that part)
+    has ``statements``; see :data:`OPT_LEVELS`.
 
     ``$MODELGEN_CFLAGS`` is appended (and is part of the cache key).
+
+    >>> compile_flags(100, 1)[0], compile_flags(100, 2)[0], compile_flags(5000, 1)[0]
+    ('-O1', '-O2', '-O0')
     """
-    opt = "-O1" if statements > O1_ABOVE[part] else "-O2"
+    opt = next((level for level, above in OPT_LEVELS[part] if statements > above), "-O2")
     return [opt, *BASE_FLAGS, *_split_env("MODELGEN_CFLAGS", "")]
 
 
@@ -511,13 +517,15 @@ def link_command(objects: list, output: str) -> list:
 
 
 def build_module(directory: Path, name: str, sources: dict, manifest: dict,
-                 statements: int, integrator: dict) -> BuildResult:
+                 statements, integrator: dict) -> BuildResult:
     """Compile ``sources`` (``<name>.c``, ``<name>.h``) into a shared library in
     ``directory``, linked with the cached object of ``integrator``
     (``mg_integrate.h``/``.c``).
 
     ``manifest`` must hold ``build_hash``; the library is named after it so a
-    changed model never collides with an already loaded one.
+    changed model never collides with an already loaded one.  ``statements`` is
+    the largest routine's statement count, or a dict part -> count (1: the model
+    functions, 2: the integration path; see :data:`OPT_LEVELS`).
     """
     start = time.perf_counter()
     directory = Path(directory)
@@ -532,8 +540,12 @@ def build_module(directory: Path, name: str, sources: dict, manifest: dict,
             (tmp / fname).write_text(sources[fname])
         (tmp / "mg_integrate.h").write_text(integrator["mg_integrate.h"])
         cc = compiler()
-        parts = (1, 2) if statements > SPLIT_ABOVE and (os.cpu_count() or 1) > 1 else (0,)
-        model_objs = [[*cc, *compile_flags(statements, part), "-Werror",
+        by_part = statements if isinstance(statements, dict) else \
+            {1: statements, 2: statements}
+        largest = max(by_part.values())
+        by_part[0] = largest
+        parts = (1, 2) if largest > SPLIT_ABOVE and (os.cpu_count() or 1) > 1 else (0,)
+        model_objs = [[*cc, *compile_flags(by_part[part], part), "-Werror",
                        *([f"-DMG_PART={part}"] if part else []), "-c", f"{name}.c",
                        "-o", f"{name}_{part}.o"] for part in parts]
         run_commands(model_objs, tmp)

@@ -83,6 +83,17 @@ def model_hash(spec: ModelSpec, outputs=(), jacobian: bool = False,
     return h.hexdigest()
 
 
+#: The routines on the integration path (compiled as MG_PART 2, see model.c.j2).
+INTEGRATION_PATH = ("rhs", "outputs", "jacobian_terms", "linearize_terms")
+
+def part_statements(statements: dict) -> dict:
+    """Routine name -> statements, to part -> its largest routine's statements (what
+    :func:`modelgen.codegen.build.build_module` chooses optimisation levels by)."""
+    return {part: max((count for name, count in statements.items()
+                       if (name in INTEGRATION_PATH) == (part == 2)), default=0)
+            for part in (1, 2)}
+
+
 #: How a model is built and loaded (part of the cache key): a plain shared library
 #: called through the runtime module's trampolines.
 LIBRARY_FORMAT = "shared-library+runtime-trampolines"
@@ -286,7 +297,7 @@ def generate(spec: ModelSpec, out_dir=None, *, force: bool = False, outputs=(),
     t3 = time.perf_counter()
     seconds["emit"] = t3 - t2
     stage("compile")
-    statements = max(f.statements for f in functions.values())
+    statements = part_statements({f.name: f.statements for f in functions.values()})
     manifest = {
         "name": spec.name,
         "description": spec.description,

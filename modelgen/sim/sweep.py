@@ -39,7 +39,7 @@ import numpy as np
 
 from modelgen.codegen.build import build_module, cache_lookup
 from modelgen.codegen.emit import integrator_sources
-from modelgen.codegen.pipeline import default_output
+from modelgen.codegen.pipeline import default_output, part_statements
 from modelgen.errors import ModelgenError, SimulationError
 from modelgen.model import as_spec, is_scene_file
 from modelgen.sim.integrate import STATUS, method_of
@@ -187,7 +187,8 @@ def worker_model(payload: ModelPayload, build_dir=None) -> CompiledModel:
                     f"its directory since); fix: build the model into a directory of its own "
                     f"(build_dir=...) or share the build directory with the workers")
             if hit is None:
-                statements = max((o["statements"] for o in manifest["ops"].values()), default=0)
+                statements = part_statements({name: o["statements"]
+                                              for name, o in manifest["ops"].items()})
                 keep = {k: v for k, v in manifest.items()
                         if k not in ("module_name", "module_file", "module_size", "module_sha256",
                                      "manifest_sha256", "compile_commands", "integrators",
