@@ -77,10 +77,11 @@ from modelgen.errors import BuildError
 #: path) stays at -O2 up to 4,000 statements: at n = 30 links its rhs (3,800)
 #: compiles in 3.4 s at -O2 and runs 12% faster than at -O1.  Part 1 (A, h, tau,
 #: energies, poses: called from Python or a user's C, never by an integrator)
-#: is at most -O1, and -O0 above 2,000 statements: at n = 50 links it compiles
-#: in 3.2 s at -O0 against 10.7 s at -O1, and A then takes 17.6 us instead of
-#: 7.6 us (h 4.5 against 2.4 us).  Part 0 is the whole file in one process.
-OPT_LEVELS = {0: (("-O1", 400),), 1: (("-O0", 2000), ("-O1", 0)), 2: (("-O1", 4000),)}
+#: is at most -O1, and -O0 above 1,000 statements: at n = 50 links it compiles
+#: in 3.2 s at -O0 against 10.7 s at -O1 (n = 20: 0.95 against 1.7 s), and A
+#: then takes 17.6 us instead of 7.6 us (h 4.5 against 2.4 us).  Part 0 is the
+#: whole file in one process.
+OPT_LEVELS = {0: (("-O1", 400),), 1: (("-O0", 1000), ("-O1", 0)), 2: (("-O1", 4000),)}
 #: Models whose largest routine has more statements are compiled as two parts
 #: in parallel (MG_PART 1: everything but the rhs, 2: the rhs and the
 #: integrators' entry points) when the machine has two cores; smaller ones in
