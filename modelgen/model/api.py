@@ -249,6 +249,15 @@ class Model:
         """
         return self._apply(lambda c: c.add_effect(name, type, fields, f"effects.{name}"))
 
+    def set_units(self, units: Mapping[str, str]) -> "Model":
+        """Set the units of declared coordinates, parameters and inputs (replacing any
+        set before); for people and exports, never in the equations.
+
+        >>> Model("m").add_parameter("L", 1.0).set_units({"L": "m"}).spec().units
+        (('L', 'm'),)
+        """
+        return self._apply(lambda c: c.set_units(dict(units)))
+
     def spec(self) -> ModelSpec:
         """Validate the whole model and return the frozen :class:`ModelSpec`.
 

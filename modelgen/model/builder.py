@@ -663,5 +663,8 @@ def replay(ctx: ModelBuilder, spec: ModelSpec, parameters=None) -> ModelBuilder:
                        f"actions.{a.name}")
     for e in spec.effects:
         ctx.add_effect(e.name, e.kind, effect_fields(e), f"effects.{e.name}")
+    # a reduced model (a scene's) may have dropped some names: their units go too
+    ctx.set_units({name: unit for name, unit in spec.units
+                   if ctx.kind_of(name) in ("coordinate", "parameter", "input")} or None)
     return ctx
 
