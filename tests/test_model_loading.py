@@ -79,6 +79,8 @@ def test_double_pendulum_matches_a_hand_built_spec():
         bodies=(BodySpec("rod1", m1, "G1", "B1", rod1), BodySpec("rod2", m2, "G2", "B2", rod2)),
         gravity=(Z, -g, Z),
         actions=(ActionSpec("motor", "rod1", "O", "B1", (Z, Z, T1), (Z, Z, Z)),),
+        units=(("q1", "rad"), ("q2", "rad"), ("m1", "kg"), ("m2", "kg"), ("l1", "m"),
+               ("l2", "m"), ("g", "m/s2"), ("T1", "N.m")),
     )
     assert load_model(ROOT / "models" / "double_pendulum.yaml") == expected
 
@@ -114,6 +116,8 @@ def test_api_builds_the_same_spec_as_the_double_pendulum_yaml():
     m.set_gravity([0, "-g", 0])
     m.add_action("motor", body="rod1", point="O", base="B1", torque=[0, 0, "T1"],
                  force=[0, 0, 0])
+    m.set_units({"q1": "rad", "q2": "rad", "m1": "kg", "m2": "kg", "l1": "m", "l2": "m",
+                 "g": "m/s2", "T1": "N.m"})
     from_yaml = load_model(ROOT / "models" / "double_pendulum.yaml")
     assert m.spec() == from_yaml
     assert parse_model(m.to_yaml()) == m.spec()
