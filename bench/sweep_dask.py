@@ -35,7 +35,6 @@ os.environ["PYTHONPATH"] = os.pathsep.join([str(HERE), os.environ.get("PYTHONPAT
 import numpy as np                                     # noqa: E402
 
 import modelgen                                        # noqa: E402
-from modelgen.sim import sweep as sw                   # noqa: E402
 
 T_END = 10.0
 T_EVAL = np.linspace(0.0, T_END, 101)
@@ -185,7 +184,7 @@ def main(argv=None) -> int:
     k, secs, compute, per_chunk = overhead
     load_after = load_average()
     lines = [
-        f"# Sweeps on Dask: measured by bench/sweep_dask.py",
+        "# Sweeps on Dask: measured by bench/sweep_dask.py",
         "",
         f"{n} runs of the double pendulum over 10 s (dop853, rtol 1e-8, atol 1e-10, 101 "
         f"samples), a grid of m2 and q1; {os.cpu_count()} cores, load average "

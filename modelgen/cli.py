@@ -185,9 +185,8 @@ def _quietly(run, *args, **kwargs):
 
 
 def _check_times(args) -> None:
-    max_steps = getattr(args, "max_steps", None)     # sweep has no --max-steps
-    if max_steps is not None and max_steps < 1:
-        raise ModelgenError(f"--max-steps must be a positive count, got {max_steps}")
+    if args.max_steps is not None and args.max_steps < 1:
+        raise ModelgenError(f"--max-steps must be a positive count, got {args.max_steps}")
     for flag, value in (("--t-end", args.t_end), ("--dt", args.dt), ("--sample", args.sample)):
         if value is not None and not (value > 0 and value < float("inf")):
             raise ModelgenError(f"{flag} must be a positive number of seconds, got {value!r}")
@@ -523,6 +522,7 @@ def _sweep(args) -> int:
         ds = sw.sweep(args.scene, {k: g[k] for k in axes}, {k: g[k] for k in inits},
                       t_eval=t_eval, method=args.method, rtol=args.rtol, step=args.dt,
                       client=args.scheduler, chunk=args.chunk,
+                      **({} if args.max_steps is None else {"max_steps": args.max_steps}),
                       progress=progress if bar is not None else None,
                       build_dir=args.build_dir)
     finally:
@@ -552,7 +552,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     g = sub.add_parser("generate", help="derive the equations, write C and compile the module",
                        description="Derive A, h and tau, eliminate common subexpressions, "
-                                   "write <name>.c/<name>.h and compile a cffi module. An "
+                                   "write <name>.c/<name>.h and compile them into a shared "
+                                   "library. An "
                                    "unchanged model reuses the cached build.")
     g.add_argument("model", help="model YAML file")
     g.add_argument("-o", "--output", default=None,
@@ -692,6 +693,9 @@ def build_parser() -> argparse.ArgumentParser:
     w.add_argument("--method", default=None, help="integration method (default: the scene's)")
     w.add_argument("--rtol", type=float, default=None, help="relative tolerance")
     w.add_argument("--dt", type=float, default=None, help="fixed step [s]")
+    w.add_argument("--max-steps", type=int, default=None, metavar="N",
+                   help="most steps of each run (default 100000); a run that needs more "
+                        "stops with status -1, keeping what it computed")
     w.add_argument("--t-end", type=float, default=None,
                    help="final time [s] (default: the scene's, or 10 for a model)")
     w.add_argument("--sample", type=float, default=None,

@@ -214,6 +214,12 @@ def test_cli_sweep_writes_the_dataset_the_summary_and_the_plot(scene, build_root
                           str(SCENES / "dp_damped.yaml"), "--param", "c=0:1"],
                          cwd=ROOT, capture_output=True, text=True, timeout=300, env=env)
     assert bad.returncode == 2 and "START:STOP:COUNT" in bad.stderr
+    capped = subprocess.run(
+        [sys.executable, "-m", "modelgen", "sweep", str(SCENES / "dp_damped.yaml"),
+         "--param", "c=0.0:0.2:2", "--method", "dop853", "--max-steps", "5", "--strict",
+         "-o", str(tmp_path / "capped.nc"), "--build-dir", str(build_root / "sweep_dp_damped")],
+        cwd=ROOT, capture_output=True, text=True, timeout=300, env=env)
+    assert capped.returncode == 4 and "MAX_STEPS" in capped.stdout, capped.stdout
 
 
 def test_period_of_a_swept_pendulum_equals_the_elliptic_closed_form(compiled):

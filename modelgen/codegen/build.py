@@ -48,7 +48,6 @@ from __future__ import annotations
 
 import contextlib
 import hashlib
-import io
 import json
 import os
 import re
@@ -82,12 +81,11 @@ from modelgen.errors import BuildError
 #: then takes 17.6 us instead of 7.6 us (h 4.5 against 2.4 us).  Part 0 is the
 #: whole file in one process.
 OPT_LEVELS = {0: (("-O1", 400),), 1: (("-O0", 1000), ("-O1", 0)), 2: (("-O1", 4000),)}
-#: Models whose largest routine has more statements are compiled as two parts
-#: in parallel (MG_PART 1: everything but the rhs, 2: the rhs and the
-#: integrators' entry points) when the machine has two cores; smaller ones in
-#: one process (part 0: the whole file).  Even the double pendulum gains: its
-#: file takes 0.09-0.10 s of compiler CPU at -O2, each part 0.05-0.06 s.
-SPLIT_ABOVE = 0
+#: A model's C is compiled as two parts in parallel (MG_PART 1: the model
+#: functions no integrator calls, 2: the integration path) when the machine has
+#: two cores, at every size: even the double pendulum gains (its file takes
+#: 0.09-0.10 s of compiler CPU at -O2, each part 0.05-0.06 s); on one core, as
+#: one part (0: the whole file).
 BASE_FLAGS = ("-std=c99", "-fPIC", "-Wall", "-Wextra")
 #: Flags of mg_integrate.c (compiled once, on the integration hot path).
 INTEGRATOR_FLAGS = ("-O2", *BASE_FLAGS, "-Werror")
@@ -399,17 +397,6 @@ def _write_if_changed(path: Path, text: str, tmpdir: Path) -> None:
     os.replace(tmp, path)
 
 
-class _Log:
-    def __init__(self, path: Path):
-        self.path = path
-
-    def read(self) -> str:
-        try:
-            return self.path.read_text(errors="replace")
-        except OSError:
-            return ""
-
-
 @contextlib.contextmanager
 def _captured_output(path: Path):
     """Send this process's stdout and stderr (file descriptors 1 and 2, which the
@@ -424,7 +411,7 @@ def _captured_output(path: Path):
                 pass
         try:
             with contextlib.redirect_stdout(sink), contextlib.redirect_stderr(sink):
-                yield _Log(path)
+                yield
         finally:
             for fd, copy in saved:
                 os.dup2(copy, fd)
@@ -470,10 +457,10 @@ def runtime_module(integrator: dict, runtime: dict) -> tuple:
                 raise BuildError(f"the Python headers (Python.h) are missing from {include}",
                                  fix=FIX_PYTHON_H)
             try:
-                with _captured_output(tmp / "compiler.log") as log:
+                with _captured_output(tmp / "compiler.log"):
                     built = tmp / ffi.compile(tmpdir=str(tmp), verbose=False)
             except Exception as exc:              # setuptools' and cffi's errors alike
-                text = f"{log.read()}{exc}"
+                text = f"{(tmp / 'compiler.log').read_text(errors='replace')}{exc}"
                 python_h = "Python.h" in text
                 raise BuildError(
                     "the Python headers (Python.h) are missing" if python_h
@@ -518,15 +505,16 @@ def link_command(objects: list, output: str) -> list:
 
 
 def build_module(directory: Path, name: str, sources: dict, manifest: dict,
-                 statements, integrator: dict) -> BuildResult:
+                 statements: dict, integrator: dict) -> BuildResult:
     """Compile ``sources`` (``<name>.c``, ``<name>.h``) into a shared library in
     ``directory``, linked with the cached object of ``integrator``
     (``mg_integrate.h``/``.c``).
 
     ``manifest`` must hold ``build_hash``; the library is named after it so a
-    changed model never collides with an already loaded one.  ``statements`` is
-    the largest routine's statement count, or a dict part -> count (1: the model
-    functions, 2: the integration path; see :data:`OPT_LEVELS`).
+    changed model never collides with an already loaded one.  ``statements`` maps
+    each part (1: the model functions, 2: the integration path) to its largest
+    routine's statement count, which chooses its optimisation level
+    (:data:`OPT_LEVELS`; see :func:`modelgen.codegen.pipeline.part_statements`).
     """
     start = time.perf_counter()
     directory = Path(directory)
@@ -541,11 +529,8 @@ def build_module(directory: Path, name: str, sources: dict, manifest: dict,
             (tmp / fname).write_text(sources[fname])
         (tmp / "mg_integrate.h").write_text(integrator["mg_integrate.h"])
         cc = compiler()
-        by_part = statements if isinstance(statements, dict) else \
-            {1: statements, 2: statements}
-        largest = max(by_part.values())
-        by_part[0] = largest
-        parts = (1, 2) if largest > SPLIT_ABOVE and (os.cpu_count() or 1) > 1 else (0,)
+        by_part = {**statements, 0: max(statements.values())}
+        parts = (1, 2) if (os.cpu_count() or 1) > 1 else (0,)
         model_objs = [[*cc, *compile_flags(by_part[part], part), "-Werror",
                        *([f"-DMG_PART={part}"] if part else []), "-c", f"{name}.c",
                        "-o", f"{name}_{part}.o"] for part in parts]

@@ -3,8 +3,10 @@
 Method codes, statuses (with their messages), statistics slots, limits and
 the fields of the public structs live here and nowhere else.  The templates
 ``mg_integrate.h.j2`` / ``mg_integrate.c.j2`` render them as prefixed
-``#define`` s and struct declarations, the cffi ``cdef`` declares the same
-``#define`` s so Python reads them back from every compiled module, and
+``#define`` s and struct declarations, the runtime module's cffi ``cdef``
+declares the same ``#define`` s so Python reads them back from the compiled C,
+``SIGNATURES`` lists the signatures of the model's exported functions (one
+trampoline each in the runtime module), and
 :mod:`modelgen.sim.integrate` formats results with the messages below.  A
 test compares the compiled constants with this table.
 

@@ -530,7 +530,7 @@ def derive_aba(eqs: Equations, tree: JointTree, spec: ModelSpec, graph: Graph | 
     joints = tree.joints
     count = len(joints)
     outward = outward_pass(g, tree, eqs.qd)
-    v, c, IA, pA = outward.v, outward.c, list(outward.I), list(outward.bias)
+    c, IA, pA = outward.c, list(outward.I), list(outward.bias)
     for i, f in external.items():
         pA[i] = g.vec(sub(pA[i], f))
 
