@@ -251,7 +251,7 @@ def _simulate_scene(args) -> int:
     t0 = time.perf_counter()
     spec = load_scene(args.model)
     # every override is checked before anything is built
-    states = list(spec.model.coordinates) + [f"{c}_dot" for c in spec.model.coordinates]
+    states = list(spec.model.coordinates) + list(spec.model.speeds)
     init = _state_overrides(states, args.init)
     p = _parameter_overrides([name for name, _ in spec.model.parameters], args.set) or None
     changes = {k: v for k, v in (("t_end", args.t_end), ("step", args.dt),
@@ -295,7 +295,7 @@ def _simulate(args) -> int:
     model = as_spec(args.model)
     with _generation_progress(args, model.name) as stages:
         cm = load(model, args.build_dir, progress=stages)
-    x0 = np.zeros(2 * cm.n)
+    x0 = cm.neutral_state()
     for key, value in _state_overrides(cm.state_names, args.init).items():
         x0[cm.state_names.index(key)] = value
     p = _parameter_overrides(cm.parameters, args.set) or None
@@ -330,9 +330,9 @@ def _linearize(args) -> int:
         t = spec.t_start if args.t is None else args.t
     else:
         spec, model = None, as_spec(args.model)
-        x0, t = np.zeros(2 * model.n), args.t or 0.0
+        x0, t = np.zeros(model.nq + model.n), args.t or 0.0
     # every value is checked before anything is built
-    states = list(model.coordinates) + [f"{c}_dot" for c in model.coordinates]
+    states = list(model.coordinates) + list(model.speeds)
     at = _parse_assignments(args.at, "at")
     for key, value in at.items():
         if key not in states:

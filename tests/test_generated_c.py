@@ -58,7 +58,7 @@ HASH_ENV = ("CC", "MODELGEN_CFLAGS")
 #: Every function a model exports, without the "<name>_" prefix; written out
 #: here rather than taken from modelgen.codegen.emit.public_api, which renders the header.
 EXPORTED = ("abi_version", "dimensions", "default_parameters", "mass_matrix", "velocity_terms",
-            "generalized_forces", "rhs", "energy", "body_poses",
+            "generalized_forces", "rhs", "energy", "body_poses", "project",
             "system", "jacobian_fd", "integrate", "integrate_batch")
 #: The model-independent integrator files copied next to every model's C.
 INTEGRATOR = ("mg_integrate.c", "mg_integrate.h")

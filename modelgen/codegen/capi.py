@@ -24,7 +24,7 @@ import re
 from typing import NamedTuple
 
 #: Version of the C interface (model functions and mg_integrate), checked by the loader.
-ABI_VERSION = 3
+ABI_VERSION = 4
 #: Prefix of every constant, type and function of the model-independent C.
 PREFIX = "MG"
 
@@ -136,7 +136,10 @@ STRUCTS = (
         (RHS_FN.format("rhs"), "rhs", "xdot[nx] at (t, x[nx], u[nu], p[np]); returns 0 or the failing pivot"),
         (RHS_FN.format("jacobian"), "jacobian", "J[nx*nx] = d xdot / d x, row-major; NULL: central differences"),
         (OUTPUTS_FN.format("outputs"), "outputs", "y[ny] at (t, x, u, p); NULL when ny = 0"),
-        ("void *", "model", "passed as the first argument of the three functions"),
+        ("void (*project)(void *model, double *x)", "project",
+         "NULL, or puts x back on its manifold (unit quaternions of ball and free joints) "
+         "after each accepted step and at the start"),
+        ("void *", "model", "passed as the first argument of the functions above"),
     )),
     ("mg_inputs", "The inputs u(t): none, samples, or a callback.", (
         ("long", "n", "number of samples (0 and no callback: u = 0)"),
@@ -250,6 +253,7 @@ SIGNATURES = (
     Signature("linearize", "int", (*_RHS_ARGS, "double *A", "double *B", "double *C",
                                    "double *D")),
     Signature("system", "void", ("mg_system *system",)),
+    Signature("x_inplace", "void", ("double *x",)),
     Signature("integrate", "int", (
         "double t0", "double t1", "const double *x0", "const double *p",
         "const mg_inputs *inputs", "const mg_options *options", "mg_output *output",

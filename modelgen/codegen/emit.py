@@ -256,8 +256,15 @@ def _comment_safe(text: str) -> str:
 def template_context(*, name: str, description: str, model_hash: str, n: int,
                      coordinates, parameters, inputs, bodies,
                      functions: dict, output_columns=(), has_jacobian=False,
-                     has_linearize=False) -> dict:
-    """The plain dict every C template receives."""
+                     has_linearize=False, nq: int | None = None, speeds=None,
+                     quaternions=()) -> dict:
+    """The plain dict every C template receives.
+
+    ``n`` is the number of speeds (the size of A), ``nq`` that of the
+    coordinates (default ``n``; more with ball or free joints, whose
+    ``quaternions`` are lists of the four state indices of each quaternion).
+    """
+    nq = n if nq is None else nq
     return {
         "name": name,
         "NAME": name.upper(),
@@ -266,7 +273,11 @@ def template_context(*, name: str, description: str, model_hash: str, n: int,
         "model_hash": model_hash,
         "description": _comment_safe(description),
         "n": n,
-        "nx": 2 * n,
+        "nq": nq,
+        "nx": nq + n,
+        "has_joints": nq != n,
+        "quaternions": [list(qi) for qi in quaternions],
+        "speeds": list(speeds) if speeds is not None else [],
         "np": len(parameters),
         "nu": len(inputs),
         "nbodies": len(bodies),
@@ -278,38 +289,40 @@ def template_context(*, name: str, description: str, model_hash: str, n: int,
         "ny": len(output_columns),
         "has_jacobian": bool(has_jacobian),
         "has_linearize": bool(has_linearize),
-        "nc": 2 * n + len(inputs),
+        "nc": nq + n + len(inputs),
         "output_columns": list(output_columns),
         "api": public_api(name, n, len(parameters), len(inputs), len(bodies),
-                          len(output_columns), has_jacobian, has_linearize),
+                          len(output_columns), has_jacobian, has_linearize, nq),
         "solve_lines": unrolled_ldlt(n, f"{name.upper()}_PIVOT_TOL") if n <= UNROLL_SOLVE else [],
         "capi": capi.context(),
     }
 
 
 def public_api(name: str, n: int, n_p: int, n_u: int, n_b: int, n_y: int = 0,
-               has_jacobian: bool = False, has_linearize: bool = False) -> list:
+               has_jacobian: bool = False, has_linearize: bool = False,
+               nq: int | None = None) -> list:
     """Prototypes and documentation of every exported function.
 
     The header is rendered from this one list, and the manifest records each
     function's :class:`~modelgen.codegen.capi.Signature` (how Python calls it).
     """
     P = f"p: {n_p} parameters (see {name}_default_parameters)"
+    nq = n if nq is None else nq
+    nx = nq + n
     extra = []
     if n_y:
         extra.append(
             {"ret": "void", "name": f"{name}_outputs",
              "params": "double t, const double *x, const double *u, const double *p, double *y",
-             "doc": [f"The scene's recorded outputs y[{n_y}] at state x[{2 * n}] (columns in",
+             "doc": [f"The scene's recorded outputs y[{n_y}] at state x[{nx}] (columns in",
                      "the order listed at the top of this file)."]})
     if has_jacobian:
         extra.append(
             {"ret": "int", "name": f"{name}_jacobian",
              "params": "double t, const double *x, const double *u, const double *p, double *J",
-             "doc": [f"Jacobian J[{2 * n}*{2 * n}] = d xdot / d x, row-major, derived symbolically",
+             "doc": [f"Jacobian J[{nx}*{nx}] = d xdot / d x, row-major, derived symbolically",
                      "(forward mode over the generated program). Returns the rhs status."]})
     if has_linearize:
-        nx = 2 * n
         extra.append(
             {"ret": "int", "name": f"{name}_linearize",
              "params": "double t, const double *x, const double *u, const double *p, "
@@ -325,28 +338,38 @@ def public_api(name: str, n: int, n_p: int, n_u: int, n_b: int, n_y: int = 0,
         {"ret": "int", "name": f"{name}_abi_version", "params": "void",
          "doc": [f"Returns the ABI version ({ABI_VERSION}) this file was generated for."]},
         {"ret": "void", "name": f"{name}_dimensions", "params": "int *d",
-         "doc": [f"Writes the sizes d[6] = {{{name.upper()}_NQ, _NX, _NP, _NU, _NBODIES, _NY}}",
+         "doc": [f"Writes the sizes d[7] = {{{name.upper()}_NQ, _NX, _NP, _NU, _NBODIES, _NY, "
+                 "_NV}",
                  "(what the loader checks a library against its manifest with)."]},
         {"ret": "void", "name": f"{name}_default_parameters", "params": "double *p",
          "doc": [f"Writes the {n_p} default parameter values into p, in declaration order."]},
         {"ret": "void", "name": f"{name}_mass_matrix",
          "params": "const double *q, const double *p, double *A",
-         "doc": [f"Mass matrix A(q, p): q[{n}] coordinates; {P};",
+         "doc": [f"Mass matrix A(q, p): q[{nq}] coordinates; {P};",
                  f"A[{n}*{n}] row-major, symmetric (SI units: kg, kg m, kg m^2)."]},
         {"ret": "void", "name": f"{name}_velocity_terms",
          "params": "const double *q, const double *qd, const double *p, double *h",
          "doc": ["Velocity-product term h(q, qd, p) (Coriolis, centrifugal, gyroscopic),",
-                 f"so that A qdd = tau - h: q[{n}], qd[{n}]; {P}; h[{n}]."]},
+                 f"so that A qdd = tau - h: q[{nq}], qd[{n}]; {P}; h[{n}]."]},
         {"ret": "void", "name": f"{name}_generalized_forces",
          "params": "double t, const double *q, const double *qd, const double *u, const double *p, double *tau",
-         "doc": [f"Generalized forces tau of gravity and actions: t [s]; q[{n}]; qd[{n}];",
+         "doc": [f"Generalized forces tau of gravity and actions: t [s]; q[{nq}]; qd[{n}];",
                  f"u[{n_u}] inputs; {P}; tau[{n}] (N or N m per coordinate)."]},
         {"ret": "int", "name": f"{name}_rhs",
          "params": "double t, const double *x, const double *u, const double *p, double *xdot",
-         "doc": [f"State derivative for x = [q, qd] (x[{2 * n}]): xdot = [qd, qdd] with",
-                 "A qdd = tau - h solved by Cholesky in place. u, p as above.",
-                 "Returns 0, or k > 0 when pivot k (1-based) of A is not positive",
-                 "(A not positive definite); xdot[n..2n) is then NaN."]},
+         "doc": ([f"State derivative for x = [q, qd] (x[{nx}]): xdot = [qd, qdd] with",
+                  "A qdd = tau - h solved by Cholesky in place. u, p as above."]
+                 if nq == n else
+                 [f"State derivative for x = [q, qd] (x[{nx}]: {nq} coordinates, {n} speeds):",
+                  "xdot = [N(q) qd, qdd], N(q) the kinematic relation of the ball and free",
+                  "joints (dquat/dt = quat * (0, w) / 2, dr/dt = R v), A qdd = tau - h",
+                  "solved by Cholesky in place. u, p as above."])
+                + ["Returns 0, or k > 0 when pivot k (1-based) of A is not positive",
+                   f"(A not positive definite); xdot[{nq}..{nx}) is then NaN."]},
+        {"ret": "void", "name": f"{name}_project", "params": "double *x",
+         "doc": ["Normalises the quaternions of the ball and free joints in x[NX] in place"
+                 if nq != n else "Nothing to do: this model has no ball or free joints",
+                 "(the integrators call it after every step; call it after yours)."]},
         {"ret": "void", "name": f"{name}_energy",
          "params": "const double *q, const double *qd, const double *p, double *out",
          "doc": ["out[0] kinetic energy, out[1] potential energy of gravity (zero at O)",
@@ -356,14 +379,14 @@ def public_api(name: str, n: int, n_p: int, n_u: int, n_b: int, n_y: int = 0,
          "doc": [f"Pose of every body: T[{n_b}*16], one row-major 4x4 matrix per body",
                  "[[R, r_G], [0, 0, 0, 1]]: R's columns are the body base's unit vectors",
                  "in E, r_G the centre of mass from O in E [m]."]},
-    ] + _integrator_api(name, n, n_p, n_u, n_y, has_jacobian)
+    ] + _integrator_api(name, nx, n_p, n_u, n_y, has_jacobian)
 
 
 # -- integration (mg_integrate.h, rendered from modelgen/codegen/capi.py) ----------------
 
-def _integrator_api(name: str, n: int, n_p: int, n_u: int, n_y: int, has_jacobian: bool) -> list:
+def _integrator_api(name: str, nx: int, n_p: int, n_u: int, n_y: int,
+                    has_jacobian: bool) -> list:
     """Prototypes and documentation of the model's entry points into mg_integrate."""
-    nx = 2 * n
     return [
         {"ret": "void", "name": f"{name}_system", "params": "mg_system *system",
          "doc": [f"Fills system with this model for mg_integrate: nx = {nx}, nu = {n_u},",

@@ -132,8 +132,12 @@ def choose_formulation(spec: ModelSpec, formulation: str = "auto"):
     if formulation not in FORMULATIONS:
         raise ModelError(f"unknown formulation {formulation!r}", file=spec.source,
                          key="formulation", fix="use one of " + ", ".join(FORMULATIONS))
-    if formulation == "crba":
+    if formulation == "crba" or (formulation == "auto" and spec.joints):
         return "crba", None
+    if spec.joints:
+        raise ModelError("the articulated-body formulation does not take ball or free joints "
+                         "yet", file=spec.source, line=spec.line_of(f"joints.{spec.joints[0].name}"),
+                         key="formulation", fix="use formulation crba (or auto)")
     if formulation == "aba":
         return "aba", extract_joint_tree(spec)
     if spec.n < ABA_CROSSOVER:
@@ -154,18 +158,20 @@ def routines_for(eqs: Equations, output_exprs=(), jacobian=None,
     (:class:`~modelgen.derive.linearize.LinearizationTerms`) ``linearize_terms``
     writes its R and Y (derivatives with respect to [x, u]).
     """
-    n = len(eqs.q)
+    n = len(eqs.qd)
     t = (("t", (eqs.t,)),)
     q, qd, u, p = ("q", eqs.q), ("qd", eqs.qd), ("u", eqs.u), ("p", eqs.p)
     x = ("x", eqs.q + eqs.qd)
     A_flat = tuple(eqs.A[i][j] for i in range(n) for j in range(n))
     b = tuple(eqs.tau[k] - eqs.h[k] for k in range(n))
+    qdot = (("qdot", eqs.qdot),) if eqs.has_joints else ()
     if forward is not None:
         rhs = ("rhs", t + (x, u, p),
-               (("qdd", forward.qdd), ("D", tuple(forward.D[k] for k in forward.inward))))
+               (("qdd", forward.qdd), ("D", tuple(forward.D[k] for k in forward.inward)))
+               + qdot)
         jac_inputs = t + (x, u, p)
     else:
-        rhs = ("rhs", t + (x, u, p), (("A", A_flat), ("b", b)))
+        rhs = ("rhs", t + (x, u, p), (("A", A_flat), ("b", b)) + qdot)
         jac_inputs = t + (x, u, p, ("a", jacobian.a)) if jacobian else ()
     lin = []
     if linearization is not None:
@@ -183,7 +189,9 @@ def routines_for(eqs: Equations, output_exprs=(), jacobian=None,
         ("body_poses", (q, p), (("T", tuple(e for pose in eqs.poses for e in pose)),)),
     ] + ([("outputs", t + (x, u, p), (("y", tuple(output_exprs)),))] if output_exprs else []) \
       + ([("jacobian_terms", jac_inputs,
-           (("D", tuple(e for row in jacobian.D for e in row)),))] if jacobian else []) \
+           (("D", tuple(e for row in jacobian.D for e in row)),)
+           + ((("K", tuple(e for row in jacobian.K for e in row)),) if jacobian.K else ()))]
+         if jacobian else []) \
       + lin
 
 
@@ -235,6 +243,11 @@ def generate(spec: ModelSpec, out_dir=None, *, force: bool = False, outputs=(),
     2
     """
     _check_generable(spec)
+    if linearize and spec.joints:
+        raise ModelError("linearization of a model with ball or free joints is not supported: "
+                         "its state holds unit quaternions, whose four components cannot "
+                         "move independently", file=spec.source, key="linearize",
+                         fix="linearize a model whose rotations are simple ones (angles)")
     formulation, tree = choose_formulation(spec, formulation)
     jacobian = bool(jacobian or linearize)
     directory = Path(out_dir) if out_dir is not None else default_output(spec.name)
@@ -282,13 +295,14 @@ def generate(spec: ModelSpec, out_dir=None, *, force: bool = False, outputs=(),
     seconds["cse"] = t2 - t1
     stage("emit")
     outputs_c = {"A": "A", "h": "h", "tau": "tau", "b": "b", "out": "out", "T": "T", "y": "y",
-                 "D": "D", "qdd": "qdd", "R": "R", "Y": "Y"}
+                 "D": "D", "qdd": "qdd", "R": "R", "Y": "Y", "qdot": "qdot", "K": "K"}
     functions = {r.name: print_routine(r, outputs_c) for r in routines}
     context = template_context(
         name=spec.name, description=spec.description,
         model_hash=model_hash(spec, outputs, jacobian, formulation, linearize)[:16],
-        n=spec.n,
-        coordinates=spec.coordinates, parameters=spec.parameters, inputs=spec.inputs,
+        n=spec.n, nq=spec.nq,
+        coordinates=spec.coordinates, speeds=spec.speeds,
+        quaternions=[[spec.coordinates.index(c) for c in j.quaternion] for j in spec.joints], parameters=spec.parameters, inputs=spec.inputs,
         bodies=eqs.bodies, functions=functions,
         output_columns=[c for cols in columns.columns for c in cols] if columns else (),
         has_jacobian=bool(jacobian), has_linearize=bool(linearize))
@@ -305,7 +319,12 @@ def generate(spec: ModelSpec, out_dir=None, *, force: bool = False, outputs=(),
         "abi_version": ABI_VERSION,
         "build_hash": key,
         "n": spec.n,
+        "nq": spec.nq,
         "coordinates": list(spec.coordinates),
+        "speeds": list(spec.speeds),
+        "n_simple": len(spec.simple_coordinates),
+        "quaternions": [[spec.coordinates.index(c) for c in j.quaternion]
+                        for j in spec.joints],
         "parameters": [[name, float(value)] for name, value in spec.parameters],
         "inputs": list(spec.inputs),
         "jacobian": bool(jacobian),

@@ -31,7 +31,7 @@ import sympy
 from modelgen.derive.effects import action_forces, derive_effect
 from modelgen.derive.graph import (ZERO, ZERO3, Graph, GraphBuilder, add, cross, dot, matvec,
                                    scale, sub)
-from modelgen.derive.kinematics import Kinematics
+from modelgen.derive.kinematics import Kinematics, quaternion_columns
 from modelgen.model.spec import TIME, symbol
 
 
@@ -53,6 +53,14 @@ class Equations:
     kinetic: sympy.Expr
     potential: sympy.Expr   # of gravity, zero at O
     poses: tuple            # per body: 16 entries of the 4x4 pose, row-major
+    #: dq/dt = N(q) qd (len(q) entries): the speeds themselves, except for the
+    #: coordinates of ball and free joints (:func:`kinematic_relation`)
+    qdot: tuple = ()
+
+    @property
+    def has_joints(self) -> bool:
+        """True if some dq/dt is not its speed (a ball or free joint)."""
+        return len(self.q) != len(self.qd)
 
 
 def _transform_inertia(g: GraphBuilder, R, inertia):
@@ -128,6 +136,41 @@ def _warm(sums: _SetSums, sets):
     """Compute sets smallest-first so larger ones reuse them."""
     for s in sorted(set(sets), key=lambda s: (len(s), sorted(s))):
         sums(s)
+
+
+def kinematic_relation(g: GraphBuilder, spec, q: tuple, qd: tuple) -> tuple:
+    """dq/dt = N(q) qd: a simple coordinate's rate is its speed; a joint's
+    quaternion turns as ``dquat/dt = quat * (0, w) / 2`` (w in the joint's own
+    base), and a free joint's position as ``dr/dt = R(quat) v``.
+
+    >>> from modelgen.model.api import Model
+    >>> spec = Model("m").add_joint("J", "ball", parent="E", base="B").spec()
+    >>> qdot = kinematic_relation(GraphBuilder(), spec, *_symbols(spec))
+    >>> qdot[0]
+    -J_qx*J_wx/2 - J_qy*J_wy/2 - J_qz*J_wz/2
+    """
+    simple = len(spec.simple_coordinates)
+    out = list(qd[:simple])
+    name_q = {str(s): s for s in q}
+    name_v = {str(s): s for s in qd}
+    for joint in spec.joints:
+        qs = [name_q[c] for c in joint.coordinates]
+        vs = [name_v[v] for v in joint.speeds]
+        w, x, y, z = qs[-4:]
+        wx, wy, wz = vs[-3:]
+        half = sympy.Rational(1, 2)
+        quat_dot = [-half * (x * wx + y * wy + z * wz), half * (w * wx + y * wz - z * wy),
+                    half * (w * wy + z * wx - x * wz), half * (w * wz + x * wy - y * wx)]
+        if joint.kind == "free":
+            cols = quaternion_columns((w, x, y, z))
+            out += [g.name(sympy.Add(*[cols[j][i] * vs[j] for j in range(3)]))
+                    for i in range(3)]
+        out += [g.name(e) for e in quat_dot]
+    return tuple(out)
+
+
+def _symbols(spec) -> tuple:
+    return (tuple(symbol(c) for c in spec.coordinates), tuple(symbol(v) for v in spec.speeds))
 
 
 def derive_equations(kin: Kinematics) -> Equations:
@@ -269,10 +312,11 @@ def derive_equations(kin: Kinematics) -> Equations:
         + tuple(direct_parts)
 
     kinetic, potential = g.name(kinetic), g.name(potential)
+    qdot = kinematic_relation(g, spec, kin.q, kin.qd)
     return Equations(
         name=spec.name, graph=g.freeze(), t=TIME, q=kin.q, qd=kin.qd,
         u=tuple(symbol(x) for x in spec.inputs),
         p=tuple(symbol(x) for x in spec.parameter_names),
         bodies=tuple(b.name for b in spec.bodies),
         A=tuple(tuple(row) for row in A), h=h, tau=tau, tau_parts=tau_parts,
-        kinetic=kinetic, potential=potential, poses=tuple(poses))
+        kinetic=kinetic, potential=potential, poses=tuple(poses), qdot=qdot)

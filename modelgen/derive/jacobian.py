@@ -25,10 +25,15 @@ from modelgen.derive.graph import Graph, GraphBuilder
 
 @dataclass(frozen=True)
 class JacobianTerms:
-    """``D[k][j] = d r_k / d x_j`` (n x 2n) over ``graph``; ``a`` the qdd symbols."""
+    """``D[k][j] = d r_k / d x_j`` (nv x nx) over ``graph``; ``a`` the qdd symbols.
+
+    ``K[i][j] = d (dq_i/dt) / d x_j`` (nq x nx) for a model with ball or free
+    joints, where dq/dt = N(q) qd is not the speeds themselves; empty otherwise.
+    """
     graph: Graph
     a: tuple
     D: tuple
+    K: tuple = ()
 
 
 def accelerations(n: int) -> tuple:
@@ -83,7 +88,7 @@ def differentiate(graph: Graph, outputs, wrt) -> tuple:
 
 def residual(eqs: Equations) -> tuple:
     """``(a, r)``: the qdd symbols and ``r = tau - h - A a``, zero at the solution."""
-    n = len(eqs.q)
+    n = len(eqs.qd)
     a = accelerations(n)
     return a, tuple(eqs.tau[k] - eqs.h[k] - sympy.Add(*[eqs.A[k][l] * a[l] for l in range(n)])
                     for k in range(n))
@@ -92,5 +97,6 @@ def residual(eqs: Equations) -> tuple:
 def derive_jacobian_terms(eqs: Equations, graph: Graph | None = None) -> JacobianTerms:
     """d(tau - h - A a)/dx for the equations ``eqs`` (graph defaults to eqs.graph)."""
     a, r = residual(eqs)
-    g, rows = differentiate(graph or eqs.graph, r, eqs.q + eqs.qd)
-    return JacobianTerms(g, a, rows)
+    extra = eqs.qdot if eqs.has_joints else ()
+    g, rows = differentiate(graph or eqs.graph, tuple(r) + tuple(extra), eqs.q + eqs.qd)
+    return JacobianTerms(g, a, rows[:len(r)], rows[len(r):])

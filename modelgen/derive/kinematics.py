@@ -85,6 +85,18 @@ def _rotation_columns(axis: int, c, s):
     return ((c, s, 0), (-s, c, 0), (0, 0, 1))
 
 
+def quaternion_columns(quaternion):
+    """Child unit vectors in parent components for a unit quaternion (w, x, y, z).
+
+    The matrix with these columns is the usual R(q) (Shuster's passive
+    convention transposed): ``v_parent = R v_child``.
+    """
+    w, x, y, z = quaternion
+    return ((1 - 2 * (y * y + z * z), 2 * (x * y + w * z), 2 * (x * z - w * y)),
+            (2 * (x * y - w * z), 1 - 2 * (x * x + z * z), 2 * (y * z + w * x)),
+            (2 * (x * z + w * y), 2 * (y * z - w * x), 1 - 2 * (x * x + y * y)))
+
+
 def _rows_from_columns(cols):
     return tuple(tuple(cols[j][i] for j in range(3)) for i in range(3))
 
@@ -154,11 +166,16 @@ def derive_kinematics(spec: ModelSpec, graph: Graph | None = None) -> Kinematics
     g = GraphBuilder(graph)
     q = tuple(symbol(c) for c in spec.coordinates)
     qd = tuple(symbol(s) for s in spec.speeds)
-    d = _Deriver(q, qd)
+    simple = len(spec.simple_coordinates)
+    d = _Deriver(q[:simple], qd[:simple])
+    speed_index = {v: k for k, v in enumerate(qd)}
 
     bases = {CANONICAL_BASE: BaseKinematics(IDENTITY, ZERO3, ZERO3, {})}
     for b in spec.bases:
         parent = bases[b.parent]
+        if b.quaternion:
+            bases[b.name] = _quaternion_base(g, parent, b, speed_index)
+            continue
         theta = b.angle
         c, s = g.name(sympy.cos(theta)), g.name(sympy.sin(theta))
         local = _rotation_columns(b.axis, c, s)
@@ -186,9 +203,14 @@ def derive_kinematics(spec: ModelSpec, graph: Graph | None = None) -> Kinematics
         w_x_d = g.vec(cross(B.omega, dvec))
         v = add(Q.v, w_x_d)
         a = add(add(Q.a_bias, cross(B.alpha_bias, dvec)), cross(B.omega, w_x_d))
-        grads = [d.gradient(ci) for ci in p.coordinates]
+        grads = [{}, {}, {}] if p.speeds else [d.gradient(ci) for ci in p.coordinates]
         moving = any(grads) or any(ci.has(TIME) for ci in p.coordinates)
-        if moving:   # coordinates that change in time (prismatic-like)
+        if p.speeds:   # a free joint: d/dt (R_B c) relative to B = R_J v
+            J = bases[p.speed_base]
+            rel_v = g.vec(matvec(J.R, p.speeds))
+            v = add(v, rel_v)
+            a = add(a, cross(add(B.omega, J.omega), rel_v))
+        elif moving:   # coordinates that change in time (prismatic-like)
             cdot = tuple(d.rate(ci, gi) for ci, gi in zip(p.coordinates, grads))
             rel_v = g.vec(matvec(B.R, g.vec(cdot)))
             cddot = g.vec(d.bias_rate(x) for x in cdot)
@@ -198,6 +220,10 @@ def derive_kinematics(spec: ModelSpec, graph: Graph | None = None) -> Kinematics
         a = g.vec(a)
 
         partials = {}
+        if p.speeds:
+            J = bases[p.speed_base]
+            for j, speed in enumerate(p.speeds):
+                partials[speed_index[speed]] = (ZERO3, _column(J.R, j))
         for k in sorted(set(Q.partials) | set(B.partials) | {k for gi in grads for k in gi}):
             wQ, betaQ = Q.partials.get(k, (ZERO3, ZERO3))
             cB = B.partials.get(k, ZERO3)
@@ -214,3 +240,21 @@ def derive_kinematics(spec: ModelSpec, graph: Graph | None = None) -> Kinematics
         points[p.name] = PointKinematics(r, v, a, partials)
 
     return Kinematics(spec, g.freeze(), q, qd, bases, points)
+
+
+def _quaternion_base(g: GraphBuilder, parent: BaseKinematics, b, speed_index: dict):
+    """A joint's base: turned by a unit quaternion, turning at ``b.rates`` (in itself).
+
+    ``omega_B = omega_P + R_B w``; with every speed derivative zero,
+    ``d/dt (R_B w) = omega_B x R_B w = omega_P x R_B w``.
+    """
+    local = quaternion_columns(b.quaternion)
+    cols = [g.vec(matvec(parent.R, tuple(g.name(x) for x in col))) for col in local]
+    R = _rows_from_columns(cols)
+    rel = g.vec(matvec(R, b.rates))
+    omega = g.vec(add(parent.omega, rel))
+    alpha = g.vec(add(parent.alpha_bias, cross(parent.omega, rel)))
+    partials = dict(parent.partials)
+    for j, rate in enumerate(b.rates):
+        partials[speed_index[rate]] = cols[j]
+    return BaseKinematics(R, omega, alpha, partials)

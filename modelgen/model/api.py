@@ -171,6 +171,19 @@ class Model:
         """
         return self._apply(lambda c: c.add_base(name, parent, axis, angle, f"bases.{name}"))
 
+    def add_joint(self, name: str, kind: str, *, parent: str, base: str,
+                  origin: Optional[str] = None, point: Optional[str] = None) -> "Model":
+        """Add a ``ball`` or ``free`` joint: base ``base`` turned from ``parent`` by
+        a unit quaternion; a free joint also makes ``point`` at a position from
+        ``origin`` (default O; the YAML key is ``from``) in ``parent``'s components.
+
+        >>> spec = Model("m").add_joint("J", "free", parent="E", base="B", point="P").spec()
+        >>> spec.coordinates, spec.speeds
+        (('J_x', 'J_y', 'J_z', 'J_qw', 'J_qx', 'J_qy', 'J_qz'), ('J_vx', 'J_vy', 'J_vz', 'J_wx', 'J_wy', 'J_wz'))
+        """
+        return self._apply(lambda c: c.add_joint(name, kind, parent, base, origin, point,
+                                                 f"joints.{name}"))
+
     def add_point(self, name: str, *, coordinates, parent: Optional[str] = None,
                   base: Optional[str] = None, frame: Optional[str] = None) -> "Model":
         """Add a point at ``coordinates`` (in ``base``) from point ``parent``.

@@ -39,8 +39,8 @@ from modelgen.model.schema import ENTRY_KEYS, EXPRESSION_RULES, NUMERIC_STRING, 
 from modelgen.model.spec import (CANONICAL_BASE, CANONICAL_POINT, EFFECT_KINDS, TIME,
                                  ModelSpec, effect_fields)
 
-__all__ = ["ModelBuilder", "replay", "BaseDecl", "PointDecl", "FrameDecl", "BodyDecl",
-           "ActionDecl", "EffectDecl"]
+__all__ = ["ModelBuilder", "replay", "BaseDecl", "PointDecl", "JointDecl", "FrameDecl",
+           "BodyDecl", "ActionDecl", "EffectDecl"]
 
 
 # -- declarations: validated entries, before references are resolved ----------
@@ -54,6 +54,8 @@ class BaseDecl(NamedTuple):
     axis: int
     angle: sympy.Expr
     key: str
+    quaternion: tuple = ()  # a joint's base: its quaternion symbols (w, x, y, z)
+    rates: tuple = ()       # and its angular-velocity symbols
 
 
 class PointDecl(NamedTuple):
@@ -62,6 +64,20 @@ class PointDecl(NamedTuple):
     base: Optional[str]
     frame: Optional[str]
     coordinates: tuple
+    key: str
+    speeds: tuple = ()      # a free joint's point: its velocity symbols
+    speed_base: str = ""    # in components of this base
+
+
+class JointDecl(NamedTuple):
+    name: str
+    kind: str               # a key of JOINT_KINDS
+    parent: str
+    base: str
+    origin: str
+    point: str
+    coordinates: tuple      # names
+    speeds: tuple           # names
     key: str
 
 
@@ -125,6 +141,7 @@ class ModelBuilder:
         self.inputs: list = []
         self.bases: list = []
         self.points: list = []
+        self.joints: list = []
         self.frames: list = []
         self.bodies: list = []
         self.actions: list = []
@@ -390,6 +407,57 @@ class ModelBuilder:
         self.register(name, "point", key)
         self.points.append(PointDecl(name, parent, base, frame, coordinates, key))
 
+    def add_joint(self, name, kind, parent, base, origin, point, key: str) -> None:
+        """A ball or free joint: it declares its base (and a free joint its point),
+        its coordinates ``<name>_<suffix>`` and speeds (``JOINT_KINDS``)."""
+        self.check_new_name(name, "joint", key)
+        if kind not in specmod.JOINT_KINDS:
+            raise self.error(f"unknown joint type {describe(kind)}", f"{key}.type",
+                             "use 'ball' (a quaternion, 3 speeds) or 'free' (a position and "
+                             "a quaternion, 6 speeds); a hinge is a base with an axis and "
+                             "an angle")
+        parent = self.reference(parent, "base", f"{key}.parent")
+        base = self.reference(base, "base", f"{key}.base")
+        if kind == "free":
+            origin = CANONICAL_POINT if origin is None else \
+                self.reference(origin, "point", f"{key}.from")
+            if point is None:
+                raise self.error("missing required key 'point'", key,
+                                 "a free joint makes a point: add 'point: <new point name>'")
+            point = self.reference(point, "point", f"{key}.point")
+        else:
+            for field, value in (("from", origin), ("point", point)):
+                if value is not None:
+                    raise self.error(f"a ball joint has no '{field}'", f"{key}.{field}",
+                                     "remove it, or make the joint 'type: free'")
+            origin = point = ""
+        q_suffixes, v_suffixes = specmod.JOINT_KINDS[kind]
+        coordinates = tuple(f"{name}_{s}" for s in q_suffixes)
+        speeds = tuple(f"{name}_{s}" for s in v_suffixes)
+        made = [(base, "base")] + ([(point, "point")] if point else [])
+        names = made + [(c, "joint coordinate") for c in coordinates] + \
+            [(v, "joint speed") for v in speeds]
+        for new, what in names:
+            self.check_new_name(new, what, key)
+        if len({new for new, _ in names} | {name}) != len(names) + 1:
+            raise self.error("the joint's base, point and name must differ", key,
+                             "give the base and the point their own names")
+        self.register(name, "joint", key)
+        for new, what in names:
+            self.register(new, what, key)
+        for new in coordinates + speeds:
+            self.add_symbol(new)
+        sym = self.symbols
+        self.bases.append(BaseDecl(base, parent, 0, sympy.S.Zero, key,
+                                   tuple(sym[c] for c in coordinates[-4:]),
+                                   tuple(sym[v] for v in speeds[-3:])))
+        if kind == "free":
+            self.points.append(PointDecl(point, origin, parent, None,
+                                         tuple(sym[c] for c in coordinates[:3]), key,
+                                         tuple(sym[v] for v in speeds[:3]), base))
+        self.joints.append(JointDecl(name, kind, parent, base, origin, point, coordinates,
+                                     speeds, key))
+
     def add_frame(self, name, point, base, key: str) -> None:
         self.check_new_name(name, "frame", key)
         point = self.reference(point, "point", f"{key}.point")
@@ -643,16 +711,22 @@ def replay(ctx: ModelBuilder, spec: ModelSpec, parameters=None) -> ModelBuilder:
     ``parameters`` replaces the spec's ``(name, default)`` pairs if given.
     Points are declared with their resolved from/base.
     """
-    for c in spec.coordinates:
+    for c in spec.simple_coordinates:
         ctx.add_coordinate(c, f"coordinates[{len(ctx.coordinates)}]")
     for p, value in (spec.parameters if parameters is None else parameters):
         ctx.add_parameter(p, value, f"parameters.{p}")
     for i in spec.inputs:
         ctx.add_input(i, f"inputs[{len(ctx.inputs)}]")
+    made = {j.base for j in spec.joints} | {j.point for j in spec.joints}
+    for j in spec.joints:
+        ctx.add_joint(j.name, j.kind, j.parent, j.base, j.origin or None, j.point or None,
+                      f"joints.{j.name}")
     for b in spec.bases:
-        ctx.add_base(b.name, b.parent, b.axis, b.angle, f"bases.{b.name}")
+        if b.name not in made:
+            ctx.add_base(b.name, b.parent, b.axis, b.angle, f"bases.{b.name}")
     for p in spec.points:
-        ctx.add_point(p.name, p.parent, p.base, None, p.coordinates, f"points.{p.name}")
+        if p.name not in made:
+            ctx.add_point(p.name, p.parent, p.base, None, p.coordinates, f"points.{p.name}")
     for f in spec.frames:
         ctx.add_frame(f.name, f.point, f.base, f"frames.{f.name}")
     for b in spec.bodies:

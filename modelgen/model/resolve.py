@@ -15,7 +15,7 @@ from typing import Optional
 from modelgen.model.messages import API_FILE, article, closest, listing
 from modelgen.model.schema import SECTION_OF
 from modelgen.model.spec import (CANONICAL_BASE, CANONICAL_POINT, EFFECT_KINDS, ActionSpec,
-                                 BaseSpec, BodySpec, FrameSpec, ModelSpec, PointSpec)
+                                 BaseSpec, BodySpec, FrameSpec, JointSpec, ModelSpec, PointSpec)
 
 __all__ = ["build_spec", "resolve", "resolve_effect"]
 
@@ -53,6 +53,10 @@ def build_spec(builder) -> ModelSpec:
                             " (each base is rotated from the next)", f"{first.key}.parent",
                             "make one of these bases a child of 'E' or of a base outside "
                             "the cycle")
+    for j in builder.joints:
+        resolve(builder, j.parent, "base", f"{j.key}.parent", CANONICAL_BASE)
+        if j.kind == "free":
+            resolve(builder, j.origin, "point", f"{j.key}.from", CANONICAL_POINT)
     frames = {}
     for f in builder.frames:
         resolve(builder, f.point, "point", f"{f.key}.point", CANONICAL_POINT)
@@ -100,12 +104,16 @@ def build_spec(builder) -> ModelSpec:
     return ModelSpec(
         name=builder.name,
         description=builder.description,
-        coordinates=tuple(builder.coordinates),
+        coordinates=tuple(builder.coordinates) + tuple(c for j in builder.joints
+                                                       for c in j.coordinates),
         parameters=tuple(builder.parameters),
         inputs=tuple(builder.inputs),
-        bases=tuple(BaseSpec(b.name, b.parent, b.axis, b.angle) for b in bases),
-        points=tuple(PointSpec(p.name, p.parent, p.base, p.coordinates)
+        bases=tuple(BaseSpec(b.name, b.parent, b.axis, b.angle, b.quaternion, b.rates)
+                    for b in bases),
+        points=tuple(PointSpec(p.name, p.parent, p.base, p.coordinates, p.speeds, p.speed_base)
                      for p in ordered_points),
+        joints=tuple(JointSpec(j.name, j.kind, j.parent, j.base, j.origin, j.point,
+                               j.coordinates, j.speeds) for j in builder.joints),
         frames=tuple(FrameSpec(f.name, f.point, f.base) for f in builder.frames),
         bodies=tuple(BodySpec(b.name, b.mass, b.G, b.base, b.inertia)
                      for b in builder.bodies),

@@ -286,10 +286,12 @@ class _SceneReader:
         state = full.coordinates + full.speeds
         value = self.data.get("initial")
         given: dict = {}
+        unit_w = {j.quaternion[0] for j in full.joints}
 
         def template() -> str:
             return "initial: {" + ", ".join(
-                f"{s}: {yaml_float(given.get(s, 0.0))}" for s in state) + "}"
+                f"{s}: {yaml_float(given.get(s, 1.0 if s in unit_w else 0.0))}"
+                for s in state) + "}"
 
         if "initial" not in self.data:
             raise ModelError("missing required key 'initial'", file=self.file, line=1,
@@ -313,6 +315,11 @@ class _SceneReader:
             plural = "s" if len(missing) > 1 else ""
             raise self.error(f"missing initial value{plural} for {names}", "initial",
                              f"every coordinate and speed needs one; write {template()}")
+        for j in full.joints:
+            if all(given[c] == 0 for c in j.quaternion):
+                raise self.error(f"the quaternion of joint '{j.name}' is zero", "initial",
+                                 f"give a unit quaternion, e.g. {j.quaternion[0]}: 1.0 and "
+                                 "the others 0 for no rotation (it is normalised)")
         return tuple(given[s] for s in state)
 
     def time_span(self) -> tuple:

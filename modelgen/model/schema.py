@@ -19,12 +19,13 @@ __all__ = ["TOP_LEVEL_KEYS", "ENTRY_KEYS", "REQUIRED_KEYS", "ExpressionRule",
 #: Any other key is an error; a stage adding a key adds it here and reads it
 #: in ``builder_from_data``.
 TOP_LEVEL_KEYS = ("name", "description", "coordinates", "parameters", "inputs",
-                  "bases", "points", "frames", "bodies", "gravity", "actions", "effects",
+                  "bases", "joints", "points", "frames", "bodies", "gravity", "actions", "effects",
                   "units")
 
 #: Keys of one entry of each mapping section.
 ENTRY_KEYS = {
     "bases": ("parent", "axis", "angle"),
+    "joints": ("type", "parent", "base", "from", "point"),
     "points": ("from", "base", "frame", "coordinates"),
     "frames": ("point", "base"),
     "bodies": ("mass", "G", "base", "inertia"),
@@ -34,6 +35,7 @@ ENTRY_KEYS = {
 #: Keys an entry must have (alternatives such as ``frame`` are checked separately).
 REQUIRED_KEYS = {
     "bases": ("parent", "axis", "angle"),
+    "joints": ("type", "parent", "base"),
     "points": ("coordinates",),
     "frames": ("point", "base"),
     "bodies": ("mass", "G", "base"),
@@ -71,7 +73,7 @@ EXPRESSION_RULES = {
 }
 
 #: The kind of entry of each mapping section, and the section of each kind.
-SECTION_KIND = {"bases": "base", "points": "point", "frames": "frame",
+SECTION_KIND = {"bases": "base", "joints": "joint", "points": "point", "frames": "frame",
                 "bodies": "body", "actions": "action", "effects": "effect"}
 SECTION_OF = {**{kind: section for section, kind in SECTION_KIND.items()},
               "coordinate": "coordinates"}
@@ -79,6 +81,7 @@ SECTION_OF = {**{kind: section for section, kind in SECTION_KIND.items()},
 #: An example entry of each mapping section, for the fixes of messages.
 SECTION_EXAMPLES = {
     "bases": "B1: {parent: E, axis: 3, angle: q1}",
+    "joints": "J1: {type: free, parent: E, base: B1, from: O, point: P1}",
     "points": "P1: {from: O, base: B1, coordinates: [l1, 0, 0]}",
     "frames": "F1: {point: P1, base: B1}",
     "bodies": "rod1: {mass: m1, G: G1, base: B1, inertia: [I1, I2, I3]}",

@@ -127,6 +127,9 @@ def builder_from_data(data, lines: dict, file: str) -> ModelBuilder:
 
     for name, e, key in entries("bases"):
         ctx.add_base(name, e["parent"], e["axis"], e["angle"], key)
+    for name, e, key in entries("joints"):
+        ctx.add_joint(name, e["type"], e["parent"], e["base"], e.get("from"), e.get("point"),
+                      key)
     for name, e, key in entries("points"):
         ctx.add_point(name, e.get("from"), e.get("base"), e.get("frame"),
                       e["coordinates"], key)

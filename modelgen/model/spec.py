@@ -60,20 +60,72 @@ def speed_name(coordinate: str) -> str:
 
 @dataclass(frozen=True)
 class BaseSpec:
-    """A base rotated from ``parent`` by ``angle`` about the parent's axis ``axis``."""
+    """A base rotated from ``parent`` by ``angle`` about the parent's axis ``axis``.
+
+    A base made by a ball or free joint (:class:`JointSpec`) has ``axis`` 0 and
+    ``angle`` 0 instead: it is turned from ``parent`` by the unit quaternion
+    ``quaternion`` (symbols w, x, y, z) and turns relative to ``parent`` with the
+    angular velocity ``rates`` (symbols, components in this base).
+    """
     name: str
     parent: str
-    axis: int          # 1, 2 or 3
+    axis: int          # 1, 2 or 3; 0 for a joint's quaternion base
     angle: Expr
+    quaternion: tuple = ()
+    rates: tuple = ()
 
 
 @dataclass(frozen=True)
 class PointSpec:
-    """A point at ``coordinates`` (components in ``base``) from point ``parent``."""
+    """A point at ``coordinates`` (components in ``base``) from point ``parent``.
+
+    A free joint's point (:class:`JointSpec`) has the joint's position symbols as
+    ``coordinates`` and moves relative to ``parent`` and ``base`` with the
+    velocity ``speeds`` (symbols) in components of ``speed_base``, the joint's
+    own base.
+    """
     name: str
     parent: str        # a point name; "O" for absolute points
     base: str          # a base name; "E" for absolute points
     coordinates: Vec3
+    speeds: tuple = ()
+    speed_base: str = ""
+
+
+#: Joint kinds with a quaternion: configuration names and speed names after the
+#: joint's name (``<joint>_<suffix>``).  A free joint's speeds are Pinocchio's
+#: free-flyer's: the linear velocity of its point, then the angular velocity,
+#: both in components of the joint's own base.
+JOINT_KINDS = {
+    "ball": (("qw", "qx", "qy", "qz"), ("wx", "wy", "wz")),
+    "free": (("x", "y", "z", "qw", "qx", "qy", "qz"), ("vx", "vy", "vz", "wx", "wy", "wz")),
+}
+
+
+@dataclass(frozen=True)
+class JointSpec:
+    """A ball or free joint: the one place where coordinates and speeds differ.
+
+    It makes base ``base``, turned from base ``parent`` by a unit quaternion
+    (w, x, y, z: scalar first), and for a free joint also point ``point`` at
+    position (x, y, z) from point ``origin``, in components of ``parent``.
+    ``coordinates`` and ``speeds`` are the names of :data:`JOINT_KINDS`; the
+    kinematic relation is ``d(quaternion)/dt = quaternion * (0, w) / 2`` and
+    ``d(position)/dt = R v`` (R: the quaternion's rotation matrix).
+    """
+    name: str
+    kind: str             # "ball" | "free"
+    parent: str           # the parent base
+    base: str             # the base the joint makes
+    origin: str           # free: the parent point; ball: ""
+    point: str            # free: the point the joint makes; ball: ""
+    coordinates: tuple    # names, JOINT_KINDS order
+    speeds: tuple         # names, JOINT_KINDS order
+
+    @property
+    def quaternion(self) -> tuple:
+        """The names of the quaternion's w, x, y, z."""
+        return self.coordinates[-4:]
 
 
 @dataclass(frozen=True)
@@ -306,6 +358,9 @@ class ModelSpec:
     gravity: Optional[Vec3] = None     # components in E, acting at every G
     actions: tuple = ()                # tuple[ActionSpec, ...]
     effects: tuple = ()                # tuple of the effect dataclasses above
+    #: ball and free joints (JointSpec); their coordinates and speeds come after
+    #: the simple coordinates, in joint order
+    joints: tuple = ()
     #: ((name, unit), ...): units of coordinates, parameters and inputs, for people
     #: and for exports (an FMU's variables); they never change the equations
     units: tuple = ()
@@ -317,8 +372,19 @@ class ModelSpec:
     # -- convenience -------------------------------------------------------
     @property
     def n(self) -> int:
-        """Number of generalized coordinates."""
+        """Number of degrees of freedom: the speeds (the size of A)."""
+        return len(self.speeds)
+
+    @property
+    def nq(self) -> int:
+        """Number of configuration coordinates (more than ``n`` with a ball or free joint)."""
         return len(self.coordinates)
+
+    @property
+    def simple_coordinates(self) -> tuple:
+        """The coordinates whose speed is their time derivative (all but joints')."""
+        return self.coordinates[:len(self.coordinates) - sum(len(j.coordinates)
+                                                             for j in self.joints)]
 
     @property
     def parameter_names(self) -> tuple:
@@ -330,7 +396,9 @@ class ModelSpec:
 
     @property
     def speeds(self) -> tuple:
-        return tuple(speed_name(c) for c in self.coordinates)
+        """Speed names: ``q_dot`` of each simple coordinate, then the joints' speeds."""
+        return (tuple(speed_name(c) for c in self.simple_coordinates)
+                + tuple(s for j in self.joints for s in j.speeds))
 
     def expressions(self):
         """Every expression of the model: angles, coordinates, masses, inertias,

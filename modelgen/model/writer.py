@@ -72,20 +72,31 @@ def spec_to_yaml(spec: ModelSpec) -> str:
     out = [f"name: {name(spec.name)}"]
     if spec.description:
         out.append(f"description: {name(spec.description)}")
-    if spec.coordinates:
-        out.append("coordinates: [" + ", ".join(name(c) for c in spec.coordinates) + "]")
+    if spec.simple_coordinates:
+        out.append("coordinates: [" + ", ".join(name(c) for c in spec.simple_coordinates) + "]")
     if spec.parameters:
         out.append("parameters:")
         out += [f"  {name(p)}: {yaml_float(v)}" for p, v in spec.parameters]
     if spec.inputs:
         out.append("inputs: [" + ", ".join(name(i) for i in spec.inputs) + "]")
-    if spec.bases:
+    made = {j.base for j in spec.joints} | {j.point for j in spec.joints}
+    bases = [b for b in spec.bases if b.name not in made]
+    if bases:
         out.append("bases:")
         out += [f"  {name(b.name)}: {{parent: {name(b.parent)}, axis: {b.axis}, "
-                f"angle: {_yaml_expr(b.angle)}}}" for b in spec.bases]
-    if spec.points:
+                f"angle: {_yaml_expr(b.angle)}}}" for b in bases]
+    if spec.joints:
+        out.append("joints:")
+        for j in spec.joints:
+            text = f"  {name(j.name)}: {{type: {j.kind}, parent: {name(j.parent)}, " \
+                   f"base: {name(j.base)}"
+            if j.kind == "free":
+                text += f", from: {name(j.origin)}, point: {name(j.point)}"
+            out.append(text + "}")
+    points = [p for p in spec.points if p.name not in made]
+    if points:
         out.append("points:")
-        for p in spec.points:
+        for p in points:
             where = "" if (p.parent, p.base) == (CANONICAL_POINT, CANONICAL_BASE) else \
                 f"from: {name(p.parent)}, base: {name(p.base)}, "
             out.append(f"  {name(p.name)}: {{{where}coordinates: "

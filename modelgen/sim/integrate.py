@@ -98,15 +98,15 @@ def _lib_function(cm, suffix):
 def jacobian(cm, t, x, u=None, p=None) -> np.ndarray:
     """d xdot / d x at (t, x), shape (nx, nx): the generated symbolic Jacobian when
     the model has one, else central differences of the compiled rhs in C."""
-    nx = 2 * cm.n
+    nx = cm.nx
     x = cm._vector(x, nx, "x")
     out = np.empty((nx, nx))
     fn = _lib_function(cm, "jacobian") or _lib_function(cm, "jacobian_fd")
     status = fn(float(t), cm._ptr(x), cm._ptr(cm.input_vector(u)), cm._ptr(cm.params(p)),
                 cm._ptr(out))
     if status:
-        raise MassMatrixError(status, cm.coordinates[status - 1], t, x,
-                              failure_kind(cm.mass_matrix(x[:cm.n], p), status - 1))
+        raise MassMatrixError(status, cm.dof_names[status - 1], t, x,
+                              failure_kind(cm.mass_matrix(x[:cm.nq], p), status - 1))
     return out
 
 
@@ -167,7 +167,7 @@ def _times(t_eval, t0, t1, sign=1.0):
 @_checked
 def _options(cm, method, rtol, atol, step, first_step, max_step, max_steps):
     m = method_of(method)
-    nx = 2 * cm.n
+    nx = cm.nx
     if step is None:
         if not m.adaptive:
             raise SimulationError(f"method {m.name!r} has a fixed step: give step=")
@@ -205,7 +205,7 @@ class _Inputs:
         self.errors = []
         self._keep = []
         if callable(u):
-            nu, nx = len(cm.inputs), 2 * cm.n
+            nu, nx = len(cm.inputs), cm.nx
 
             def call(ctx, t, x_ptr, u_ptr):
                 x = np.frombuffer(ffi.buffer(x_ptr, 8 * nx), dtype=float).copy()
@@ -335,7 +335,7 @@ def simulate(cm, x0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10
     >>> res = simulate(cm, [np.pi / 2, 0.0], (0.0, 3.0), rtol=1e-10, events=g)  # doctest: +SKIP
     >>> res.t_events[0], res.y.shape, res.message                             # doctest: +SKIP
     """
-    ffi, nx = cm.ffi, 2 * cm.n
+    ffi, nx = cm.ffi, cm.nx
     m, rtol, atol, fixed, first, hmax, budget = _options(
         cm, method, rtol, atol, step, first_step, max_step,
         DEFAULT_MAX_STEPS if max_steps is None else max_steps)
@@ -460,7 +460,7 @@ def simulate(cm, x0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10
     message = status_message(
         int(status), t=t_reached, h=sign * float(stop[1]), t_fail=t_fail,
         x=_vector_text(stop[STOP_X:]), pivot=pivot,
-        coordinate=cm.coordinates[pivot - 1] if 0 < pivot <= cm.n else "?", max_steps=max_steps,
+        coordinate=cm.dof_names[pivot - 1] if 0 < pivot <= cm.n else "?", max_steps=max_steps,
         kind=_mass_matrix_kind(cm, status, pivot, p_vec, x_start,
                                stats_total["naccept"] == 0))
     if failure is not None:
@@ -542,7 +542,7 @@ def _mass_matrix_kind(cm, status, pivot, p_vec, x_start, at_start) -> str:
     if status != -3 or not 0 < pivot <= cm.n:
         return "not positive definite"
     if at_start:
-        return failure_kind(cm.mass_matrix(x_start[:cm.n], p_vec), pivot - 1)
+        return failure_kind(cm.mass_matrix(x_start[:cm.nq], p_vec), pivot - 1)
     return "singular to working precision"
 
 
@@ -551,8 +551,8 @@ def _conditioning_note(cm, p_vec, x_start, x_last) -> str:
     its start and its last good state (a singular configuration ahead), else ''."""
     if not (np.all(np.isfinite(x_start)) and np.all(np.isfinite(x_last))):
         return ""
-    return growth_note(condition_number(cm.mass_matrix(x_start[:cm.n], p_vec)),
-                       condition_number(cm.mass_matrix(x_last[:cm.n], p_vec)))
+    return growth_note(condition_number(cm.mass_matrix(x_start[:cm.nq], p_vec)),
+                       condition_number(cm.mass_matrix(x_last[:cm.nq], p_vec)))
 
 
 # -- batches ---------------------------------------------------------------------------
@@ -599,7 +599,7 @@ def simulate_batch(cm, X0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol
 
     >>> res = simulate_batch(cm, X0, (0, 5), P={"m2": np.linspace(0.5, 2, len(X0))})  # doctest: +SKIP
     """
-    nx = 2 * cm.n
+    nx = cm.nx
     m, rtol, atol, fixed, first, hmax, max_steps = _options(
         cm, method, rtol, atol, step, first_step, max_step, max_steps)
     t0, t1, sign = _span(t_span)
@@ -654,7 +654,7 @@ def simulate_batch(cm, X0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol
             int(status[r]), t=sign * float(stop[r, 0]), h=sign * float(stop[r, 1]),
             t_fail=sign * float(stop[r, 2]),
             x=_vector_text(stop[r, STOP_X:]), pivot=pivot,
-            coordinate=cm.coordinates[pivot - 1] if 0 < pivot <= cm.n else "?",
+            coordinate=cm.dof_names[pivot - 1] if 0 < pivot <= cm.n else "?",
             max_steps=max_steps,
             kind=_mass_matrix_kind(cm, int(status[r]), pivot,
                                    P_rows[r] if p_stride else P_rows, X0[r],

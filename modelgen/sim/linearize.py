@@ -223,8 +223,8 @@ def linearize(cm, x, u=None, t=0.0, p=None, outputs=None) -> Linearization:
             f"modelgen.load(..., linearize=True) or modelgen.load_scene(..., linearize=True)")
     status, A, B, C, D = got
     if status:
-        raise MassMatrixError(status, cm.coordinates[status - 1], t, x,
-                              failure_kind(cm.mass_matrix(x[:cm.n], p_vec), status - 1))
+        raise MassMatrixError(status, cm.dof_names[status - 1], t, x,
+                              failure_kind(cm.mass_matrix(x[:cm.nq], p_vec), status - 1))
     for label, M, names in (("A", A, cm.state_names), ("B", B, cm.state_names),
                             ("C", C, cm.output_columns), ("D", D, cm.output_columns)):
         bad = [names[i] for i in range(M.shape[0]) if not np.all(np.isfinite(M[i]))]

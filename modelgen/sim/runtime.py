@@ -45,9 +45,22 @@ class CompiledModel:
         self.parameters = {name: float(v) for name, v in manifest["parameters"]}
         self.inputs = tuple(manifest["inputs"])
         self.bodies = tuple(manifest["bodies"])
-        self.n = len(self.coordinates)
-        #: names of the state x = [q, qd]: the coordinates, then their speeds
-        self.state_names = self.coordinates + tuple(f"{c}_dot" for c in self.coordinates)
+        #: the speeds: ``q_dot`` of each simple coordinate, then the speeds of the
+        #: ball and free joints (angular velocities in the joint's base, and a
+        #: free joint's linear velocity first)
+        self.speeds = tuple(manifest.get("speeds") or (f"{c}_dot" for c in self.coordinates))
+        #: number of speeds (degrees of freedom, the size of A); ``nq`` coordinates
+        self.n = len(self.speeds)
+        self.nq = len(self.coordinates)
+        self.nx = self.nq + self.n
+        #: state indices (w, x, y, z) of each joint's unit quaternion
+        self.quaternions = tuple(tuple(qi) for qi in manifest.get("quaternions", ()))
+        #: names of the state x = [q, qd]: the coordinates, then the speeds
+        self.state_names = self.coordinates + self.speeds
+        #: one name per degree of freedom (the rows of A): a simple coordinate's
+        #: own name, a joint's speed name
+        simple = manifest.get("n_simple", self.nq)
+        self.dof_names = self.coordinates[:simple] + self.speeds[simple:]
         self.path = Path(module_path)
         self.lib = ModelLibrary(manifest, self.path)
         self.ffi = self.lib.ffi
@@ -72,12 +85,13 @@ class CompiledModel:
         if got != ABI_VERSION:
             raise BuildError(f"{self.path}: generated ABI version {got}, this modelgen "
                              f"expects {ABI_VERSION}; regenerate the model")
-        dims = self.ffi.new("int[6]")
+        dims = self.ffi.new("int[7]")
         getattr(self.lib, f"{self.name}_dimensions")(dims)
         prefix = self.name.upper()
-        expected = {"NQ": self.n, "NX": 2 * self.n, "NP": len(self.parameters),
+        expected = {"NQ": self.nq, "NX": self.nx, "NP": len(self.parameters),
                     "NU": len(self.inputs), "NBODIES": len(self.bodies),
-                    "NY": sum(len(o["columns"]) for o in self.manifest["outputs"])}
+                    "NY": sum(len(o["columns"]) for o in self.manifest["outputs"]),
+                    "NV": self.n}
         for got, (key, value) in zip(dims, expected.items()):
             if got != value:
                 raise BuildError(f"{self.path}: the library's {prefix}_{key} is {got}, the "
@@ -91,7 +105,8 @@ class CompiledModel:
         return (CompiledModel, (self.manifest, str(self.path)))
 
     def __repr__(self):
-        return (f"<CompiledModel {self.name}: n={self.n}, {len(self.parameters)} parameters, "
+        sizes = f"n={self.n}" if self.nq == self.n else f"nq={self.nq}, nv={self.n}"
+        return (f"<CompiledModel {self.name}: {sizes}, {len(self.parameters)} parameters, "
                 f"{len(self.inputs)} inputs, {len(self.bodies)} bodies>")
 
     # -- argument handling -------------------------------------------------------
@@ -164,16 +179,31 @@ class CompiledModel:
         return out
 
     # -- model functions ---------------------------------------------------------
+    def neutral_state(self) -> np.ndarray:
+        """The state with every coordinate and speed zero and every quaternion (1, 0, 0, 0)."""
+        x = np.zeros(self.nx)
+        for quat in self.quaternions:
+            x[quat[0]] = 1.0
+        return x
+
+    def project(self, x) -> np.ndarray:
+        """A copy of the state (or configuration) ``x`` with each quaternion normalised
+        (what the integrators do after every step)."""
+        x = np.array(x, dtype=float)
+        for quat in self.quaternions:
+            x[list(quat)] /= np.linalg.norm(x[list(quat)])
+        return x
+
     def mass_matrix(self, q, p=None) -> np.ndarray:
-        """A(q, p), shape (n, n)."""
-        q = self._vector(q, self.n, "q")
+        """A(q, p), shape (n, n); q has ``nq`` entries."""
+        q = self._vector(q, self.nq, "q")
         out = np.empty((self.n, self.n))
         self._mass_matrix(self._ptr(q), self._ptr(self.params(p)), self._ptr(out))
         return out
 
     def velocity_terms(self, q, qd, p=None) -> np.ndarray:
         """h(q, qd, p) with A qdd = tau - h, shape (n,)."""
-        q, qd = self._vector(q, self.n, "q"), self._vector(qd, self.n, "qd")
+        q, qd = self._vector(q, self.nq, "q"), self._vector(qd, self.n, "qd")
         out = np.empty(self.n)
         self._velocity_terms(self._ptr(q), self._ptr(qd), self._ptr(self.params(p)),
                              self._ptr(out))
@@ -181,7 +211,7 @@ class CompiledModel:
 
     def generalized_forces(self, t, q, qd, u=None, p=None) -> np.ndarray:
         """tau(t, q, qd, u, p), shape (n,)."""
-        q, qd = self._vector(q, self.n, "q"), self._vector(qd, self.n, "qd")
+        q, qd = self._vector(q, self.nq, "q"), self._vector(qd, self.n, "qd")
         out = np.empty(self.n)
         self._generalized_forces(self._time(t), self._ptr(q), self._ptr(qd),
                                  self._ptr(self.input_vector(u)), self._ptr(self.params(p)),
@@ -193,8 +223,8 @@ class CompiledModel:
 
         Raises :class:`MassMatrixError` if A is not positive definite.
         """
-        x = self._vector(x, 2 * self.n, "x")
-        out = np.empty(2 * self.n)
+        x = self._vector(x, self.nx, "x")
+        out = np.empty(self.nx)
         status = self._rhs(self._time(t), self._ptr(x), self._ptr(self.input_vector(u)),
                            self._ptr(self.params(p)), self._ptr(out))
         if status:
@@ -203,8 +233,8 @@ class CompiledModel:
 
     def _mass_matrix_error(self, pivot: int, t, x, p=None) -> MassMatrixError:
         """The error of a failing pivot at x, worded by the kind of failure."""
-        kind = failure_kind(self.mass_matrix(x[:self.n], p), pivot - 1)
-        return MassMatrixError(pivot, self.coordinates[pivot - 1], t, x, kind)
+        kind = failure_kind(self.mass_matrix(x[:self.nq], p), pivot - 1)
+        return MassMatrixError(pivot, self.dof_names[pivot - 1], t, x, kind)
 
     def rhs_function(self, u=None, p=None):
         """Low-overhead ``f(t, x) -> xdot`` with parameters and inputs bound.
@@ -220,7 +250,7 @@ class CompiledModel:
         >>> f.x[:] = x0; f.inplace(0.0); f.out                      # doctest: +SKIP
         """
         ffi = self.ffi
-        nx = 2 * self.n
+        nx = self.nx
         p_arr = self.params(p).copy()
         u_arr = self.input_vector(u).copy()
         x_buf = np.zeros(nx)
@@ -265,7 +295,7 @@ class CompiledModel:
 
     def energy(self, q, qd, p=None) -> np.ndarray:
         """[kinetic, potential] in J; potential of gravity (zero at O) and of springs."""
-        q, qd = self._vector(q, self.n, "q"), self._vector(qd, self.n, "qd")
+        q, qd = self._vector(q, self.nq, "q"), self._vector(qd, self.n, "qd")
         out = np.empty(2)
         self._energy(self._ptr(q), self._ptr(qd), self._ptr(self.params(p)), self._ptr(out))
         return out
@@ -274,7 +304,7 @@ class CompiledModel:
         """The scene's recorded outputs at one state (flat, ``output_columns`` order)."""
         if self._outputs is None:
             raise SimulationError(f"{self.name}: this model was generated without outputs")
-        x = self._vector(x, 2 * self.n, "x")
+        x = self._vector(x, self.nx, "x")
         out = np.empty(len(self.output_columns))
         self._outputs(self._time(t), self._ptr(x), self._ptr(self.input_vector(u)),
                       self._ptr(self.params(p)), self._ptr(out))
@@ -382,7 +412,7 @@ class CompiledModel:
         limit = STABILITY_LIMIT.get(name)
         if limit is None:            # implicit methods: A-stable
             return None
-        x = self._vector(x0, 2 * self.n, "x0")
+        x = self._vector(x0, self.nx, "x0")
         try:
             J = self.jac(t0, x, _input_at(self, u, t0, x), p)
             lam = float(np.max(np.abs(np.linalg.eigvals(J))))
@@ -397,8 +427,8 @@ class CompiledModel:
 
     def energies(self, res, p=None) -> np.ndarray:
         """Kinetic and potential energy at every time of a result, shape (n_times, 2)."""
-        n = self.n
-        return np.array([self.energy(x[:n], x[n:], p) for x in res.y.T]).reshape(-1, 2)
+        nq = self.nq
+        return np.array([self.energy(x[:nq], x[nq:], p) for x in res.y.T]).reshape(-1, 2)
 
     def simulate_batch(self, X0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10,
                        u=None, P=None, **options):
@@ -450,7 +480,7 @@ class CompiledModel:
         fn = getattr(self.lib, f"{self.name}_linearize", None)
         if fn is None:
             return None
-        nx, nu, ny = 2 * self.n, len(self.inputs), len(self.output_columns)
+        nx, nu, ny = self.nx, len(self.inputs), len(self.output_columns)
         out = [np.zeros((nx, nx)), np.zeros((nx, nu)), np.zeros((ny, nx)), np.zeros((ny, nu))]
         ptrs = [self._ptr(a) if a.size else self.ffi.NULL for a in out]
         status = fn(t, self._ptr(x), self._ptr(u), self._ptr(p), *ptrs)
@@ -458,7 +488,7 @@ class CompiledModel:
 
     def body_poses(self, q, p=None) -> np.ndarray:
         """4x4 pose of every body, shape (n_bodies, 4, 4)."""
-        q = self._vector(q, self.n, "q")
+        q = self._vector(q, self.nq, "q")
         out = np.empty((len(self.bodies), 4, 4))
         self._body_poses(self._ptr(q), self._ptr(self.params(p)), self._ptr(out))
         return out
@@ -475,7 +505,7 @@ def check_mass_matrix(cm: CompiledModel, samples: int = 3, seed: int = 0) -> Non
     rng = np.random.default_rng(seed)
     failing = None
     for _ in range(samples):
-        A = cm.mass_matrix(rng.uniform(-np.pi, np.pi, cm.n))
+        A = cm.mass_matrix(cm.project(rng.uniform(-np.pi, np.pi, cm.nq)))
         _check_representable(cm, A)
         pivot = _cholesky_pivot(A)
         if pivot is None:
@@ -483,7 +513,7 @@ def check_mass_matrix(cm: CompiledModel, samples: int = 3, seed: int = 0) -> Non
         if pivot is None:
             return
         failing = pivot
-    name = cm.coordinates[failing]
+    name = cm.dof_names[failing]
     raise DerivationError(
         f"{cm.name}: the mass matrix is singular for every configuration tried: coordinate "
         f"{name!r} (row {failing + 1} of A) moves no mass or inertia independently of "

@@ -80,7 +80,7 @@ class Scene:
         """
         s, cm = self.spec, self.model
         x = self.initial_state(x0)
-        rest = np.concatenate([x[:cm.n], np.zeros(cm.n)])
+        rest = np.concatenate([x[:cm.nq], np.zeros(cm.n)])
         u = self._constant_inputs()
         return max(float(np.max(np.abs(np.linalg.eigvals(cm.jac(s.t_start, state, u, p)))))
                    for state in (x, rest))

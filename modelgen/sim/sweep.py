@@ -274,10 +274,10 @@ def _study(cm, defaults, parameters, initial, x0, t_eval, t_span, method, rtol, 
     params, n_runs = _columns(parameters, tuple(cm.parameters), "parameter", None)
     inits, n_runs = _columns(initial, cm.state_names, "state", n_runs)
     n_runs = 1 if n_runs is None else n_runs
-    base = np.zeros(2 * cm.n) if x0 is None and "x0" not in defaults else \
+    base = cm.neutral_state() if x0 is None and "x0" not in defaults else \
         np.array(defaults["x0"] if x0 is None else x0, dtype=float)
-    if base.shape != (2 * cm.n,):
-        raise SimulationError(f"{cm.name}: x0 must have {2 * cm.n} values, got {base.shape}")
+    if base.shape != (cm.nx,):
+        raise SimulationError(f"{cm.name}: x0 must have {cm.nx} values, got {base.shape}")
     X0 = np.tile(base, (n_runs, 1))
     for name, a in inits.items():
         X0[:, cm.state_names.index(name)] = a
@@ -421,7 +421,7 @@ def _dataset(xr, cm, study, swept, results, defaults, timing):
         coords[name] = ("run", np.broadcast_to(values, (study.n_runs,)).copy())
     # one contiguous block per state, filled chunk by chunk (one copy): xarray is slow on
     # strided views (6.8 s instead of 0.02 s for four 10,000 x 101 views, xarray 2026.9)
-    by_state = np.empty((2 * cm.n, study.n_runs, len(study.t_eval)))
+    by_state = np.empty((cm.nx, study.n_runs, len(study.t_eval)))
     lo = 0
     for r in results:
         hi = lo + r["y"].shape[0]
