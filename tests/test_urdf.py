@@ -17,7 +17,7 @@ from modelgen.cli import main
 from modelgen.errors import ModelError
 from modelgen.model import as_spec, load_model
 from modelgen.model.spec import symbol
-from modelgen.model.urdf import import_urdf, import_urdf_text, urdf_to_yaml
+from modelgen.model.urdf import import_urdf, import_urdf_text, sanitize, urdf_to_yaml
 from modelgen.sim.load import load
 
 DATA = Path(__file__).parent / "data" / "urdf"
@@ -142,6 +142,116 @@ def test_unaligned_axes_rpy_welds_and_mimic_match_pinocchio(pin, tmp_path):
     _compare_with_pinocchio(pin, path, tmp_path / "build")
 
 
+# -- floating bases and floating joints: free joints (a unit quaternion) ----------------
+
+def _free_joint_names(joint: str) -> tuple:
+    return (tuple(f"{joint}_{s}" for s in ("x", "y", "z", "qx", "qy", "qz", "qw")),
+            tuple(f"{joint}_{s}" for s in ("vx", "vy", "vz", "wx", "wy", "wz")))
+
+
+def _compare_floating_with_pinocchio(pin, imp, pm, cm, samples: int = 4) -> float:
+    """A, h - tau_gravity and q'' against Pinocchio with free joints: Pinocchio's q
+    holds (x, y, z, qx, qy, qz, qw) per free joint (its free-flyer), modelgen's the
+    simple coordinates first and each free joint's (x, y, z, qw, qx, qy, qz) last;
+    the speeds (v in the joint's base, then w) are the same quantities, permuted."""
+    pd = pm.createData()
+    joints = {j.name: j for j in imp.joints}
+    names, speeds = list(cm.coordinates), list(cm.speeds)
+    P = np.zeros((pm.nv, cm.n))          # Pinocchio's v = P modelgen's v
+    q_parts = []
+    for jid in range(1, pm.njoints):
+        jm, name = pm.joints[jid], pm.names[jid]
+        info = joints.get(name)
+        if info is None or info.type == "floating":       # root_joint, or a floating one
+            qn, vn = _free_joint_names(sanitize(name))
+            q_parts.append((jm.idx_q, [names.index(c) for c in qn], None))
+            for k, v in enumerate(vn):
+                P[jm.idx_v + k, speeds.index(v)] = 1.0
+        else:
+            q_parts.append((jm.idx_q, [names.index(info.coordinate)], jm.nq))
+            P[jm.idx_v, speeds.index(info.coordinate + "_dot")] = 1.0
+    assert np.all(P.sum(axis=0) == 1) and np.all(P.sum(axis=1) == 1)
+
+    def q_pin(q):
+        out = np.zeros(pm.nq)
+        for iq, ks, nq in q_parts:
+            if nq is None:
+                out[iq:iq + 7] = q[ks]
+            else:
+                out[iq:iq + nq] = [math.cos(q[ks[0]]), math.sin(q[ks[0]])] if nq == 2 \
+                    else [q[ks[0]]]
+        return out
+    rng = np.random.default_rng(20261123)
+    nu, worst = len(cm.inputs), 0.0
+    for _ in range(samples):
+        q = cm.project(rng.uniform(-1.5, 1.5, cm.nq))     # random unit quaternions
+        v, u = rng.uniform(-2, 2, cm.n), rng.uniform(-5, 5, nu)
+        pq, pv = q_pin(q), P @ v
+        for iq, _, nq in q_parts:
+            if nq is None:
+                assert abs(np.linalg.norm(pq[iq + 3:iq + 7]) - 1) < 1e-15
+        m_pin = pin.crba(pm, pd, pq)
+        a_ref = P.T @ (np.triu(m_pin) + np.triu(m_pin, 1).T) @ P
+        a_mg = cm.mass_matrix(q)
+        nle = P.T @ pin.nonLinearEffects(pm, pd, pq, pv)
+        tau_gravity = cm.generalized_forces(0.0, q, np.zeros(cm.n), np.zeros(nu))
+        h_mg = cm.velocity_terms(q, v) - tau_gravity
+        tau = cm.generalized_forces(0.0, q, v, u) - tau_gravity   # efforts (and damping)
+        qdd_ref = P.T @ pin.aba(pm, pd, pq, pv, P @ tau)
+        qdd_mg = cm.rhs(0.0, np.concatenate([q, v]), u)[cm.nq:]
+        errors = (np.max(np.abs(a_mg - a_ref)) / np.max(np.abs(a_ref)),
+                  np.max(np.abs(h_mg - nle)) / max(1.0, np.max(np.abs(nle))),
+                  np.max(np.abs(qdd_mg - qdd_ref)) / max(1.0, np.max(np.abs(qdd_ref))))
+        assert max(errors) <= TOL, errors
+        worst = max(worst, *errors)
+    return worst
+
+
+def _installed_robot(relative: str) -> Path:
+    pin = pytest.importorskip("pinocchio")
+    share = Path(pin.__file__).resolve().parents[4] / "share" / "example-robot-data" / "robots"
+    path = share / relative
+    if not path.exists():
+        pytest.skip(f"example-robot-data has no {relative} here ({share})")
+    return path
+
+
+@pytest.mark.parametrize("robot", ["solo12", "go2"])
+def test_floating_base_quadrupeds_match_pinocchio_free_flyer(robot, pin, tmp_path):
+    path = DATA / "solo12.urdf" if robot == "solo12" else \
+        _installed_robot("go2_description/urdf/go2.urdf")
+    imp = import_urdf(path, floating_base=True)
+    spec = imp.model.spec()
+    assert spec.nq == spec.n + 1 == 19
+    assert spec.coordinates[-7:] == tuple(f"root_joint_{s}" for s in
+                                          ("x", "y", "z", "qw", "qx", "qy", "qz"))
+    cm = load(imp.model, tmp_path / "build")
+    _compare_floating_with_pinocchio(pin, imp, pin.buildModelFromUrdf(str(path),
+                                                                       pin.JointModelFreeFlyer()),
+                                     cm)
+
+
+def test_a_floating_joint_inside_the_tree_matches_pinocchio(pin, tmp_path):
+    """A URDF 'floating' joint between two links (a free body riding on an arm)."""
+    text = EXOTIC.replace('<joint name="j3" type="continuous">',
+                          '<joint name="j3" type="floating">')
+    text = text.replace('<mimic joint="j4" multiplier="-0.7" offset="0.25"/>', "")
+    path = tmp_path / "floating.urdf"
+    path.write_text(text)
+    imp = import_urdf(path)
+    assert "j3" not in imp.model.spec().coordinates and "j3_qw" in imp.model.spec().coordinates
+    cm = load(imp.model, tmp_path / "build")
+    _compare_floating_with_pinocchio(pin, imp, pin.buildModelFromUrdf(str(path)), cm)
+
+
+def test_modelgen_load_takes_floating_base(tmp_path):
+    cm = load(str(DATA / "double_pendulum.urdf"), tmp_path, floating_base=True)
+    assert cm.coordinates[:2] == ("joint1", "joint2") and cm.nq == 9 and cm.n == 8
+    assert cm.quaternions == ((5, 6, 7, 8),)
+    with pytest.raises(TypeError, match="floating_base=True applies to a URDF"):
+        as_spec(DATA.parent / "models" / "x.yaml", floating_base=True)
+
+
 # -- files, entry points ----------------------------------------------------------
 
 def test_import_names_coordinates_inputs_and_effects_in_depth_first_order():
@@ -212,8 +322,8 @@ def _joint(name="j", kind="revolute", parent="a", child="b", extra=""):
     ('<link name="a"/>\n<link name="b"><inertial><mass value="-1"/>'
      '<inertia ixx="1" iyy="1" izz="1" ixy="0" ixz="0" iyz="0"/></inertial></link>\n'
      + _joint(), 4, "link[b].inertial.mass", "negative mass"),
-    (LINKS + "\n" + _joint(kind="floating"), 5, "joint[j].type",
-     "floating joints are not supported yet"),
+    (LINKS + "\n" + _joint(kind="floating", extra='<mimic joint="j"/>'), 5, "joint[j].mimic",
+     "a floating joint cannot mimic"),
     (LINKS + "\n" + _joint(extra='<mimic joint="ghost"/>'), 5, "joint[j].mimic",
      "mimic of unknown joint 'ghost'"),
     (LINKS + '\n<link name="c"/>\n' + _joint(), 5, "robot", "2 root links"),

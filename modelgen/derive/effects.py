@@ -157,7 +157,7 @@ def _damper(g: GraphBuilder, kin: Kinematics, eff: DamperEffect) -> EffectTerms:
 def _on_coordinates(g: GraphBuilder, kin: Kinematics, forces: dict,
                     potential=ZERO) -> EffectTerms:
     """Generalized forces ``{coordinate name: force}`` (others zero) as EffectTerms."""
-    coord = {name: k for k, name in enumerate(kin.spec.coordinates)}
+    coord = {name: k for k, name in enumerate(kin.spec.simple_coordinates)}
     tau = [ZERO] * kin.spec.n
     for name, force in forces.items():
         tau[coord[name]] = force
@@ -174,7 +174,7 @@ def _torsion_spring(g: GraphBuilder, kin: Kinematics, eff: TorsionSpringEffect) 
 
 def _joint_damping(g: GraphBuilder, kin: Kinematics, eff: JointDampingEffect) -> EffectTerms:
     """-c q_dot on each listed coordinate."""
-    qd = {name: kin.qd[k] for k, name in enumerate(kin.spec.coordinates)}
+    qd = {name: kin.qd[k] for k, name in enumerate(kin.spec.simple_coordinates)}
     return _on_coordinates(g, kin, {name: -eff.damping * qd[name] for name in eff.coordinates})
 
 

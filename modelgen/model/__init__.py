@@ -26,14 +26,19 @@ __all__ = ["Model", "ModelSpec", "SceneSpec", "load_model", "parse_model", "spec
            "CONSERVATIVE_KINDS", "load_urdf"]
 
 
-def as_spec(source) -> ModelSpec:
+def as_spec(source, *, floating_base: bool = False) -> ModelSpec:
     """A :class:`ModelSpec` from a path (YAML, or URDF by its ``.urdf`` suffix), a
-    :class:`Model` or a spec."""
+    :class:`Model` or a spec.  ``floating_base=True`` (URDF only) makes the
+    root link a free body (see :mod:`modelgen.model.urdf`)."""
+    if floating_base and not (isinstance(source, (str, Path))
+                              and Path(source).suffix.lower() == ".urdf"):
+        raise TypeError("floating_base=True applies to a URDF file (a .urdf path); in a "
+                        "model file, declare a free joint under 'joints:'")
     if isinstance(source, ModelSpec):
         return source
     if isinstance(source, (str, Path)):
         if Path(source).suffix.lower() == ".urdf":
-            return load_urdf(source).spec()
+            return load_urdf(source, floating_base=floating_base).spec()
         return load_model(source)
     if isinstance(source, Model):
         return source.spec()

@@ -44,7 +44,14 @@ applies.  What becomes what:
 * Masses, centres of mass and inertias are numbers (exact decimals of the
   URDF values) unless ``inertial_parameters=True``, which makes each body's
   mass ``m_<body>`` and inertia entries ``I_<body>_xx`` ... parameters.
-* ``floating`` joints are refused (floating bases are not supported yet);
+* A ``floating`` joint is a ``free`` joint (a position and a unit quaternion,
+  6 speeds: Pinocchio's free-flyer) named after the joint, from the joint
+  origin's point and base to the child's; it has no input (nothing actuates
+  it).  ``floating_base=True`` makes the root link itself a free body,
+  through a free joint ``root_joint`` from E/O, as Pinocchio's
+  ``buildModel(urdf, JointModelFreeFlyer())`` does.  The free joints'
+  coordinates and speeds come after the joint angles (modelgen's order: simple
+  coordinates first), where Pinocchio puts its free-flyer first.
   ``fix_floating_root=True`` welds a floating joint at the root instead and
   says so in the description.  Meshes are never opened.
 
@@ -69,7 +76,7 @@ import sympy
 
 from modelgen.errors import ModelError
 from modelgen.model.api import Model, check_name
-from modelgen.model.spec import CANONICAL_BASE, CANONICAL_POINT, symbol
+from modelgen.model.spec import CANONICAL_BASE, CANONICAL_POINT, JOINT_KINDS, symbol
 from modelgen.model.urdf_read import Joint, Limit, Robot, parse_robot, rpy_matrix
 
 __all__ = ["UrdfImport", "JointInfo", "load_urdf", "import_urdf", "import_urdf_text",
@@ -115,14 +122,22 @@ def _num(x: float):
 
 
 class _Builder:
-    def __init__(self, robot: Robot, inertial_parameters: bool, notes: tuple):
+    def __init__(self, robot: Robot, inertial_parameters: bool, notes: tuple,
+                 floating_base: bool = False, fix_floating_root: bool = False):
         self.robot = robot
+        self.fix_floating_root = fix_floating_root
+        self.free_links: set = set()
         self.inertial_parameters = inertial_parameters
         self.notes = notes
+        self.floating_base = floating_base
         moving = [j for j in robot.order if j.type in _MOVING]
+        free = sum(j.type == "floating" and not (fix_floating_root and j.parent == robot.root)
+                   for j in robot.order)
         text = (f"Robot '{robot.name}' imported from {Path(robot.file).name}: "
-                f"{sum(j.mimic is None for j in moving)} coordinates, {len(moving)} moving "
-                "links, fixed base.")
+                f"{sum(j.mimic is None for j in moving)} coordinates, "
+                f"{len(moving) + free} moving links"
+                + (f", {free} floating joints" if free else "")
+                + (", floating base." if floating_base else ", fixed base."))
         self.model = Model(self.model_name(), " ".join((text,) + notes))
         self.actuation: dict = {}                     # joint -> (base, point, unit axis)
         self.taken: set = set()
@@ -198,12 +213,33 @@ class _Builder:
         return name
 
     # -- kinematics -----------------------------------------------------------
+    def free_joint(self, wanted: str, parent_base: str, parent_point: str, link: str,
+                   line: int) -> None:
+        """A free joint from (parent_point, parent_base) to ``link``'s own base and point."""
+        name = sanitize(wanted)
+        taken = [name] + [f"{name}_{s}" for kind in ("free",)
+                          for part in JOINT_KINDS[kind] for s in part]
+        clash = [t for t in taken if t in self.taken]
+        if clash:
+            raise ModelError(f"floating joint '{wanted}' gives the name '{clash[0]}', which "
+                             "is already taken", file=self.robot.file, line=line,
+                             key=f"joint[{wanted}]", fix="rename the joint or the link")
+        self.taken.update(taken)
+        base, point = self.unique(f"B_{sanitize(link)}"), self.unique(f"P_{sanitize(link)}")
+        self.model.add_joint(name, "free", parent=parent_base, base=base, origin=parent_point,
+                             point=point)
+        self.base[link], self.point[link] = base, point
+        self.free_links.add(link)
+        self.group[link] = link
+        self.placement[link] = (np.eye(3), np.zeros(3))
+
     def joint(self, joint: Joint) -> None:
         parent_base, parent_point = self.base[joint.parent], self.point[joint.parent]
         jname = sanitize(joint.name)
         point = parent_point
         if any(joint.xyz):      # a welded link's origin is named after the link
-            wanted = f"J_{jname}" if joint.type in _MOVING else f"P_{sanitize(joint.child)}"
+            wanted = f"J_{jname}" if joint.type in _MOVING + ("floating",) \
+                else f"P_{sanitize(joint.child)}"
             point = self.add_point(wanted, parent_point, parent_base,
                                    [_num(x) for x in joint.xyz])
         base = parent_base
@@ -212,6 +248,10 @@ class _Builder:
             if angle != 0:
                 base = self.add_base(f"B_{jname}_{tag}", base, axis, _num(angle))
         child = joint.child
+        if joint.type == "floating" and not (self.fix_floating_root
+                                              and joint.parent == self.robot.root):
+            self.free_joint(joint.name, base, point, child, joint.line)
+            return
         moving = joint.type in _MOVING
         if not moving:
             self.weld(joint)
@@ -264,7 +304,7 @@ class _Builder:
             members.setdefault(self.group[link.name], []).append(link)
         body_of = {}
         for head, links in members.items():
-            if head == self.robot.root:
+            if head == self.robot.root and not self.floating_base:
                 continue
             mass, com, inertia = _merge(links, self.placement)
             name = self.unique(sanitize(head))
@@ -292,6 +332,10 @@ class _Builder:
     def inputs_and_effects(self, body_of: dict) -> None:
         for joint in self.robot.order:
             coordinate = self.coordinate.get(joint.name)
+            if joint.type == "floating" and joint.child in self.free_links:
+                self.infos.append(JointInfo(joint.name, joint.type, None, None, joint.limit,
+                                            joint.damping, joint.friction))
+                continue
             if coordinate is None:
                 mimic = None
                 if joint.mimic is not None and joint.type in _MOVING:
@@ -311,7 +355,7 @@ class _Builder:
             self.model.add_action(self.unique(f"motor_{jname}"), body=child, point=at,
                                   base=base, **{what: vector})
             parent_group = self.group[joint.parent]
-            if parent_group != self.robot.root:
+            if parent_group != self.robot.root or self.floating_base:
                 self.model.add_action(self.unique(f"motor_{jname}_reaction"),
                                       body=body_of[parent_group], point=point, base=base,
                                       **{what: [-v for v in vector]})
@@ -328,6 +372,9 @@ class _Builder:
         self.taken.update(("g",))
         self.coordinates()
         self.model.add_parameter("g", 9.81)
+        if self.floating_base:
+            self.free_joint("root_joint", CANONICAL_BASE, CANONICAL_POINT, self.robot.root,
+                            1)
         for joint in self.robot.order:
             self.joint(joint)
         body_of = self.bodies()
@@ -361,13 +408,15 @@ def _merge(links, placement) -> tuple:
 
 
 def import_urdf_text(text, source: str = "<string>", *, fix_floating_root: bool = False,
-                     inertial_parameters: bool = False) -> UrdfImport:
+                     inertial_parameters: bool = False,
+                     floating_base: bool = False) -> UrdfImport:
     """Import URDF text (str or bytes); see the module docstring."""
     robot = parse_robot(text, source, fix_floating_root=fix_floating_root)
-    notes = tuple(f"The floating joint '{j.name}' at the root was imported as fixed "
-                  "(floating bases are not supported yet)."
-                  for j in robot.order if j.type == "floating")
-    return _Builder(robot, inertial_parameters, notes).build()
+    notes = tuple(f"The floating joint '{j.name}' at the root was imported as fixed."
+                  for j in robot.order if j.type == "floating" and fix_floating_root
+                  and j.parent == robot.root)
+    return _Builder(robot, inertial_parameters, notes, floating_base,
+                    fix_floating_root).build()
 
 
 def import_urdf(path, **options) -> UrdfImport:

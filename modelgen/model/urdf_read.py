@@ -343,13 +343,10 @@ class _Reader:
 
     def check_joint_use(self, joint: Joint, joints: dict, root: str, fix_floating: bool):
         key = f"joint[{joint.name}]"
-        if joint.type == "floating" and not (fix_floating and joint.parent == root):
-            fix = ("import the robot with its root welded to the ground: "
-                   "fix_floating_root=True (modelgen import --fix-floating-root)"
-                   if joint.parent == root else "remove the floating joint")
-            raise self.error("floating joints are not supported yet (no free bodies or "
-                             "quaternions)", joint.line, f"{key}.type", fix)
-        if joint.mimic is None or joint.type == "fixed":
+        if joint.type == "floating" and joint.mimic is not None:
+            raise self.error("a floating joint cannot mimic another joint", joint.line,
+                             f"{key}.mimic", "remove the <mimic> element")
+        if joint.mimic is None or joint.type in ("fixed", "floating"):
             return
         target = joints.get(joint.mimic[0])
         if target is None:

@@ -39,7 +39,8 @@ def _loaded(generated: Generated) -> CompiledModel:
 
 
 def load(source, out_dir=None, *, force: bool = False, jacobian: bool = False,
-         formulation: str = "auto", progress=None, linearize: bool = False) -> CompiledModel:
+         formulation: str = "auto", progress=None, linearize: bool = False,
+         floating_base: bool = False) -> CompiledModel:
     """Build (on first use) and import a model; returns a :class:`CompiledModel`.
 
     ``source`` is a YAML path, a :class:`modelgen.model.Model` or a ModelSpec.
@@ -52,11 +53,13 @@ def load(source, out_dir=None, *, force: bool = False, jacobian: bool = False,
     ``progress(stage)`` is called as each stage of a build starts.
     With ``linearize=True`` the symbolic ``<name>_linearize`` is generated too, for
     :meth:`CompiledModel.linearize` and :meth:`CompiledModel.equilibrium`.
+    ``floating_base=True`` (a URDF path) makes the robot's root link a free
+    body (a free joint ``root_joint``: position, unit quaternion, 6 speeds).
 
     >>> cm = load("models/double_pendulum.yaml")             # doctest: +SKIP
     >>> cm.rhs(0.0, [0.1, 0.2, 0.0, 0.0])                    # doctest: +SKIP
     """
-    return _loaded(generate(as_spec(source), out_dir, force=force, jacobian=jacobian,
+    return _loaded(generate(as_spec(source, floating_base=floating_base), out_dir, force=force, jacobian=jacobian,
                             formulation=formulation, progress=progress,
                             linearize=linearize))
 
