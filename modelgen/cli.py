@@ -103,14 +103,16 @@ def _generate(args) -> int:
         raise ModelgenError(f"{args.model} is a scene file, not a model; fix: run it with "
                             f"`modelgen simulate {args.model}` (which builds its reduced model), "
                             f"or generate the model file it names")
-    spec = as_spec(args.model)
+    spec = as_spec(args.model, floating_base=args.floating_base)
     t_load = time.perf_counter() - t0
     with _generation_progress(args, spec.name) as stages:
         g = generate_model(spec, args.output, force=args.force, jacobian=args.jacobian,
                            formulation=args.formulation, progress=stages)
     b = g.build
     print(f"model      {spec.name}  ({args.model})")
-    print(f"n          {spec.n} coordinates, {len(spec.parameters)} parameters, "
+    sizes = f"{spec.n} coordinates" if spec.nq == spec.n else \
+        f"{spec.nq} coordinates, {spec.n} speeds ({len(spec.joints)} quaternion joints)"
+    print(f"n          {sizes}, {len(spec.parameters)} parameters, "
           f"{len(spec.inputs)} inputs, {len(spec.bodies)} bodies")
     print(f"output     {b.directory}/{spec.name}.c, {spec.name}.h, {b.module_path.name}")
     print(f"rhs        formulation {g.manifest['formulation']}")
@@ -132,13 +134,16 @@ def _generate(args) -> int:
 def _import(args) -> int:
     from modelgen.model.urdf import import_urdf, urdf_to_yaml
     imported = import_urdf(args.urdf, fix_floating_root=args.fix_floating_root,
-                           inertial_parameters=args.inertial_parameters)
+                           inertial_parameters=args.inertial_parameters,
+                           floating_base=args.floating_base)
     spec = imported.model.spec()
     out = Path(args.output) if args.output else Path(args.urdf).with_suffix(".yaml")
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(urdf_to_yaml(imported))
     print(f"model      {spec.name}  ({args.urdf})")
-    print(f"n          {spec.n} coordinates, {len(spec.bodies)} bodies, "
+    sizes = f"{spec.n} coordinates" if spec.nq == spec.n else \
+        f"{spec.nq} coordinates, {spec.n} speeds"
+    print(f"n          {sizes}, {len(spec.bodies)} bodies, "
           f"{len(spec.inputs)} inputs, {len(spec.effects)} joint effects")
     for note in imported.notes:
         print(f"note       {note}")
@@ -292,7 +297,7 @@ def _simulate(args) -> int:
     _check_output_dir(args.output)
     if is_scene_file(args.model):
         return _simulate_scene(args)
-    model = as_spec(args.model)
+    model = as_spec(args.model, floating_base=args.floating_base)
     with _generation_progress(args, model.name) as stages:
         cm = load(model, args.build_dir, progress=stages)
     x0 = cm.neutral_state()
@@ -568,6 +573,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="how <name>_rhs computes q_ddot: aba (articulated-body algorithm, "
                         "O(n), joint trees only), crba (mass matrix and Cholesky solve), or "
                         "auto (aba for joint trees from a measured size on; default)")
+    g.add_argument("--floating-base", action="store_true",
+                   help="(a URDF) make the root link a free body: a free joint root_joint "
+                        "with a position, a unit quaternion and 6 speeds")
     g.set_defaults(func=_generate)
 
     s = sub.add_parser("simulate", help="run a scene (or a model) and write CSV, NPZ and PNG",
@@ -611,9 +619,11 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--trace", action="append", metavar="POINT",
                    help="trace this point in the animation (repeatable; default: the ends "
                         "of the longest branches)")
+    s.add_argument("--floating-base", action="store_true",
+                   help="(a URDF) make the root link a free body (a free joint root_joint)")
     s.set_defaults(func=_simulate)
 
-    i = sub.add_parser("import", help="import a URDF robot (fixed base) as a model file",
+    i = sub.add_parser("import", help="import a URDF robot as a model file",
                        description="Read a URDF file and write a model file in modelgen's "
                                    "YAML: bases, points, bodies, gravity, one input "
                                    "tau_<joint> per joint and the joints' damping and "
@@ -622,8 +632,11 @@ def build_parser() -> argparse.ArgumentParser:
     i.add_argument("-o", "--output", default=None,
                    help="model file to write (default: the URDF path with .yaml)")
     i.add_argument("--fix-floating-root", action="store_true",
-                   help="weld a floating joint at the root to the ground (floating bases "
-                        "are not supported yet)")
+                   help="weld a floating joint at the root to the ground instead of making "
+                        "it a free joint")
+    i.add_argument("--floating-base", action="store_true",
+                   help="make the root link a free body (a free joint root_joint, as "
+                        "Pinocchio's free-flyer)")
     i.add_argument("--inertial-parameters", action="store_true",
                    help="make masses and inertias parameters instead of numbers")
     i.set_defaults(func=_import)

@@ -457,6 +457,13 @@ def build_fmu(source, out_path, *, method: str | None = None, rtol: float | None
     start = time.perf_counter()
     src = _resolve(source)
     spec = src.spec
+    if spec.joints:
+        raise ModelError("FMU export of a model with ball or free joints is not supported: "
+                         "an FMI 2 importer integrates the quaternions of the state without "
+                         "normalising them (nor knows that 7 coordinates move with 6 speeds)",
+                         file=spec.source, key="joints",
+                         fix="export a model whose rotations are simple ones, or simulate "
+                         "this one with modelgen (its integrators normalise the quaternions)")
     settings = _settings(method, rtol, atol, step, src.defaults)
     jacobian = src.jacobian or capi.METHODS[settings.method].implicit
     texts, manifest, hash16 = _model_sources(spec, src.outputs, jacobian, out_dir)

@@ -70,7 +70,7 @@ def derive_outputs(kin: Kinematics, eqs: Equations, outputs) -> OutputColumns:
             cols = [out.name]
         elif out.kind == "generalized_force":
             values = list(parts[a["effect"]])
-            cols = [f"{out.name}.{c}" for c in kin.spec.coordinates]
+            cols = [f"{out.name}.{c}" for c in kin.spec.dof_names]
         elif out.kind == "power":
             # the power of the effect's forces: its generalized force . q_dot
             values = [sympy.Add(*[f * v for f, v in zip(parts[a["effect"]], eqs.qd)])]

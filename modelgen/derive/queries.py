@@ -39,7 +39,10 @@ class Mechanism:
         self.spec = spec
         self.kin = derive_kinematics(spec)
         self._simplify = simplify
-        self.qdd = tuple(symbol(acceleration_name(c)) for c in spec.coordinates)
+        #: one acceleration per degree of freedom: ``q_ddot`` of a simple coordinate,
+        #: ``<speed>_dot`` of a joint's speed
+        self.qdd = tuple(symbol(acceleration_name(c)) for c in spec.simple_coordinates) + \
+            tuple(symbol(s + "_dot") for j in spec.joints for s in j.speeds)
 
     # -- helpers ----------------------------------------------------------------
     def _final(self, expr):
@@ -113,11 +116,12 @@ class Mechanism:
     def partial_velocities(self, body: str) -> dict:
         """The seed's virtual velocities of a body: ``{coordinate: (c_k, b_k)}`` in E.
 
-        ``omega = sum_k c_k q_dot_k`` and ``v_G = sum_k b_k q_dot_k``.
+        ``omega = sum_k c_k q_dot_k`` and ``v_G = sum_k b_k q_dot_k``; for the
+        speeds of a ball or free joint the key is the speed's name.
         """
         _, b = self._body(body)
         out = {}
-        for k, name in enumerate(self.spec.coordinates):
+        for k, name in enumerate(self.spec.dof_names):
             c = self._base(b.base).partials.get(k, (0, 0, 0))
             out[name] = (self._column(c), self._column(self.kin.point_partial(b.G, k)))
         return out

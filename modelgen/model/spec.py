@@ -381,6 +381,12 @@ class ModelSpec:
         return len(self.coordinates)
 
     @property
+    def dof_names(self) -> tuple:
+        """One name per degree of freedom (row of A): each simple coordinate's own
+        name, then the joints' speed names."""
+        return self.simple_coordinates + tuple(s for j in self.joints for s in j.speeds)
+
+    @property
     def simple_coordinates(self) -> tuple:
         """The coordinates whose speed is their time derivative (all but joints')."""
         return self.coordinates[:len(self.coordinates) - sum(len(j.coordinates)

@@ -135,7 +135,7 @@ class _Builder:
                    for j in robot.order)
         text = (f"Robot '{robot.name}' imported from {Path(robot.file).name}: "
                 f"{sum(j.mimic is None for j in moving)} coordinates, "
-                f"{len(moving) + free} moving links"
+                f"{len(moving) + free + floating_base} moving links"
                 + (f", {free} floating joints" if free else "")
                 + (", floating base." if floating_base else ", fixed base."))
         self.model = Model(self.model_name(), " ".join((text,) + notes))

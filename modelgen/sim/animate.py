@@ -243,7 +243,7 @@ def motion(result, spec: ModelSpec, *, compiled=None, p=None, trace: Optional[Se
     >>> m = motion(res, scene.spec.model, compiled=scene.model)   # doctest: +SKIP
     >>> m.positions.shape                # (frames, points incl. O, 3)  # doctest: +SKIP
     """
-    n = spec.n
+    n = spec.nq
     if result.y.shape[0] < n:
         raise ModelgenError(f"animation: the result has {result.y.shape[0]} states, "
                             f"model {spec.name} has {n} coordinates")

@@ -475,7 +475,8 @@ def simulate(cm, x0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10
     res = make_result(
         t=sign * np.concatenate(t_parts), y=np.ascontiguousarray(np.concatenate(x_parts)
                                                           .reshape(-1, nx).T),
-        state_names=cm.state_names, status=int(status), message=message, method=m.name,
+        state_names=cm.state_names, n_coordinates=cm.nq, status=int(status), message=message,
+        method=m.name,
         t_events=[sign * et[ei == i] for i in range(n_ev)] if n_ev else None,
         y_events=[ex[ei == i] for i in range(n_ev)] if n_ev else None,
         t_fail=t_fail if status < 0 else None,
@@ -664,6 +665,7 @@ def simulate_batch(cm, X0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol
                                                stop[r, STOP_X:])
     res = make_result(
         t=sign * times, y=np.ascontiguousarray(x_out.transpose(0, 2, 1)), state_names=cm.state_names,
+        n_coordinates=cm.nq,
         status=status.astype(int), message=messages, method=m.name,
         **{name: np.array([getattr(stats[r], name) for r in range(n_runs)], dtype=_LONG)
            for name in STAT_NAMES if name != "pivot"})

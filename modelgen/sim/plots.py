@@ -28,7 +28,8 @@ def result_figure(res, *, title: str = "", conservative=None):
     from matplotlib.figure import Figure
 
     n_states = len(res.state_names)
-    coords = res.state_names[: n_states // 2] if n_states else ()
+    nq = n_states // 2 if res.n_coordinates is None else res.n_coordinates
+    coords = res.state_names[:nq] if n_states else ()
     plotted = [name for name, v in res.outputs.items() if np.shape(v)[-1] <= MAX_COLUMNS]
     skipped = [name for name in res.outputs if name not in plotted]
     panels = ["coordinates"] + [("output", name) for name in plotted]
@@ -76,7 +77,10 @@ def result_figure(res, *, title: str = "", conservative=None):
                 ax.plot(t, values[:, j], label=column)
             ax.set_ylabel(name)
         if ax.get_legend_handles_labels()[0]:
-            ax.legend(loc="upper left", bbox_to_anchor=(1.0, 1.0), fontsize="small")
+            entries = len(ax.get_legend_handles_labels()[0])
+            ax.legend(loc="upper left", bbox_to_anchor=(1.0, 1.0),
+                      fontsize="small" if entries <= 8 else "x-small",
+                      ncol=1 if entries <= 8 else 2)
         if not res.success and len(t):
             ax.axvline(t[-1], color="r", ls="--")
     axes[-1].set_xlabel("t [s]")

@@ -34,6 +34,9 @@ class Result:
     t: np.ndarray
     y: np.ndarray
     state_names: tuple = ()
+    #: how many of ``state_names`` are coordinates (the rest are speeds); None:
+    #: half of them (a model without ball or free joints)
+    n_coordinates: Optional[int] = None
     status: int = 0
     message: str = "The solver successfully reached the end of the integration interval."
     method: str = ""
