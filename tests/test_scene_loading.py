@@ -67,7 +67,7 @@ def test_shipped_scene_loads_and_its_reduced_model_is_a_valid_model(path):
     s = load_scene(path)
     assert s.name == path.stem == s.model.name
     assert s.source == str(path)
-    assert len(s.initial) == 2 * s.model.n
+    assert len(s.initial) == s.model.nq + s.model.n
     assert s.t_end > s.t_start and s.sample_dt > 0 and s.step > 0
     assert parse_model(spec_to_yaml(s.model)) == s.model
     assert [i.name for i in s.inputs] == list(s.full_model.inputs)
