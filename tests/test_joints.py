@@ -29,11 +29,11 @@ from scipy.special import ellipk
 
 import modelgen
 from modelgen.cli import main
-from modelgen.errors import ModelError
+from modelgen.errors import ModelError, SimulationError
 from modelgen.model.api import load_model, parse_model, spec_to_yaml
 from modelgen.model.scene import parse_scene
 
-from conftest import MODELS, SUMMARY
+from conftest import SUMMARY
 from mechanics_reference import zxz_body_rate_matrix, zxz_rotation
 
 DATA = Path(__file__).resolve().parent / "data" / "joints"
@@ -225,12 +225,13 @@ def test_tennis_racket_flips_with_the_closed_form_period_conserving_everything(r
     half = flip_half_period(w)
     period_error = np.abs(np.diff(crossings) / half - 1).max()
     # (d) through attitudes where ZYX angles are singular: axis 1 along z of E
-    # (cos pitch = 0) at the start and again (to 1e-2) after the first flip, and
-    # axis 2 turned from along L to against it and back
+    # (cos pitch = 0) at the start and again (to 2e-2) after the first flip; axis 2
+    # along L, then against it, and back (its L component is I2 w2 / |L|)
     cos_pitch = np.sqrt(np.clip(1 - R[:, 2, 0] ** 2, 0, None))
     axis2_on_L = R[:, :, 1] @ (L[0] / np.linalg.norm(L[0]))
 
-    SUMMARY.append(f"joints: tennis racket w=({', '.join(f'{v:g}' for v in w)}): {len(crossings)} flips, period "
+    label = ", ".join(f"{v:g}" for v in w)
+    SUMMARY.append(f"joints: tennis racket w=({label}): {len(crossings)} flips, period "
                    f"{half:.6f} s rel err {period_error:.1e}; energy {energy_error:.1e}, "
                    f"L {L_error:.1e}, momentum {P_error:.1e}, |q|-1 {norm_error:.1e}, "
                    f"min cos(pitch) after the first flip "
@@ -241,9 +242,13 @@ def test_tennis_racket_flips_with_the_closed_form_period_conserving_everything(r
     assert len(crossings) >= 8
     assert period_error < 1e-7
     assert cos_pitch[0] < 1e-15 and cos_pitch[res.t > crossings[0]].min() < 2e-2
-    assert axis2_on_L.max() > 0.99 and axis2_on_L.min() < -0.99
-    assert np.all(np.sign(axis2_on_L[np.searchsorted(res.t, crossings[1:-1])])
-                  != np.sign(axis2_on_L[np.searchsorted(res.t, crossings[:-2])]))
+    # between successive zeros of w2, axis 2 turns to along L, then against it
+    extremes = []
+    for a, b in zip(crossings[:-1], crossings[1:]):
+        between = axis2_on_L[(res.t > a) & (res.t < b)]
+        extremes.append(between[np.abs(between).argmax()])
+    assert np.all(np.abs(extremes) > 0.99)
+    assert np.all(np.sign(extremes[1:]) == -np.sign(extremes[:-1]))
 
 
 def test_tennis_racket_scene_runs_and_conserves_energy(build_root):
@@ -525,6 +530,26 @@ def test_a_scene_normalises_its_initial_quaternion(build_root):
     assert res.success, res.message
     assert np.allclose(res.y[:4, 0], [np.sqrt(0.5), np.sqrt(0.5), 0, 0], rtol=0, atol=1e-15)
     assert np.abs(np.linalg.norm(res.y[:4], axis=0) - 1).max() < 1e-10
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "bug: a scene refuses a zero quaternion, but simulate (and so `modelgen simulate "
+    "model.yaml --init J_qw=0`, exit 4) normalises it into NaN and stops at t = 0 with "
+    "'NaN or Inf in the state ... last finite state at t=0.0: x=[..., nan, nan, nan, "
+    "nan, ...]', which names neither the joint nor the quaternion"))
+def test_simulate_refuses_a_zero_quaternion_naming_it(racket):
+    x0 = np.zeros(racket.nx)
+    x0[racket.state_names.index("J_wy")] = 1.0
+    with pytest.raises(SimulationError, match="quaternion"):
+        racket.simulate(x0, (0.0, 1.0))
+
+
+def test_linearizing_a_model_with_joints_is_refused_with_the_reason(tmp_path):
+    with pytest.raises(ModelError) as info:
+        modelgen.load(DATA / "heavy_body_ball.yaml", tmp_path, linearize=True)
+    text = str(info.value)
+    assert text.startswith(f"{DATA / 'heavy_body_ball.yaml'}: linearize: ")
+    assert "ball or free joints is not supported" in text and "fix: " in text
 
 
 @pytest.mark.parametrize("path", sorted(DATA.glob("*.yaml")), ids=lambda p: p.stem)
