@@ -262,9 +262,8 @@ def test_tennis_racket_scene_runs_and_conserves_energy(build_root):
     norm_error = np.abs(np.linalg.norm(res.y[3:7], axis=0) - 1).max()
     assert norm_error < 1e-10
     # the outputs of a joint's base: its orientation is R(q), its angular velocity
-    # in its own components the speeds w; the samples' quaternions are not
-    # normalised (see the xfail below), and R(q) of a quaternion of norm 1 + e is
-    # off a rotation by 4 e at most, R'R w off w by about 8 e |w|
+    # in its own components the speeds w (R(q) of a quaternion of norm 1 + e is
+    # off a rotation by 4 e at most, R'R w off w by about 8 e |w|)
     R = np.array([rotation(quat) for quat in res.y[3:7].T])
     assert np.abs(res["attitude"] - R.reshape(-1, 9)).max() < 1e-14 + 4.5 * norm_error
     w = res.y[10:13].T
@@ -273,11 +272,6 @@ def test_tennis_racket_scene_runs_and_conserves_energy(build_root):
     assert w2.max() > 1.9 and w2.min() < -1.9          # it flipped
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "bug: mg_integrate projects the state after each accepted step but not the samples "
-    "it takes on the dense output (t_eval, and so every scene with an adaptive method): "
-    "there |q| - 1 is the interpolation error, 3.9e-8 for dop853 at rtol 1e-8 "
-    "(3.3e-10 at rtol 1e-10); issue 11 allows 1e-10"))
 def test_quaternions_are_unit_at_dense_output_samples_at_the_default_tolerance(racket):
     cm = racket
     x0 = cm.neutral_state()
@@ -476,8 +470,8 @@ def test_a_free_joint_needs_a_point():
 def test_a_joint_base_may_not_reuse_a_base_name():
     assert message("coordinates: [q1]\nbases:\n  B: {parent: E, axis: 3, angle: q1}\n"
                    "joints:\n  J: {type: ball, parent: E, base: B}\n") == (
-        "m.yaml:7: joints.J: duplicate name 'B': already declared as a base at bases.B "
-        "(line 5); fix: rename one of them; coordinates, parameters, inputs, bases, points, "
+        "m.yaml:5: bases.B: duplicate name 'B': already declared as a base at joints.J "
+        "(line 7); fix: rename one of them; coordinates, parameters, inputs, bases, points, "
         "frames, bodies and actions share one namespace")
 
 
@@ -500,10 +494,6 @@ def test_a_joint_coordinate_in_an_angle_is_refused_by_the_api():
         "cannot depend on speeds or inputs)")
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "bug: sections.py reads bases: before joints:, so a joint coordinate in a base angle "
-    "is an 'undefined name' whose fix says to declare it under 'coordinates' (which would "
-    "clash with the joint); the API and points: say 'joint coordinate ... is not allowed'"))
 def test_a_joint_coordinate_in_an_angle_is_refused_naming_the_joint_coordinate():
     text = message("joints:\n  J: {type: ball, parent: E, base: B}\n"
                    "bases:\n  B2: {parent: B, axis: 3, angle: sin(J_qw)}\n")
@@ -544,11 +534,6 @@ def test_a_scene_normalises_its_initial_quaternion(build_root):
     assert np.abs(np.linalg.norm(res.y[:4], axis=0) - 1).max() < 1e-10
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "bug: a scene refuses a zero quaternion, but simulate (and so `modelgen simulate "
-    "model.yaml --init J_qw=0`, exit 4) normalises it into NaN and stops at t = 0 with "
-    "'NaN or Inf in the state ... last finite state at t=0.0: x=[..., nan, nan, nan, "
-    "nan, ...]', which names neither the joint nor the quaternion"))
 def test_simulate_refuses_a_zero_quaternion_naming_it(racket):
     x0 = np.zeros(racket.nx)
     x0[racket.state_names.index("J_wy")] = 1.0

@@ -125,11 +125,13 @@ def builder_from_data(data, lines: dict, file: str) -> ModelBuilder:
             check_entry_keys(ctx, entry, section, key)
             yield name, entry, key
 
-    for name, e, key in entries("bases"):
-        ctx.add_base(name, e["parent"], e["axis"], e["angle"], key)
+    # joints first: they declare their coordinates, bases and points, which the
+    # other sections may name (and whose coordinates no expression may use)
     for name, e, key in entries("joints"):
         ctx.add_joint(name, e["type"], e["parent"], e["base"], e.get("from"), e.get("point"),
                       key)
+    for name, e, key in entries("bases"):
+        ctx.add_base(name, e["parent"], e["axis"], e["angle"], key)
     for name, e, key in entries("points"):
         ctx.add_point(name, e.get("from"), e.get("base"), e.get("frame"),
                       e["coordinates"], key)

@@ -112,6 +112,20 @@ def jacobian(cm, t, x, u=None, p=None) -> np.ndarray:
 
 # -- argument checking ---------------------------------------------------------------
 
+def _check_quaternions(cm, X, what: str) -> None:
+    """Every joint quaternion of every row of X is nonzero (the integrators
+    normalise it; a zero one has no direction)."""
+    for quat in cm.quaternions:
+        norms = np.linalg.norm(X[:, list(quat)], axis=1)
+        if np.any(norms == 0):
+            names = ", ".join(cm.state_names[k] for k in quat)
+            row = int(np.argmax(norms == 0))
+            where = f" (row {row})" if X.shape[0] > 1 else ""
+            raise SimulationError(f"{cm.name}: {what}{where} has a zero quaternion ({names}); "
+                                  f"give a unit quaternion, e.g. {cm.state_names[quat[0]]} = 1 "
+                                  "and the others 0 for no rotation (it is normalised)")
+
+
 def _checked(check):
     """Make an argument check raise only SimulationError: the TypeError, ValueError
     or OverflowError of a nonsensical argument (a string, a ragged list, a complex
@@ -349,6 +363,7 @@ def simulate(cm, x0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10
     x = cm._vector(x0, nx, "x0").copy()
     if not np.all(np.isfinite(x)):
         raise SimulationError(f"{cm.name}: x0 must be finite")
+    _check_quaternions(cm, x[None, :], "x0")
     x_start = x.copy()
     inputs = _Inputs(cm, u, sign)
     p_vec = cm.params(p).copy()
@@ -609,6 +624,7 @@ def simulate_batch(cm, X0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol
         raise SimulationError(f"{cm.name}: X0 must have shape (n_runs, {nx}), got {X0.shape}")
     if not np.all(np.isfinite(X0)):
         raise SimulationError(f"{cm.name}: X0 must be finite")
+    _check_quaternions(cm, X0, "X0")
     n_runs = X0.shape[0]
     times = _times([t1] if t_eval is None else t_eval, t0, t1, sign)
     t0, t1 = sign * t0, sign * t1          # from here on s = sign * t, increasing
