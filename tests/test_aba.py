@@ -47,16 +47,20 @@ def _qdd_both(spec, states=3, seed=0):
     """[(q_ddot by CRBA and a dense solve, q_ddot by ABA)] at seeded random states."""
     eqs = derive_equations(derive_kinematics(spec))
     fd = derive_aba(eqs, extract_joint_tree(spec), spec)
-    n = len(eqs.q)
+    n, nq = len(eqs.qd), len(eqs.q)
     inputs = (eqs.t,) + eqs.q + eqs.qd + eqs.u + eqs.p
+    quaternions = [[spec.coordinates.index(c) for c in j.quaternion] for j in spec.joints]
     crba = _program(eqs.graph, [eqs.A[i][j] for i in range(n) for j in range(n)]
                     + [eqs.tau[k] - eqs.h[k] for k in range(n)], inputs)
     aba = _program(fd.graph, list(fd.qdd) + list(fd.D), inputs)
     rng = np.random.default_rng(seed)
     out = []
     for _ in range(states):
-        values = ([0.3] + list(rng.uniform(-1, 1, 2 * n)) + list(rng.uniform(-1, 1, len(eqs.u)))
-                  + list(spec.parameter_defaults))
+        q = rng.uniform(-1, 1, nq)
+        for quat in quaternions:          # the equations hold for unit quaternions
+            q[quat] /= np.linalg.norm(q[quat])
+        values = ([0.3] + list(q) + list(rng.uniform(-1, 1, n))
+                  + list(rng.uniform(-1, 1, len(eqs.u))) + list(spec.parameter_defaults))
         r = crba(*values)
         A, b = np.array(r[:n * n]).reshape(n, n), np.array(r[n * n:])
         s = aba(*values)

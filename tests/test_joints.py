@@ -422,10 +422,6 @@ def test_free_base_tree_symbolic_jacobian_equals_central_differences(tree):
     assert worst < 1e-7
 
 
-@pytest.mark.xfail(strict=True, raises=ModelError, reason=(
-    "not built yet: the articulated-body formulation refuses ball and free joints "
-    "(joint_tree: \"coordinate 'J_qw' moves no body\"); issue 11 asks every "
-    "formulation to support them"))
 def test_free_base_tree_aba_equals_crba(tree, build_root):
     aba = modelgen.load(DATA / "free_base_two_links.yaml", build_root / "joints_tree_aba",
                         formulation="aba")

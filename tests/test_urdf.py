@@ -216,8 +216,10 @@ def _installed_robot(relative: str) -> Path:
     return path
 
 
-@pytest.mark.parametrize("robot", ["solo12", "go2"])
-def test_floating_base_quadrupeds_match_pinocchio_free_flyer(robot, pin, tmp_path):
+@pytest.mark.parametrize("robot, formulation", [("solo12", "crba"), ("solo12", "aba"),
+                                                ("go2", "auto")])
+def test_floating_base_quadrupeds_match_pinocchio_free_flyer(robot, formulation, pin,
+                                                             tmp_path):
     path = DATA / "solo12.urdf" if robot == "solo12" else \
         _installed_robot("go2_description/urdf/go2.urdf")
     imp = import_urdf(path, floating_base=True)
@@ -225,7 +227,7 @@ def test_floating_base_quadrupeds_match_pinocchio_free_flyer(robot, pin, tmp_pat
     assert spec.nq == spec.n + 1 == 19
     assert spec.coordinates[-7:] == tuple(f"root_joint_{s}" for s in
                                           ("x", "y", "z", "qw", "qx", "qy", "qz"))
-    cm = load(imp.model, tmp_path / "build")
+    cm = load(imp.model, tmp_path / "build", formulation=formulation)
     _compare_floating_with_pinocchio(pin, imp, pin.buildModelFromUrdf(str(path),
                                                                        pin.JointModelFreeFlyer()),
                                      cm)
@@ -240,8 +242,9 @@ def test_a_floating_joint_inside_the_tree_matches_pinocchio(pin, tmp_path):
     path.write_text(text)
     imp = import_urdf(path)
     assert "j3" not in imp.model.spec().coordinates and "j3_qw" in imp.model.spec().coordinates
-    cm = load(imp.model, tmp_path / "build")
-    _compare_floating_with_pinocchio(pin, imp, pin.buildModelFromUrdf(str(path)), cm)
+    for formulation in ("crba", "aba"):
+        cm = load(imp.model, tmp_path / formulation, formulation=formulation)
+        _compare_floating_with_pinocchio(pin, imp, pin.buildModelFromUrdf(str(path)), cm)
 
 
 def test_modelgen_load_takes_floating_base(tmp_path):

@@ -132,12 +132,8 @@ def choose_formulation(spec: ModelSpec, formulation: str = "auto"):
     if formulation not in FORMULATIONS:
         raise ModelError(f"unknown formulation {formulation!r}", file=spec.source,
                          key="formulation", fix="use one of " + ", ".join(FORMULATIONS))
-    if formulation == "crba" or (formulation == "auto" and spec.joints):
+    if formulation == "crba":
         return "crba", None
-    if spec.joints:
-        raise ModelError("the articulated-body formulation does not take ball or free joints "
-                         "yet", file=spec.source, line=spec.line_of(f"joints.{spec.joints[0].name}"),
-                         key="formulation", fix="use formulation crba (or auto)")
     if formulation == "aba":
         return "aba", extract_joint_tree(spec)
     if spec.n < ABA_CROSSOVER:

@@ -41,6 +41,7 @@ from modelgen.derive.dynamics import Equations
 from modelgen.derive.graph import ONE, ZERO, ZERO3, Graph, GraphBuilder
 from modelgen.derive.jacobian import JacobianTerms, differentiate
 from modelgen.derive.joint_tree import JointTree
+from modelgen.derive.kinematics import quaternion_columns
 from modelgen.model.spec import CANONICAL_BASE, CANONICAL_POINT, ModelSpec
 
 _PAIRS = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
@@ -247,6 +248,11 @@ def _cross_force(a, f):
     return add(cross(a[:3], f[:3]), cross(a[3:], f[3:])) + cross(a[:3], f[3:])
 
 
+def _quaternion_rotation(g, joint) -> tuple:
+    """E = R(quat)^T of a ball or free joint: parent -> link components."""
+    return tuple(tuple(g.name(x) for x in col) for col in quaternion_columns(joint.quaternion))
+
+
 def joint_motion(g, joint, m):
     """X_i m for the parent->link transform X_i = X_J X_T."""
     E, r = joint.fixed
@@ -254,7 +260,11 @@ def joint_motion(g, joint, m):
         m = _motion_xlt(g, r, m)
     if not _is_identity(E):
         m = _motion_rot(g, E, m)
-    if joint.kind == "revolute":
+    if joint.kind in ("ball", "free"):
+        if joint.position:
+            m = _motion_xlt(g, joint.position, m)
+        m = _motion_rot(g, _quaternion_rotation(g, joint), m)
+    elif joint.kind == "revolute":
         c, s = g.name(sympy.cos(joint.angle)), g.name(sympy.sin(joint.angle))
         m = _motion_rot(g, _rotation(joint.axis, c, s), m)
     else:
@@ -273,7 +283,11 @@ def _rotation(axis, c, s):
 def to_parent_force(g, joint, f):
     """X_i^T f."""
     E, r = joint.fixed
-    if joint.kind == "revolute":
+    if joint.kind in ("ball", "free"):
+        f = _force_rot_T(g, _quaternion_rotation(g, joint), f)
+        if joint.position:
+            f = _force_xlt_T(g, joint.position, f)
+    elif joint.kind == "revolute":
         c, s = g.name(sympy.cos(joint.angle)), g.name(sympy.sin(joint.angle))
         f = _force_rot_T(g, _rotation(joint.axis, c, s), f)
     else:
@@ -359,7 +373,11 @@ def _elementary(E):
 def _to_parent_inertia(g, joint, I):
     """X_i^T I X_i."""
     E, r = joint.fixed
-    if joint.kind == "revolute":
+    if joint.kind in ("ball", "free"):
+        I = _inertia_rot_T(g, _quaternion_rotation(g, joint), I)
+        if joint.position:
+            I = _inertia_xlt_T(g, joint.position, I)
+    elif joint.kind == "revolute":
         c, s = g.name(sympy.cos(joint.angle)), g.name(sympy.sin(joint.angle))
         I = _axis_rot_T(g, I, joint.axis, c, s)
     else:
@@ -400,14 +418,17 @@ def _rotate_into(g, spec, v, X: str, L: str) -> tuple:
     up, down = _base_steps(spec, X, L)
     v = tuple(v)
     for name in up:                  # child -> parent components: E^T v
-        b = bases[name]
-        E = _rotation(b.axis, g.name(sympy.cos(b.angle)), g.name(sympy.sin(b.angle)))
-        v = g.vec(_mv(_T(E), v))
+        v = g.vec(_mv(_T(_base_rotation(g, bases[name])), v))
     for name in down:                # parent -> child components: E v
-        b = bases[name]
-        E = _rotation(b.axis, g.name(sympy.cos(b.angle)), g.name(sympy.sin(b.angle)))
-        v = g.vec(_mv(E, v))
+        v = g.vec(_mv(_base_rotation(g, bases[name]), v))
     return v
+
+
+def _base_rotation(g, b) -> tuple:
+    """E of a base: parent -> base components."""
+    if b.quaternion:
+        return tuple(tuple(g.name(x) for x in col) for col in quaternion_columns(b.quaternion))
+    return _rotation(b.axis, g.name(sympy.cos(b.angle)), g.name(sympy.sin(b.angle)))
 
 
 def _point_offset(g, spec, P: str, Q: str, L: str) -> tuple:
@@ -480,7 +501,7 @@ def outward_pass(g: GraphBuilder, tree: JointTree, qd) -> Outward:
     count = len(tree.joints)
     v, c, I, bias = [None] * count, [None] * count, [None] * count, [None] * count
     for i, joint in enumerate(tree.joints):
-        vJ = g.vec(_times(s, qd[joint.coordinate]) for s in joint.S)
+        vJ = g.vec(_total(_times(S[r], qd[k]) for k, S in joint.dofs) for r in range(6))
         if joint.parent < 0:
             v[i], c[i] = vJ, (ZERO,) * 6
         else:
@@ -513,7 +534,7 @@ def derive_aba(eqs: Equations, tree: JointTree, spec: ModelSpec, graph: Graph | 
     (2, (1, 0))
     """
     g = GraphBuilder(graph or eqs.graph)
-    n = len(eqs.q)
+    n = len(eqs.qd)
     a0, gravity_labels = _ground_acceleration(spec)
     actions = list(spec.actions) + [e for e in spec.effects if e.kind == "action"]
     local = set(gravity_labels) | {a.name for a in actions}
@@ -535,8 +556,19 @@ def derive_aba(eqs: Equations, tree: JointTree, spec: ModelSpec, graph: Graph | 
         pA[i] = g.vec(sub(pA[i], f))
 
     U, D, invD, u = [None] * count, [None] * count, [None] * count, [None] * count
+    multi: dict = {}                    # joint index -> _MultiDof of a ball or free joint
     for i in reversed(range(count)):                        # pass 2: inwards
         joint = joints[i]
+        if len(joint.dofs) > 1:
+            multi[i] = _multi_dof_inward(g, joint, IA[i], pA[i], c[i], tau)
+            if joint.parent >= 0:
+                p = joint.parent
+                Ip = _to_parent_inertia(g, joint, multi[i].Ia)
+                IA[p] = tuple(_name_full(g, tuple(tuple(_total((X[r][s], Y[r][s]))
+                                                        for s in range(3)) for r in range(3)))
+                              for X, Y in zip(IA[p], Ip))
+                pA[p] = g.vec(add(pA[p], to_parent_force(g, joint, multi[i].pa)))
+            continue
         S = joint.S
         U[i] = g.vec(inertia_times(IA[i], S))
         D[i] = g.name(dot(S, U[i]))
@@ -567,14 +599,97 @@ def derive_aba(eqs: Equations, tree: JointTree, spec: ModelSpec, graph: Graph | 
     for i, joint in enumerate(joints):                      # pass 3: outwards
         ap = a0 if joint.parent < 0 else acc[joint.parent]
         a_prime = g.vec(add(joint_motion(g, joint, ap), c[i]))
+        if i in multi:
+            acc[i] = _multi_dof_outward(g, joint, multi[i], a_prime, qdd)
+            continue
         k = joint.coordinate
         qdd[k] = g.name((u[i] - dot(U[i], a_prime)) * invD[i])
         acc[i] = g.vec(add(a_prime, tuple(_times(s, qdd[k]) for s in joint.S)))
     D_out = [None] * n
     for i, joint in enumerate(joints):
-        D_out[joint.coordinate] = D[i]
-    inward = tuple(joints[i].coordinate for i in reversed(range(count)))
+        if i in multi:
+            for (k, _), d in zip(joint.dofs, multi[i].pivots):
+                D_out[k] = d
+        else:
+            D_out[joint.coordinate] = D[i]
+    inward = tuple(k for i in reversed(range(count)) for k, _ in joints[i].dofs)
     return ForwardDynamics(g.freeze(), tuple(qdd), tuple(D_out), inward)
+
+
+# -- ball and free joints: several degrees of freedom (Featherstone Table 7.1 with
+# S a 6 x k matrix; here the columns of the identity, so U = IA S picks columns) ---
+
+@dataclass(frozen=True)
+class _MultiDof:
+    U: tuple          # k columns, 6 entries each
+    Dinv: tuple       # k x k, (S^T U)^-1, symmetric
+    pivots: tuple     # the k pivots of the LDL^T of D: all > 0 iff D is positive definite
+    u: tuple          # tau - S^T pA (k)
+    Ia: tuple         # articulated inertia passed to the parent (blocks)
+    pa: tuple         # bias force passed to the parent
+
+
+def _ldlt_inverse(g, D) -> tuple:
+    """(D^-1, pivots) of a symmetric k x k D by an unrolled LDL^T."""
+    k = len(D)
+    L = [[ZERO] * k for _ in range(k)]
+    d = [None] * k
+    for j in range(k):
+        d[j] = g.name(D[j][j] - _total(_times(_times(L[j][m], L[j][m]), d[m]) for m in range(j)))
+        inv = g.name(1 / d[j])
+        for i in range(j + 1, k):
+            L[i][j] = g.name((D[i][j] - _total(_times(_times(L[i][m], L[j][m]), d[m])
+                                                for m in range(j))) * inv)
+    # columns of the inverse: solve L d L^T x = e_c
+    cols = []
+    for col in range(k):
+        y = [None] * k
+        for i in range(k):
+            y[i] = g.name((ONE if i == col else ZERO) - _total(_times(L[i][m], y[m])
+                                                               for m in range(i)))
+        x = [None] * k
+        for i in reversed(range(k)):
+            x[i] = g.name(y[i] / d[i] - _total(_times(L[m][i], x[m]) for m in range(i + 1, k)))
+        cols.append(x)
+    inverse = tuple(tuple(cols[c][r] for c in range(k)) for r in range(k))
+    return inverse, tuple(d)
+
+
+def _multi_dof_inward(g, joint, IA, pA, c, tau) -> _MultiDof:
+    """U, D^-1, u and what the parent receives, for a joint with k columns."""
+    S = [col for _, col in joint.dofs]
+    k = len(S)
+    U = [g.vec(inertia_times(IA, col)) for col in S]
+    D = [[g.name(dot(S[a], U[b])) for b in range(k)] for a in range(k)]
+    Dinv, pivots = _ldlt_inverse(g, D)
+    u = [g.name(tau[idx] - dot(col, pA)) for idx, col in joint.dofs]
+    # U D^-1 (6 x k) and D^-1 u (k)
+    UD = [g.vec(_total(_times(U[b][r], Dinv[b][a]) for b in range(k)) for r in range(6))
+          for a in range(k)]
+    Du = [g.name(_total(_times(Dinv[a][b], u[b]) for b in range(k))) for a in range(k)]
+    A, B, C = IA
+
+    def update(M, r0, s0):
+        return tuple(tuple(_total((M[r][s], _neg(_total(_times(UD[a][r0 + r], U[a][s0 + s])
+                                                         for a in range(k)))))
+                           for s in range(3)) for r in range(3))
+    Ia = (_name_sym(g, update(A, 0, 0)), _name_full(g, update(B, 0, 3)),
+          _name_sym(g, update(C, 3, 3)))
+    pa = g.vec(add(add(pA, inertia_times(Ia, c)),
+                   tuple(_total(_times(U[a][r], Du[a]) for a in range(k)) for r in range(6))))
+    return _MultiDof(tuple(U), Dinv, pivots, tuple(u), Ia, pa)
+
+
+def _multi_dof_outward(g, joint, m: _MultiDof, a_prime, qdd) -> tuple:
+    """qdd of the joint's speeds (written into ``qdd``) and the link acceleration."""
+    k = len(joint.dofs)
+    rhs = [m.u[a] - dot(m.U[a], a_prime) for a in range(k)]
+    rhs = [g.name(x) for x in rhs]
+    acc = a_prime
+    for a, (idx, col) in enumerate(joint.dofs):
+        qdd[idx] = g.name(_total(_times(m.Dinv[a][b], rhs[b]) for b in range(k)))
+        acc = add(acc, tuple(_times(s, qdd[idx]) for s in col))
+    return g.vec(acc)
 
 
 def derive_aba_jacobian(fd: ForwardDynamics, eqs: Equations) -> JacobianTerms:
@@ -583,5 +698,6 @@ def derive_aba_jacobian(fd: ForwardDynamics, eqs: Equations) -> JacobianTerms:
     Unlike the CRBA Jacobian there is nothing to solve: ``D`` is the lower half
     of the state Jacobian itself (``a`` is empty).
     """
-    graph, rows = differentiate(fd.graph, fd.qdd, eqs.q + eqs.qd)
-    return JacobianTerms(graph, (), rows)
+    extra = eqs.qdot if eqs.has_joints else ()
+    graph, rows = differentiate(fd.graph, tuple(fd.qdd) + tuple(extra), eqs.q + eqs.qd)
+    return JacobianTerms(graph, (), rows[:len(fd.qdd)], rows[len(fd.qdd):])

@@ -72,6 +72,18 @@ class Joint:
     source: str           # the dotted key of the expression the joint comes from
     base: str             # the base whose orientation the link frame has
     origin: tuple         # (point, correction): the link origin is r_point + R_base correction
+    #: a ball or free joint (``kind`` "ball" | "free"): ((speed index, S column), ...),
+    #: its quaternion (w, x, y, z) and a free joint's position (x, y, z) in the
+    #: frame before the joint; the joint transform is ``rot(R(quat)^T) xlt(position)``
+    columns: tuple = ()
+    quaternion: tuple = ()
+    position: tuple = ()
+
+    @property
+    def dofs(self) -> tuple:
+        """((speed index, motion subspace column), ...): one for a revolute or
+        prismatic joint, 3 for a ball joint, 6 for a free one."""
+        return self.columns or ((self.coordinate, self.S),)
 
 
 @dataclass(frozen=True)
@@ -222,15 +234,35 @@ def _body_ops(spec: ModelSpec, body, bases: dict, points: dict, linear: dict) ->
 
     ops = []
     level = 0
+    joint_of_base = {j.base: j for j in spec.joints}
 
     def advance(to):
         nonlocal level
         for name in chain[level:to]:
             base = bases[name]
-            ops.append((("base", name), "rot", base))
+            if base.quaternion:
+                joint = joint_of_base[name]
+                if joint.kind == "free":
+                    raise _error(spec, f"joints.{joint.name}",
+                                 f"body {body.name} turns with free joint {joint.name} "
+                                 f"but is not placed from its point {joint.point}")
+                ops.append((("joint", joint.name), "ball", joint))
+            else:
+                ops.append((("base", name), "rot", base))
         level = max(level, to)
 
     for point in segments:
+        if point.speeds:                 # a free joint: its position, then its rotation
+            joint = joint_of_base[point.speed_base]
+            d = depth.get(point.base, -1)
+            if d < level or point.speed_base not in depth:
+                raise _error(spec, f"joints.{joint.name}",
+                             f"body {body.name} is placed from free joint {joint.name}'s "
+                             f"point but does not turn with its base {joint.base}")
+            advance(d)
+            ops.append((("joint", joint.name), "free", joint))
+            level = depth[point.speed_base]
+            continue
         if all(c == 0 for c in point.coordinates):
             continue
         d = depth.get(point.base)
@@ -275,11 +307,12 @@ def extract_joint_tree(spec: ModelSpec) -> JointTree:
     >>> tree.joints[1].fixed[1]
     (l1, 0, 0)
     """
-    q = {k: symbol(name) for k, name in enumerate(spec.coordinates)}
+    q = {k: symbol(name) for k, name in enumerate(spec.simple_coordinates)}
     _check_coordinates(spec, q)
     bases = {b.name: b for b in spec.bases}
     points = {p.name: p for p in spec.points}
-    linear = {p.name: [_linear_in(c, q) for c in p.coordinates] for p in spec.points}
+    linear = {p.name: [_linear_in(c, q) for c in p.coordinates] for p in spec.points
+              if not p.speeds}
 
     # the trie of every body's ops, merged by names
     nodes = [None]                      # node -> (parent node, key, kind, data)
@@ -303,6 +336,10 @@ def extract_joint_tree(spec: ModelSpec) -> JointTree:
         orient[node], origin[node] = orient[parent], origin[parent]
         if kind == "rot":
             orient[node] = data.name
+        elif kind in ("ball", "free"):
+            orient[node] = data.base
+            if kind == "free":
+                origin[node] = (data.point, ZERO3)
         elif kind in ("trans", "prism"):
             point = points[key[1]]
             slopes = [sl for sl, _ in linear[point.name]]
@@ -325,6 +362,8 @@ def extract_joint_tree(spec: ModelSpec) -> JointTree:
         elif kind == "prism":
             k, direction, point = data
             source = f"points.{point.name}.coordinates"
+        elif kind in ("ball", "free"):
+            k, source = data.name, f"joints.{data.name}"
         else:
             continue
         if k in seen:
@@ -344,7 +383,10 @@ def extract_joint_tree(spec: ModelSpec) -> JointTree:
                 fixed.rotate(_rotation(odata.axis, odata.angle))
             else:
                 fixed.translate(odata)
-        if kind == "rot":
+        if kind in ("ball", "free"):
+            joint = _quaternion_joint(spec, data, joint_at.get(up, -1), fixed.value(),
+                                      orient[node], origin[node])
+        elif kind == "rot":
             S = (a if data.axis == 1 else ZERO, a if data.axis == 2 else ZERO,
                  a if data.axis == 3 else ZERO, ZERO, ZERO, ZERO)
             joint = Joint(spec.coordinates[k], k, joint_at.get(up, -1), fixed.value(),
@@ -356,7 +398,10 @@ def extract_joint_tree(spec: ModelSpec) -> JointTree:
                           ZERO3 + tuple(direction), source, orient[node], origin[node])
         joint_at[node] = len(joints)
         joints.append(joint)
-    for k, name in enumerate(spec.coordinates):
+    for j in spec.joints:
+        if j.name not in seen:
+            raise _error(spec, f"joints.{j.name}", f"joint {j.name!r} moves no body")
+    for k, name in enumerate(spec.simple_coordinates):
         if k not in seen:
             place = _occurrences(spec, {k: q[k]})[k]
             key = place[0][0] if place else "coordinates"
@@ -393,6 +438,29 @@ def extract_joint_tree(spec: ModelSpec) -> JointTree:
     inertias = tuple(LinkInertia(*merged[i]) if i in merged else
                      LinkInertia((ZERO,) * 6, ZERO3, ZERO, ()) for i in range(len(joints)))
     return JointTree(tuple(joints), inertias, tuple(body_links))
+
+
+def _quaternion_joint(spec: ModelSpec, joint, parent: int, fixed: tuple, base: str,
+                      origin: tuple) -> Joint:
+    """A ball or free joint of the spec as a multi-degree-of-freedom Joint.
+
+    Its motion subspace, in the link frame, is the identity on its speeds: the
+    angular velocity (and a free joint's linear velocity of its point) in the
+    joint's own base, which is the link frame.
+    """
+    speed_index = {v: k for k, v in enumerate(spec.speeds)}
+    unit = lambda j: tuple(ONE if i == j else ZERO for i in range(6))   # noqa: E731
+    rates = [speed_index[v] for v in joint.speeds[-3:]]
+    columns = [(k, unit(j)) for j, k in enumerate(rates)]
+    position = ()
+    if joint.kind == "free":
+        columns = [(speed_index[v], unit(3 + j)) for j, v in enumerate(joint.speeds[:3])] \
+            + columns
+        position = tuple(symbol(c) for c in joint.coordinates[:3])
+    first = columns[0][0]
+    return Joint(joint.name, first, parent, fixed, joint.kind, 0, ZERO, ZERO3, columns[0][1],
+                 f"joints.{joint.name}", base, origin, tuple(columns),
+                 tuple(symbol(c) for c in joint.quaternion), position)
 
 
 def is_joint_tree(spec: ModelSpec) -> bool:

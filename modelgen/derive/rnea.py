@@ -46,10 +46,11 @@ def derive_velocity_terms(g: GraphBuilder, tree: JointTree, qd) -> tuple:
         else:
             acc[i] = g.vec(add(joint_motion(g, joint, acc[joint.parent]), out.c[i]))
         force[i] = g.vec(add(inertia_times(out.I[i], acc[i]), out.bias[i]))
-    h = [ZERO] * count
+    h = [ZERO] * len(qd)
     for i in reversed(range(count)):
         joint = joints[i]
-        h[joint.coordinate] = g.name(dot(joint.S, force[i]))
+        for k, S in joint.dofs:
+            h[k] = g.name(dot(S, force[i]))
         if joint.parent >= 0:
             p = joint.parent
             force[p] = g.vec(add(force[p], to_parent_force(g, joint, force[i])))
