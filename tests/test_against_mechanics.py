@@ -38,7 +38,12 @@ from mechanics_reference import (MechanicsReference, actions_spec,
 RTOL = 1e-12
 N_STATES = 24
 ROOT = Path(__file__).resolve().parent.parent
-MODEL_FILES = sorted((ROOT / "models").glob("*.yaml"))
+#: the shipped models with simple rotations only: the reference builds its frames
+#: from the seed's rotations; models with ball or free joints (a quaternion state)
+#: are checked against closed forms, Euler-angle twins and conserved quantities in
+#: test_joints.py and against Pinocchio in test_urdf.py
+MODEL_FILES = sorted(path for path in (ROOT / "models").glob("*.yaml")
+                     if "\njoints:" not in path.read_text())
 CHAIN_SIZES = (1, 2, 3, 4, 5, 6)
 
 

@@ -17,7 +17,8 @@ MODEL_NAMES = sorted(p.stem for p in MODELS.glob("*.yaml"))
 
 
 def _random_state(cm, rng):
-    return rng.uniform(-np.pi, np.pi, cm.n), rng.normal(size=cm.n)
+    """q (unit quaternions for ball and free joints) and the speeds."""
+    return cm.project(rng.uniform(-np.pi, np.pi, cm.nq)), rng.normal(size=cm.n)
 
 
 @pytest.mark.parametrize("name", MODEL_NAMES)
@@ -50,10 +51,13 @@ def test_rhs_solves_the_equations_of_motion(compiled, name):
         q, qd = _random_state(cm, rng)
         xdot = cm.rhs(0.3, np.concatenate([q, qd]), u=u)
         A = cm.mass_matrix(q)
-        residual = A @ xdot[cm.n:] - (cm.generalized_forces(0.3, q, qd, u=u)
-                                      - cm.velocity_terms(q, qd))
-        assert np.array_equal(xdot[:cm.n], qd)
-        assert np.linalg.norm(residual) <= 1e-12 * max(1.0, np.linalg.norm(A @ xdot[cm.n:]))
+        residual = A @ xdot[cm.nq:] - (cm.generalized_forces(0.3, q, qd, u=u)
+                                       - cm.velocity_terms(q, qd))
+        if cm.nq == cm.n:
+            assert np.array_equal(xdot[:cm.n], qd)
+        for quat in cm.quaternions:       # dq/dt = N(q) qd keeps |quat| = 1: q . dq/dt = 0
+            assert abs(q[list(quat)] @ xdot[list(quat)]) < 1e-15 * np.abs(qd).max()
+        assert np.linalg.norm(residual) <= 1e-12 * max(1.0, np.linalg.norm(A @ xdot[cm.nq:]))
 
 
 def _energy_drift(cm, x0, dt, p):

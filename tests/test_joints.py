@@ -3,7 +3,7 @@
 * A free rigid body (joint point off the centre of mass, full inertia, a
   rotated parent base and an offset origin, gravity): A, h, tau, the energies,
   the pose and dq/dt equal Newton-Euler in body components at random states.
-* The tennis racket (tests/data/joints/tennis_racket.yaml): energy, angular and linear
+* The tennis racket (models/tennis_racket.yaml): energy, angular and linear
   momentum conserved, unit quaternions at every sample, the flip period equal
   to Landau & Lifshitz's closed form, through attitudes where ZYX angles are
   singular.
@@ -37,7 +37,8 @@ from conftest import SUMMARY
 from mechanics_reference import zxz_body_rate_matrix, zxz_rotation
 
 DATA = Path(__file__).resolve().parent / "data" / "joints"
-RACKET = DATA / "tennis_racket.yaml"
+MODELS = Path(__file__).resolve().parent.parent / "models"
+RACKET = MODELS / "tennis_racket.yaml"
 
 
 # -- independent helpers -------------------------------------------------------------------
@@ -252,7 +253,7 @@ def test_tennis_racket_flips_with_the_closed_form_period_conserving_everything(r
 
 
 def test_tennis_racket_scene_runs_and_conserves_energy(build_root):
-    scene = modelgen.load_scene(DATA / "scenes" / "tennis_racket_flip.yaml",
+    scene = modelgen.load_scene(MODELS / "scenes" / "tennis_racket_flip.yaml",
                                 build_root / "tennis_racket_flip")
     res = scene.run()
     assert res.success, res.message
