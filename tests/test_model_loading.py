@@ -15,7 +15,8 @@ from modelgen.model.spec import (TIME, ActionSpec, BaseSpec, BodySpec, FrameSpec
 ROOT = Path(__file__).resolve().parent.parent
 MODEL_FILES = sorted((ROOT / "models").glob("*.yaml"))
 SHIPPED = ["arm7", "cart_pole", "double_pendulum", "heavy_top", "incline_block",
-           "simple_pendulum", "spherical_pendulum", "spring_chain", "torque_free_body"]
+           "simple_pendulum", "spherical_pendulum", "spring_chain", "tennis_racket",
+           "torque_free_body"]
 Z = sympy.Integer(0)
 
 
