@@ -23,7 +23,9 @@ Method
       each call perturbed by the previous output, min over 5 repeats of
       >= 0.2 s, the rhs part of ``<name>.c`` compiled with the build's own
       command); MuJoCo's ``mj_forward`` on the identical chain with its
-      harness, alternated ``--rounds`` times, minimum kept.
+      harness (the arm rebuilt in MJCF from its joint tree by
+      ``codegen_scaling.tree_mjcf``), alternated ``--rounds`` times, minimum
+      kept.
     * agreement: q_ddot of aba against crba at 5 seeded random states, as
       max |qdd_aba - qdd_crba| / max |qdd_crba|, and the backward error of
       the ABA answer in the CRBA equations,
@@ -212,9 +214,14 @@ def main(argv=None) -> int:
                 exes = {f: cs.build_rhs_harness(cms[f], x0, tmp / f"h_{kind}_{f}")[0]
                         for f in FORMULATIONS}
                 xml = None
-                if mj_harness is not None and kind != "arm7":
+                if mj_harness is not None:
+                    params = cms["aba"].parameters
                     xml = tmp / f"chain_{kind}.xml"
-                    xml.write_text(cs.chain_mjcf(n, cms["aba"].parameters))
+                    if kind == "arm7":
+                        links = cs.tree_links(model_spec(kind), params)
+                        xml.write_text(cs.tree_mjcf("arm7", links, float(params["g"])))
+                    else:
+                        xml.write_text(cs.chain_mjcf(n, params))
                 for _ in range(args.rounds):
                     for f in FORMULATIONS:
                         t = cs.run_rhs_harness(exes[f])

@@ -10,7 +10,12 @@ Model
     ``modelgen.model.chains.spatial_chain(n)``: n uniform rods hanging from the
     origin, hinge axes alternating z (odd joints) and y (even joints).  If
     ``models/arm7.yaml`` exists (``--arm``), the 7-joint arm gets a row too;
-    it is the official target of the per-call goals.
+    it is the official target of the per-call goals.  A model file that is a
+    tree of revolute joints with gravity (0, 0, -g) and no effects (actions
+    only through inputs, which the harnesses hold at 0), like the arm, is
+    also timed in MuJoCo and Pinocchio: :func:`tree_links` reads its joints
+    and inertias off modelgen's joint tree, :func:`tree_mjcf` and
+    :func:`pinocchio_tree_file` write them for the peers.
 
 Method
     * Generation.  Every model is generated in a fresh subprocess (so memory
@@ -441,9 +446,11 @@ def build_mujoco_harness(work: Path):
 
 
 _PIN_HARNESS = r"""// Timing harness for Pinocchio's ABA and CRBA + Cholesky, written by
-// bench/codegen_scaling.py.  Usage: pin_bench chain.txt, the file holding n,
-// then per link "offset axis(0 = z, 1 = y) mass com_x Ixx Iyy Izz", then g, then
-// x0 (2n numbers).  Prints: aba_s crba_s, then q_ddot at x0 by each.
+// bench/codegen_scaling.py.  Usage: pin_bench tree.txt, the file holding n,
+// then per joint (parents first) "parent(0 = ground, else 1-based) axis(0 = z,
+// 1 = y, 2 = x) R(9, row-major, joint frame in the parent's) p(3) mass c(3)
+// Ixx Iyy Izz Ixy Ixz Iyz (about c)", then g, then x0 (2n numbers).
+// Prints: aba_s crba_s, then q_ddot at x0 by each.
 #include <cstdio>
 #include <ctime>
 #include <string>
@@ -506,22 +513,29 @@ static int read_chain(const char *path) {
     std::FILE *f = std::fopen(path, "r");
     int n = 0;
     if (!f || std::fscanf(f, "%%d", &n) != 1 || n < 1 || n > 1024) return 0;
-    pinocchio::Model::JointIndex parent = 0;
     for (int i = 0; i < n; ++i) {
-        double offset, m, c, ixx, iyy, izz;
-        int axis;
-        if (std::fscanf(f, "%%lf %%d %%lf %%lf %%lf %%lf %%lf", &offset, &axis, &m, &c, &ixx, &iyy,
-                        &izz) != 7) return 0;
-        const pinocchio::SE3 placement(Eigen::Matrix3d::Identity(),
-                                       Eigen::Vector3d(offset, 0.0, 0.0));
+        int parent, axis;
+        double v[22];
+        if (std::fscanf(f, "%%d %%d", &parent, &axis) != 2 || parent < 0 || parent > i)
+            return 0;
+        for (int k = 0; k < 22; ++k)
+            if (std::fscanf(f, "%%lf", &v[k]) != 1) return 0;
+        Eigen::Matrix3d R;
+        R << v[0], v[1], v[2], v[3], v[4], v[5], v[6], v[7], v[8];
+        const pinocchio::SE3 placement(R, Eigen::Vector3d(v[9], v[10], v[11]));
         const std::string name = "q" + std::to_string(i + 1);
+        pinocchio::Model::JointIndex id;
+        const pinocchio::Model::JointIndex p = (pinocchio::Model::JointIndex)parent;
         if (axis == 0)
-            parent = model.addJoint(parent, pinocchio::JointModelRZ(), placement, name);
+            id = model.addJoint(p, pinocchio::JointModelRZ(), placement, name);
+        else if (axis == 1)
+            id = model.addJoint(p, pinocchio::JointModelRY(), placement, name);
         else
-            parent = model.addJoint(parent, pinocchio::JointModelRY(), placement, name);
-        model.appendBodyToJoint(parent, pinocchio::Inertia(m, Eigen::Vector3d(c, 0.0, 0.0),
-                                Eigen::Vector3d(ixx, iyy, izz).asDiagonal()),
-                                pinocchio::SE3::Identity());
+            id = model.addJoint(p, pinocchio::JointModelRX(), placement, name);
+        Eigen::Matrix3d I;
+        I << v[16], v[19], v[20], v[19], v[17], v[21], v[20], v[21], v[18];
+        model.appendBodyToJoint(id, pinocchio::Inertia(v[12], Eigen::Vector3d(v[13], v[14], v[15]),
+                                                       I), pinocchio::SE3::Identity());
     }
     double g;
     if (std::fscanf(f, "%%lf", &g) != 1) return 0;
@@ -600,13 +614,105 @@ def pinocchio_chain_file(n: int, params: dict, x0, path: Path) -> Path:
     """The input of the Pinocchio harness: ``spatial_chain(n)`` from its written
     definition (:func:`modelgen.bench.hardcase_models.chain_links`) and the state x0."""
     from modelgen.bench.hardcase_models import chain_links
-    lines = [str(n)]
-    for offset, axis, m, c, diag in chain_links(n, params):
-        lines.append(" ".join([repr(offset), "0" if axis == "z" else "1", repr(m), repr(c),
-                               *(repr(d) for d in diag)]))
-    lines += [repr(float(params["g"])), " ".join(repr(float(v)) for v in x0)]
+    links = [(i, axis, ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0)), (offset, 0.0, 0.0),
+              m, (c, 0.0, 0.0), tuple(diag) + (0.0, 0.0, 0.0))
+             for i, (offset, axis, m, c, diag) in enumerate(chain_links(n, params))]
+    return pinocchio_tree_file(links, float(params["g"]), x0, path)
+
+
+def pinocchio_tree_file(links, g: float, x0, path: Path) -> Path:
+    """The input of the Pinocchio harness for ``links`` as :func:`tree_links` gives them."""
+    lines = [str(len(links))]
+    for parent, axis, R, p, m, c, inertia in links:
+        lines.append(" ".join([str(parent), str("zyx".index(axis)),
+                               *(repr(float(x)) for row in R for x in row),
+                               *(repr(float(x)) for x in (*p, m, *c, *inertia))]))
+    lines += [repr(g), " ".join(repr(float(v)) for v in x0)]
     path.write_text("\n".join(lines) + "\n")
     return path
+
+
+def tree_links(spec, params: dict):
+    """A model of revolute joints about base axes, numerically, for Pinocchio and MuJoCo:
+    per joint (parent's 1-based index or 0, axis 'x' | 'y' | 'z', R = the joint frame's
+    axes in the parent's (rows), p its origin, mass, centre of mass, inertia about it
+    as (xx, yy, zz, xy, xz, yz)).  Read from modelgen's joint tree of ``spec``, so it
+    is the same model; None if the model is not such a tree (or has actions or
+    effects other than gravity, which the peers would not see)."""
+    import numpy as np
+    import sympy
+    from modelgen.derive.joint_tree import extract_joint_tree
+    from modelgen.errors import ModelError
+    from modelgen.model.spec import symbol
+    try:
+        tree = extract_joint_tree(spec)
+    except ModelError:
+        return None
+    values = {symbol(name): float(v) for name, v in params.items()}
+    values.update({symbol(name): 0.0 for name in spec.inputs})
+    g = symbol("g")
+    if spec.effects or "g" not in params or tuple(spec.gravity or ()) != (0, 0, -g):
+        return None
+    for act in spec.actions:          # the harnesses run with zero inputs
+        if any(sympy.sympify(x).xreplace(values) != 0 for x in (*act.torque, *act.force)):
+            return None
+
+    def num(e):
+        return float(sympy.sympify(e).xreplace(values))
+    links = []
+    for joint, body in zip(tree.joints, tree.inertias):
+        if joint.kind != "revolute" or sympy.sympify(joint.angle) != symbol(joint.name):
+            return None
+        E, r = joint.fixed
+        R = np.array([[num(x) for x in row] for row in E]).T     # E maps parent -> child
+        m = num(body.m)
+        c = np.array([num(x) for x in body.h]) / m
+        I = np.array([num(x) for x in body.I])                     # about the link origin
+        shift = m * (np.dot(c, c) * np.array([1, 1, 1, 0, 0, 0])
+                     - np.array([c[0] * c[0], c[1] * c[1], c[2] * c[2],
+                                 c[0] * c[1], c[0] * c[2], c[1] * c[2]]))
+        links.append((joint.parent + 1, "xyz"[joint.axis - 1], tuple(map(tuple, R)),
+                      tuple(num(x) for x in r), m, tuple(c), tuple(I - shift)))
+    return links
+
+
+def tree_mjcf(name: str, links, g: float) -> str:
+    """MJCF of ``links`` (:func:`tree_links`), with the chain's options."""
+    import numpy as np
+    children: dict = {}
+    for i, link in enumerate(links, start=1):
+        children.setdefault(link[0], []).append(i)
+    lines = [f'<mujoco model="{name}">', '  <compiler inertiafromgeom="false"/>',
+             f'  <option timestep="0.001" integrator="RK4" gravity="0 0 {-g!r}">',
+             '    <flag contact="disable"/>', '  </option>', '  <worldbody>']
+
+    def quat(R):
+        R = np.asarray(R)
+        w = np.sqrt(max(0.0, 1.0 + np.trace(R))) / 2
+        if w > 1e-6:
+            return (w, (R[2, 1] - R[1, 2]) / (4 * w), (R[0, 2] - R[2, 0]) / (4 * w),
+                    (R[1, 0] - R[0, 1]) / (4 * w))
+        x = np.sqrt(max(0.0, 1.0 + R[0, 0] - R[1, 1] - R[2, 2])) / 2
+        return ((R[2, 1] - R[1, 2]) / (4 * x), x, (R[0, 1] + R[1, 0]) / (4 * x),
+                (R[0, 2] + R[2, 0]) / (4 * x))
+
+    def body(i, depth):
+        _, axis, R, p, m, c, inertia = links[i - 1]
+        pad = "  " * depth
+        lines.append(f'{pad}<body name="link{i}" pos="{" ".join(repr(float(x)) for x in p)}" '
+                     f'quat="{" ".join(repr(float(x)) for x in quat(R))}">')
+        lines.append(f'{pad}  <joint name="q{i}" type="hinge" axis="'
+                     + {"x": "1 0 0", "y": "0 1 0", "z": "0 0 1"}[axis]
+                     + '" damping="0" armature="0"/>')
+        lines.append(f'{pad}  <inertial pos="{" ".join(repr(float(x)) for x in c)}" mass="{m!r}" '
+                     f'fullinertia="{" ".join(repr(float(x)) for x in inertia)}"/>')
+        for k in children.get(i, []):
+            body(k, depth + 1)
+        lines.append(f"{pad}</body>")
+    for i in children.get(0, []):
+        body(i, 2)
+    lines += ['  </worldbody>', '</mujoco>', '']
+    return "\n".join(lines)
 
 
 def run_pinocchio_harness(exe: Path, chain_file: Path) -> tuple:
@@ -629,15 +735,16 @@ def chain_mjcf(n: int, params: dict) -> str:
     return mjcf(n, params)
 
 
-def mujoco_check(cm, n: int, states, work: Path):
-    """Build the MuJoCo chain, check qacc against modelgen's qdd, time mj_forward from Python.
+def mujoco_check(cm, n: int, states, work: Path, xml: str | None = None):
+    """Build the MuJoCo chain (or the model ``xml``), check qacc against modelgen's
+    qdd, time mj_forward from Python.
 
     Returns (row fields, path of the MJCF file).
     """
     import mujoco
     import numpy as np
-    xml_path = work / f"spatial_chain_{n}.xml"
-    xml_path.write_text(chain_mjcf(n, cm.parameters))
+    xml_path = work / f"{cm.name}.xml"
+    xml_path.write_text(xml if xml is not None else chain_mjcf(n, cm.parameters))
     model = mujoco.MjModel.from_xml_path(str(xml_path))
     data = mujoco.MjData(model)
     worst = 0.0
@@ -723,15 +830,21 @@ def child(kind: str, arg: str, work: Path, mj_harness, rounds: int, pin_harness=
     row["rhs_py_inplace_us"] = per_call_python("inplace(0.0)", {"inplace": f.inplace})
     row["rhs_py_plain_us"] = per_call_python("rhs(0.0, x)", {"rhs": cm.rhs, "x": xp})
 
+    # a model file is timed against the peers when it is a tree of revolute joints
+    # with gravity only (motor inputs are 0 in the harnesses)
+    links = tree_links(spec, cm.parameters) if kind == "file" else None
     xml_path = None
-    if kind == "chain" and have_mujoco():
-        fields, xml_path = mujoco_check(cm, cm.n, states, work)
+    if (kind == "chain" or links) and have_mujoco():
+        xml = tree_mjcf(cm.name, links, float(cm.parameters["g"])) if links else None
+        fields, xml_path = mujoco_check(cm, cm.n, states, work, xml)
         row.update(fields)
 
     pin_exe = None
-    if kind == "chain" and pin_harness:
+    if (kind == "chain" or links) and pin_harness:
         pin_exe = Path(pin_harness)
-        chain_file = pinocchio_chain_file(cm.n, cm.parameters, x0, work / "pin_chain.txt")
+        chain_file = (pinocchio_tree_file(links, float(cm.parameters["g"]), x0,
+                                          work / "pin_tree.txt") if links else
+                      pinocchio_chain_file(cm.n, cm.parameters, x0, work / "pin_chain.txt"))
 
     # The C timings, alternating modelgen, MuJoCo and Pinocchio over ``rounds``
     # rounds and keeping the minimum of each, so that a slow spell of a shared

@@ -231,6 +231,48 @@ def test_aba_matches_crba_when_gravity_is_an_effect_in_a_moving_base():
     _assert_agree(m.spec())
 
 
+def test_aba_matches_crba_with_scaled_joints_and_joint_forces():
+    # S_j is not 1 (angles 2*q1 and -q2 + 0.1, a slider 3*s along a base axis) and
+    # joint forces enter every u: the exact entries -1/S_j of -U/D and tau/S_j of pa
+    m = Model("scaled", description="Joints whose motion subspace entry is not 1.")
+    m.add_coordinates("q1", "s", "q2", "q3")
+    m.add_parameters({"m1": 1.1, "m2": 0.6, "m3": 0.8, "l": 0.5, "g": 9.81, "k": 3.0,
+                      "c": 0.2})
+    m.add_base("B1", parent="E", axis=2, angle="2*q1")
+    m.add_point("G1", parent="O", base="B1", coordinates=["l/2", "0.05", 0])
+    m.add_body("link1", mass="m1", G="G1", base="B1",
+               inertia=[[0.02, 0.001, 0.003], [0.001, 0.03, 0.002], [0.003, 0.002, 0.04]])
+    m.add_point("S", parent="O", base="B1", coordinates=["l", 0, "3*s"])
+    m.add_body("carriage", mass="m2", G="S", base="B1", inertia=[0.001, 0.002, 0.0025])
+    m.add_base("B2", parent="B1", axis=1, angle="-q2 + 0.1")
+    m.add_point("G2", parent="S", base="B2", coordinates=[0, "l/2", "0.1"])
+    m.add_body("link2", mass="m3", G="G2", base="B2", inertia=[0.012, 0.002, 0.01])
+    m.add_base("B3", parent="B2", axis=3, angle="q3")
+    m.add_point("P3", parent="S", base="B2", coordinates=[0, "l", 0])
+    m.add_point("G3", parent="P3", base="B3", coordinates=["l/2", "0.02", 0])
+    m.add_body("link3", mass="m1", G="G3", base="B3", inertia=[0.001, 0.006, 0.005])
+    m.set_gravity([0, 0, "-g"])
+    m.add_effect("twist", "torsion_spring", coordinate="q2", stiffness="k", rest_angle="0.2")
+    m.add_effect("damping", "joint_damping", coordinates=["q1", "s", "q2", "q3"],
+                 damping="c")
+    tree = extract_joint_tree(m.spec())
+    assert sorted(str(x) for j in tree.joints for x in j.S if x != 0) == ["-1", "1", "2", "3"]
+    _assert_agree(m.spec())
+
+
+def test_aba_rhs_operation_count_does_not_regress():
+    # bench/aba_scaling.py's figures (README): after CSE, per coordinate, 288 on the
+    # 20-link chain and 260 on the arm; the margins allow small changes of the CSE
+    from modelgen.codegen.cse import make_routines
+    from modelgen.codegen.pipeline import routines_for
+    for spec, limit in ((spatial_chain(20).spec(), 295), (load_model(MODELS / "arm7.yaml"), 266)):
+        eqs = derive_equations(derive_kinematics(spec))
+        fd = derive_aba(eqs, extract_joint_tree(spec), spec)
+        (rhs,) = make_routines(fd.graph, [r for r in routines_for(eqs, (), None, fd)
+                                          if r[0] == "rhs"])
+        assert rhs.ops_after / spec.n <= limit, (spec.name, rhs.ops_after / spec.n)
+
+
 # -- agreement with an independent engine (Pinocchio) --------------------------------
 
 def _chain_against_pinocchio(n, seed, mass_matrix=False):

@@ -11,6 +11,14 @@ each link's own frame (:mod:`modelgen.derive.joint_tree` gives the links):
 3. outwards: ``a'_i = X_i a_p + c_i``, ``qdd_i = (u_i - U_i^T a'_i) / D_i``,
    ``a_i = a'_i + S_i qdd_i``.
 
+What is known exactly is not computed: ``-U_i / D_i`` is named once (so ``Ia``
+and ``qdd`` are sums of products, ``qdd_i = u_i / D_i + (-U_i / D_i)^T a'_i``);
+for a one-entry ``S`` (entry j) row and column j of ``Ia`` vanish, entry j of
+``-U_i / D_i`` is ``-1 / S_j`` and entry j of ``pa`` is ``tau_i / S_j``
+(``Ia S = 0``, ``S^T U = D``).  A rotation about a base axis turns the in-plane
+2x2 blocks of ``Ia`` by their trace-free symmetric part only.  The rigid bias
+force is formed at the centre of mass when that needs no division by a mass.
+
 Gravity (the top-level ``gravity`` and gravity effects in base E) is the
 acceleration ``-g`` of the ground, so it costs nothing per body.  Actions are
 external spatial forces ``f_i`` on their links (``pA_i = v_i x* I_i v_i - f_i``),
@@ -116,6 +124,28 @@ def cross(a, b):
             _total((_times(a[0], b[1]), _neg(_times(a[1], b[0])))))
 
 
+# -- naming with the sign left outside ------------------------------------------
+# The operation count charges a negation (``a - b*c`` is three operations), so a
+# quantity is named by its positive form and its sign stays in the expression
+# that uses it, where two signs can cancel (``(-x)*(-y)``) before they are ever
+# printed.
+
+def _nm(g, e):
+    """``g.name(e)``, with a negative numeric factor, or a sum of mostly negative
+    terms, kept outside the name."""
+    if isinstance(e, sympy.Mul) and e.args[0].is_Number and e.args[0].is_negative:
+        return -g.name(-e)
+    if isinstance(e, sympy.Add):
+        negative = sum(1 for t in e.args if t.could_extract_minus_sign())
+        if 2 * negative > len(e.args):
+            return -g.name(-e)
+    return g.name(e)
+
+
+def _vec(g, xs) -> tuple:
+    return tuple(_nm(g, x) for x in xs)
+
+
 # -- 3x3 helpers: symmetric matrices as full tuples of rows ---------------------
 
 def _sym(entries) -> tuple:
@@ -125,11 +155,11 @@ def _sym(entries) -> tuple:
 
 
 def _name_sym(g, M) -> tuple:
-    return _sym(g.vec(M[i][j] for i, j in _PAIRS))
+    return _sym(_vec(g, [M[i][j] for i, j in _PAIRS]))
 
 
 def _name_full(g, M) -> tuple:
-    return tuple(g.vec(row) for row in M)
+    return tuple(_vec(g, row) for row in M)
 
 
 def _mul(a, b) -> tuple:
@@ -156,20 +186,20 @@ def _is_identity(E) -> bool:
 # -- spatial algebra: motion (w, v), force (n, f), inertia (A, B, C) -----------
 
 def _motion_rot(g, E, m):
-    return g.vec(_mv(E, m[:3])) + g.vec(_mv(E, m[3:]))
+    return _vec(g, _mv(E, m[:3])) + _vec(g, _mv(E, m[3:]))
 
 
 def _motion_xlt(g, r, m):
-    return m[:3] + g.vec(sub(m[3:], cross(r, m[:3])))
+    return m[:3] + _vec(g, sub(m[3:], cross(r, m[:3])))
 
 
 def _force_rot_T(g, E, f):
     Et = _T(E)
-    return g.vec(_mv(Et, f[:3])) + g.vec(_mv(Et, f[3:]))
+    return _vec(g, _mv(Et, f[:3])) + _vec(g, _mv(Et, f[3:]))
 
 
 def _force_xlt_T(g, r, f):
-    return g.vec(add(f[:3], cross(r, f[3:]))) + f[3:]
+    return _vec(g, add(f[:3], cross(r, f[3:]))) + f[3:]
 
 
 def _inertia_rot_T(g, E, I):
@@ -215,6 +245,12 @@ def _drop_subspace(I, S):
     return (A, B, C)
 
 
+def _single(S):
+    """Index of the one non-zero entry of S, or None."""
+    nonzero = [j for j, s in enumerate(S) if s != 0]
+    return nonzero[0] if len(nonzero) == 1 else None
+
+
 def _zero_row_col(M, j):
     return tuple(tuple(ZERO if j in (r, s) else M[r][s] for s in range(3)) for r in range(3))
 
@@ -232,10 +268,43 @@ def _rigid_bias(g, I_O, h, m, v):
     ``v x* (I v)`` vanishes, so ``p = (w x n - vl x k, w x f)`` with ``k = h x w``.
     """
     w, vl = v[:3], v[3:]
-    n = g.vec(add(_mv(I_O, w), cross(h, vl)))
-    k = g.vec(cross(h, w))
-    f = g.vec(sub(tuple(_times(m, x) for x in vl), k))
-    return g.vec(sub(cross(w, n), cross(vl, k))) + g.vec(cross(w, f))
+    n = _vec(g, add(_mv(I_O, w), cross(h, vl)))
+    k = _vec(g, cross(h, w))
+    f = _vec(g, sub(tuple(_times(m, x) for x in vl), k))
+    return _vec(g, sub(cross(w, n), cross(vl, k))) + _vec(g, cross(w, f))
+
+
+def _centre(h, m):
+    """The centre of mass h / m, if it has no division by a mass (a parameter
+    that may be 0 at run time), else None."""
+    if _zero(m):
+        return None
+    c = tuple(sympy.cancel(x / m) if not _zero(x) else ZERO for x in h)
+    if any(p.exp.is_negative for x in c if not _zero(x) for p in x.atoms(sympy.Pow)):
+        return None
+    return c
+
+
+def _com_bias(g, I_O, h, m, c, v):
+    """v x* (I v) about the centre c: ``(w x Ic w + c x f, f)``, ``f = m w x vc``.
+
+    At the centre the bias force is ``(w x Ic w, m w x vc)`` with ``vc = vl + w x c``
+    and ``Ic = I_O - m (|c|^2 1 - c c^T)`` (parameters only, and the ``m`` terms
+    of ``I_O`` cancel exactly); moved to the origin the moment gains ``c x f``
+    (``= h x (w x vc)``).  Fewer products than :func:`_rigid_bias`, whose
+    ``I_O`` and ``h`` are both dense when the centre is off the axes.
+    """
+    w, vl = v[:3], v[3:]
+    cc = _total(_times(x, x) for x in c)
+    Ic = _sym(tuple(sympy.expand(I_O[a][b] - m * ((cc if a == b else 0) - c[a] * c[b]))
+                    for a, b in _PAIRS))
+    Ic = _name_sym(g, Ic)
+    vc = _vec(g, add(vl, cross(w, c)))
+    e = _vec(g, cross(w, vc))
+    f = _vec(g, [_times(m, x) for x in e])
+    # c x f costs one product per term when c is numeric, h x e otherwise
+    moment = cross(c, f) if all(x.is_Number for x in c) else cross(h, e)
+    return _vec(g, add(cross(w, _vec(g, _mv(Ic, w))), moment)) + f
 
 
 def _cross_motion(a, b):
@@ -268,7 +337,7 @@ def joint_motion(g, joint, m):
         c, s = g.name(sympy.cos(joint.angle)), g.name(sympy.sin(joint.angle))
         m = _motion_rot(g, _rotation(joint.axis, c, s), m)
     else:
-        m = _motion_xlt(g, g.vec(joint.offset), m)
+        m = _motion_xlt(g, _vec(g, joint.offset), m)
     return m
 
 
@@ -291,7 +360,7 @@ def to_parent_force(g, joint, f):
         c, s = g.name(sympy.cos(joint.angle)), g.name(sympy.sin(joint.angle))
         f = _force_rot_T(g, _rotation(joint.axis, c, s), f)
     else:
-        f = _force_xlt_T(g, g.vec(joint.offset), f)
+        f = _force_xlt_T(g, _vec(g, joint.offset), f)
     if not _is_identity(E):
         f = _force_rot_T(g, E, f)
     if any(x != 0 for x in r):
@@ -321,8 +390,8 @@ def _sym_axis_rot_T(g, M, k1, k2, c, s, trig):
     j = 3 - k1 - k2
     a, b, d = M[k1][k1], M[k1][k2], M[k2][k2]
     out = [[None] * 3 for _ in range(3)]
-    diff = g.name(a - d)
-    t = g.name(ss * diff + S2 * b)
+    diff = _nm(g, a - d)
+    t = _nm(g, ss * diff + S2 * b)
     out[k1][k1], out[k2][k2] = a - t, d + t
     out[k1][k2] = cs * diff + C2 * b
     out[j][k1], out[j][k2] = _plane_rot_T(c, s, k1, k2, M[j][k1], M[j][k2])
@@ -335,17 +404,28 @@ def _sym_rows(out):
                  for i in range(3))
 
 
-def _full_axis_rot_T(g, M, k1, k2, c, s):
-    """E^T M E for a general M and a rotation about one axis."""
-    cols = [list(row) for row in M]
-    for row in cols:
-        row[k1], row[k2] = _plane_rot_T(c, s, k1, k2, row[k1], row[k2])
-    cols = [g.vec(row) for row in cols]
-    rows = [list(row) for row in cols]
-    for col in range(3):
-        rows[k1][col], rows[k2][col] = _plane_rot_T(c, s, k1, k2, cols[k1][col],
-                                                    cols[k2][col])
-    return _name_full(g, rows)
+def _full_axis_rot_T(g, M, k1, k2, c, s, trig):
+    """E^T M E for a general M and a rotation about one axis.
+
+    The in-plane 2x2 block changes by its symmetric, trace-free part only:
+    with ``d = m11 - m22``, ``e = m12 + m21``, ``t = s^2 d + cs e`` and
+    ``w = cs d - s^2 e``: ``m11' = m11 - t``, ``m22' = m22 + t``,
+    ``m12' = m12 + w``, ``m21' = m21 + w`` (8 operations, not 24); the
+    out-of-plane row and column turn like vectors.
+    """
+    ss, cs = trig[0], trig[1]
+    j = 3 - k1 - k2
+    out = [[None] * 3 for _ in range(3)]
+    d = _nm(g, M[k1][k1] - M[k2][k2])
+    e = _nm(g, M[k1][k2] + M[k2][k1])
+    t = _nm(g, _total((_times(ss, d), _times(cs, e))))
+    w = _nm(g, _total((_times(cs, d), _neg(_times(ss, e)))))
+    out[k1][k1], out[k2][k2] = _total((M[k1][k1], _neg(t))), _total((M[k2][k2], t))
+    out[k1][k2], out[k2][k1] = _total((M[k1][k2], w)), _total((M[k2][k1], w))
+    out[j][k1], out[j][k2] = _plane_rot_T(c, s, k1, k2, M[j][k1], M[j][k2])
+    out[k1][j], out[k2][j] = _plane_rot_T(c, s, k1, k2, M[k1][j], M[k2][j])
+    out[j][j] = M[j][j]
+    return _name_full(g, out)
 
 
 def _axis_rot_T(g, I, axis, c, s):
@@ -355,7 +435,7 @@ def _axis_rot_T(g, I, axis, c, s):
     k1, k2 = _PLANE[axis]
     A, B, C = I
     return (_sym_axis_rot_T(g, A, k1, k2, c, s, trig),
-            _full_axis_rot_T(g, B, k1, k2, c, s),
+            _full_axis_rot_T(g, B, k1, k2, c, s, trig),
             _sym_axis_rot_T(g, C, k1, k2, c, s, trig))
 
 
@@ -381,7 +461,7 @@ def _to_parent_inertia(g, joint, I):
         c, s = g.name(sympy.cos(joint.angle)), g.name(sympy.sin(joint.angle))
         I = _axis_rot_T(g, I, joint.axis, c, s)
     else:
-        I = _inertia_xlt_T(g, g.vec(joint.offset), I)
+        I = _inertia_xlt_T(g, _vec(g, joint.offset), I)
     if not _is_identity(E):
         # a constant rotation about one base axis (a URDF rpy with one angle)
         # turns the inertia like a joint does; any other goes through E^T I E
@@ -418,9 +498,9 @@ def _rotate_into(g, spec, v, X: str, L: str) -> tuple:
     up, down = _base_steps(spec, X, L)
     v = tuple(v)
     for name in up:                  # child -> parent components: E^T v
-        v = g.vec(_mv(_T(_base_rotation(g, bases[name])), v))
+        v = _vec(g, _mv(_T(_base_rotation(g, bases[name])), v))
     for name in down:                # parent -> child components: E v
-        v = g.vec(_mv(_base_rotation(g, bases[name]), v))
+        v = _vec(g, _mv(_base_rotation(g, bases[name]), v))
     return v
 
 
@@ -449,7 +529,7 @@ def _point_offset(g, spec, P: str, Q: str, L: str) -> tuple:
                       [(p, -1) for p in cq if p not in shared]:
         seg = _rotate_into(g, spec, points[name].coordinates, points[name].base, L)
         total = add(total, tuple(_times(sign, x) for x in seg))
-    return g.vec(total)
+    return _vec(g, total)
 
 
 def _action_force(g, spec, joint, act) -> tuple:
@@ -459,8 +539,8 @@ def _action_force(g, spec, joint, act) -> tuple:
     F = _rotate_into(g, spec, act.force, act.base, L)
     if any(x != 0 for x in F):
         point, correction = joint.origin
-        r = g.vec(sub(_point_offset(g, spec, act.point, point, L), correction))
-        T = g.vec(add(T, cross(r, F)))
+        r = _vec(g, sub(_point_offset(g, spec, act.point, point, L), correction))
+        T = _vec(g, add(T, cross(r, F)))
     return T + F
 
 
@@ -501,18 +581,20 @@ def outward_pass(g: GraphBuilder, tree: JointTree, qd) -> Outward:
     count = len(tree.joints)
     v, c, I, bias = [None] * count, [None] * count, [None] * count, [None] * count
     for i, joint in enumerate(tree.joints):
-        vJ = g.vec(_total(_times(S[r], qd[k]) for k, S in joint.dofs) for r in range(6))
+        vJ = _vec(g, [_total(_times(S[r], qd[k]) for k, S in joint.dofs) for r in range(6)])
         if joint.parent < 0:
             v[i], c[i] = vJ, (ZERO,) * 6
         else:
-            v[i] = g.vec(add(joint_motion(g, joint, v[joint.parent]), vJ))
-            c[i] = g.vec(_cross_motion(v[i], vJ))
+            v[i] = _vec(g, add(joint_motion(g, joint, v[joint.parent]), vJ))
+            c[i] = _vec(g, _cross_motion(v[i], vJ))
         body = tree.inertias[i]
-        A = _sym(g.vec(body.I))
-        h = g.vec(body.h)
+        A = _sym(_vec(g, body.I))
+        h = _vec(g, body.h)
         m = g.name(body.m)
         I[i] = (A, _skew(h), ((m, ZERO, ZERO), (ZERO, m, ZERO), (ZERO, ZERO, m)))
-        bias[i] = _rigid_bias(g, A, h, m, v[i])
+        centre = _centre(body.h, body.m)
+        bias[i] = (_rigid_bias(g, A, h, m, v[i]) if centre is None else
+                   _com_bias(g, _sym(body.I), h, body.m, centre, v[i]))
     return Outward(tuple(v), tuple(c), tuple(I), tuple(bias))
 
 
@@ -539,23 +621,23 @@ def derive_aba(eqs: Equations, tree: JointTree, spec: ModelSpec, graph: Graph | 
     actions = list(spec.actions) + [e for e in spec.effects if e.kind == "action"]
     local = set(gravity_labels) | {a.name for a in actions}
     others = [part for label, part in eqs.tau_parts if label not in local]
-    tau = [g.name(sympy.Add(*[part[k] for part in others])) for k in range(n)]
+    tau = [_nm(g, sympy.Add(*[part[k] for part in others])) for k in range(n)]
     link_of = dict(tree.body_links)
     external: dict = {}                 # joint index -> spatial force on its link
     for act in actions:
         i = link_of[act.body]
         if i >= 0:
             f = _action_force(g, spec, tree.joints[i], act)
-            external[i] = g.vec(add(external[i], f)) if i in external else f
+            external[i] = _vec(g, add(external[i], f)) if i in external else f
 
     joints = tree.joints
     count = len(joints)
     outward = outward_pass(g, tree, eqs.qd)
     c, IA, pA = outward.c, list(outward.I), list(outward.bias)
     for i, f in external.items():
-        pA[i] = g.vec(sub(pA[i], f))
+        pA[i] = _vec(g, sub(pA[i], f))
 
-    U, D, invD, u = [None] * count, [None] * count, [None] * count, [None] * count
+    U, D, nUd, uD = [None] * count, [None] * count, [None] * count, [None] * count
     multi: dict = {}                    # joint index -> _MultiDof of a ball or free joint
     for i in reversed(range(count)):                        # pass 2: inwards
         joint = joints[i]
@@ -570,41 +652,49 @@ def derive_aba(eqs: Equations, tree: JointTree, spec: ModelSpec, graph: Graph | 
                 pA[p] = g.vec(add(pA[p], to_parent_force(g, joint, multi[i].pa)))
             continue
         S = joint.S
-        U[i] = g.vec(inertia_times(IA[i], S))
+        j = _single(S)
+        U[i] = _vec(g, inertia_times(IA[i], S))
         D[i] = g.name(dot(S, U[i]))
-        invD[i] = g.name(1 / D[i])
-        u[i] = g.name(tau[joint.coordinate] - dot(S, pA[i]))
+        invD = g.name(1 / D[i])
+        tau_i = tau[joint.coordinate]
+        # -U/D is named with its sign, so that Ia, pa and qdd are sums of products;
+        # for a one-entry S its entry j is exactly -1/S_j (U_j = D / S_j)
+        nUd[i] = tuple(-1 / S[r] if r == j else g.name(-x * invD) if not _zero(x) else ZERO
+                       for r, x in enumerate(U[i]))
+        uD[i] = g.name((tau_i - dot(S, pA[i])) * invD)
         if joint.parent < 0:
             continue
-        Ud = g.vec(_times(x, invD[i]) for x in U[i])
         A, B, C = IA[i]
 
         def update(M, r0, s0):
-            return tuple(tuple(_total((M[r][s], _neg(_times(U[i][r0 + r], Ud[s0 + s]))))
+            return tuple(tuple(_total((M[r][s], _times(U[i][r0 + r], nUd[i][s0 + s])))
                                for s in range(3)) for r in range(3))
 
         A, B, C = _drop_subspace((update(A, 0, 0), update(B, 0, 3), update(C, 3, 3)), S)
         Ia = (_name_sym(g, A), _name_full(g, B), _name_sym(g, C))
-        ui = g.name(u[i] * invD[i])
-        pa = g.vec(add(add(pA[i], inertia_times(Ia, c[i])), tuple(_times(x, ui) for x in U[i])))
+        # pa = pA + Ia c + U u/D; with a one-entry S, S^T pa = tau exactly
+        # (Ia S = 0 and S^T U = D), so entry j is tau / S_j
+        pa = add(add(pA[i], inertia_times(Ia, c[i])), tuple(_times(x, uD[i]) for x in U[i]))
+        pa = _vec(g, [tau_i / S[r] if r == j else x for r, x in enumerate(pa)])
         p = joint.parent
         Ip = _to_parent_inertia(g, joint, Ia)
         IA[p] = tuple(_name_full(g, tuple(tuple(_total((X[r][s], Y[r][s])) for s in range(3))
                                           for r in range(3)))
                       for X, Y in zip(IA[p], Ip))
-        pA[p] = g.vec(add(pA[p], to_parent_force(g, joint, pa)))
+        pA[p] = _vec(g, add(pA[p], to_parent_force(g, joint, pa)))
 
     qdd = [None] * n
     acc = [None] * count
     for i, joint in enumerate(joints):                      # pass 3: outwards
         ap = a0 if joint.parent < 0 else acc[joint.parent]
-        a_prime = g.vec(add(joint_motion(g, joint, ap), c[i]))
+        a_prime = _vec(g, add(joint_motion(g, joint, ap), c[i]))
         if i in multi:
             acc[i] = _multi_dof_outward(g, joint, multi[i], a_prime, qdd)
             continue
         k = joint.coordinate
-        qdd[k] = g.name((u[i] - dot(U[i], a_prime)) * invD[i])
-        acc[i] = g.vec(add(a_prime, tuple(_times(s, qdd[k]) for s in joint.S)))
+        # (u - U^T a') / D
+        qdd[k] = g.name(_total((uD[i], dot(nUd[i], a_prime))))
+        acc[i] = _vec(g, add(a_prime, tuple(_times(s, qdd[k]) for s in joint.S)))
     D_out = [None] * n
     for i, joint in enumerate(joints):
         if i in multi:

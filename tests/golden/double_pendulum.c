@@ -117,7 +117,7 @@ void double_pendulum_mass_matrix(const double *q, const double *p, double *A)
     double_pendulum_mass_matrix_eval(q, p, A);
 }
 
-/* velocity_terms: 22 statements, 33 operations after CSE (33 before) */
+/* velocity_terms: 23 statements, 32 operations after CSE (32 before) */
 static void double_pendulum_velocity_terms_eval(const double *q, const double *qd, const double *p, double *h)
 {
     (void)q;
@@ -127,27 +127,28 @@ static void double_pendulum_velocity_terms_eval(const double *q, const double *q
     const double v0 = cos(q[1]);
     const double v1 = sin(q[1]);
     const double v2 = qd[0] + qd[1];
-    const double v3 = 1.0/2.0*p[1];
-    const double v4 = p[2]*qd[0];
-    const double v5 = v1*v4;
-    const double v6 = v0*v4;
-    const double v7 = v6*qd[1];
-    const double v8 = -v5*qd[1];
-    const double v9 = p[3]*v3;
-    const double v10 = -v9*v2;
-    const double v11 = p[1]*v5;
-    const double v12 = -v10 + p[1]*v6;
-    const double v13 = -v10*v5;
-    const double v14 = -v12*v2;
-    const double v15 = v11*v2;
-    const double v16 = v13 + v9*v8;
-    const double v17 = v14 + p[1]*v7;
-    const double v18 = v15 + p[1]*v8;
-    const double v19 = v17*v1;
-    const double v20 = v19 + v18*v0;
-    const double v21 = v16 + p[2]*v20;
-    h[0] = v21;
-    h[1] = v16;
+    const double v3 = 1.0/2.0*p[3];
+    const double v4 = 1.0/2.0*p[1];
+    const double v5 = p[2]*qd[0];
+    const double v6 = v1*v5;
+    const double v7 = v0*v5;
+    const double v8 = v7*qd[1];
+    const double v9 = v6*qd[1];
+    const double v10 = p[3]*v4;
+    const double v11 = v7 + v2*v3;
+    const double v12 = v11*v2;
+    const double v13 = v2*v6;
+    const double v14 = p[1]*v12;
+    const double v15 = p[1]*v13;
+    const double v16 = v10*v13;
+    const double v17 = v16 - v10*v9;
+    const double v18 = -v14 + p[1]*v8;
+    const double v19 = v15 - p[1]*v9;
+    const double v20 = v18*v1;
+    const double v21 = v20 + v19*v0;
+    const double v22 = v17 + p[2]*v21;
+    h[0] = v22;
+    h[1] = v17;
 }
 
 void double_pendulum_velocity_terms(const double *q, const double *qd, const double *p, double *h)
@@ -310,7 +311,7 @@ void double_pendulum_body_poses(const double *q, const double *p, double *T)
 
 #if !defined(MG_PART) || MG_PART == 2
 
-/* rhs: 54 statements, 92 operations after CSE (92 before) */
+/* rhs: 57 statements, 86 operations after CSE (86 before) */
 static void double_pendulum_rhs_eval(double t, const double *x, const double *u, const double *p, double *qdd, double *D)
 {
     (void)t;
@@ -323,58 +324,61 @@ static void double_pendulum_rhs_eval(double t, const double *x, const double *u,
     const double v2 = cos(x[1]);
     const double v3 = sin(x[1]);
     const double v4 = x[2] + x[3];
-    const double v5 = p[0]*(p[2]*p[2]);
-    const double v6 = p[1]*(p[3]*p[3]);
-    const double v7 = 1.0/2.0*p[1];
-    const double v8 = 1.0/2.0*p[0];
-    const double v9 = 1.0/3.0*v5;
-    const double v10 = p[2]*v8;
-    const double v11 = p[2]*x[2];
-    const double v12 = v3*v11;
-    const double v13 = v2*v11;
-    const double v14 = v13*x[3];
-    const double v15 = -v12*x[3];
-    const double v16 = 1.0/3.0*v6;
-    const double v17 = p[3]*v7;
-    const double v18 = -v17*v4;
-    const double v19 = p[1]*v12;
-    const double v20 = -v18 + p[1]*v13;
-    const double v21 = -v18*v12;
-    const double v22 = -v20*v4;
-    const double v23 = v19*v4;
-    const double v24 = v22 + p[1]*v14;
-    const double v25 = v24*v3;
-    const double v26 = 1.0/v16;
-    const double v27 = v17*v26;
-    const double v28 = p[1] - v17*v27;
-    const double v29 = -v21*v26;
-    const double v30 = v21 + v16*v29;
-    const double v31 = v23 + v17*v29 + v28*v15;
+    const double v5 = 1.0/2.0*p[3];
+    const double v6 = p[0]*(p[2]*p[2]);
+    const double v7 = p[1]*(p[3]*p[3]);
+    const double v8 = 1.0/2.0*p[1];
+    const double v9 = 1.0/2.0*p[0];
+    const double v10 = 1.0/3.0*v6;
+    const double v11 = p[2]*v9;
+    const double v12 = p[2]*x[2];
+    const double v13 = v3*v12;
+    const double v14 = v2*v12;
+    const double v15 = v14*x[3];
+    const double v16 = v13*x[3];
+    const double v17 = 1.0/3.0*v7;
+    const double v18 = p[3]*v8;
+    const double v19 = v14 + v4*v5;
+    const double v20 = v19*v4;
+    const double v21 = v4*v13;
+    const double v22 = p[1]*v20;
+    const double v23 = p[1]*v21;
+    const double v24 = v18*v21;
+    const double v25 = -v22 + p[1]*v15;
+    const double v26 = v25*v3;
+    const double v27 = 1.0/v17;
+    const double v28 = -v18*v27;
+    const double v29 = -v24*v27;
+    const double v30 = p[1] + v18*v28;
+    const double v31 = v23 + v18*v29 - v30*v16;
     const double v32 = (v3*v3);
     const double v33 = v2*v3;
-    const double v34 = p[1] - v28;
+    const double v34 = p[1] - v30;
     const double v35 = v32*v34;
-    const double v36 = v28 + v35;
+    const double v36 = v30 + v35;
     const double v37 = v33*v34;
     const double v38 = p[2]*v37;
     const double v39 = p[2]*v36;
     const double v40 = p[2]*v39;
-    const double v41 = v40 + v9;
-    const double v42 = v39 + v10;
-    const double v43 = v25 + v31*v2;
-    const double v44 = v30 + p[2]*v43;
+    const double v41 = v40 + v10;
+    const double v42 = v39 + v11;
+    const double v43 = v26 + v31*v2;
+    const double v44 = p[2]*v43;
     const double v45 = v44 - u[0];
     const double v46 = 1.0/v41;
-    const double v47 = p[4]*v1;
-    const double v48 = p[4]*v0;
-    const double v49 = v46*(-v45 - v38*v47 - v42*v48);
-    const double v50 = v48 + p[2]*v49;
-    const double v51 = v50*v2 - v47*v3;
-    const double v52 = v51 + v15;
-    const double v53 = v26*(-v21 - v16*v49 - v17*v52);
-    qdd[0] = v49;
-    qdd[1] = v53;
-    D[0] = v16;
+    const double v47 = -v38*v46;
+    const double v48 = -v42*v46;
+    const double v49 = -v45*v46;
+    const double v50 = p[4]*v1;
+    const double v51 = p[4]*v0;
+    const double v52 = v49 + v47*v50 + v48*v51;
+    const double v53 = v51 + p[2]*v52;
+    const double v54 = v53*v2 - v50*v3;
+    const double v55 = v54 - v16;
+    const double v56 = v29 - v52 + v28*v55;
+    qdd[0] = v52;
+    qdd[1] = v56;
+    D[0] = v17;
     D[1] = v41;
 }
 
