@@ -99,7 +99,7 @@ def test_free_symbols_walk_leaves_bound_symbols_to_sympy():
 
 def test_symengine_conversion_matches_sympify(program):
     graph, _ = program
-    convert = cse._to_symengine(symengine)
+    convert = cse._converters(symengine)[0]
     for _, e in graph.assignments:
         converted = convert(e)
         assert converted == symengine.sympify(e), e
