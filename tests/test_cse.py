@@ -9,6 +9,7 @@ helpers that skip zeros and ones build the expressions sympy's arithmetic builds
 """
 from __future__ import annotations
 
+import itertools
 import random
 
 import pytest
@@ -184,6 +185,14 @@ def test_vector_helpers_build_what_sympy_builds():
         for name, value in expected.items():
             assert got[name] == value, (name, a, b, s)
             assert [type(v) for v in got[name]] == [type(v) for v in value], (name, a, b, s)
+
+
+def test_product_is_sympys_product_on_every_pair():
+    sympy_pool = [sympy.sympify(v) for v in _pool()]
+    for x, y in itertools.product(sympy_pool, repeat=2):
+        got, expected = graph_module.product(x, y), x * y
+        assert got == expected and type(got) is type(expected), (x, y)
+        assert got.args == expected.args, (x, y)
 
 
 def test_closure_is_the_needed_statements_in_program_order():
