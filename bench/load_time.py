@@ -147,7 +147,8 @@ def compile_breakdown(cm_or_generated, repeats: int = 3) -> list:
                 times.append(time.perf_counter() - t0)
                 cpus.append(compiler_cpu() - c0)
             part = next((a for a in argv if a.startswith("-DMG_PART=")), "-")
-            level = next((a for a in argv if a.startswith("-O")), "-")
+            level = " ".join(a for a in argv if a.startswith(("-O", "-f")) and a != "-fPIC") \
+                or "-"
             rows.append((part.removeprefix("-D"), level, min(times), min(cpus)))
     return rows
 

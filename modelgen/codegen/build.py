@@ -70,17 +70,31 @@ except ImportError:   # not POSIX: builds are not serialised
 
 from modelgen.errors import BuildError
 
-#: Optimisation levels by the statement count of a part's largest routine: part
-#: (level, above this many statements) rows, first match wins, else -O2.  gcc's
-#: time grows faster than linearly with code size.  Part 2 (the integration
-#: path) stays at -O2 up to 4,000 statements: at n = 30 links its rhs (3,800)
-#: compiles in 3.4 s at -O2 and runs 12% faster than at -O1.  Part 1 (A, h, tau,
-#: energies, poses: called from Python or a user's C, never by an integrator)
-#: is at most -O1, and -O0 above 1,000 statements: at n = 50 links it compiles
-#: in 3.2 s at -O0 against 10.7 s at -O1 (n = 20: 0.95 against 1.7 s), and A
-#: then takes 17.6 us instead of 7.6 us (h 4.5 against 2.4 us).  Part 0 is the
-#: whole file in one process.
-OPT_LEVELS = {0: (("-O1", 400),), 1: (("-O0", 1000), ("-O1", 0)), 2: (("-O1", 4000),)}
+#: -O2 without gcc's basic-block (SLP) vectorizer, which gcc 12 enables at -O2:
+#: on the straight-line code of a rhs it packs pairs of scalar operations into
+#: vector ones and costs time at run time as well as at compile time.  Measured
+#: (gcc 12.2, this 2-core machine, min of 7 interleaved rounds of a C loop over
+#: the rhs): chain 6 rhs 310 ns at -O2, 264 ns without SLP, 256 ns at -O1;
+#: chain 20 1.66 / 1.48 / 1.45 us; chain 30 2.60 / 2.37 / 2.31 us; arm7 516 /
+#: 460 / 530 ns; double pendulum 39 ns at all three.  Compiling the chain 6's
+#: part 2 takes 237 ms of compiler CPU at -O2, 195 ms without SLP, 148 at -O1.
+O2 = ("-O2", "-fno-tree-slp-vectorize")
+#: Optimisation flags by the statement count of a part's largest routine: per
+#: part, (flags, above this many statements) rows, first match wins, else
+#: :data:`O2`.  gcc's time grows faster than linearly with code size.
+#:
+#: Part 2 (the integration path) is at :data:`O2` up to 4,000 statements, -O1
+#: above.  Part 1 (A, h, tau, energies, poses: never called by an integrator,
+#: only from Python through the runtime, where a call costs about a
+#: microsecond anyway, or from a user's C, compiled by the user) is at -O0 at
+#: every size, so it compiles beside part 2 without becoming the critical path.
+#: Chain 6 (largest part-1 routine 365 statements): part 1 compiles in 134 ms
+#: of compiler CPU at -O0 against 419 ms at -O1 (part 2: 195 ms), and A takes
+#: 390 ns instead of 231 ns, h 308 instead of 137 ns, the energies 322
+#: instead of 163 ns; n = 50 links: 3.2 s against 10.7 s, A 17.6 us against
+#: 7.6 us (h 4.5 against 2.4 us).  Part 0 is the whole file in one process
+#: (one core, and the FMU): -O1 above 400 statements, else :data:`O2`.
+OPT_LEVELS = {0: ((("-O1",), 400),), 1: ((("-O0",), -1),), 2: ((("-O1",), 4000),)}
 #: A model's C is compiled as two parts in parallel (MG_PART 1: the model
 #: functions no integrator calls, 2: the integration path) when the machine has
 #: two cores, at every size: even the double pendulum gains (its file takes
@@ -143,11 +157,11 @@ def compile_flags(statements: int, part: int = 2) -> list:
 
     ``$MODELGEN_CFLAGS`` is appended (and is part of the cache key).
 
-    >>> compile_flags(100, 1)[0], compile_flags(100, 2)[0], compile_flags(5000, 1)[0]
-    ('-O1', '-O2', '-O0')
+    >>> compile_flags(100, 1)[0], compile_flags(100, 2)[:2], compile_flags(5000, 2)[0]
+    ('-O0', ['-O2', '-fno-tree-slp-vectorize'], '-O1')
     """
-    opt = next((level for level, above in OPT_LEVELS[part] if statements > above), "-O2")
-    return [opt, *BASE_FLAGS, *_split_env("MODELGEN_CFLAGS", "")]
+    opt = next((flags for flags, above in OPT_LEVELS[part] if statements > above), O2)
+    return [*opt, *BASE_FLAGS, *_split_env("MODELGEN_CFLAGS", "")]
 
 
 def cache_dir() -> Path:

@@ -24,6 +24,7 @@ EXACT_INTEGER_LIMIT = 2**53
 #: Precedences of the fast printer's output: a sum, a product or quotient, a
 #: negated product, an atom (name, call, parenthesised group, unsigned number).
 _ADD, _MUL, _NEG, _ATOM = 1, 2, 3, 4
+_ONE, _MINUS_ONE = sympy.S.One, sympy.S.NegativeOne
 #: sympy functions printed as a C call of the same arity.
 _C_FUNCTIONS = {sympy.sin: "sin", sympy.cos: "cos", sympy.tan: "tan", sympy.asin: "asin",
                 sympy.acos: "acos", sympy.atan: "atan", sympy.atan2: "atan2",
@@ -113,17 +114,22 @@ class ModelPrinter(C99CodePrinter):
                     parts.append((" + " if i else "") + text)
             return "".join(parts), _ADD
         if e.is_Mul:
+            # numbers are compared by their fields or by identity (S.One, S.NegativeOne
+            # and S.Half are singletons): sympy's rich comparisons sympify their
+            # other operand, which took a fifth of the printing
             coeff, rest = e.as_coeff_Mul()
-            sign = "-" if coeff < 0 else ""
-            coeff = -coeff if coeff < 0 else coeff
+            negative = coeff.is_negative
+            sign = "-" if negative else ""
+            coeff = -coeff if negative else coeff
             num, den = [], []
             for factor in sympy.Mul.make_args(rest):
-                if factor.is_Pow and factor.exp.is_Rational and factor.exp.is_negative:
-                    den.append(factor.base if factor.exp == -1 else
-                               sympy.Pow(factor.base, -factor.exp, evaluate=False))
+                exp = factor.exp if factor.is_Pow else None
+                if exp is not None and exp.is_Rational and exp.p < 0:
+                    den.append(factor.base if exp is _MINUS_ONE else
+                               sympy.Pow(factor.base, -exp, evaluate=False))
                 else:
                     num.append(factor)
-            texts = [] if coeff == 1 else [self._fast(coeff)[0]]
+            texts = [] if coeff is _ONE else [self._fast(coeff)[0]]
             for factor in num:
                 text, prec = self._fast(factor)
                 texts.append(text if prec >= _MUL and not (prec == _MUL and factor.is_Rational)
@@ -142,15 +148,13 @@ class ModelPrinter(C99CodePrinter):
             base, exp = e.args
             b, prec = self._fast(base)
             group = b if prec == _ATOM else f"({b})"
-            if exp.is_Integer and 1 < abs(int(exp)) <= 4:
-                prod = "(" + "*".join([group] * abs(int(exp))) + ")"
-                return (prod, _ATOM) if exp > 0 else (f"1.0/{prod}", _MUL)
-            if exp == -1:
+            if exp.is_Integer and 1 < abs(exp.p) <= 4:
+                prod = "(" + "*".join([group] * abs(exp.p)) + ")"
+                return (prod, _ATOM) if exp.p > 0 else (f"1.0/{prod}", _MUL)
+            if exp is _MINUS_ONE:
                 return f"1.0/{group}", _MUL
-            if exp == sympy.S.Half:
-                return f"sqrt({b})", _ATOM
-            if exp == -sympy.S.Half:
-                return f"1.0/sqrt({b})", _MUL
+            if exp.is_Rational and exp.q == 2 and abs(exp.p) == 1:
+                return (f"sqrt({b})", _ATOM) if exp.p > 0 else (f"1.0/sqrt({b})", _MUL)
             return f"pow({b}, {self._fast(exp)[0]})", _ATOM
         if e.func in _C_FUNCTIONS:
             return f"{_C_FUNCTIONS[e.func]}({', '.join(self._fast(a)[0] for a in e.args)})", _ATOM
