@@ -55,3 +55,22 @@ def test_forward_mode_differentiates_through_named_intermediates():
     exact = [sympy.diff((sympy.cos(x) * y) ** 2 + x, v).subs(value) for v in (x, y)]
     got = [float(graph.expand(e).subs(value)) for e in rows[0]]
     assert got == pytest.approx([float(e) for e in exact], rel=1e-14)
+
+
+def test_jacobian_c_is_the_same_whatever_the_hash_seed(tmp_path):
+    """The derivatives are named in column order, not in the order of a set of
+    symbols (which follows PYTHONHASHSEED): two processes write the same C."""
+    import os
+    import subprocess
+    import sys
+    script = ("import sys; from modelgen.codegen.pipeline import generate; "
+              "from modelgen.model import as_spec; "
+              f"generate(as_spec({str(MODELS / 'cart_pole.yaml')!r}), sys.argv[1], "
+              "linearize=True, formulation='crba')")
+    texts = []
+    for seed in ("1", "2"):
+        out = tmp_path / seed
+        env = dict(os.environ, PYTHONHASHSEED=seed, MODELGEN_CACHE_DIR=str(tmp_path / "cache"))
+        subprocess.run([sys.executable, "-c", script, str(out)], check=True, env=env)
+        texts.append((out / "cart_pole.c").read_text())
+    assert "cart_pole_linearize" in texts[0] and texts[0] == texts[1]

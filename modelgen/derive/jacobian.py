@@ -73,7 +73,9 @@ def differentiate(graph: Graph, outputs, wrt) -> tuple:
                 continue
             for j, dj in inner.items():
                 total[j] = total.get(j, sympy.S.Zero) + partial * dj
-        return {j: builder.name(v) for j, v in total.items() if v != 0}
+        # named in column order, not in the order of the free-symbol set (which
+        # follows the hash seed), so the generated C is the same on every run
+        return {j: builder.name(v) for j, v in sorted(total.items()) if v != 0}
 
     for sym, expr in graph.closure(outputs):
         g = grad_of(expr)
