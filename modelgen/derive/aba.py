@@ -46,7 +46,7 @@ from dataclasses import dataclass
 import sympy
 
 from modelgen.derive.dynamics import Equations
-from modelgen.derive.graph import ONE, ZERO, ZERO3, Graph, GraphBuilder
+from modelgen.derive.graph import ONE, ZERO, ZERO3, Graph, GraphBuilder, product
 from modelgen.derive.jacobian import JacobianTerms, differentiate
 from modelgen.derive.joint_tree import JointTree
 from modelgen.derive.kinematics import quaternion_columns
@@ -92,7 +92,7 @@ def _times(x, y):
         return y
     if _one(y):
         return x
-    return x * y
+    return product(x, y)
 
 
 def _total(terms):
