@@ -184,13 +184,16 @@ class DenseOutput:
     (dop853's is of degree 7, dopri5's 4, rodas's and the Hermite of the
     fixed-step methods 3), so ``sol`` is as accurate as ``t_eval`` sampling.
     ``sol(t)`` returns shape (n_states,) for a scalar t, else (n_states, len(t)).
+    The quaternions of ball and free joints (``quaternions``: their state
+    indices) are normalised, as the integrators normalise their samples.
     """
 
     #: interpolation nodes on [0, 1] and their barycentric weights
     NODES = (1.0 - np.cos(np.pi * np.arange(8) / 7)) / 2
     WEIGHTS = np.array([0.5, -1, 1, -1, 1, -1, 1, -0.5])
 
-    def __init__(self, t_steps: np.ndarray, values: np.ndarray):
+    def __init__(self, t_steps: np.ndarray, values: np.ndarray, quaternions=()):
+        self.quaternions = tuple(tuple(q) for q in quaternions)
         self.t = np.asarray(t_steps, dtype=float)        # (n_steps + 1,)
         self.values = np.asarray(values, dtype=float)    # (n_steps, 8, n_states)
         self.t_min, self.t_max = float(self.t[0]), float(self.t[-1])
@@ -207,6 +210,8 @@ class DenseOutput:
         c = np.where(exact.any(axis=1, keepdims=True), exact.astype(float), c)
         c /= c.sum(axis=1, keepdims=True)
         out = np.einsum("tj,tjn->nt", c, self.values[k])
+        for quat in self.quaternions:
+            out[list(quat)] /= np.linalg.norm(out[list(quat)], axis=0)
         return out[:, 0] if np.ndim(t) == 0 else out
 
 

@@ -377,8 +377,7 @@ class CompiledModel:
             res.sol = self._dense(steps, run)
         return res
 
-    @staticmethod
-    def _dense(steps, run) -> DenseOutput | None:
+    def _dense(self, steps, run) -> DenseOutput | None:
         """Sample the method's own dense output inside every accepted step (a second,
         identical run with those times as t_eval) and wrap it as ``sol``."""
         sign = 1.0 if len(steps.t) < 2 or steps.t[-1] >= steps.t[0] else -1.0
@@ -399,7 +398,8 @@ class CompiledModel:
         values[:, 1:-1] = got.reshape(len(ts) - 1, len(inner), nx)
         if sign < 0:        # steps and nodes ascending in t (the nodes are symmetric)
             ts, values = ts[::-1], values[::-1, ::-1]
-        return DenseOutput(np.ascontiguousarray(ts), np.ascontiguousarray(values))
+        return DenseOutput(np.ascontiguousarray(ts), np.ascontiguousarray(values),
+                           self.quaternions)
 
     def stability_warning(self, method, step, t0, x0, u=None, p=None) -> str | None:
         """Why a fixed ``step`` of an explicit ``method`` is unstable at (t0, x0), or None.
