@@ -145,8 +145,9 @@ def kinematic_relation(g: GraphBuilder, spec, q: tuple, qd: tuple) -> tuple:
 
     >>> from modelgen.model.api import Model
     >>> spec = Model("m").add_joint("J", "ball", parent="E", base="B").spec()
-    >>> qdot = kinematic_relation(GraphBuilder(), spec, *_symbols(spec))
-    >>> qdot[0]
+    >>> g = GraphBuilder()
+    >>> qdot = kinematic_relation(g, spec, *_symbols(spec))
+    >>> g.freeze().expand(qdot[0])
     -J_qx*J_wx/2 - J_qy*J_wy/2 - J_qz*J_wz/2
     """
     simple = len(spec.simple_coordinates)

@@ -37,8 +37,8 @@ def spatial_chain(n: int) -> Model:
     >>> spec = spatial_chain(3).spec()
     >>> [(b.name, b.parent, b.axis) for b in spec.bases]
     [('B1', 'E', 3), ('B2', 'B1', 2), ('B3', 'B2', 3)]
-    >>> spec.points[1]
-    PointSpec(name='G1', parent='O', base='B1', coordinates=(l1/2, 0, 0))
+    >>> p = spec.points[1]; p.name, p.parent, p.base, p.coordinates
+    ('G1', 'O', 'B1', (l1/2, 0, 0))
     """
     if isinstance(n, bool) or not isinstance(n, numbers.Integral) or n < 1:
         raise ModelError(f"the number of links must be a positive integer but is {n!r}",
