@@ -317,7 +317,7 @@ def build_rhs_harness(cm, x0, work: Path):
     work.mkdir(parents=True, exist_ok=True)
     harness = work / "rhs_bench.c"
     harness.write_text(_MG_HARNESS.format(
-        name=name, nx=2 * cm.n, x0=_c_array(x0), np_=max(len(cm.parameters), 1),
+        name=name, nx=cm.nx, x0=_c_array(x0), np_=max(len(cm.parameters), 1),
         p=_c_array(cm.params()) or "0.0", nu_=max(len(cm.inputs), 1),
         min_seconds=MIN_SECONDS, repeats=REPEATS))
 
@@ -375,7 +375,7 @@ def rhs_instructions(cm, x0, work: Path, calls: int = 2000):
         return None
     exe, _ = build_rhs_harness(cm, x0, work)        # compiles model_rhs.o as the build did
     src = work / "rhs_count.c"
-    src.write_text(_MG_COUNT.format(name=cm.name, calls=calls, nx=2 * cm.n, x0=_c_array(x0),
+    src.write_text(_MG_COUNT.format(name=cm.name, calls=calls, nx=cm.nx, x0=_c_array(x0),
                                     np_=max(len(cm.parameters), 1),
                                     p=_c_array(cm.params()) or "0.0",
                                     nu_=max(len(cm.inputs), 1)))

@@ -118,7 +118,7 @@ def jacobian_function(cm, u=None, p=None):
     fn = getattr(cm.lib, f"{cm.name}_jacobian", None)
     if fn is None:
         return lambda t, x: cm.jac(t, x, u, p)
-    nx = 2 * cm.n
+    nx = cm.nx
     ffi = cm.ffi
     p_arr, u_arr = cm.params(p).copy(), cm.input_vector(u).copy()
     x_buf = np.zeros(nx)
