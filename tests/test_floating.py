@@ -22,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from scipy.spatial.transform import Rotation
 
 from modelgen.sim.load import load_scene
 
@@ -30,10 +31,9 @@ G = np.array([0.0, 0.0, -9.81])
 
 
 def _rotation(quat):
+    """R of a scalar-first unit quaternion, from scipy (not modelgen's formula)."""
     w, x, y, z = quat
-    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-                     [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-                     [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+    return Rotation.from_quat([x, y, z, w]).as_matrix()
 
 
 @pytest.fixture(scope="module")

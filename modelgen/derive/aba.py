@@ -317,9 +317,10 @@ def _cross_force(a, f):
     return add(cross(a[:3], f[:3]), cross(a[3:], f[3:])) + cross(a[:3], f[3:])
 
 
-def _quaternion_rotation(g, joint) -> tuple:
-    """E = R(quat)^T of a ball or free joint: parent -> link components."""
-    return tuple(tuple(g.name(x) for x in col) for col in quaternion_columns(joint.quaternion))
+def _quaternion_rotation(g, quaternion) -> tuple:
+    """E = R(quat)^T of a ball or free joint's base: parent -> child components
+    (the rows of E are the columns of R)."""
+    return tuple(tuple(g.name(x) for x in col) for col in quaternion_columns(quaternion))
 
 
 def joint_motion(g, joint, m):
@@ -332,7 +333,7 @@ def joint_motion(g, joint, m):
     if joint.kind in ("ball", "free"):
         if joint.position:
             m = _motion_xlt(g, joint.position, m)
-        m = _motion_rot(g, _quaternion_rotation(g, joint), m)
+        m = _motion_rot(g, _quaternion_rotation(g, joint.quaternion), m)
     elif joint.kind == "revolute":
         c, s = g.name(sympy.cos(joint.angle)), g.name(sympy.sin(joint.angle))
         m = _motion_rot(g, _rotation(joint.axis, c, s), m)
@@ -353,7 +354,7 @@ def to_parent_force(g, joint, f):
     """X_i^T f."""
     E, r = joint.fixed
     if joint.kind in ("ball", "free"):
-        f = _force_rot_T(g, _quaternion_rotation(g, joint), f)
+        f = _force_rot_T(g, _quaternion_rotation(g, joint.quaternion), f)
         if joint.position:
             f = _force_xlt_T(g, joint.position, f)
     elif joint.kind == "revolute":
@@ -454,7 +455,7 @@ def _to_parent_inertia(g, joint, I):
     """X_i^T I X_i."""
     E, r = joint.fixed
     if joint.kind in ("ball", "free"):
-        I = _inertia_rot_T(g, _quaternion_rotation(g, joint), I)
+        I = _inertia_rot_T(g, _quaternion_rotation(g, joint.quaternion), I)
         if joint.position:
             I = _inertia_xlt_T(g, joint.position, I)
     elif joint.kind == "revolute":
@@ -507,7 +508,7 @@ def _rotate_into(g, spec, v, X: str, L: str) -> tuple:
 def _base_rotation(g, b) -> tuple:
     """E of a base: parent -> base components."""
     if b.quaternion:
-        return tuple(tuple(g.name(x) for x in col) for col in quaternion_columns(b.quaternion))
+        return _quaternion_rotation(g, b.quaternion)
     return _rotation(b.axis, g.name(sympy.cos(b.angle)), g.name(sympy.sin(b.angle)))
 
 
@@ -644,12 +645,7 @@ def derive_aba(eqs: Equations, tree: JointTree, spec: ModelSpec, graph: Graph | 
         if len(joint.dofs) > 1:
             multi[i] = _multi_dof_inward(g, joint, IA[i], pA[i], c[i], tau)
             if joint.parent >= 0:
-                p = joint.parent
-                Ip = _to_parent_inertia(g, joint, multi[i].Ia)
-                IA[p] = tuple(_name_full(g, tuple(tuple(_total((X[r][s], Y[r][s]))
-                                                        for s in range(3)) for r in range(3)))
-                              for X, Y in zip(IA[p], Ip))
-                pA[p] = g.vec(add(pA[p], to_parent_force(g, joint, multi[i].pa)))
+                _add_to_parent(g, joint, IA, pA, multi[i].Ia, multi[i].pa)
             continue
         S = joint.S
         j = _single(S)
@@ -676,12 +672,7 @@ def derive_aba(eqs: Equations, tree: JointTree, spec: ModelSpec, graph: Graph | 
         # (Ia S = 0 and S^T U = D), so entry j is tau / S_j
         pa = add(add(pA[i], inertia_times(Ia, c[i])), tuple(_times(x, uD[i]) for x in U[i]))
         pa = _vec(g, [tau_i / S[r] if r == j else x for r, x in enumerate(pa)])
-        p = joint.parent
-        Ip = _to_parent_inertia(g, joint, Ia)
-        IA[p] = tuple(_name_full(g, tuple(tuple(_total((X[r][s], Y[r][s])) for s in range(3))
-                                          for r in range(3)))
-                      for X, Y in zip(IA[p], Ip))
-        pA[p] = _vec(g, add(pA[p], to_parent_force(g, joint, pa)))
+        _add_to_parent(g, joint, IA, pA, Ia, pa)
 
     qdd = [None] * n
     acc = [None] * count
@@ -704,6 +695,16 @@ def derive_aba(eqs: Equations, tree: JointTree, spec: ModelSpec, graph: Graph | 
             D_out[joint.coordinate] = D[i]
     inward = tuple(k for i in reversed(range(count)) for k, _ in joints[i].dofs)
     return ForwardDynamics(g.freeze(), tuple(qdd), tuple(D_out), inward)
+
+
+def _add_to_parent(g, joint, IA: list, pA: list, Ia, pa) -> None:
+    """IA_p += X^T Ia X and pA_p += X^T pa for the joint's parent p (in place)."""
+    p = joint.parent
+    Ip = _to_parent_inertia(g, joint, Ia)
+    IA[p] = tuple(_name_full(g, tuple(tuple(_total((X[r][s], Y[r][s])) for s in range(3))
+                                      for r in range(3)))
+                  for X, Y in zip(IA[p], Ip))
+    pA[p] = _vec(g, add(pA[p], to_parent_force(g, joint, pa)))
 
 
 # -- ball and free joints: several degrees of freedom (Featherstone Table 7.1 with

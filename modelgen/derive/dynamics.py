@@ -138,7 +138,7 @@ def _warm(sums: _SetSums, sets):
         sums(s)
 
 
-def kinematic_relation(g: GraphBuilder, spec, q: tuple, qd: tuple) -> tuple:
+def kinematic_relation(g: GraphBuilder, spec) -> tuple:
     """dq/dt = N(q) qd: a simple coordinate's rate is its speed; a joint's
     quaternion turns as ``dquat/dt = quat * (0, w) / 2`` (w in the joint's own
     base), and a free joint's position as ``dr/dt = R(quat) v``.
@@ -146,17 +146,14 @@ def kinematic_relation(g: GraphBuilder, spec, q: tuple, qd: tuple) -> tuple:
     >>> from modelgen.model.api import Model
     >>> spec = Model("m").add_joint("J", "ball", parent="E", base="B").spec()
     >>> g = GraphBuilder()
-    >>> qdot = kinematic_relation(g, spec, *_symbols(spec))
+    >>> qdot = kinematic_relation(g, spec)
     >>> g.freeze().expand(qdot[0])
     -J_qx*J_wx/2 - J_qy*J_wy/2 - J_qz*J_wz/2
     """
-    simple = len(spec.simple_coordinates)
-    out = list(qd[:simple])
-    name_q = {str(s): s for s in q}
-    name_v = {str(s): s for s in qd}
+    out = [symbol(v) for v in spec.speeds[:len(spec.simple_coordinates)]]
     for joint in spec.joints:
-        qs = [name_q[c] for c in joint.coordinates]
-        vs = [name_v[v] for v in joint.speeds]
+        qs = [symbol(c) for c in joint.coordinates]
+        vs = [symbol(v) for v in joint.speeds]
         w, x, y, z = qs[-4:]
         wx, wy, wz = vs[-3:]
         half = sympy.Rational(1, 2)
@@ -168,10 +165,6 @@ def kinematic_relation(g: GraphBuilder, spec, q: tuple, qd: tuple) -> tuple:
                     for i in range(3)]
         out += [g.name(e) for e in quat_dot]
     return tuple(out)
-
-
-def _symbols(spec) -> tuple:
-    return (tuple(symbol(c) for c in spec.coordinates), tuple(symbol(v) for v in spec.speeds))
 
 
 def derive_equations(kin: Kinematics) -> Equations:
@@ -313,7 +306,7 @@ def derive_equations(kin: Kinematics) -> Equations:
         + tuple(direct_parts)
 
     kinetic, potential = g.name(kinetic), g.name(potential)
-    qdot = kinematic_relation(g, spec, kin.q, kin.qd)
+    qdot = kinematic_relation(g, spec)
     return Equations(
         name=spec.name, graph=g.freeze(), t=TIME, q=kin.q, qd=kin.qd,
         u=tuple(symbol(x) for x in spec.inputs),
