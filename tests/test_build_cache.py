@@ -291,3 +291,31 @@ def test_the_link_is_the_platforms_with_cc_in_the_compilers_place(monkeypatch):
     monkeypatch.setenv("LDSHARED", "")
     with pytest.raises(BuildError, match="LDSHARED"):
         build.link_command(["a.o"], "x.so")
+
+
+def test_the_host_isa_flag_changes_the_encoding_never_a_result(monkeypatch, tmp_path):
+    """AVX (when this CPU has it) is in the library's compile commands and its
+    cache key, never in an FMU's flags, and the rhs and A are bit for bit those
+    of the baseline build: ISO C99 forbids contracting ``a*b + c`` into an FMA."""
+    import numpy as np
+    from modelgen.model.chains import spatial_chain
+    if not build.host_flags():
+        pytest.skip("this CPU has no AVX (or is not x86-64 Linux): nothing to compare")
+    spec = spatial_chain(4).spec()
+    models, commands = {}, {}
+    for avx in ("1", "0"):
+        monkeypatch.setenv("MODELGEN_AVX", avx)
+        cm = modelgen.load(spec, tmp_path / f"avx{avx}")
+        models[avx] = cm
+        commands[avx] = cm.manifest["compile_commands"]
+    assert all("-mavx" in c.split() for c in commands["1"])
+    assert not any("-mavx" in c.split() for c in commands["0"])
+    assert models["1"].manifest["build_hash"] != models["0"].manifest["build_hash"]
+    assert "-mavx" not in build.compile_flags(100, 0)      # the FMU's flags (part 0, not host)
+    rng = np.random.default_rng(7)
+    for _ in range(20):
+        x = rng.uniform(-3, 3, 8)
+        a, b = (models[k].rhs(0.0, x) for k in ("1", "0"))
+        assert a.tobytes() == b.tobytes()
+        a, b = (models[k].mass_matrix(x[:4]) for k in ("1", "0"))
+        assert a.tobytes() == b.tobytes()

@@ -13,7 +13,7 @@ from pathlib import Path
 
 from modelgen.version import __version__
 from modelgen.codegen.build import (BuildResult, build_module, cache_dir, cache_lookup,
-                                    compiler, integrator_hash, runtime_module)
+                                    compiler, host_flags, integrator_hash, runtime_module)
 from modelgen.codegen.capi import signature_of
 from modelgen.codegen.cse import make_routines
 from modelgen.derive.aba import ForwardDynamics, derive_aba, derive_aba_jacobian
@@ -115,7 +115,7 @@ def _build_key(model: str) -> str:
     """:func:`build_hash` of the model whose :func:`model_hash` is ``model``."""
     h = hashlib.sha256()
     for part in (LIBRARY_FORMAT, model,
-                 " ".join(compiler()),
+                 " ".join(compiler()), " ".join(host_flags()),
                  os.environ.get("MODELGEN_CFLAGS", ""), integrator_hash(integrator_sources())):
         h.update(part.encode())
         h.update(b"\0")
