@@ -11,7 +11,7 @@ import pytest
 import sympy
 
 import modelgen
-from modelgen.codegen.printer import ModelPrinter
+from modelgen.codegen.printer import ModelPrinter, c_operations
 from modelgen.errors import DerivationError
 
 from conftest import MODELS, SCENES
@@ -82,4 +82,62 @@ def test_what_the_walk_does_not_know_goes_to_sympys_printer_strictly():
     assert printer.doprint(-x / 3 + x**-2) == "1.0/(q[0]*q[0]) - 1.0/3.0*q[0]"
     assert printer.doprint(sympy.sqrt(x) / (x + 1) / x) == "1.0/(sqrt(q[0])*(1.0 + q[0]))"
     assert printer.doprint(2 * x * (x - 1)**3 / sympy.sin(x)) == \
-        "2.0*q[0]*((-1.0 + q[0])*(-1.0 + q[0])*(-1.0 + q[0]))/sin(q[0])"
+        "2.0*q[0]*((q[0] - 1.0)*(q[0] - 1.0)*(q[0] - 1.0))/sin(q[0])"
+
+
+_TOKEN = re.compile(r"\s*(?:(?P<num>\d+\.\d*(?:e[+-]?\d+)?)|(?P<name>[A-Za-z_]\w*(?:\[\d+\])?)"
+                    r"|(?P<op>[-+*/(),]))")
+
+
+def _operators_in(text: str) -> int:
+    """Floating-point operations in a printed C expression, read off the text:
+    binary + - * /, a unary minus, a function call; a literal's own minus and
+    a quotient of two literals (constant folding) cost nothing."""
+    tokens = []
+    pos = 0
+    while pos < len(text):
+        m = _TOKEN.match(text, pos)
+        assert m and m.end() > pos, text[pos:]
+        kind = m.lastgroup
+        tokens.append((kind, m.group(kind)))
+        pos = m.end()
+    count = 0
+    for i, (kind, tok) in enumerate(tokens):
+        before = tokens[i - 1] if i else ("op", "(")
+        after = tokens[i + 1] if i + 1 < len(tokens) else ("op", ")")
+        if kind == "name" and after == ("op", "("):
+            count += 1                                   # a call
+        elif tok == "-" and before[0] == "op" and before[1] != ")":
+            count += after[0] != "num"                   # unary minus
+        elif tok in "+-*" and kind == "op":
+            count += 1
+        elif tok == "/":
+            count += not (before[0] == "num" and after[0] == "num")
+    return count
+
+
+@pytest.mark.parametrize("source, options", [
+    (MODELS / "arm7.yaml", {"jacobian": True}),
+    (MODELS / "heavy_top.yaml", {"formulation": "crba", "jacobian": True}),
+    (SCENES / "block_friction.yaml", {}),
+])
+def test_the_operation_count_is_the_operators_of_the_printed_c(source, options, tmp_path,
+                                                               monkeypatch):
+    """c_operations (the counts in manifests and benchmarks) against the
+    operators in the C text the printer writes, statement by statement."""
+    seen = []
+    fast = ModelPrinter.doprint
+
+    def record(self, expr, assign_to=None):
+        text = fast(self, expr)
+        seen.append((expr, text))
+        return text
+    monkeypatch.setattr(ModelPrinter, "doprint", record)
+    if source.parent == SCENES:
+        modelgen.load_scene(source, tmp_path)
+    else:
+        modelgen.load(source, tmp_path, **options)
+    assert len(seen) > 50
+    wrong = [(text, c_operations(e), _operators_in(text)) for e, text in seen
+             if c_operations(e) != _operators_in(text)]
+    assert not wrong, wrong[:5]

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 import sympy
 
 from modelgen.derive.graph import Graph, free_symbols
+from modelgen.codegen.printer import c_operations
 
 
 @dataclass(frozen=True)
@@ -41,32 +42,18 @@ class Routine:
 
 
 def _ops(expr) -> int:
-    """Floating-point operations of one expression as printed in C.
-
-    An n-ary sum or product costs n - 1; a negation or a numeric factor -1
-    costs 1; x**k costs |k| - 1 multiplications (plus a division if k < 0)
-    for |k| <= 4, else one ``pow``; every function call costs 1.
-    """
-    if expr.is_Atom:
-        return 0
-    args = expr.args
-    inner = sum(_ops(a) for a in args)
-    if expr.is_Add or expr.is_Mul:
-        return inner + len(args) - 1
-    if expr.is_Pow:
-        k = args[1]
-        if k.is_Integer and 1 < abs(int(k)) <= 4:
-            return _ops(args[0]) + abs(int(k)) - 1 + (1 if k < 0 else 0)
-        return inner + 1
-    return inner + 1
+    """Floating-point operations of one expression as printed in C
+    (:func:`modelgen.codegen.printer.c_operations`: each binary operator, unary
+    minus and call is one; the sign of a term inside a sum is its ``-``)."""
+    return c_operations(expr)
 
 
 def count_ops(exprs) -> int:
     """Floating-point operations of a list of expressions (see :func:`_ops`).
 
     >>> x, y = sympy.symbols("x y")
-    >>> count_ops([x*y + 1, x**2, sympy.sin(x) / y])
-    6
+    >>> count_ops([x*y + 1, x**2, sympy.sin(x) / y, x - x*y])
+    7
     """
     return sum(_ops(e) for e in exprs)
 

@@ -105,9 +105,13 @@ class ModelPrinter(C99CodePrinter):
         if e is sympy.E:
             return "2.7182818284590451", _ATOM
         if e.is_Add:
+            printed = [self._fast(term) for term in e.args]
+            if len(printed) > 1 and printed[0][1] == _NEG and printed[1][1] != _NEG:
+                # -a + b is printed b - a: the same rounding (a sum of two is
+                # commutative), one operation fewer
+                printed[0], printed[1] = printed[1], printed[0]
             parts = []
-            for i, term in enumerate(e.args):
-                text, prec = self._fast(term)
+            for i, (text, prec) in enumerate(printed):
                 if i and prec == _NEG:
                     parts.append(" - " + text[1:])
                 else:
@@ -219,6 +223,72 @@ class ModelPrinter(C99CodePrinter):
         return f"((double)(({a}) > 0) - (double)(({a}) < 0))"
 
 
+
+
+def c_operations(e) -> int:
+    """Floating-point operations of ``e`` as :class:`ModelPrinter` prints it in C.
+
+    Each binary ``+ - * /`` and each function call costs 1, a unary minus 1;
+    a constant (``1.0/3.0``, ``-2.0``) costs nothing, and a term's sign inside a
+    sum is its ``-`` (``a - b*c`` is 2).  Mirrors :meth:`ModelPrinter._fast`
+    node for node; ``tests/test_printer.py`` checks it against the operators
+    in the printed text of real models.
+
+    >>> x, y, z = sympy.symbols("x y z")
+    >>> c_operations(z - x*y), c_operations(-x*y), c_operations(-x + y), c_operations(x/3)
+    (2, 2, 1, 1)
+    """
+    return sum(_c_ops(e))
+
+
+def _c_ops(e) -> tuple:
+    """(operations but a leading minus, 1 if printed with a leading minus that is
+    an operation else 0)."""
+    if e.is_Atom:
+        return 0, 0
+    if e.is_Add:
+        terms = [_c_ops(t) for t in e.args]
+        swapped = len(terms) > 1 and _negative_text(e.args[0]) and not _negative_text(e.args[1])
+        first = terms[1] if swapped else terms[0]
+        # a sign after the first term is its '-'; only the first one's can cost
+        return sum(n for n, _ in terms) + len(terms) - 1 + first[1], 0
+    if e.is_Mul:
+        coeff, rest = e.as_coeff_Mul()
+        negative = coeff.is_negative
+        coeff = -coeff if negative else coeff
+        count, factors, den = 0, (0 if coeff is _ONE else 1), 0
+        for factor in sympy.Mul.make_args(rest):
+            exp = factor.exp if factor.is_Pow else None
+            if exp is not None and exp.is_Rational and exp.p < 0:
+                den += 1
+                count += sum(_c_ops(factor.base if exp is _MINUS_ONE else
+                                    sympy.Pow(factor.base, -exp, evaluate=False)))
+            else:
+                factors += 1
+                count += sum(_c_ops(factor))
+        count += max(factors - 1, 0) + den
+        # a minus on a coefficient or a lone 1.0 is part of the literal (-2.0*x, -1.0/x)
+        return count, int(negative and coeff is _ONE and factors > 0)
+    if e.is_Pow:
+        base, exp = e.args
+        inner = sum(_c_ops(base))
+        if exp.is_Integer and 1 < abs(exp.p) <= 4:
+            return inner + abs(exp.p) - 1 + (1 if exp.p < 0 else 0), 0
+        if exp is _MINUS_ONE:
+            return inner + 1, 0
+        if exp.is_Rational and exp.q == 2 and abs(exp.p) == 1:
+            return inner + (1 if exp.p > 0 else 2), 0
+        return inner + sum(_c_ops(exp)) + 1, 0
+    return sum(sum(_c_ops(a)) for a in e.args) + 1, 0
+
+
+def _negative_text(e) -> bool:
+    """True if the printer prints ``e`` with a leading minus (precedence _NEG)."""
+    if e.is_Number:
+        return bool(e.is_negative)
+    if e.is_Mul:
+        return bool(e.as_coeff_Mul()[0].is_negative)
+    return False
 
 
 def _shorten(text: str) -> str:

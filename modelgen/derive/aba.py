@@ -296,15 +296,35 @@ def _com_bias(g, I_O, h, m, c, v):
     """
     w, vl = v[:3], v[3:]
     cc = _total(_times(x, x) for x in c)
-    Ic = _sym(tuple(sympy.expand(I_O[a][b] - m * ((cc if a == b else 0) - c[a] * c[b]))
-                    for a, b in _PAIRS))
-    Ic = _name_sym(g, Ic)
+    entries = tuple(sympy.expand(I_O[a][b] - m * ((cc if a == b else 0) - c[a] * c[b]))
+                    for a, b in _PAIRS)
     vc = _vec(g, add(vl, cross(w, c)))
     e = _vec(g, cross(w, vc))
     f = _vec(g, [_times(m, x) for x in e])
     # c x f costs one product per term when c is numeric, h x e otherwise
     moment = cross(c, f) if all(x.is_Number for x in c) else cross(h, e)
-    return _vec(g, add(cross(w, _vec(g, _mv(Ic, w))), moment)) + f
+    return _vec(g, add(_gyroscopic(g, entries, w), moment)) + f
+
+
+def _gyroscopic(g, entries, w) -> tuple:
+    """``w x (Ic w)`` for Ic given by its entries (xx, yy, zz, xy, xz, yz).
+
+    A diagonal Ic (principal axes along the link's, as for most bodies) gives
+    component k as ``(I_{k+2} - I_{k+1}) w_{k+1} w_{k+2}``: 3 products and 3
+    multiplications by parameter differences, not 3 + 9 operations; a
+    difference that is exactly 0 (a body symmetric about axis k, such as a
+    rod or a disc) drops the component, where ``w_y (I w_z) - w_z (I w_y)``
+    would be computed and come out 0.
+    """
+    if any(not _zero(x) for x in entries[3:]):
+        Ic = _name_sym(g, _sym(entries))
+        return cross(w, _vec(g, _mv(Ic, w)))
+    out = []
+    for k in range(3):
+        k1, k2 = (k + 1) % 3, (k + 2) % 3
+        d = sympy.expand(entries[k2] - entries[k1])
+        out.append(ZERO if _zero(d) else _times(_nm(g, d), _times(w[k1], w[k2])))
+    return tuple(out)
 
 
 def _cross_motion(a, b):
@@ -655,9 +675,9 @@ def derive_aba(eqs: Equations, tree: JointTree, spec: ModelSpec, graph: Graph | 
         tau_i = tau[joint.coordinate]
         # -U/D is named with its sign, so that Ia, pa and qdd are sums of products;
         # for a one-entry S its entry j is exactly -1/S_j (U_j = D / S_j)
-        nUd[i] = tuple(-1 / S[r] if r == j else g.name(-x * invD) if not _zero(x) else ZERO
+        nUd[i] = tuple(-1 / S[r] if r == j else _nm(g, -x * invD) if not _zero(x) else ZERO
                        for r, x in enumerate(U[i]))
-        uD[i] = g.name((tau_i - dot(S, pA[i])) * invD)
+        uD[i] = _nm(g, (tau_i - dot(S, pA[i])) * invD)
         if joint.parent < 0:
             continue
         A, B, C = IA[i]
@@ -684,8 +704,17 @@ def derive_aba(eqs: Equations, tree: JointTree, spec: ModelSpec, graph: Graph | 
             continue
         k = joint.coordinate
         # (u - U^T a') / D
-        qdd[k] = g.name(_total((uD[i], dot(nUd[i], a_prime))))
-        acc[i] = _vec(g, add(a_prime, tuple(_times(s, qdd[k]) for s in joint.S)))
+        j = _single(joint.S)
+        if j is not None and joint.S[j] == 1:
+            # entry j of -U/D is -1: a_j = a'_j + qdd = u/D + the other terms, named
+            # once, and qdd = a_j - a'_j
+            rest = _nm(g, _total([uD[i]] + [_times(x, y) for r, (x, y) in
+                                             enumerate(zip(nUd[i], a_prime)) if r != j]))
+            qdd[k] = g.name(_total((rest, _neg(a_prime[j]))))
+            acc[i] = tuple(rest if r == j else x for r, x in enumerate(a_prime))
+        else:
+            qdd[k] = g.name(_total((uD[i], dot(nUd[i], a_prime))))
+            acc[i] = _vec(g, add(a_prime, tuple(_times(s, qdd[k]) for s in joint.S)))
     D_out = [None] * n
     for i, joint in enumerate(joints):
         if i in multi:

@@ -68,7 +68,7 @@ void double_pendulum_default_parameters(double *p)
     p[4] = 9.81; /* g */
 }
 
-/* mass_matrix: 32 statements, 56 operations after CSE (59 before) */
+/* mass_matrix: 32 statements, 50 operations after CSE (53 before) */
 static void double_pendulum_mass_matrix_eval(const double *q, const double *p, double *A)
 {
     (void)q;
@@ -103,7 +103,7 @@ static void double_pendulum_mass_matrix_eval(const double *q, const double *p, d
     const double v26 = v22 + p[1]*v25;
     const double v27 = v20 + v26;
     const double v28 = v26 - v23*v8 - v24*v9;
-    const double v29 = -v24 + p[1]*v9;
+    const double v29 = p[1]*v9 - v24;
     const double v30 = v23 - p[1]*v8;
     const double v31 = v28 + v29*v9 - v30*v8;
     A[0] = v27;
@@ -117,7 +117,7 @@ void double_pendulum_mass_matrix(const double *q, const double *p, double *A)
     double_pendulum_mass_matrix_eval(q, p, A);
 }
 
-/* velocity_terms: 23 statements, 32 operations after CSE (32 before) */
+/* velocity_terms: 22 statements, 28 operations after CSE (29 before) */
 static void double_pendulum_velocity_terms_eval(const double *q, const double *qd, const double *p, double *h)
 {
     (void)q;
@@ -128,27 +128,26 @@ static void double_pendulum_velocity_terms_eval(const double *q, const double *q
     const double v1 = sin(q[1]);
     const double v2 = qd[0] + qd[1];
     const double v3 = 1.0/2.0*p[3];
-    const double v4 = 1.0/2.0*p[1];
-    const double v5 = p[2]*qd[0];
-    const double v6 = v1*v5;
-    const double v7 = v0*v5;
-    const double v8 = v7*qd[1];
-    const double v9 = v6*qd[1];
-    const double v10 = p[3]*v4;
-    const double v11 = v7 + v2*v3;
-    const double v12 = v11*v2;
-    const double v13 = v2*v6;
+    const double v4 = p[2]*qd[0];
+    const double v5 = v1*v4;
+    const double v6 = v0*v4;
+    const double v7 = v6*qd[1];
+    const double v8 = v5*qd[1];
+    const double v9 = p[1]*v3;
+    const double v10 = v6 + v2*v3;
+    const double v11 = v10*v2;
+    const double v12 = v2*v5;
+    const double v13 = p[1]*v11;
     const double v14 = p[1]*v12;
-    const double v15 = p[1]*v13;
-    const double v16 = v10*v13;
-    const double v17 = v16 - v10*v9;
-    const double v18 = -v14 + p[1]*v8;
-    const double v19 = v15 - p[1]*v9;
-    const double v20 = v18*v1;
-    const double v21 = v20 + v19*v0;
-    const double v22 = v17 + p[2]*v21;
-    h[0] = v22;
-    h[1] = v17;
+    const double v15 = v9*v12;
+    const double v16 = v15 - v9*v8;
+    const double v17 = p[1]*v7 - v13;
+    const double v18 = v14 - p[1]*v8;
+    const double v19 = v17*v1;
+    const double v20 = v19 + v18*v0;
+    const double v21 = v16 + p[2]*v20;
+    h[0] = v21;
+    h[1] = v16;
 }
 
 void double_pendulum_velocity_terms(const double *q, const double *qd, const double *p, double *h)
@@ -156,7 +155,7 @@ void double_pendulum_velocity_terms(const double *q, const double *qd, const dou
     double_pendulum_velocity_terms_eval(q, qd, p, h);
 }
 
-/* generalized_forces: 17 statements, 24 operations after CSE (25 before) */
+/* generalized_forces: 17 statements, 22 operations after CSE (23 before) */
 static void double_pendulum_generalized_forces_eval(double t, const double *q, const double *qd, const double *u, const double *p, double *tau)
 {
     (void)t;
@@ -191,7 +190,7 @@ void double_pendulum_generalized_forces(double t, const double *q, const double 
     double_pendulum_generalized_forces_eval(t, q, qd, u, p, tau);
 }
 
-/* energy: 37 statements, 65 operations after CSE (68 before) */
+/* energy: 36 statements, 63 operations after CSE (66 before) */
 static void double_pendulum_energy_eval(const double *q, const double *qd, const double *p, double *out)
 {
     (void)q;
@@ -231,12 +230,11 @@ static void double_pendulum_energy_eval(const double *q, const double *qd, const
     const double v30 = 1.0/12.0*v29;
     const double v31 = v30*v8;
     const double v32 = -p[4]*p[1];
-    const double v33 = 1.0/2.0*p[1];
-    const double v34 = 1.0/2.0*p[0];
-    const double v35 = v33*((v23*v23) + (v24*v24)) + v34*((v15*v15) + (v16*v16)) + 1.0/2.0*v27*qd[0] + 1.0/2.0*v31*v8;
-    const double v36 = -v14*v28 - v20*v32;
-    out[0] = v35;
-    out[1] = v36;
+    const double v33 = 1.0/2.0*p[0];
+    const double v34 = v33*((v15*v15) + (v16*v16)) + 1.0/2.0*p[1]*((v23*v23) + (v24*v24)) + 1.0/2.0*v27*qd[0] + 1.0/2.0*v31*v8;
+    const double v35 = -v14*v28 - v20*v32;
+    out[0] = v34;
+    out[1] = v35;
 }
 
 void double_pendulum_energy(const double *q, const double *qd, const double *p, double *out)
@@ -244,7 +242,7 @@ void double_pendulum_energy(const double *q, const double *qd, const double *p, 
     double_pendulum_energy_eval(q, qd, p, out);
 }
 
-/* body_poses: 18 statements, 24 operations after CSE (29 before) */
+/* body_poses: 18 statements, 22 operations after CSE (27 before) */
 static void double_pendulum_body_poses_eval(const double *q, const double *p, double *T)
 {
     (void)q;
@@ -311,7 +309,7 @@ void double_pendulum_body_poses(const double *q, const double *p, double *T)
 
 #if !defined(MG_PART) || MG_PART == 2
 
-/* rhs: 57 statements, 86 operations after CSE (86 before) */
+/* rhs: 57 statements, 74 operations after CSE (75 before) */
 static void double_pendulum_rhs_eval(double t, const double *x, const double *u, const double *p, double *qdd, double *D)
 {
     (void)t;
@@ -327,59 +325,59 @@ static void double_pendulum_rhs_eval(double t, const double *x, const double *u,
     const double v5 = 1.0/2.0*p[3];
     const double v6 = p[0]*(p[2]*p[2]);
     const double v7 = p[1]*(p[3]*p[3]);
-    const double v8 = 1.0/2.0*p[1];
-    const double v9 = 1.0/2.0*p[0];
-    const double v10 = 1.0/3.0*v6;
-    const double v11 = p[2]*v9;
-    const double v12 = p[2]*x[2];
-    const double v13 = v3*v12;
-    const double v14 = v2*v12;
-    const double v15 = v14*x[3];
-    const double v16 = v13*x[3];
-    const double v17 = 1.0/3.0*v7;
-    const double v18 = p[3]*v8;
-    const double v19 = v14 + v4*v5;
-    const double v20 = v19*v4;
-    const double v21 = v4*v13;
+    const double v8 = 1.0/2.0*p[0];
+    const double v9 = 1.0/3.0*v6;
+    const double v10 = p[2]*v8;
+    const double v11 = p[2]*x[2];
+    const double v12 = v3*v11;
+    const double v13 = v2*v11;
+    const double v14 = v13*x[3];
+    const double v15 = v12*x[3];
+    const double v16 = 1.0/3.0*v7;
+    const double v17 = p[1]*v5;
+    const double v18 = v13 + v4*v5;
+    const double v19 = v18*v4;
+    const double v20 = v4*v12;
+    const double v21 = p[1]*v19;
     const double v22 = p[1]*v20;
-    const double v23 = p[1]*v21;
-    const double v24 = v18*v21;
-    const double v25 = -v22 + p[1]*v15;
-    const double v26 = v25*v3;
-    const double v27 = 1.0/v17;
-    const double v28 = -v18*v27;
-    const double v29 = -v24*v27;
-    const double v30 = p[1] + v18*v28;
-    const double v31 = v23 + v18*v29 - v30*v16;
-    const double v32 = (v3*v3);
-    const double v33 = v2*v3;
-    const double v34 = p[1] - v30;
-    const double v35 = v32*v34;
-    const double v36 = v30 + v35;
-    const double v37 = v33*v34;
-    const double v38 = p[2]*v37;
-    const double v39 = p[2]*v36;
-    const double v40 = p[2]*v39;
-    const double v41 = v40 + v10;
-    const double v42 = v39 + v11;
-    const double v43 = v26 + v31*v2;
-    const double v44 = p[2]*v43;
-    const double v45 = v44 - u[0];
-    const double v46 = 1.0/v41;
-    const double v47 = -v38*v46;
-    const double v48 = -v42*v46;
-    const double v49 = -v45*v46;
-    const double v50 = p[4]*v1;
-    const double v51 = p[4]*v0;
-    const double v52 = v49 + v47*v50 + v48*v51;
-    const double v53 = v51 + p[2]*v52;
-    const double v54 = v53*v2 - v50*v3;
-    const double v55 = v54 - v16;
-    const double v56 = v29 - v52 + v28*v55;
-    qdd[0] = v52;
+    const double v23 = v17*v20;
+    const double v24 = p[1]*v14 - v21;
+    const double v25 = v24*v3;
+    const double v26 = 1.0/v16;
+    const double v27 = v17*v26;
+    const double v28 = v23*v26;
+    const double v29 = p[1] - v17*v27;
+    const double v30 = v17*v28 - v22 + v29*v15;
+    const double v31 = (v3*v3);
+    const double v32 = v2*v3;
+    const double v33 = p[1] - v29;
+    const double v34 = v31*v33;
+    const double v35 = v29 + v34;
+    const double v36 = v32*v33;
+    const double v37 = p[2]*v36;
+    const double v38 = p[2]*v35;
+    const double v39 = p[2]*v38;
+    const double v40 = v39 + v9;
+    const double v41 = v38 + v10;
+    const double v42 = v25 - v30*v2;
+    const double v43 = p[2]*v42;
+    const double v44 = v43 - u[0];
+    const double v45 = 1.0/v40;
+    const double v46 = v37*v45;
+    const double v47 = v41*v45;
+    const double v48 = v44*v45;
+    const double v49 = p[4]*v1;
+    const double v50 = p[4]*v0;
+    const double v51 = v48 + v46*v49 + v47*v50;
+    const double v52 = v50 - p[2]*v51;
+    const double v53 = v52*v2 - v49*v3;
+    const double v54 = v53 - v15;
+    const double v55 = v28 + v27*v54;
+    const double v56 = v51 - v55;
+    qdd[0] = -v51;
     qdd[1] = v56;
-    D[0] = v17;
-    D[1] = v41;
+    D[0] = v16;
+    D[1] = v40;
 }
 
 /* Coordinate of each D, in the order the inward pass computes them. */
