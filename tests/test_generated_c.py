@@ -58,7 +58,8 @@ HASH_ENV = ("CC", "MODELGEN_CFLAGS")
 #: Every function a model exports, without the "<name>_" prefix; written out
 #: here rather than taken from modelgen.codegen.emit.public_api, which renders the header.
 EXPORTED = ("abi_version", "dimensions", "default_parameters", "mass_matrix", "velocity_terms",
-            "generalized_forces", "rhs", "energy", "body_poses", "project",
+            "generalized_forces", "prepare", "rhs_prepared", "rhs", "energy", "body_poses",
+            "project",
             "system", "jacobian_fd", "integrate", "integrate_batch")
 #: The model-independent integrator files copied next to every model's C.
 INTEGRATOR = ("mg_integrate.c", "mg_integrate.h")
@@ -276,10 +277,25 @@ def _checker(model_dir: Path, name: str) -> str:
         if fn == f"{name}_dimensions":
             lines += [
                 "    {",
-                "        int d[6];",
+                "        int d[7];",
                 f"        {fn}(d);",
                 f"        if (d[0] != {N}_NQ || d[1] != {N}_NX || d[2] != {N}_NP || d[3] != {N}_NU"
-                f" || d[4] != {N}_NBODIES || d[5] != {N}_NY) ++failures;",
+                f" || d[4] != {N}_NBODIES || d[5] != {N}_NY || d[6] != {N}_NV) ++failures;",
+                "    }",
+                f'    printf("called {fn}\\n");']
+            continue
+        if fn == f"{name}_prepare":
+            lines += [f'    printf("called {fn}\\n");']     # called with rhs_prepared
+            continue
+        if fn == f"{name}_rhs_prepared":
+            # the same xdot, bit for bit, as the rhs that prepares pd itself
+            lines += [
+                "    {",
+                f"        double pd[{N}_NPD_ALLOC], a[{N}_NX], b[{N}_NX];",
+                f"        {name}_prepare(p, pd);",
+                f"        if ({fn}(0.25, x, u, p, pd, a) != 0 || {name}_rhs(0.25, x, u, p, b) != 0)"
+                " ++failures;",
+                f"        if (memcmp(a, b, sizeof a) != 0) ++failures;",
                 "    }",
                 f'    printf("called {fn}\\n");']
             continue

@@ -24,7 +24,7 @@ import re
 from typing import NamedTuple
 
 #: Version of the C interface (model functions and mg_integrate), checked by the loader.
-ABI_VERSION = 4
+ABI_VERSION = 5
 #: Prefix of every constant, type and function of the model-independent C.
 PREFIX = "MG"
 
@@ -249,6 +249,8 @@ SIGNATURES = (
     Signature("t_q_qd_u_p", "void", ("double t", "const double *q", "const double *qd",
                                      "const double *u", "const double *p", "double *out")),
     Signature("t_x_u_p", "int", (*_RHS_ARGS, "double *out")),
+    Signature("t_x_u_p_pd", "int", (*_RHS_ARGS, "const double *pd", "double *out")),
+    Signature("prepare", "void", ("const double *p", "double *out")),
     Signature("t_x_u_p_void", "void", (*_RHS_ARGS, "double *out")),
     Signature("linearize", "int", (*_RHS_ARGS, "double *A", "double *B", "double *C",
                                    "double *D")),

@@ -276,3 +276,52 @@ def make_routines(graph: Graph, routines, *, cse: bool = True) -> tuple:
         after = _closure_ops(statements, ops) + count_ops(flat)
         result.append(Routine(name, inputs, tuple(new_outs), statements, before[name], after))
     return tuple(result)
+
+
+def hoist_parameters(routine: Routine, name: str = "prepare") -> tuple:
+    """``(prepare, rest)``: ``routine`` split where its statements stop depending
+    on the parameters alone.
+
+    ``prepare`` (inputs ``p``) computes every statement whose value depends on
+    the parameters only (a body's inertia about its joint, ``m l / 2``, the
+    difference of two principal moments...) and writes the ones ``rest``
+    needs into ``pd``; ``rest`` is ``routine`` with those statements removed
+    and ``pd`` as one more input.  A caller that integrates with fixed
+    parameters runs ``prepare`` once and ``rest`` at every step, as Pinocchio
+    and MuJoCo keep a model's inertias precomputed.  The values are those of
+    ``routine``, bit for bit: the same statements, evaluated once.
+
+    >>> import sympy
+    >>> from modelgen.derive.graph import GraphBuilder
+    >>> x, m, l = sympy.symbols("x m l")
+    >>> g = GraphBuilder(); a = g.name(m * l / 2); b = g.name(a * x + m)
+    >>> (r,) = make_routines(g.freeze(), [("f", (("x", (x,)), ("p", (m, l))), (("out", (b,)),))])
+    >>> pre, rest = hoist_parameters(r)
+    >>> [str(e) for _, e in pre.statements], pre.outputs, [str(e) for _, e in rest.statements]
+    (['l*m/2'], (('pd', (mg_0,)),), ['m + mg_0*x'])
+    >>> rest.inputs[-1], pre.ops_after + rest.ops_after == r.ops_after
+    (('pd', (mg_0,)), True)
+    """
+    params = {s for array, symbols in routine.inputs if array == "p" for s in symbols}
+    fixed, before, after = set(), [], []
+    for sym, expr in routine.statements:
+        if free_symbols(expr) <= (params | fixed):
+            fixed.add(sym)
+            before.append((sym, expr))
+        else:
+            after.append((sym, expr))
+    used = set()
+    for _, expr in after:
+        used |= free_symbols(expr) & fixed
+    for _, items in routine.outputs:
+        for e in items:
+            used |= free_symbols(e) & fixed
+    pd = tuple(sym for sym, _ in before if sym in used)
+    ops = sum(_ops(e) for _, e in before)
+    prepare = Routine(name, (("p", tuple(s for array, symbols in routine.inputs
+                                          if array == "p" for s in symbols)),),
+                      (("pd", pd),), tuple(before), ops, ops)
+    # ops_before stays the whole program's, before CSE and hoisting
+    rest = Routine(routine.name, routine.inputs + (("pd", pd),), routine.outputs, tuple(after),
+                   routine.ops_before, routine.ops_after - ops)
+    return prepare, rest

@@ -107,7 +107,7 @@ def render(template: str, context: dict) -> str:
 #: C parameter declaration of every input array name
 _PARAM = {"t": "double t", "q": "const double *q", "qd": "const double *qd",
           "x": "const double *x", "u": "const double *u", "p": "const double *p",
-          "a": "const double *a"}
+          "a": "const double *a", "pd": "const double *pd"}
 
 
 def _input_slots(routine: Routine) -> dict:
@@ -257,7 +257,7 @@ def template_context(*, name: str, description: str, model_hash: str, n: int,
                      coordinates, parameters, inputs, bodies,
                      functions: dict, output_columns=(), has_jacobian=False,
                      has_linearize=False, nq: int | None = None, speeds=None,
-                     quaternions=()) -> dict:
+                     quaternions=(), npd: int = 0) -> dict:
     """The plain dict every C template receives.
 
     ``n`` is the number of speeds (the size of A), ``nq`` that of the
@@ -281,6 +281,7 @@ def template_context(*, name: str, description: str, model_hash: str, n: int,
         "np": len(parameters),
         "nu": len(inputs),
         "nbodies": len(bodies),
+        "npd": npd,
         "coordinates": list(coordinates),
         "parameters": [{"name": p, "default": repr(float(v))} for p, v in parameters],
         "inputs": list(inputs),
@@ -355,6 +356,16 @@ def public_api(name: str, n: int, n_p: int, n_u: int, n_b: int, n_y: int = 0,
          "params": "double t, const double *q, const double *qd, const double *u, const double *p, double *tau",
          "doc": [f"Generalized forces tau of gravity and actions: t [s]; q[{nq}]; qd[{n}];",
                  f"u[{n_u}] inputs; {P}; tau[{n}] (N or N m per coordinate)."]},
+        {"ret": "void", "name": f"{name}_prepare", "params": "const double *p, double *pd",
+         "doc": [f"Derived parameters pd[{name.upper()}_NPD] of p[{n_p}]: what the rhs",
+                 "computes from the parameters alone (inertias about the joints, products",
+                 "of masses and lengths...).  Call it once per parameter set, then",
+                 f"{name}_rhs_prepared at every step."]},
+        {"ret": "int", "name": f"{name}_rhs_prepared",
+         "params": "double t, const double *x, const double *u, const double *p, "
+                   "const double *pd, double *xdot",
+         "doc": [f"{name}_rhs with pd from {name}_prepare(p, pd): the same xdot, bit for",
+                 "bit, and the same status, without the parameter-only work."]},
         {"ret": "int", "name": f"{name}_rhs",
          "params": "double t, const double *x, const double *u, const double *p, double *xdot",
          "doc": ([f"State derivative for x = [q, qd] (x[{nx}]): xdot = [qd, qdd] with",

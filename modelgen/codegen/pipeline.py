@@ -15,7 +15,7 @@ from modelgen.version import __version__
 from modelgen.codegen.build import (BuildResult, build_module, cache_dir, cache_lookup,
                                     compiler, host_flags, integrator_hash, runtime_module)
 from modelgen.codegen.capi import signature_of
-from modelgen.codegen.cse import make_routines
+from modelgen.codegen.cse import hoist_parameters, make_routines
 from modelgen.derive.aba import ForwardDynamics, derive_aba, derive_aba_jacobian
 from modelgen.derive.dynamics import Equations, derive_equations
 from modelgen.derive.graph import GraphBuilder
@@ -84,7 +84,7 @@ def model_hash(spec: ModelSpec, outputs=(), jacobian: bool = False,
 
 
 #: The routines on the integration path (compiled as MG_PART 2, see model.c.j2).
-INTEGRATION_PATH = ("rhs", "outputs", "jacobian_terms", "linearize_terms")
+INTEGRATION_PATH = ("prepare", "rhs", "outputs", "jacobian_terms", "linearize_terms")
 
 def part_statements(statements: dict) -> dict:
     """Routine name -> statements, to part -> its largest routine's statements (what
@@ -196,6 +196,16 @@ def routines_for(eqs: Equations, output_exprs=(), jacobian=None,
       + lin
 
 
+def _hoisted(routines) -> tuple:
+    """``routines`` with ``rhs`` split into ``prepare`` (its parameter-only
+    statements, written into ``pd``) and the ``rhs`` that reads ``pd``
+    (:func:`modelgen.codegen.cse.hoist_parameters`)."""
+    out = []
+    for r in routines:
+        out.extend(hoist_parameters(r) if r.name == "rhs" else (r,))
+    return tuple(out)
+
+
 def _time_free(tree: JointTree) -> bool:
     """True if no joint of ``tree`` moves with time t by itself (then h has no t)."""
     for joint in tree.joints:
@@ -295,11 +305,13 @@ def generate(spec: ModelSpec, out_dir=None, *, force: bool = False, outputs=(),
     stage("cse")
     routines = make_routines(graph, routines_for(eqs, columns.exprs if columns else (), terms,
                                                  forward, linearization))
+    routines = _hoisted(routines)
     t2 = time.perf_counter()
     seconds["cse"] = t2 - t1
     stage("emit")
     outputs_c = {"A": "A", "h": "h", "tau": "tau", "b": "b", "out": "out", "T": "T", "y": "y",
-                 "D": "D", "qdd": "qdd", "R": "R", "Y": "Y", "qdot": "qdot", "K": "K"}
+                 "D": "D", "qdd": "qdd", "R": "R", "Y": "Y", "qdot": "qdot", "K": "K",
+                 "pd": "pd"}
     functions = {r.name: print_routine(r, outputs_c) for r in routines}
     context = template_context(
         name=spec.name, description=spec.description,
@@ -309,7 +321,8 @@ def generate(spec: ModelSpec, out_dir=None, *, force: bool = False, outputs=(),
         quaternions=[[spec.coordinates.index(c) for c in j.quaternion] for j in spec.joints], parameters=spec.parameters, inputs=spec.inputs,
         bodies=eqs.bodies, functions=functions,
         output_columns=[c for cols in columns.columns for c in cols] if columns else (),
-        has_jacobian=bool(jacobian), has_linearize=bool(linearize))
+        has_jacobian=bool(jacobian), has_linearize=bool(linearize),
+        npd=next(len(r.outputs[0][1]) for r in routines if r.name == "prepare"))
     sources = emit_sources(dict(context, formulation=formulation,
                                 aba_inward=list(forward.inward) if forward else []))
     t3 = time.perf_counter()
