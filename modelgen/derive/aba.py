@@ -218,7 +218,13 @@ def _inertia_xlt_T(g, r, I):
     M = _name_full(g, _mul(rx, C))                # rx C
     N = _name_full(g, _mul(B, rx))                # B rx
     P = _mul(M, rx)                               # rx C rx (symmetric)
-    A2 = tuple(tuple(_total((A[i][j], _neg(N[i][j]), _neg(N[j][i]), _neg(P[i][j])))
+    # on the diagonal N_ii + N_ii = B (2 rx) _ii: one product by the parameter 2 r
+    # (computed once per parameter set), where 2 * (B rx)_ii would be two
+    rx2 = _skew(tuple(ZERO if _zero(x) else -g.factor(-2 * x) if x.could_extract_minus_sign()
+                      else g.factor(2 * x) for x in r))
+    A2 = tuple(tuple(_total((A[i][j], _neg(dot(B[i], (rx2[0][i], rx2[1][i], rx2[2][i]))),
+                             _neg(P[i][j]))) if i == j else
+                     _total((A[i][j], _neg(N[i][j]), _neg(N[j][i]), _neg(P[i][j])))
                      for j in range(3)) for i in range(3))
     B2 = tuple(tuple(_total((B[i][j], M[i][j])) for j in range(3)) for i in range(3))
     return (_name_sym(g, A2), _name_full(g, B2), C)
@@ -323,7 +329,9 @@ def _gyroscopic(g, entries, w) -> tuple:
     for k in range(3):
         k1, k2 = (k + 1) % 3, (k + 2) % 3
         d = sympy.expand(entries[k2] - entries[k1])
-        out.append(ZERO if _zero(d) else _times(_nm(g, d), _times(w[k1], w[k2])))
+        # one name for d and -d: the sign sympy would extract stays outside
+        d = -g.name(-d) if d.could_extract_minus_sign() else g.name(d)
+        out.append(ZERO if _zero(d) else _times(d, _times(w[k1], w[k2])))
     return tuple(out)
 
 
@@ -708,8 +716,10 @@ def derive_aba(eqs: Equations, tree: JointTree, spec: ModelSpec, graph: Graph | 
         if j is not None and joint.S[j] == 1:
             # entry j of -U/D is -1: a_j = a'_j + qdd = u/D + the other terms, named
             # once, and qdd = a_j - a'_j
-            rest = _nm(g, _total([uD[i]] + [_times(x, y) for r, (x, y) in
-                                             enumerate(zip(nUd[i], a_prime)) if r != j]))
+            # named as it stands (not by _nm): qdd = rest - a'_j is then one
+            # subtraction, where a negated name would make it -(name) - a'_j
+            rest = g.name(_total([uD[i]] + [_times(x, y) for r, (x, y) in
+                                            enumerate(zip(nUd[i], a_prime)) if r != j]))
             qdd[k] = g.name(_total((rest, _neg(a_prime[j]))))
             acc[i] = tuple(rest if r == j else x for r, x in enumerate(a_prime))
         else:

@@ -146,6 +146,22 @@ class GraphBuilder:
             self._memo[expr] = sym
         return sym
 
+    def factor(self, expr) -> sympy.Expr:
+        """A symbol for ``expr`` even when it is a number times a symbol (``2*l``),
+        which :meth:`name` leaves inline: for a factor that multiplies several
+        things, or that the caller wants computed once (a parameter's multiple,
+        hoisted with the parameters)."""
+        if not isinstance(expr, sympy.Basic):
+            expr = sympy.sympify(expr)
+        if expr.is_Number or expr.is_Symbol:
+            return expr
+        sym = self._memo.get(expr)
+        if sym is None:
+            sym = sympy.Symbol(f"{PREFIX}{len(self._assignments)}")
+            self._assignments.append((sym, expr))
+            self._memo[expr] = sym
+        return sym
+
     def vec(self, components) -> tuple:
         """Name each component of a vector."""
         return tuple(self.name(c) for c in components)
