@@ -16,10 +16,13 @@ Method
       *emit*, *compile* are modelgen's stage timers, *RSS* the child's peak
       resident set (Python side) after generating.
     * ops: modelgen's operation counts of the ``rhs`` routine
-      (:func:`modelgen.codegen.cse.count_ops`) before and after CSE, per
-      coordinate.  For crba they do not include the Cholesky solve run in C
-      on A (about n^3/6 multiply-adds).
-    * rhs in C: bench/codegen_scaling.py's harness (``<name>_rhs`` in a loop,
+      (:func:`modelgen.codegen.cse.count_ops`: C operators as printed) before
+      and after CSE, per coordinate; after CSE without the parameter-only
+      statements (``<name>_prepare``, run once per parameter set).  For crba
+      they do not include the Cholesky solve run in C on A (about n^3/6
+      multiply-adds).
+    * rhs in C: bench/codegen_scaling.py's harness (``<name>_prepare`` once,
+      ``<name>_rhs_prepared`` in a loop,
       each call perturbed by the previous output, min over 5 repeats of
       >= 0.2 s, the rhs part of ``<name>.c`` compiled with the build's own
       command); MuJoCo's ``mj_forward`` on the identical chain with its

@@ -31,7 +31,9 @@ Method
       (the Python side, including the interpreter and sympy) and
       ``RUSAGE_CHILDREN`` (the largest compiler process).
     * Operation counts are modelgen's counts for the ``rhs`` routine (the
-      mass matrix A and b = tau - h) before and after CSE.  They do not
+      mass matrix A and b = tau - h, or the ABA program) before and after CSE,
+      as C operators (:func:`modelgen.codegen.printer.c_operations`); after
+      CSE without the parameter-only statements ``<name>_prepare`` computes.  They do not
       include the Cholesky solve that ``<name>_rhs`` runs on A in a C loop
       (about n^3/6 multiply-adds).  The exponent is a least-squares fit of
       log(ops) against log(n) over the chains run; the *local* exponent is
@@ -40,7 +42,9 @@ Method
       compiled at -O2 and linked with ``<name>.c`` compiled by the exact
       command modelgen's build used for the rhs part (from the manifest's
       ``compile_commands``, i.e. ``build.compile_flags``).  It calls
-      ``<name>_rhs`` in a loop, perturbing one entry of x from the previous
+      ``<name>_prepare`` once and ``<name>_rhs_prepared`` in a loop (what an
+      integration runs; the peers too keep their models' inertias
+      precomputed), perturbing one entry of x from the previous
       output every iteration (so nothing can be hoisted and consecutive calls
       form a dependency chain), and reports the minimum per-call time over 5
       repeats of at least 0.2 s each.  The modelgen and MuJoCo harnesses are
@@ -137,6 +141,7 @@ static double now(void)
 
 static const double x0[NX] = {{{x0}}};
 static const double p[{np_}] = {{{p}}};
+static double pd[{NAME}_NPD_ALLOC];
 static double u[{nu_}];
 static double x[NX], xdot[NX];
 static int status;
@@ -151,7 +156,7 @@ static double run(long loops)
     for (k = 0; k < loops; ++k) {{
         const int j = (int)(k % NX);
         x[j] = x0[j] + 1e-9 * xdot[NX - 1 - j];
-        status |= {name}_rhs(0.0, x, u, p, xdot);
+        status |= {name}_rhs_prepared(0.0, x, u, p, pd, xdot);
         sink += xdot[NX - 1];
     }}
     return now() - start;
@@ -164,7 +169,8 @@ int main(void)
     double best = 1e300;
     for (i = 0; i < NX; ++i)
         x[i] = x0[i];
-    status = {name}_rhs(0.0, x, u, p, xdot);
+    {name}_prepare(p, pd);      /* once, as the peers' models hold their inertias */
+    status = {name}_rhs_prepared(0.0, x, u, p, pd, xdot);
     while (run(loops) < {min_seconds})
         loops *= 2;
     for (r = 0; r < {repeats}; ++r) {{
@@ -317,7 +323,8 @@ def build_rhs_harness(cm, x0, work: Path):
     work.mkdir(parents=True, exist_ok=True)
     harness = work / "rhs_bench.c"
     harness.write_text(_MG_HARNESS.format(
-        name=name, nx=cm.nx, x0=_c_array(x0), np_=max(len(cm.parameters), 1),
+        name=name, NAME=name.upper(), nx=cm.nx, x0=_c_array(x0),
+        np_=max(len(cm.parameters), 1),
         p=_c_array(cm.params()) or "0.0", nu_=max(len(cm.inputs), 1),
         min_seconds=MIN_SECONDS, repeats=REPEATS))
 
@@ -344,11 +351,12 @@ def build_rhs_harness(cm, x0, work: Path):
     return exe, shlex.join(cmd)
 
 
-_MG_COUNT = r"""/* {name}_rhs called {calls} times, for callgrind (bench/codegen_scaling.py). */
+_MG_COUNT = r"""/* {name}_rhs_prepared called {calls} times, for callgrind (bench/codegen_scaling.py). */
 #include <stdio.h>
 #include "{name}.h"
 static const double x0[{nx}] = {{{x0}}};
 static const double p[{np_}] = {{{p}}};
+static double pd[{NAME}_NPD_ALLOC];
 static double u[{nu_}];
 int main(void)
 {{
@@ -356,10 +364,11 @@ int main(void)
     int k, status = 0;
     for (k = 0; k < {nx}; ++k)
         x[k] = x0[k];
+    {name}_prepare(p, pd);
     for (k = 0; k < {calls}; ++k) {{
         const int j = k % {nx};
         x[j] = x0[j] + 1e-9 * xdot[{nx} - 1 - j];
-        status |= {name}_rhs(0.0, x, u, p, xdot);
+        status |= {name}_rhs_prepared(0.0, x, u, p, pd, xdot);
         sink += xdot[{nx} - 1];
     }}
     printf("%d %.17g\n", status, sink);
@@ -369,13 +378,14 @@ int main(void)
 
 
 def rhs_instructions(cm, x0, work: Path, calls: int = 2000):
-    """Instructions per ``<name>_rhs`` call (callgrind, inclusive of sin/cos), or None
+    """Instructions per ``<name>_rhs_prepared`` call (callgrind, inclusive of sin/cos), or None
     without valgrind.  Machine load does not change this count, unlike a time."""
     if shutil.which("valgrind") is None:
         return None
     exe, _ = build_rhs_harness(cm, x0, work)        # compiles model_rhs.o as the build did
     src = work / "rhs_count.c"
-    src.write_text(_MG_COUNT.format(name=cm.name, calls=calls, nx=cm.nx, x0=_c_array(x0),
+    src.write_text(_MG_COUNT.format(name=cm.name, NAME=cm.name.upper(), calls=calls, nx=cm.nx,
+                                    x0=_c_array(x0),
                                     np_=max(len(cm.parameters), 1),
                                     p=_c_array(cm.params()) or "0.0",
                                     nu_=max(len(cm.inputs), 1)))
@@ -387,7 +397,7 @@ def rhs_instructions(cm, x0, work: Path, calls: int = 2000):
                   str(counter), "-lm"])
     out = work / "callgrind.out"
     _run_checked(["valgrind", "--tool=callgrind", f"--callgrind-out-file={out}",
-                  f"--toggle-collect={cm.name}_rhs", str(counter)])
+                  f"--toggle-collect={cm.name}_rhs_prepared", str(counter)])
     for line in out.read_text().splitlines():
         if line.startswith(("summary:", "totals:")):
             return int(line.split()[1]) / calls
