@@ -4,18 +4,22 @@ against mpmath, and against glibc's sin and cos on the same arguments.
 The block between the template's ``/* ---- mg_sin, mg_cos`` and ``/* ---- end
 mg_sin, mg_cos ---- */`` markers is compiled into two small shared objects, one
 as is and one with ``-DMG_LIBM_TRIG`` (libm's sin and cos), and called through
-ctypes on about 210,000 seeded arguments: uniform in [-10, 10], log-uniform
+ctypes on about 215,000 seeded arguments: uniform in [-10, 10], log-uniform
 magnitudes 1e-300..1e6 of both signs, the doubles within 3 ulps of multiples of
-pi/2 up to 1e5, the neighbourhood of the fallback threshold ``MG_TRIG_MAX``, and
-0, -0, subnormals, inf, -inf, NaN.  The exact values come from mpmath (its
+pi/2 up to 1e5, within 0.1 of odd multiples of pi/4 up to 1e5 (|r| near pi/4,
+where the kernels' rounding is largest), the neighbourhood of the fallback
+threshold ``MG_TRIG_MAX``, and 0, -0, subnormals, inf, -inf, NaN.  The exact values come from mpmath (its
 reduction raises the working precision until the cancellation near multiples of
 pi/2 is resolved), as double-doubles hi + lo; the error of a result y is
 ``|(y - hi) - lo|`` in ulps of the exact value, also near zeros (the results
 near multiples of pi/2 are measured relative to their own tiny size).
 
-Measured (gcc 12, glibc 2.36): max error 0.724 ulp for mg_sin, 0.728 for
-mg_cos; glibc's 0.513 and 0.561 on the same points (the table is printed in the
-test summary; another seed gave 0.744 and 0.745).  The bound asserted is 0.8 ulp: the code uses only + - * on
+Measured (gcc 12, glibc 2.36): max error 0.758 ulp for mg_sin, 0.784 for
+mg_cos; glibc's 0.512 and 0.561 on the same points (the table is printed in
+the test summary).  Wider searches (50 million arguments of the same kinds, the
+5 % where mg and glibc differ checked against mpmath; ``bench/trig.py
+--search 25``) found 0.808 for mg_sin and 0.815 for mg_cos; the bound asserted
+is 0.85 ulp. the code uses only + - * on
 doubles and -std=c99 turns contraction off, so these numbers are the same on
 any IEEE machine (checked: -O1 and -O2 -march=native give the same bits as
 -O2).  Unoptimised (gcc or clang at -O0) mg_sin and mg_cos are libm's.
@@ -37,8 +41,9 @@ from modelgen.codegen.emit import templates_dir
 
 from conftest import MODELS, SUMMARY
 
-#: The largest error asserted, in ulps of the exact result (measured: 0.728).
-MAX_ULP = 0.8
+#: The largest error asserted, in ulps of the exact result (measured: 0.784;
+#: 0.815 the largest found in 50 million arguments).
+MAX_ULP = 0.85
 #: mpmath's working precision of the exact values (bits; it adds what the
 #: reduction of large or nearly cancelling arguments needs).
 PREC = 80
@@ -105,9 +110,11 @@ def libs(tmp_path_factory):
 def _arguments() -> dict:
     """The argument sets, seeded."""
     rng = np.random.default_rng(20261123)
-    sets = {"uniform [-10, 10]": rng.uniform(-10.0, 10.0, 70_000),
-            "log-uniform 1e-300..1e6": 10.0 ** rng.uniform(-300.0, 6.0, 70_000)
-            * rng.choice([-1.0, 1.0], 70_000)}
+    sets = {"uniform [-10, 10]": rng.uniform(-10.0, 10.0, 50_000),
+            "log-uniform 1e-300..1e6": 10.0 ** rng.uniform(-300.0, 6.0, 50_000)
+            * rng.choice([-1.0, 1.0], 50_000),
+            "odd k pi/4 +- 0.1, < 1e5": (rng.integers(0, int(1e5 / (math.pi / 2)), 50_000) + 0.5)
+            * (math.pi / 2) + rng.uniform(-0.1, 0.1, 50_000)}
     ks = np.concatenate([np.arange(1, 201), rng.integers(201, int(1e5 / (math.pi / 2)), 8_000)])
     pi_fixed = libmp.mpf_pi(200)
     base = np.array([libmp.to_float(libmp.mpf_mul(libmp.from_int(int(k)), pi_fixed, 200))
@@ -155,7 +162,7 @@ def _ulp_errors(y, hi, lo):
     return np.where((hi == 0) & (y == 0), 0.0, err)
 
 
-def test_mg_sin_and_mg_cos_are_within_0_8_ulp_of_mpmath(libs):
+def test_mg_sin_and_mg_cos_are_within_0_85_ulp_of_mpmath(libs):
     rows, worst = [], {}
     for label, x in _arguments().items():
         x = np.ascontiguousarray(x)
