@@ -21,7 +21,7 @@ the test summary).  Wider searches (50 million arguments of the same kinds, the
 --search 25``) found 0.808 for mg_sin and 0.815 for mg_cos; the bound asserted
 is 0.85 ulp. the code uses only + - * on
 doubles and -std=c99 turns contraction off, so these numbers are the same on
-any IEEE machine (checked: -O1 and -O2 -march=native give the same bits as
+any machine that computes doubles in double precision (checked: -O1 and -O2 -march=native give the same bits as
 -O2).  Unoptimised (gcc or clang at -O0) mg_sin and mg_cos are libm's.
 """
 from __future__ import annotations
