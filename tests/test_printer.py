@@ -39,6 +39,24 @@ def _value(text, ns):
         return None
 
 
+def _printed(source, options, tmp_path, monkeypatch) -> list:
+    """(printer, expression, C text) of every expression printed while
+    building the model or scene ``source`` (fresh, into ``tmp_path``)."""
+    seen = []
+    fast = ModelPrinter.doprint
+
+    def record(self, expr, assign_to=None):
+        text = fast(self, expr)
+        seen.append((self, expr, text))
+        return text
+    monkeypatch.setattr(ModelPrinter, "doprint", record)
+    if source.parent == SCENES:
+        modelgen.load_scene(source, tmp_path)
+    else:
+        modelgen.load(source, tmp_path, **options)
+    return seen
+
+
 @pytest.mark.parametrize("source, options", [
     (MODELS / "double_pendulum.yaml", {"formulation": "crba", "jacobian": True}),
     (MODELS / "arm7.yaml", {}),
@@ -49,17 +67,8 @@ def _value(text, ns):
 ])
 def test_the_direct_walk_prints_what_sympys_printer_prints(source, options, tmp_path,
                                                              monkeypatch):
-    pairs = []
-    fast = ModelPrinter.doprint
-
-    def record(self, expr, assign_to=None):
-        pairs.append((fast(self, expr), self._slow(expr)))
-        return pairs[-1][0]
-    monkeypatch.setattr(ModelPrinter, "doprint", record)
-    if source.parent == SCENES:
-        modelgen.load_scene(source, tmp_path)
-    else:
-        modelgen.load(source, tmp_path, **options)
+    pairs = [(text, printer._slow(expr))
+             for printer, expr, text in _printed(source, options, tmp_path, monkeypatch)]
     assert len(pairs) > 50
     rng = random.Random(1)
     compared = 0
@@ -126,18 +135,7 @@ def test_the_operation_count_is_the_operators_of_the_printed_c(source, options, 
                                                                monkeypatch):
     """c_operations (the counts in manifests and benchmarks) against the
     operators in the C text the printer writes, statement by statement."""
-    seen = []
-    fast = ModelPrinter.doprint
-
-    def record(self, expr, assign_to=None):
-        text = fast(self, expr)
-        seen.append((expr, text))
-        return text
-    monkeypatch.setattr(ModelPrinter, "doprint", record)
-    if source.parent == SCENES:
-        modelgen.load_scene(source, tmp_path)
-    else:
-        modelgen.load(source, tmp_path, **options)
+    seen = [(expr, text) for _, expr, text in _printed(source, options, tmp_path, monkeypatch)]
     assert len(seen) > 50
     wrong = [(text, c_operations(e), _operators_in(text)) for e, text in seen
              if c_operations(e) != _operators_in(text)]

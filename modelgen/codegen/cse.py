@@ -41,21 +41,15 @@ class Routine:
     ops_after: int
 
 
-def _ops(expr) -> int:
-    """Floating-point operations of one expression as printed in C
-    (:func:`modelgen.codegen.printer.c_operations`: each binary operator, unary
-    minus and call is one; the sign of a term inside a sum is its ``-``)."""
-    return c_operations(expr)
-
-
 def count_ops(exprs) -> int:
-    """Floating-point operations of a list of expressions (see :func:`_ops`).
+    """Floating-point operations of a list of expressions, each counted as
+    printed in C (:func:`modelgen.codegen.printer.c_operations`).
 
     >>> x, y = sympy.symbols("x y")
     >>> count_ops([x*y + 1, x**2, sympy.sin(x) / y, x - x*y])
     7
     """
-    return sum(_ops(e) for e in exprs)
+    return sum(c_operations(e) for e in exprs)
 
 
 #: sympy functions with a symengine function of the same name and arity
@@ -140,7 +134,7 @@ def _closure_ops(statements, memo: dict) -> int:
     for sym, expr in statements:
         n = memo.get(sym)
         if n is None:
-            n = memo[sym] = _ops(expr)
+            n = memo[sym] = c_operations(expr)
         total += n
     return total
 
@@ -302,7 +296,8 @@ def hoist_parameters(routine: Routine, name: str = "prepare") -> tuple:
     >>> rest.inputs[-1], pre.ops_after + rest.ops_after == r.ops_after
     (('pd', (mg_0,)), True)
     """
-    params = {s for array, symbols in routine.inputs if array == "p" for s in symbols}
+    parameters = tuple(s for array, symbols in routine.inputs if array == "p" for s in symbols)
+    params = set(parameters)
     fixed, before, after = set(), [], []
     for sym, expr in routine.statements:
         if free_symbols(expr) <= (params | fixed):
@@ -317,10 +312,8 @@ def hoist_parameters(routine: Routine, name: str = "prepare") -> tuple:
         for e in items:
             used |= free_symbols(e) & fixed
     pd = tuple(sym for sym, _ in before if sym in used)
-    ops = sum(_ops(e) for _, e in before)
-    prepare = Routine(name, (("p", tuple(s for array, symbols in routine.inputs
-                                          if array == "p" for s in symbols)),),
-                      (("pd", pd),), tuple(before), ops, ops)
+    ops = sum(c_operations(e) for _, e in before)
+    prepare = Routine(name, (("p", parameters),), (("pd", pd),), tuple(before), ops, ops)
     # ops_before stays the whole program's, before CSE and hoisting
     rest = Routine(routine.name, routine.inputs + (("pd", pd),), routine.outputs, tuple(after),
                    routine.ops_before, routine.ops_after - ops)

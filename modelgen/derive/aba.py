@@ -142,6 +142,12 @@ def _nm(g, e):
     return g.name(e)
 
 
+def _signed(namer, e):
+    """``namer(e)`` with the sign sympy would extract kept outside, so that e
+    and -e share one name."""
+    return -namer(-e) if e.could_extract_minus_sign() else namer(e)
+
+
 def _vec(g, xs) -> tuple:
     return tuple(_nm(g, x) for x in xs)
 
@@ -220,8 +226,7 @@ def _inertia_xlt_T(g, r, I):
     P = _mul(M, rx)                               # rx C rx (symmetric)
     # on the diagonal N_ii + N_ii = B (2 rx) _ii: one product by the parameter 2 r
     # (computed once per parameter set), where 2 * (B rx)_ii would be two
-    rx2 = _skew(tuple(ZERO if _zero(x) else -g.factor(-2 * x) if x.could_extract_minus_sign()
-                      else g.factor(2 * x) for x in r))
+    rx2 = _skew(tuple(ZERO if _zero(x) else _signed(g.factor, 2 * x) for x in r))
     A2 = tuple(tuple(_total((A[i][j], _neg(dot(B[i], (rx2[0][i], rx2[1][i], rx2[2][i]))),
                              _neg(P[i][j]))) if i == j else
                      _total((A[i][j], _neg(N[i][j]), _neg(N[j][i]), _neg(P[i][j])))
@@ -329,8 +334,8 @@ def _gyroscopic(g, entries, w) -> tuple:
     for k in range(3):
         k1, k2 = (k + 1) % 3, (k + 2) % 3
         d = sympy.expand(entries[k2] - entries[k1])
-        # one name for d and -d: the sign sympy would extract stays outside
-        d = -g.name(-d) if d.could_extract_minus_sign() else g.name(d)
+        # one name for d and -d
+        d = _signed(g.name, d)
         out.append(ZERO if _zero(d) else _times(d, _times(w[k1], w[k2])))
     return tuple(out)
 

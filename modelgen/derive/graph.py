@@ -139,12 +139,7 @@ class GraphBuilder:
         if expr.is_Mul and len(expr.args) == 2 and expr.args[0] is sympy.S.NegativeOne:
             inner = self.name(expr.args[1])
             return -inner
-        sym = self._memo.get(expr)
-        if sym is None:
-            sym = sympy.Symbol(f"{PREFIX}{len(self._assignments)}")
-            self._assignments.append((sym, expr))
-            self._memo[expr] = sym
-        return sym
+        return self._symbol(expr)
 
     def factor(self, expr) -> sympy.Expr:
         """A symbol for ``expr`` even when it is a number times a symbol (``2*l``),
@@ -155,6 +150,10 @@ class GraphBuilder:
             expr = sympy.sympify(expr)
         if expr.is_Number or expr.is_Symbol:
             return expr
+        return self._symbol(expr)
+
+    def _symbol(self, expr) -> sympy.Symbol:
+        """The statement's symbol for ``expr``, recording the statement once."""
         sym = self._memo.get(expr)
         if sym is None:
             sym = sympy.Symbol(f"{PREFIX}{len(self._assignments)}")
