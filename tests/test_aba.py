@@ -43,10 +43,10 @@ def _program(graph, outputs, inputs):
     return namespace["f"]
 
 
-def _qdd_both(spec, states=3, seed=0):
+def _qdd_both(spec, states=3, seed=0, velocity_products="auto"):
     """[(q_ddot by CRBA and a dense solve, q_ddot by ABA)] at seeded random states."""
     eqs = derive_equations(derive_kinematics(spec))
-    fd = derive_aba(eqs, extract_joint_tree(spec), spec)
+    fd = derive_aba(eqs, extract_joint_tree(spec), spec, velocity_products=velocity_products)
     n, nq = len(eqs.qd), len(eqs.q)
     inputs = (eqs.t,) + eqs.q + eqs.qd + eqs.u + eqs.p
     quaternions = [[spec.coordinates.index(c) for c in j.quaternion] for j in spec.joints]
@@ -69,8 +69,8 @@ def _qdd_both(spec, states=3, seed=0):
     return out
 
 
-def _assert_agree(spec, rtol=1e-12):
-    for crba, aba in _qdd_both(spec):
+def _assert_agree(spec, rtol=1e-12, velocity_products="auto"):
+    for crba, aba in _qdd_both(spec, velocity_products=velocity_products):
         assert np.max(np.abs(aba - crba)) <= rtol * np.max(np.abs(crba)), (crba, aba)
 
 
@@ -210,18 +210,42 @@ def test_unknown_formulation_is_a_model_error():
 
 # -- agreement with the CRBA path ---------------------------------------------------
 
+# both places of the velocity-product accelerations (derive_aba's velocity_products;
+# "auto" keeps one of the two programs)
+VP = ("inward", "outward")
+
+
+@pytest.mark.parametrize("vp", VP)
 @pytest.mark.parametrize("name", SHIPPED)
-def test_aba_matches_crba_on_every_shipped_model(name):
-    _assert_agree(load_model(MODELS / f"{name}.yaml"))
+def test_aba_matches_crba_on_every_shipped_model(name, vp):
+    _assert_agree(load_model(MODELS / f"{name}.yaml"), velocity_products=vp)
 
 
+@pytest.mark.parametrize("vp", VP)
 @pytest.mark.parametrize("n", [2, 5, 12])     # n = 1 has q_ddot = 0 (gravity along the axis)
-def test_aba_matches_crba_on_spatial_chains(n):
-    _assert_agree(spatial_chain(n).spec())
+def test_aba_matches_crba_on_spatial_chains(n, vp):
+    _assert_agree(spatial_chain(n).spec(), velocity_products=vp)
 
 
-def test_aba_matches_crba_on_a_branched_tree():
-    _assert_agree(branched_tree().spec())
+@pytest.mark.parametrize("vp", VP)
+def test_aba_matches_crba_on_a_branched_tree(vp):
+    _assert_agree(branched_tree().spec(), velocity_products=vp)
+
+
+def test_auto_keeps_the_shorter_program():
+    # from some length on (6: inward 1043 operations, outward 1066) the spatial
+    # chain's rods (centre on the axis, diagonal inertia) favour
+    # "outward", the arm's full inertias off the axes "inward"
+    for spec, best in ((spatial_chain(12).spec(), "outward"),
+                       (load_model(MODELS / "arm7.yaml"), "inward")):
+        eqs = derive_equations(derive_kinematics(spec))
+        tree = extract_joint_tree(spec)
+        fds = {vp: derive_aba(eqs, tree, spec, velocity_products=vp) for vp in VP + ("auto",)}
+        ops = {vp: fd.graph.operations(fd.qdd + fd.D) for vp, fd in fds.items()}
+        assert ops["auto"] == min(ops["inward"], ops["outward"]) == ops[best], (spec.name, ops)
+        assert ops["inward"] != ops["outward"]
+    with pytest.raises(ValueError, match="velocity_products"):
+        derive_aba(eqs, tree, spec, velocity_products="sideways")
 
 
 def test_aba_matches_crba_when_gravity_is_an_effect_in_a_moving_base():

@@ -303,8 +303,9 @@ def generate(spec: ModelSpec, out_dir=None, *, force: bool = False, outputs=(),
     t1 = time.perf_counter()
     seconds["derive"] = t1 - t0
     stage("cse")
+    # the rhs (what an integration runs) is eliminated on its own
     routines = make_routines(graph, routines_for(eqs, columns.exprs if columns else (), terms,
-                                                 forward, linearization))
+                                                 forward, linearization), alone=("rhs",))
     routines = _hoisted(routines)
     t2 = time.perf_counter()
     seconds["cse"] = t2 - t1

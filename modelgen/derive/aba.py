@@ -272,17 +272,20 @@ def inertia_times(I, m):
     return add(_mv(A, w), _mv(B, v)) + add(_mv(_T(B), w), _mv(C, v))
 
 
-def _rigid_bias(g, I_O, h, m, v):
-    """v x* (I v) for a rigid body (I_O about the origin, first moment h, mass m).
+def _rigid_force(g, I_O, h, m, v, a):
+    """I a + v x* (I v) for a rigid body (I_O about the origin, first moment h, mass m).
 
     ``I v = (I_O w + h x vl, m vl - h x w)``; the term ``vl x (m vl)`` of
-    ``v x* (I v)`` vanishes, so ``p = (w x n - vl x k, w x f)`` with ``k = h x w``.
+    ``v x* (I v)`` vanishes, so ``v x* (I v) = (w x n - vl x k, w x f)`` with
+    ``k = h x w``.
     """
     w, vl = v[:3], v[3:]
     n = _vec(g, add(_mv(I_O, w), cross(h, vl)))
     k = _vec(g, cross(h, w))
     f = _vec(g, sub(tuple(_times(m, x) for x in vl), k))
-    return _vec(g, sub(cross(w, n), cross(vl, k))) + _vec(g, cross(w, f))
+    bias = sub(cross(w, n), cross(vl, k)) + cross(w, f)
+    I = (I_O, _skew(h), ((m, ZERO, ZERO), (ZERO, m, ZERO), (ZERO, ZERO, m)))
+    return _vec(g, add(bias, inertia_times(I, a)))
 
 
 def _centre(h, m):
@@ -296,25 +299,33 @@ def _centre(h, m):
     return c
 
 
-def _com_bias(g, I_O, h, m, c, v):
-    """v x* (I v) about the centre c: ``(w x Ic w + c x f, f)``, ``f = m w x vc``.
+def _com_force(g, I_O, h, m, c, v, a):
+    """I a + v x* (I v) about the centre c: the Newton-Euler equations at c.
 
-    At the centre the bias force is ``(w x Ic w, m w x vc)`` with ``vc = vl + w x c``
-    and ``Ic = I_O - m (|c|^2 1 - c c^T)`` (parameters only, and the ``m`` terms
-    of ``I_O`` cancel exactly); moved to the origin the moment gains ``c x f``
-    (``= h x (w x vc)``).  Fewer products than :func:`_rigid_bias`, whose
-    ``I_O`` and ``h`` are both dense when the centre is off the axes.
+    The centre's acceleration (the part not due to q_ddot) is
+    ``ac = al + wd x c + w x vc`` with ``vc = vl + w x c``; at the centre the
+    force is ``(Ic wd + w x Ic w, m ac)`` with ``Ic = I_O - m (|c|^2 1 - c c^T)``
+    (parameters only, and the ``m`` terms of ``I_O`` cancel exactly); moved to
+    the origin the moment gains ``c x f`` (``= h x ac``).  Fewer products than
+    :func:`_rigid_force`, whose ``I_O`` and ``h`` are both dense when the
+    centre is off the axes.
     """
     w, vl = v[:3], v[3:]
+    wd, al = a[:3], a[3:]
     cc = _total(_times(x, x) for x in c)
-    entries = tuple(sympy.expand(I_O[a][b] - m * ((cc if a == b else 0) - c[a] * c[b]))
-                    for a, b in _PAIRS)
-    vc = _vec(g, add(vl, cross(w, c)))
-    e = _vec(g, cross(w, vc))
+    entries = tuple(sympy.expand(I_O[a_][b] - m * ((cc if a_ == b else 0) - c[a_] * c[b]))
+                    for a_, b in _PAIRS)
+    # a c such as l/2 named once (hoisted with the parameters): inline, each
+    # product by it would be two
+    cn = tuple(ZERO if _zero(x) else g.factor(x) for x in c)
+    vc = _vec(g, add(vl, cross(w, cn)))
+    e = _vec(g, add(add(al, cross(wd, cn)), cross(w, vc)))
     f = _vec(g, [_times(m, x) for x in e])
     # c x f costs one product per term when c is numeric, h x e otherwise
-    moment = cross(c, f) if all(x.is_Number for x in c) else cross(h, e)
-    return _vec(g, add(_gyroscopic(g, entries, w), moment)) + f
+    moment = cross(cn, f) if all(x.is_Number for x in c) else cross(h, e)
+    Ic = _name_sym(g, _sym(entries))
+    spin = add(_gyroscopic(g, entries, w), _mv(Ic, wd))
+    return _vec(g, add(spin, moment)) + f
 
 
 def _gyroscopic(g, entries, w) -> tuple:
@@ -594,51 +605,86 @@ def _ground_acceleration(eqs_spec) -> tuple:
 
 @dataclass(frozen=True)
 class Outward:
-    """Pass 1 of ABA and RNEA (Featherstone Table 5.1 / 7.1), per joint, in link frames.
+    """Pass 1 of ABA and RNEA (Featherstone Table 5.1), per joint, in link frames.
 
-    ``v`` the link velocity, ``c = v x S qd`` the velocity-product acceleration,
-    ``I`` the rigid link inertia as blocks ``(A, B, C)`` at the link origin,
-    ``bias = v x* I v``.
+    ``v`` the link velocity, ``c = v x S qd`` the velocity-product
+    acceleration, ``I`` the rigid link inertia as blocks ``(A, B, C)`` at the
+    link origin, ``bias = v x* I v``.  With ``accelerations``: ``a`` the link
+    acceleration at zero q_ddot from a ground at rest (``a_i = X_i a_p + c_i``,
+    RNEA's a_vp) and ``f = I a + v x* I v`` the force that needs; else None.
     """
     v: tuple
     c: tuple
     I: tuple
     bias: tuple
+    a: tuple | None
+    f: tuple | None
 
 
-def outward_pass(g: GraphBuilder, tree: JointTree, qd) -> Outward:
-    """Velocities, velocity-product accelerations and bias forces of every link.
+def outward_pass(g: GraphBuilder, tree: JointTree, qd, accelerations: bool = True) -> Outward:
+    """Velocities, velocity-product accelerations and forces of every link.
 
     Built in ``g``: a second call with the same ``g`` returns the same symbols
     (the graph hash-conses), so ABA and RNEA share this pass.
     """
     count = len(tree.joints)
-    v, c, I, bias = [None] * count, [None] * count, [None] * count, [None] * count
+    v, c, I, bias, a, f = ([None] * count for _ in range(6))
+    nothing = (ZERO,) * 6
     for i, joint in enumerate(tree.joints):
         vJ = _vec(g, [_total(_times(S[r], qd[k]) for k, S in joint.dofs) for r in range(6)])
-        if joint.parent < 0:
-            v[i], c[i] = vJ, (ZERO,) * 6
+        p = joint.parent
+        if p < 0:
+            v[i], c[i], a[i] = vJ, nothing, nothing
         else:
-            v[i] = _vec(g, add(joint_motion(g, joint, v[joint.parent]), vJ))
+            v[i] = _vec(g, add(joint_motion(g, joint, v[p]), vJ))
             c[i] = _vec(g, _cross_motion(v[i], vJ))
+            if accelerations:
+                a[i] = _vec(g, add(joint_motion(g, joint, a[p]), c[i]))
         body = tree.inertias[i]
         A = _sym(_vec(g, body.I))
         h = _vec(g, body.h)
         m = g.name(body.m)
         I[i] = (A, _skew(h), ((m, ZERO, ZERO), (ZERO, m, ZERO), (ZERO, ZERO, m)))
         centre = _centre(body.h, body.m)
-        bias[i] = (_rigid_bias(g, A, h, m, v[i]) if centre is None else
-                   _com_bias(g, _sym(body.I), h, body.m, centre, v[i]))
-    return Outward(tuple(v), tuple(c), tuple(I), tuple(bias))
+
+        def force(acc):
+            return (_rigid_force(g, A, h, m, v[i], acc) if centre is None else
+                    _com_force(g, _sym(body.I), h, body.m, centre, v[i], acc))
+        bias[i] = force(nothing)
+        if accelerations:
+            f[i] = force(a[i])
+    return Outward(tuple(v), tuple(c), tuple(I), tuple(bias),
+                   tuple(a) if accelerations else None, tuple(f) if accelerations else None)
 
 
-def derive_aba(eqs: Equations, tree: JointTree, spec: ModelSpec, graph: Graph | None = None
-               ) -> ForwardDynamics:
+#: where the velocity-product accelerations c_i enter the ABA (:func:`derive_aba`)
+VELOCITY_PRODUCTS = ("inward", "outward", "auto")
+
+
+def derive_aba(eqs: Equations, tree: JointTree, spec: ModelSpec, graph: Graph | None = None,
+               velocity_products: str = "auto") -> ForwardDynamics:
     """qdd by the articulated-body algorithm over ``graph`` (default ``eqs.graph``).
 
     ``spec`` is the model the equations came from; ``tree`` its joint tree.
     Gravity in E and actions are handled here; the generalized forces of every
     other effect are read from ``eqs.tau_parts``.
+
+    ``velocity_products`` says where the velocity-product accelerations
+    ``c_i`` enter (the two give the same qdd, up to rounding):
+
+    * ``"inward"``: as in Table 7.1, ``pa_i = pA_i + Ia_i c_i + U_i u_i / D_i``
+      and ``a'_i = X_i a_p + c_i``;
+    * ``"outward"``: pass 1 propagates ``a_vp,i = X_i a_vp,p + c_i`` (RNEA's
+      accelerations at zero q_ddot) and the bias force becomes
+      ``pA_i = I_i a_vp,i + v_i x* I_i v_i``; the ABA then runs with ``c = 0``
+      (write ``a_i = a_vp,i + a^_i``: ``a^_i = X_i a^_p + S_i qdd_i`` and
+      ``f_i = I_i a^_i + pA_i``).  No ``Ia c`` (about 40 operations a revolute
+      joint) and no ``+ c`` in pass 3, for one more transform and ``I a_vp``
+      in pass 1: cheaper for links whose centre lies on an axis and whose
+      inertia is diagonal (the spatial chain: 11 operations a joint fewer),
+      dearer for full inertias off the axes (the arm: 11 more);
+    * ``"auto"``: both programs are built and the shorter one (operations
+      before CSE, :func:`modelgen.derive.graph.operation_count`) is kept.
 
     >>> from modelgen.model.chains import spatial_chain
     >>> from modelgen.derive.kinematics import derive_kinematics
@@ -649,6 +695,15 @@ def derive_aba(eqs: Equations, tree: JointTree, spec: ModelSpec, graph: Graph | 
     >>> len(fd.qdd), fd.inward
     (2, (1, 0))
     """
+    if velocity_products not in VELOCITY_PRODUCTS:
+        raise ValueError(f"velocity_products must be one of {VELOCITY_PRODUCTS}")
+    if velocity_products != "auto":
+        return _derive_aba(eqs, tree, spec, graph, velocity_products == "outward")
+    programs = [_derive_aba(eqs, tree, spec, graph, outward) for outward in (True, False)]
+    return min(programs, key=lambda fd: fd.graph.operations(fd.qdd + fd.D))
+
+
+def _derive_aba(eqs, tree, spec, graph, outward_vp: bool) -> ForwardDynamics:
     g = GraphBuilder(graph or eqs.graph)
     n = len(eqs.qd)
     a0, gravity_labels = _ground_acceleration(spec)
@@ -666,8 +721,11 @@ def derive_aba(eqs: Equations, tree: JointTree, spec: ModelSpec, graph: Graph | 
 
     joints = tree.joints
     count = len(joints)
-    outward = outward_pass(g, tree, eqs.qd)
-    c, IA, pA = outward.c, list(outward.I), list(outward.bias)
+    outward = outward_pass(g, tree, eqs.qd, accelerations=outward_vp)
+    # with outward_vp the bias forces carry I_i a_vp,i and c is 0 in passes 2
+    # and 3; gravity stays the ground's acceleration in pass 3 either way
+    IA, pA = list(outward.I), list(outward.f if outward_vp else outward.bias)
+    c = (((ZERO,) * 6,) * count) if outward_vp else outward.c
     for i, f in external.items():
         pA[i] = _vec(g, sub(pA[i], f))
 

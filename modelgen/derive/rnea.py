@@ -5,20 +5,20 @@ each link's own frame (:mod:`modelgen.derive.joint_tree` gives the links),
 without gravity and external forces:
 
 1. outwards: ``v_i = X_i v_p + S_i qd_i``, ``c_i = v_i x S_i qd_i``,
-   ``a_i = X_i a_p + c_i`` (``a`` of the ground is 0);
-2. ``f_i = I_i a_i + v_i x* I_i v_i``;
-3. inwards: ``h_i = S_i^T f_i``, ``f_p += X_i^T f_i``.
+   ``a_i = X_i a_p + c_i`` (``a`` of the ground is 0),
+   ``f_i = I_i a_i + v_i x* I_i v_i``;
+2. inwards: ``h_i = S_i^T f_i``, ``f_p += X_i^T f_i``.
 
 This is ``h`` of ``A q_ddot + h = tau`` (:mod:`modelgen.derive.dynamics`):
 the generalized inertia forces at zero acceleration.  Pass 1 is
-:func:`modelgen.derive.aba.outward_pass`, so over the ABA program it costs
-only steps 1 (``a``), 2 and 3: about 40 operations per revolute joint,
-against the O(n^2) projections of the composite-body sums.
+:func:`modelgen.derive.aba.outward_pass`, which the ABA program uses too
+(its ``f`` is the ABA's bias force), so over it RNEA costs only step 2:
+about 20 operations per revolute joint, against the O(n^2) projections of
+the composite-body sums.
 """
 from __future__ import annotations
 
-from modelgen.derive.aba import (add, dot, inertia_times, joint_motion, outward_pass,
-                                 to_parent_force)
+from modelgen.derive.aba import add, dot, outward_pass, to_parent_force
 from modelgen.derive.graph import ZERO, GraphBuilder
 from modelgen.derive.joint_tree import JointTree
 
@@ -36,18 +36,9 @@ def derive_velocity_terms(g: GraphBuilder, tree: JointTree, qd) -> tuple:
     2
     """
     joints = tree.joints
-    count = len(joints)
-    out = outward_pass(g, tree, qd)
-    acc = [None] * count
-    force = [None] * count
-    for i, joint in enumerate(joints):
-        if joint.parent < 0:
-            acc[i] = out.c[i]
-        else:
-            acc[i] = g.vec(add(joint_motion(g, joint, acc[joint.parent]), out.c[i]))
-        force[i] = g.vec(add(inertia_times(out.I[i], acc[i]), out.bias[i]))
+    force = list(outward_pass(g, tree, qd).f)
     h = [ZERO] * len(qd)
-    for i in reversed(range(count)):
+    for i in reversed(range(len(joints))):
         joint = joints[i]
         for k, S in joint.dofs:
             h[k] = g.name(dot(S, force[i]))

@@ -182,7 +182,7 @@ void double_pendulum_default_parameters(double *p)
     p[4] = 9.81; /* g */
 }
 
-/* mass_matrix: 32 statements, 50 operations after CSE (53 before) */
+/* mass_matrix: 30 statements, 50 operations after CSE (53 before) */
 static void double_pendulum_mass_matrix_eval(const double *q, const double *p, double *A)
 {
     (void)q;
@@ -205,25 +205,23 @@ static void double_pendulum_mass_matrix_eval(const double *q, const double *p, d
     const double v14 = v7*v12;
     const double v15 = v13 + v8;
     const double v16 = v14 + v9;
-    const double v17 = p[0]*(p[2]*p[2]);
-    const double v18 = 1.0/12.0*v17;
-    const double v19 = (v10*v10) + (v11*v11);
-    const double v20 = v18 + p[0]*v19;
-    const double v21 = p[1]*(p[3]*p[3]);
-    const double v22 = 1.0/12.0*v21;
-    const double v23 = p[1]*v15;
-    const double v24 = p[1]*v16;
-    const double v25 = (v15*v15) + (v16*v16);
-    const double v26 = v22 + p[1]*v25;
-    const double v27 = v20 + v26;
-    const double v28 = v26 - v23*v8 - v24*v9;
-    const double v29 = p[1]*v9 - v24;
-    const double v30 = v23 - p[1]*v8;
-    const double v31 = v28 + v29*v9 - v30*v8;
-    A[0] = v27;
-    A[1] = v28;
-    A[2] = v28;
-    A[3] = v31;
+    const double v17 = 1.0/12.0*p[0]*(p[2]*p[2]);
+    const double v18 = (v10*v10) + (v11*v11);
+    const double v19 = v17 + p[0]*v18;
+    const double v20 = 1.0/12.0*p[1]*(p[3]*p[3]);
+    const double v21 = p[1]*v15;
+    const double v22 = p[1]*v16;
+    const double v23 = (v15*v15) + (v16*v16);
+    const double v24 = v20 + p[1]*v23;
+    const double v25 = v19 + v24;
+    const double v26 = v24 - v21*v8 - v22*v9;
+    const double v27 = p[1]*v9 - v22;
+    const double v28 = v21 - p[1]*v8;
+    const double v29 = v26 + v27*v9 - v28*v8;
+    A[0] = v25;
+    A[1] = v26;
+    A[2] = v26;
+    A[3] = v29;
 }
 
 void double_pendulum_mass_matrix(const double *q, const double *p, double *A)
@@ -231,7 +229,7 @@ void double_pendulum_mass_matrix(const double *q, const double *p, double *A)
     double_pendulum_mass_matrix_eval(q, p, A);
 }
 
-/* velocity_terms: 22 statements, 28 operations after CSE (29 before) */
+/* velocity_terms: 18 statements, 24 operations after CSE (25 before) */
 static void double_pendulum_velocity_terms_eval(const double *q, const double *qd, const double *p, double *h)
 {
     (void)q;
@@ -249,19 +247,15 @@ static void double_pendulum_velocity_terms_eval(const double *q, const double *q
     const double v8 = v5*qd[1];
     const double v9 = p[1]*v3;
     const double v10 = v6 + v2*v3;
-    const double v11 = v10*v2;
-    const double v12 = v2*v5;
+    const double v11 = v7 - v10*v2;
+    const double v12 = v2*v5 - v8;
     const double v13 = p[1]*v11;
     const double v14 = p[1]*v12;
     const double v15 = v9*v12;
-    const double v16 = v15 - v9*v8;
-    const double v17 = p[1]*v7 - v13;
-    const double v18 = v14 - p[1]*v8;
-    const double v19 = v17*v1;
-    const double v20 = v19 + v18*v0;
-    const double v21 = v16 + p[2]*v20;
-    h[0] = v21;
-    h[1] = v16;
+    const double v16 = v13*v1 + v14*v0;
+    const double v17 = v15 + p[2]*v16;
+    h[0] = v17;
+    h[1] = v15;
 }
 
 void double_pendulum_velocity_terms(const double *q, const double *qd, const double *p, double *h)
@@ -304,7 +298,7 @@ void double_pendulum_generalized_forces(double t, const double *q, const double 
     double_pendulum_generalized_forces_eval(t, q, qd, u, p, tau);
 }
 
-/* energy: 36 statements, 63 operations after CSE (66 before) */
+/* energy: 33 statements, 63 operations after CSE (66 before) */
 static void double_pendulum_energy_eval(const double *q, const double *qd, const double *p, double *out)
 {
     (void)q;
@@ -336,19 +330,16 @@ static void double_pendulum_energy_eval(const double *q, const double *qd, const
     const double v22 = v18*v8;
     const double v23 = v11 + v21;
     const double v24 = v12 + v22;
-    const double v25 = p[0]*(p[2]*p[2]);
-    const double v26 = 1.0/12.0*v25;
-    const double v27 = v26*qd[0];
-    const double v28 = -p[4]*p[0];
-    const double v29 = p[1]*(p[3]*p[3]);
-    const double v30 = 1.0/12.0*v29;
-    const double v31 = v30*v8;
-    const double v32 = -p[4]*p[1];
-    const double v33 = 1.0/2.0*p[0];
-    const double v34 = v33*((v15*v15) + (v16*v16)) + 1.0/2.0*p[1]*((v23*v23) + (v24*v24)) + 1.0/2.0*v27*qd[0] + 1.0/2.0*v31*v8;
-    const double v35 = -v14*v28 - v20*v32;
-    out[0] = v34;
-    out[1] = v35;
+    const double v25 = 1.0/12.0*p[0]*(p[2]*p[2]);
+    const double v26 = v25*qd[0];
+    const double v27 = -p[4]*p[0];
+    const double v28 = 1.0/12.0*p[1]*(p[3]*p[3]);
+    const double v29 = v28*v8;
+    const double v30 = -p[4]*p[1];
+    const double v31 = 1.0/2.0*p[0]*((v15*v15) + (v16*v16)) + 1.0/2.0*p[1]*((v23*v23) + (v24*v24)) + 1.0/2.0*v26*qd[0] + 1.0/2.0*v29*v8;
+    const double v32 = -v14*v27 - v20*v30;
+    out[0] = v31;
+    out[1] = v32;
 }
 
 void double_pendulum_energy(const double *q, const double *qd, const double *p, double *out)
@@ -423,7 +414,7 @@ void double_pendulum_body_poses(const double *q, const double *p, double *T)
 
 #if !defined(MG_PART) || MG_PART == 2
 
-/* rhs: 45 statements, 60 operations after CSE (76 before) */
+/* rhs: 42 statements, 57 operations after CSE (73 before) */
 static void double_pendulum_rhs_eval(double t, const double *x, const double *u, const double *p, const double *pd, double *qdd, double *D)
 {
     (void)t;
@@ -442,45 +433,42 @@ static void double_pendulum_rhs_eval(double t, const double *x, const double *u,
     const double v7 = v2*v5;
     const double v8 = v7*x[3];
     const double v9 = v6*x[3];
-    const double v10 = v7 + v4*pd[0];
-    const double v11 = v10*v4;
-    const double v12 = v4*v6;
+    const double v10 = v7 + v4*pd[3];
+    const double v11 = v8 - v10*v4;
+    const double v12 = v4*v6 - v9;
     const double v13 = p[1]*v11;
     const double v14 = p[1]*v12;
     const double v15 = pd[4]*v12;
-    const double v16 = p[1]*v8 - v13;
-    const double v17 = v16*v3;
-    const double v18 = v15*pd[5];
-    const double v19 = pd[4]*v18 - v14 + pd[7]*v9;
-    const double v20 = (v3*v3);
-    const double v21 = v2*v3;
-    const double v22 = v20*pd[8];
-    const double v23 = pd[7] + v22;
-    const double v24 = v21*pd[8];
+    const double v16 = v15*pd[5];
+    const double v17 = v14 - pd[4]*v16;
+    const double v18 = (v3*v3);
+    const double v19 = v2*v3;
+    const double v20 = v18*pd[8];
+    const double v21 = pd[7] + v20;
+    const double v22 = v19*pd[8];
+    const double v23 = p[2]*v22;
+    const double v24 = p[2]*v21;
     const double v25 = p[2]*v24;
-    const double v26 = p[2]*v23;
-    const double v27 = p[2]*v26;
-    const double v28 = v27 + pd[1];
-    const double v29 = v26 + pd[2];
-    const double v30 = v17 - v19*v2;
-    const double v31 = p[2]*v30;
-    const double v32 = v31 - u[0];
-    const double v33 = 1.0/v28;
-    const double v34 = v25*v33;
-    const double v35 = v29*v33;
-    const double v36 = v32*v33;
-    const double v37 = p[4]*v1;
-    const double v38 = p[4]*v0;
-    const double v39 = -v36 - v34*v37 - v35*v38;
-    const double v40 = v38 + p[2]*v39;
-    const double v41 = v40*v2 - v37*v3;
-    const double v42 = v41 - v9;
-    const double v43 = -v18 - pd[6]*v42;
-    const double v44 = v43 - v39;
-    qdd[0] = v39;
-    qdd[1] = v44;
-    D[0] = pd[3];
-    D[1] = v28;
+    const double v26 = v25 + pd[0];
+    const double v27 = v24 + pd[1];
+    const double v28 = v13*v3 + v17*v2;
+    const double v29 = p[2]*v28;
+    const double v30 = v29 - u[0];
+    const double v31 = 1.0/v26;
+    const double v32 = v23*v31;
+    const double v33 = v27*v31;
+    const double v34 = v30*v31;
+    const double v35 = p[4]*v1;
+    const double v36 = p[4]*v0;
+    const double v37 = -v34 - v32*v35 - v33*v36;
+    const double v38 = v36 + p[2]*v37;
+    const double v39 = v38*v2 - v35*v3;
+    const double v40 = -v16 - pd[6]*v39;
+    const double v41 = v40 - v37;
+    qdd[0] = v37;
+    qdd[1] = v41;
+    D[0] = pd[2];
+    D[1] = v26;
 }
 
 /* Coordinate of each D, in the order the inward pass computes them. */
@@ -528,32 +516,29 @@ int double_pendulum_rhs_prepared(double t, const double *x, const double *u, con
     return 0;
 }
 
-/* prepare: 12 statements, 15 operations after CSE (15 before) */
+/* prepare: 9 statements, 15 operations after CSE (15 before) */
 static void double_pendulum_prepare_eval(const double *p, double *pd)
 {
     (void)p;
 
-    const double v0 = 1.0/2.0*p[3];
-    const double v1 = p[0]*(p[2]*p[2]);
-    const double v2 = p[1]*(p[3]*p[3]);
-    const double v3 = 1.0/2.0*p[0];
-    const double v4 = 1.0/3.0*v1;
-    const double v5 = p[2]*v3;
-    const double v6 = 1.0/3.0*v2;
-    const double v7 = p[1]*v0;
-    const double v8 = 1.0/v6;
-    const double v9 = v7*v8;
-    const double v10 = p[1] - v7*v9;
-    const double v11 = p[1] - v10;
+    const double v0 = 1.0/3.0*p[0]*(p[2]*p[2]);
+    const double v1 = 1.0/2.0*p[2]*p[0];
+    const double v2 = 1.0/3.0*p[1]*(p[3]*p[3]);
+    const double v3 = 1.0/2.0*p[3];
+    const double v4 = p[1]*v3;
+    const double v5 = 1.0/v2;
+    const double v6 = v4*v5;
+    const double v7 = p[1] - v4*v6;
+    const double v8 = p[1] - v7;
     pd[0] = v0;
-    pd[1] = v4;
-    pd[2] = v5;
-    pd[3] = v6;
-    pd[4] = v7;
-    pd[5] = v8;
-    pd[6] = v9;
-    pd[7] = v10;
-    pd[8] = v11;
+    pd[1] = v1;
+    pd[2] = v2;
+    pd[3] = v3;
+    pd[4] = v4;
+    pd[5] = v5;
+    pd[6] = v6;
+    pd[7] = v7;
+    pd[8] = v8;
 }
 
 void double_pendulum_prepare(const double *p, double *pd)
