@@ -11,6 +11,11 @@ each link's own frame (:mod:`modelgen.derive.joint_tree` gives the links):
 3. outwards: ``a'_i = X_i a_p + c_i``, ``qdd_i = (u_i - U_i^T a'_i) / D_i``,
    ``a_i = a'_i + S_i qdd_i``.
 
+Or the ``c_i`` go into pass 1 (``velocity_products="outward"``): RNEA's
+``a_vp,i = X_i a_vp,p + c_i`` and ``pA_i = I_i a_vp,i + v_i x* I_i v_i``, and
+passes 2 and 3 run with ``c = 0``.  :func:`derive_aba` builds both and keeps
+the shorter program.
+
 What is known exactly is not computed: ``-U_i / D_i`` is named once (so ``Ia``
 and ``qdd`` are sums of products, ``qdd_i = u_i / D_i + (-U_i / D_i)^T a'_i``);
 for a one-entry ``S`` (entry j) row and column j of ``Ia`` vanish, entry j of
@@ -46,7 +51,8 @@ from dataclasses import dataclass
 import sympy
 
 from modelgen.derive.dynamics import Equations
-from modelgen.derive.graph import ONE, ZERO, ZERO3, Graph, GraphBuilder, product
+from modelgen.derive.graph import (ONE, ZERO, ZERO3, Graph, GraphBuilder, free_symbols,
+                                   operation_count, product)
 from modelgen.derive.jacobian import JacobianTerms, differentiate
 from modelgen.derive.joint_tree import JointTree
 from modelgen.derive.kinematics import quaternion_columns
@@ -67,6 +73,8 @@ class ForwardDynamics:
     qdd: tuple
     D: tuple
     inward: tuple
+    #: per joint (tree order): does its velocity-product acceleration go outwards?
+    outward: tuple = ()
 
 
 # -- arithmetic that skips constant zeros and ones before sympy sees them --------
@@ -609,56 +617,207 @@ class Outward:
 
     ``v`` the link velocity, ``c = v x S qd`` the velocity-product
     acceleration, ``I`` the rigid link inertia as blocks ``(A, B, C)`` at the
-    link origin, ``bias = v x* I v``.  With ``accelerations``: ``a`` the link
-    acceleration at zero q_ddot from a ground at rest (``a_i = X_i a_p + c_i``,
-    RNEA's a_vp) and ``f = I a + v x* I v`` the force that needs; else None.
+    link origin; for a joint whose ``c`` goes outwards (``plan``), ``a`` the
+    link acceleration at zero q_ddot (RNEA's a_vp: ``a_i = X_i a_p + c_i``,
+    or ``c_i`` where the parent's goes inwards) and ``f = I a + v x* I v``;
+    for the others ``a`` is None and ``f = v x* I v``.
     """
     v: tuple
     c: tuple
     I: tuple
-    bias: tuple
-    a: tuple | None
-    f: tuple | None
+    a: tuple
+    f: tuple
 
 
-def outward_pass(g: GraphBuilder, tree: JointTree, qd, accelerations: bool = True) -> Outward:
-    """Velocities, velocity-product accelerations and forces of every link.
+def _link_force(g, body, v, a):
+    """``I a + v x* I v`` for a link's rigid body at its origin."""
+    A = _sym(_vec(g, body.I))
+    h = _vec(g, body.h)
+    m = g.name(body.m)
+    centre = _centre(body.h, body.m)
+    if centre is None:
+        return _rigid_force(g, A, h, m, v, a)
+    return _com_force(g, _sym(body.I), h, body.m, centre, v, a)
 
-    Built in ``g``: a second call with the same ``g`` returns the same symbols
-    (the graph hash-conses), so ABA and RNEA share this pass.
-    """
+
+def _joint_velocity(g, joint, qd) -> tuple:
+    return _vec(g, [_total(_times(S[r], qd[k]) for k, S in joint.dofs) for r in range(6)])
+
+
+def link_velocities(g: GraphBuilder, tree: JointTree, qd) -> tuple:
+    """``(v, c)``: every link's velocity ``v_i = X_i v_p + S_i qd_i`` and
+    velocity-product acceleration ``c_i = v_i x S_i qd_i``."""
     count = len(tree.joints)
-    v, c, I, bias, a, f = ([None] * count for _ in range(6))
-    nothing = (ZERO,) * 6
+    v, c = [None] * count, [None] * count
     for i, joint in enumerate(tree.joints):
-        vJ = _vec(g, [_total(_times(S[r], qd[k]) for k, S in joint.dofs) for r in range(6)])
+        vJ = _joint_velocity(g, joint, qd)
         p = joint.parent
         if p < 0:
-            v[i], c[i], a[i] = vJ, nothing, nothing
+            v[i], c[i] = vJ, (ZERO,) * 6
         else:
             v[i] = _vec(g, add(joint_motion(g, joint, v[p]), vJ))
             c[i] = _vec(g, _cross_motion(v[i], vJ))
-            if accelerations:
-                a[i] = _vec(g, add(joint_motion(g, joint, a[p]), c[i]))
-        body = tree.inertias[i]
-        A = _sym(_vec(g, body.I))
-        h = _vec(g, body.h)
-        m = g.name(body.m)
-        I[i] = (A, _skew(h), ((m, ZERO, ZERO), (ZERO, m, ZERO), (ZERO, ZERO, m)))
-        centre = _centre(body.h, body.m)
+    return tuple(v), tuple(c)
 
-        def force(acc):
-            return (_rigid_force(g, A, h, m, v[i], acc) if centre is None else
-                    _com_force(g, _sym(body.I), h, body.m, centre, v[i], acc))
-        bias[i] = force(nothing)
-        if accelerations:
-            f[i] = force(a[i])
-    return Outward(tuple(v), tuple(c), tuple(I), tuple(bias),
-                   tuple(a) if accelerations else None, tuple(f) if accelerations else None)
+
+def outward_pass(g: GraphBuilder, tree: JointTree, qd, plan=None) -> Outward:
+    """Velocities, velocity-product accelerations and forces of every link.
+
+    ``plan[i]`` says whether joint i's ``c`` goes outwards (default: every
+    one, as RNEA needs).  Built in ``g``: a second call with the same ``g``
+    returns the same symbols (the graph hash-conses), so ABA and RNEA share
+    what they have in common.
+    """
+    count = len(tree.joints)
+    plan = (True,) * count if plan is None else plan
+    v, c = link_velocities(g, tree, qd)
+    I, a, f = [None] * count, [None] * count, [None] * count
+    nothing = (ZERO,) * 6
+    for i, joint in enumerate(tree.joints):
+        p = joint.parent
+        if plan[i]:
+            a[i] = (_vec(g, add(joint_motion(g, joint, a[p]), c[i])) if p >= 0 and plan[p]
+                    else c[i])
+        body = tree.inertias[i]
+        I[i] = _rigid_inertia(g, body)
+        f[i] = _link_force(g, body, v[i], a[i] if plan[i] else nothing)
+    return Outward(v, c, tuple(I), tuple(a), tuple(f))
 
 
 #: where the velocity-product accelerations c_i enter the ABA (:func:`derive_aba`)
 VELOCITY_PRODUCTS = ("inward", "outward", "auto")
+
+
+def _variable_operations(build, variables, g=None) -> int:
+    """Operations of what ``build(g)`` returns, built in ``g`` (default a fresh
+    graph), without the statements of the parameters alone (they are hoisted)."""
+    g = GraphBuilder() if g is None else g
+    out = build(g)
+    graph = g.freeze()
+    moving = set(variables)
+    total = 0
+    for sym, e in graph.closure(out):
+        if free_symbols(e) & moving:
+            moving.add(sym)
+            total += operation_count(e)
+    return total + sum(operation_count(sympy.sympify(e)) for e in out
+                       if free_symbols(sympy.sympify(e)) & moving)
+
+
+def _renamed(data) -> tuple:
+    """``data`` (nested tuples of expressions) flat, with its symbols renamed in
+    order of appearance: what the costs of :func:`velocity_product_plan`
+    depend on (the links of a uniform chain have one shape)."""
+    flat = _flat(data)
+    names: dict = {}
+    for node in sympy.preorder_traversal(sympy.Tuple(*[x for x in flat
+                                                       if isinstance(x, sympy.Basic)])):
+        if isinstance(node, sympy.Symbol) and node not in names:
+            names[node] = sympy.Symbol(f"s{len(names)}")
+    return tuple(x.xreplace(names) if isinstance(x, sympy.Basic) else x for x in flat)
+
+
+def _flat(data) -> list:
+    out = []
+    for x in data:
+        if isinstance(x, (tuple, list)):
+            out.extend(_flat(x))
+        else:
+            out.append(sympy.sympify(x) if isinstance(x, (int, float)) else x)
+    return out
+
+
+#: operations a subtree must save, by the estimate, to send its c outwards: the
+#: estimate misses what CSE and shared names do (a few operations a joint:
+#: the heavy top's last joint counts 10 inwards against 8 outwards and costs 4
+#: more outwards), and inwards is the textbook's program
+_PLAN_MARGIN = 4
+
+
+def velocity_product_plan(tree: JointTree, qd, velocities, cost_in) -> tuple:
+    """Per joint: does its ``c_i`` go outwards (True) or inwards?
+
+    ``velocities`` is :func:`link_velocities`' ``(v, c)``: where they are
+    exactly zero (near the root, at massless links) the choice costs less.
+    A joint's choice costs, in operations of its own:
+
+    * inwards: ``cost_in[i]``, counted on the joint's articulated inertia
+      (``Ia c`` added into ``pa``, and ``+ c`` in pass 3);
+
+    and, counted on generic values with the zeros of ``v`` and ``c``,
+    parameters aside:
+
+    * outwards, below a joint whose ``c`` goes inwards: ``a = c`` and
+      ``I c`` in the force (no transform);
+    * outwards below an outward joint: the transform of the parent's ``a``,
+      ``+ c``, and ``I a`` (``a`` with the zeros of the parent's ``c`` below
+      a start, taken as dense further down).
+
+    An outward joint's children go outwards too (going back would cost the
+    transform and a dense ``c``); the cheapest such choice is found by dynamic
+    programming over the tree, and a subtree goes outwards only if that saves
+    at least ``_PLAN_MARGIN`` operations.  Roots (``c = 0``) go inwards.
+    """
+    joints = tree.joints
+    count = len(joints)
+    dense = sympy.symbols("mg_a0:6")
+    nothing = (ZERO,) * 6
+
+    def generic(prefix, values):
+        return tuple(ZERO if _zero(x) else sympy.Symbol(f"{prefix}{r}")
+                     for r, x in enumerate(values))
+
+    # per joint: a = c (start), a = X a_p + c below a start (a_p = c_p, sparse)
+    # and below an outward joint (a_p taken as dense); the costs of links and
+    # joints alike but for their symbols are counted once
+    forces: dict = {}
+    transforms: dict = {}
+
+    def force_extra(body, vs, a):
+        key = (_renamed((body.I, body.h, body.m)), vs, a)
+        if key not in forces:
+            variables = set(vs) | set(a)
+            forces[key] = (
+                _variable_operations(lambda g: _link_force(g, body, vs, a), variables)
+                - _variable_operations(lambda g: _link_force(g, body, vs, nothing), variables))
+        return forces[key]
+
+    def below(joint, body, vs, ap, cs):
+        key = (_renamed((joint.kind, joint.axis, joint.fixed, joint.offset, joint.angle,
+                         joint.quaternion, joint.position)), ap, cs)
+        if key not in transforms:
+            g = GraphBuilder()
+            a = add(joint_motion(g, joint, ap), cs)
+            transforms[key] = (_variable_operations(lambda _: a, set(ap) | set(cs), g),
+                               generic("mg_a", a))
+        ops, a = transforms[key]
+        return ops + force_extra(body, vs, a)
+
+    cost_start, after_start, after_more = [0] * count, [0] * count, [0] * count
+    for i, joint in enumerate(joints):
+        if joint.parent < 0:
+            continue
+        body = tree.inertias[i]
+        vs, cs = generic("mg_v", velocities[0][i]), generic("mg_c", velocities[1][i])
+        cp = generic("mg_a", velocities[1][joint.parent])
+        cost_start[i] = force_extra(body, vs, cs)
+        after_start[i] = below(joint, body, vs, cp, cs)
+        after_more[i] = below(joint, body, vs, dense, cs)
+    children: list = [[] for _ in range(count)]
+    for i, joint in enumerate(joints):
+        if joint.parent >= 0:
+            children[joint.parent].append(i)
+    inward, start, more_s, more = [0] * count, [0] * count, [0] * count, [0] * count
+    for i in reversed(range(count)):
+        inward[i] = cost_in[i] + sum(min(inward[k], start[k]) for k in children[i])
+        start[i] = cost_start[i] + sum(more_s[k] for k in children[i])
+        more_s[i] = after_start[i] + sum(more[k] for k in children[i])
+        more[i] = after_more[i] + sum(more[k] for k in children[i])
+    plan = [False] * count
+    for i, joint in enumerate(joints):
+        p = joint.parent
+        plan[i] = p >= 0 and (plan[p] or start[i] + _PLAN_MARGIN <= inward[i])
+    return tuple(plan)
 
 
 def derive_aba(eqs: Equations, tree: JointTree, spec: ModelSpec, graph: Graph | None = None,
@@ -670,21 +829,23 @@ def derive_aba(eqs: Equations, tree: JointTree, spec: ModelSpec, graph: Graph | 
     other effect are read from ``eqs.tau_parts``.
 
     ``velocity_products`` says where the velocity-product accelerations
-    ``c_i`` enter (the two give the same qdd, up to rounding):
+    ``c_i`` enter (every choice gives the same qdd, up to rounding):
 
     * ``"inward"``: as in Table 7.1, ``pa_i = pA_i + Ia_i c_i + U_i u_i / D_i``
       and ``a'_i = X_i a_p + c_i``;
     * ``"outward"``: pass 1 propagates ``a_vp,i = X_i a_vp,p + c_i`` (RNEA's
       accelerations at zero q_ddot) and the bias force becomes
-      ``pA_i = I_i a_vp,i + v_i x* I_i v_i``; the ABA then runs with ``c = 0``
-      (write ``a_i = a_vp,i + a^_i``: ``a^_i = X_i a^_p + S_i qdd_i`` and
-      ``f_i = I_i a^_i + pA_i``).  No ``Ia c`` (about 40 operations a revolute
-      joint) and no ``+ c`` in pass 3, for one more transform and ``I a_vp``
-      in pass 1: cheaper for links whose centre lies on an axis and whose
-      inertia is diagonal (the spatial chain: 11 operations a joint fewer),
-      dearer for full inertias off the axes (the arm: 11 more);
-    * ``"auto"``: both programs are built and the shorter one (operations
-      before CSE, :func:`modelgen.derive.graph.operation_count`) is kept.
+      ``pA_i = I_i a_vp,i + v_i x* I_i v_i``; passes 2 and 3 run with
+      ``c = 0`` (write ``a_i = a_vp,i + a^_i``: then ``a^_i = X_i a^_p +
+      S_i qdd_i`` and ``f_i = I_i a^_i + pA_i``).  No ``Ia c`` (about 40
+      operations a revolute joint) and no ``+ c`` in pass 3, for one more
+      transform and ``I a_vp`` in pass 1: cheaper for links whose centre lies
+      on an axis and whose inertia is diagonal (the spatial chain's rods: 11
+      operations a joint fewer), dearer for full inertias off the axes (the
+      arm: 11 more);
+    * ``"auto"``: per joint, as :func:`velocity_product_plan` finds cheapest
+      (a subtree can go outwards from a joint whose parent's ``c`` goes
+      inwards: there ``a_vp = c``, no transform).
 
     >>> from modelgen.model.chains import spatial_chain
     >>> from modelgen.derive.kinematics import derive_kinematics
@@ -697,13 +858,10 @@ def derive_aba(eqs: Equations, tree: JointTree, spec: ModelSpec, graph: Graph | 
     """
     if velocity_products not in VELOCITY_PRODUCTS:
         raise ValueError(f"velocity_products must be one of {VELOCITY_PRODUCTS}")
-    if velocity_products != "auto":
-        return _derive_aba(eqs, tree, spec, graph, velocity_products == "outward")
-    programs = [_derive_aba(eqs, tree, spec, graph, outward) for outward in (True, False)]
-    return min(programs, key=lambda fd: fd.graph.operations(fd.qdd + fd.D))
+    return _derive_aba(eqs, tree, spec, graph, velocity_products)
 
 
-def _derive_aba(eqs, tree, spec, graph, outward_vp: bool) -> ForwardDynamics:
+def _derive_aba(eqs, tree, spec, graph, velocity_products) -> ForwardDynamics:
     g = GraphBuilder(graph or eqs.graph)
     n = len(eqs.qd)
     a0, gravity_labels = _ground_acceleration(spec)
@@ -721,49 +879,76 @@ def _derive_aba(eqs, tree, spec, graph, outward_vp: bool) -> ForwardDynamics:
 
     joints = tree.joints
     count = len(joints)
-    outward = outward_pass(g, tree, eqs.qd, accelerations=outward_vp)
-    # with outward_vp the bias forces carry I_i a_vp,i and c is 0 in passes 2
-    # and 3; gravity stays the ground's acceleration in pass 3 either way
-    IA, pA = list(outward.I), list(outward.f if outward_vp else outward.bias)
-    c = (((ZERO,) * 6,) * count) if outward_vp else outward.c
+    velocities = link_velocities(g, tree, eqs.qd)
+    # pass 2, inertias (they do not depend on where c goes): U, D, Ia of every joint
+    IA = [_rigid_inertia(g, body) for body in tree.inertias]
+    U, D, nUd, Ia = [None] * count, [None] * count, [None] * count, [None] * count
+    multi: dict = {}                    # joint index -> _MultiDofInertia of a ball or free joint
+    for i in reversed(range(count)):
+        joint = joints[i]
+        if len(joint.dofs) > 1:
+            multi[i] = _multi_dof_inertia(g, joint, IA[i])
+            Ia[i] = multi[i].Ia
+        else:
+            S = joint.S
+            j = _single(S)
+            U[i] = _vec(g, inertia_times(IA[i], S))
+            D[i] = g.name(dot(S, U[i]))
+            invD = g.name(1 / D[i])
+            # -U/D is named with its sign, so that Ia, pa and qdd are sums of
+            # products; for a one-entry S its entry j is exactly -1/S_j (U_j = D / S_j)
+            nUd[i] = tuple(-1 / S[r] if r == j else _nm(g, -x * invD) if not _zero(x) else ZERO
+                           for r, x in enumerate(U[i]))
+            if joint.parent >= 0:
+                A, B, C = IA[i]
+
+                def update(M, r0, s0):
+                    return tuple(tuple(_total((M[r][s], _times(U[i][r0 + r], nUd[i][s0 + s])))
+                                       for s in range(3)) for r in range(3))
+
+                A, B, C = _drop_subspace((update(A, 0, 0), update(B, 0, 3), update(C, 3, 3)), S)
+                Ia[i] = (_name_sym(g, A), _name_full(g, B), _name_sym(g, C))
+        if joint.parent >= 0:
+            p = joint.parent
+            Ip = _to_parent_inertia(g, joint, Ia[i])
+            IA[p] = tuple(_name_full(g, tuple(tuple(_total((X[r][s], Y[r][s])) for s in range(3))
+                                              for r in range(3)))
+                          for X, Y in zip(IA[p], Ip))
+
+    if velocity_products == "auto":
+        inward = [0 if joint.parent < 0 else _inward_cost(Ia[i], velocities[1][i])
+                  for i, joint in enumerate(joints)]
+        plan = velocity_product_plan(tree, eqs.qd, velocities, inward)
+    else:
+        plan = tuple(velocity_products == "outward" and j.parent >= 0 for j in joints)
+    # pass 1, accelerations and forces: where c goes outwards the bias force
+    # carries I a_vp and c is 0 in passes 2 and 3; gravity is the ground's
+    # acceleration in pass 3 either way
+    outward = outward_pass(g, tree, eqs.qd, plan)
+    pA = list(outward.f)
+    c = tuple((ZERO,) * 6 if plan[i] else outward.c[i] for i in range(count))
     for i, f in external.items():
         pA[i] = _vec(g, sub(pA[i], f))
 
-    U, D, nUd, uD = [None] * count, [None] * count, [None] * count, [None] * count
-    multi: dict = {}                    # joint index -> _MultiDof of a ball or free joint
-    for i in reversed(range(count)):                        # pass 2: inwards
+    uD = [None] * count
+    for i in reversed(range(count)):                        # pass 2, forces
         joint = joints[i]
-        if len(joint.dofs) > 1:
-            multi[i] = _multi_dof_inward(g, joint, IA[i], pA[i], c[i], tau)
-            if joint.parent >= 0:
-                _add_to_parent(g, joint, IA, pA, multi[i].Ia, multi[i].pa)
-            continue
-        S = joint.S
-        j = _single(S)
-        U[i] = _vec(g, inertia_times(IA[i], S))
-        D[i] = g.name(dot(S, U[i]))
-        invD = g.name(1 / D[i])
-        tau_i = tau[joint.coordinate]
-        # -U/D is named with its sign, so that Ia, pa and qdd are sums of products;
-        # for a one-entry S its entry j is exactly -1/S_j (U_j = D / S_j)
-        nUd[i] = tuple(-1 / S[r] if r == j else _nm(g, -x * invD) if not _zero(x) else ZERO
-                       for r, x in enumerate(U[i]))
-        uD[i] = _nm(g, (tau_i - dot(S, pA[i])) * invD)
-        if joint.parent < 0:
-            continue
-        A, B, C = IA[i]
-
-        def update(M, r0, s0):
-            return tuple(tuple(_total((M[r][s], _times(U[i][r0 + r], nUd[i][s0 + s])))
-                               for s in range(3)) for r in range(3))
-
-        A, B, C = _drop_subspace((update(A, 0, 0), update(B, 0, 3), update(C, 3, 3)), S)
-        Ia = (_name_sym(g, A), _name_full(g, B), _name_sym(g, C))
-        # pa = pA + Ia c + U u/D; with a one-entry S, S^T pa = tau exactly
-        # (Ia S = 0 and S^T U = D), so entry j is tau / S_j
-        pa = add(add(pA[i], inertia_times(Ia, c[i])), tuple(_times(x, uD[i]) for x in U[i]))
-        pa = _vec(g, [tau_i / S[r] if r == j else x for r, x in enumerate(pa)])
-        _add_to_parent(g, joint, IA, pA, Ia, pa)
+        if i in multi:
+            pa = multi[i].forces(g, joint, pA[i], c[i], tau)
+        else:
+            S = joint.S
+            j = _single(S)
+            tau_i = tau[joint.coordinate]
+            uD[i] = _nm(g, (tau_i - dot(S, pA[i])) * g.name(1 / D[i]))
+            if joint.parent < 0:
+                continue
+            # pa = pA + Ia c + U u/D; with a one-entry S, S^T pa = tau exactly
+            # (Ia S = 0 and S^T U = D), so entry j is tau / S_j
+            pa = add(add(pA[i], inertia_times(Ia[i], c[i])), tuple(_times(x, uD[i]) for x in U[i]))
+            pa = _vec(g, [tau_i / S[r] if r == j else x for r, x in enumerate(pa)])
+        if joint.parent >= 0:
+            p = joint.parent
+            pA[p] = _vec(g, add(pA[p], to_parent_force(g, joint, pa)))
 
     qdd = [None] * n
     acc = [None] * count
@@ -771,7 +956,7 @@ def _derive_aba(eqs, tree, spec, graph, outward_vp: bool) -> ForwardDynamics:
         ap = a0 if joint.parent < 0 else acc[joint.parent]
         a_prime = _vec(g, add(joint_motion(g, joint, ap), c[i]))
         if i in multi:
-            acc[i] = _multi_dof_outward(g, joint, multi[i], a_prime, qdd)
+            acc[i] = multi[i].outward(g, joint, a_prime, qdd)
             continue
         k = joint.coordinate
         # (u - U^T a') / D
@@ -796,30 +981,56 @@ def _derive_aba(eqs, tree, spec, graph, outward_vp: bool) -> ForwardDynamics:
         else:
             D_out[joint.coordinate] = D[i]
     inward = tuple(k for i in reversed(range(count)) for k, _ in joints[i].dofs)
-    return ForwardDynamics(g.freeze(), tuple(qdd), tuple(D_out), inward)
+    return ForwardDynamics(g.freeze(), tuple(qdd), tuple(D_out), inward, tuple(plan))
 
 
-def _add_to_parent(g, joint, IA: list, pA: list, Ia, pa) -> None:
-    """IA_p += X^T Ia X and pA_p += X^T pa for the joint's parent p (in place)."""
-    p = joint.parent
-    Ip = _to_parent_inertia(g, joint, Ia)
-    IA[p] = tuple(_name_full(g, tuple(tuple(_total((X[r][s], Y[r][s])) for s in range(3))
-                                      for r in range(3)))
-                  for X, Y in zip(IA[p], Ip))
-    pA[p] = _vec(g, add(pA[p], to_parent_force(g, joint, pa)))
+def _inward_cost(Ia, c) -> int:
+    """Operations ``c`` costs where it goes inwards: ``Ia c`` added into ``pa``,
+    and ``+ c`` in pass 3."""
+    rows = inertia_times(Ia, c)
+    return sum(operation_count(x) + 1 for x in rows if not _zero(x)) + \
+        sum(1 for x in c if not _zero(x))
+
+
+def _rigid_inertia(g, body) -> tuple:
+    """A link's rigid inertia as blocks (A, B, C) at its origin."""
+    m = g.name(body.m)
+    h = _vec(g, body.h)
+    return (_sym(_vec(g, body.I)), _skew(h), ((m, ZERO, ZERO), (ZERO, m, ZERO), (ZERO, ZERO, m)))
 
 
 # -- ball and free joints: several degrees of freedom (Featherstone Table 7.1 with
 # S a 6 x k matrix; here the columns of the identity, so U = IA S picks columns) ---
 
-@dataclass(frozen=True)
-class _MultiDof:
+@dataclass
+class _MultiDofInertia:
+    """A ball or free joint's pass-2 inertias, and (after :meth:`forces`) its ``u``."""
     U: tuple          # k columns, 6 entries each
     Dinv: tuple       # k x k, (S^T U)^-1, symmetric
     pivots: tuple     # the k pivots of the LDL^T of D: all > 0 iff D is positive definite
-    u: tuple          # tau - S^T pA (k)
+    UD: tuple         # U D^-1, k columns
     Ia: tuple         # articulated inertia passed to the parent (blocks)
-    pa: tuple         # bias force passed to the parent
+    u: tuple = ()     # tau - S^T pA (k)
+
+    def forces(self, g, joint, pA, c, tau) -> tuple:
+        """``pa = pA + Ia c + U D^-1 u`` (and ``u``, kept for the outward pass)."""
+        k = len(joint.dofs)
+        self.u = tuple(g.name(tau[idx] - dot(col, pA)) for idx, col in joint.dofs)
+        Du = [g.name(_total(_times(self.Dinv[a][b], self.u[b]) for b in range(k)))
+              for a in range(k)]
+        return g.vec(add(add(pA, inertia_times(self.Ia, c)),
+                         tuple(_total(_times(self.U[a][r], Du[a]) for a in range(k))
+                               for r in range(6))))
+
+    def outward(self, g, joint, a_prime, qdd) -> tuple:
+        """qdd of the joint's speeds (written into ``qdd``) and the link acceleration."""
+        k = len(joint.dofs)
+        rhs = [g.name(self.u[a] - dot(self.U[a], a_prime)) for a in range(k)]
+        acc = a_prime
+        for a, (idx, col) in enumerate(joint.dofs):
+            qdd[idx] = g.name(_total(_times(self.Dinv[a][b], rhs[b]) for b in range(k)))
+            acc = add(acc, tuple(_times(s, qdd[idx]) for s in col))
+        return g.vec(acc)
 
 
 def _ldlt_inverse(g, D) -> tuple:
@@ -848,18 +1059,16 @@ def _ldlt_inverse(g, D) -> tuple:
     return inverse, tuple(d)
 
 
-def _multi_dof_inward(g, joint, IA, pA, c, tau) -> _MultiDof:
-    """U, D^-1, u and what the parent receives, for a joint with k columns."""
+def _multi_dof_inertia(g, joint, IA) -> _MultiDofInertia:
+    """U, D^-1 and the inertia the parent receives, for a joint with k columns."""
     S = [col for _, col in joint.dofs]
     k = len(S)
     U = [g.vec(inertia_times(IA, col)) for col in S]
     D = [[g.name(dot(S[a], U[b])) for b in range(k)] for a in range(k)]
     Dinv, pivots = _ldlt_inverse(g, D)
-    u = [g.name(tau[idx] - dot(col, pA)) for idx, col in joint.dofs]
-    # U D^-1 (6 x k) and D^-1 u (k)
+    # U D^-1 (6 x k)
     UD = [g.vec(_total(_times(U[b][r], Dinv[b][a]) for b in range(k)) for r in range(6))
           for a in range(k)]
-    Du = [g.name(_total(_times(Dinv[a][b], u[b]) for b in range(k))) for a in range(k)]
     A, B, C = IA
 
     def update(M, r0, s0):
@@ -868,21 +1077,7 @@ def _multi_dof_inward(g, joint, IA, pA, c, tau) -> _MultiDof:
                            for s in range(3)) for r in range(3))
     Ia = (_name_sym(g, update(A, 0, 0)), _name_full(g, update(B, 0, 3)),
           _name_sym(g, update(C, 3, 3)))
-    pa = g.vec(add(add(pA, inertia_times(Ia, c)),
-                   tuple(_total(_times(U[a][r], Du[a]) for a in range(k)) for r in range(6))))
-    return _MultiDof(tuple(U), Dinv, pivots, tuple(u), Ia, pa)
-
-
-def _multi_dof_outward(g, joint, m: _MultiDof, a_prime, qdd) -> tuple:
-    """qdd of the joint's speeds (written into ``qdd``) and the link acceleration."""
-    k = len(joint.dofs)
-    rhs = [m.u[a] - dot(m.U[a], a_prime) for a in range(k)]
-    rhs = [g.name(x) for x in rhs]
-    acc = a_prime
-    for a, (idx, col) in enumerate(joint.dofs):
-        qdd[idx] = g.name(_total(_times(m.Dinv[a][b], rhs[b]) for b in range(k)))
-        acc = add(acc, tuple(_times(s, qdd[idx]) for s in col))
-    return g.vec(acc)
+    return _MultiDofInertia(tuple(U), Dinv, pivots, tuple(UD), Ia)
 
 
 def derive_aba_jacobian(fd: ForwardDynamics, eqs: Equations) -> JacobianTerms:
