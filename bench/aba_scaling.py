@@ -29,6 +29,9 @@ Method
       harness (the arm rebuilt in MJCF from its joint tree by
       ``codegen_scaling.tree_mjcf``), alternated ``--rounds`` times, minimum
       kept.
+    * plans: the ABA rhs derived in-process with each ``velocity_products``
+      (inward, outward, auto), operations per coordinate before and after
+      CSE, and auto's per-joint plan.
     * agreement: q_ddot of aba against crba at 5 seeded random states, as
       max |qdd_aba - qdd_crba| / max |qdd_crba|, and the backward error of
       the ABA answer in the CRBA equations,
@@ -98,6 +101,32 @@ def compiled(kind: str, formulation: str, out_dir: Path):
     from modelgen.sim.runtime import CompiledModel
     g = generate(model_spec(kind), out_dir, formulation=formulation)
     return CompiledModel(g.manifest, g.build.module_path)
+
+
+def plan_row(kind: str) -> list:
+    """The ABA rhs operations per coordinate with each place of the
+    velocity-product accelerations (derive_aba's ``velocity_products``): before
+    CSE and after (the rhs eliminated alone, as a build does, without the
+    parameter-only ``prepare``), and auto's plan (o: c outwards, .: inwards)."""
+    from modelgen.codegen.cse import hoist_parameters, make_routines
+    from modelgen.codegen.pipeline import routines_for
+    from modelgen.derive.aba import derive_aba
+    from modelgen.derive.dynamics import derive_equations
+    from modelgen.derive.joint_tree import extract_joint_tree
+    from modelgen.derive.kinematics import derive_kinematics
+    spec = model_spec(kind)
+    eqs = derive_equations(derive_kinematics(spec))
+    tree = extract_joint_tree(spec)
+    row, plan = [kind], ""
+    for vp in ("inward", "outward", "auto"):
+        fd = derive_aba(eqs, tree, spec, velocity_products=vp)
+        (rhs,) = make_routines(fd.graph, [r for r in routines_for(eqs, (), None, fd)
+                                          if r[0] == "rhs"])
+        rest = hoist_parameters(rhs)[1]
+        row.append(f"{fd.graph.operations(fd.qdd + fd.D) / spec.n:.1f} / "
+                   f"{rest.ops_after / spec.n:.1f}")
+        plan = "".join("o" if x else "." for x in fd.outward)
+    return row + [plan if len(plan) <= 12 else f"{plan[:6]}...{plan[-3:]} ({plan.count('o')} o)"]
 
 
 def agreement(cm_crba, cm_aba, n: int, seed: int = 0) -> tuple:
@@ -188,7 +217,7 @@ def main(argv=None) -> int:
         if mj_harness is None:
             print("MuJoCo:", why)
     print(f"load average {os.getloadavg()[0]:.2f} (2 cores shared: > 0.5 means noisy times)\n")
-    gen_rows, run_rows = [], []
+    gen_rows, run_rows, plan_rows = [], [], []
     with tempfile.TemporaryDirectory(prefix="aba_scaling_") as tmp:
         tmp = Path(tmp)
         for kind in kinds:
@@ -237,6 +266,7 @@ def main(argv=None) -> int:
                              fmt(mj), fmt(mj / times["aba"] if mj and times["aba"] else None),
                              f"{fwd:.1e}", f"{bwd:.1e}",
                              fmt(ref.get("crba"), ".1e"), fmt(ref.get("aba"), ".1e")])
+            plan_rows.append(plan_row(kind))
             print(f"done {kind}", flush=True)
     print()
     print(cs.markdown(["model", "formulation", "derive s", "cse s", "emit s", "compile s",
@@ -246,6 +276,11 @@ def main(argv=None) -> int:
     print(cs.markdown(["model", "crba rhs µs", "aba rhs µs", "crba/aba", "mj_forward µs",
                        "mj/aba", "aba-crba rel", "aba backward err", "crba err (mp)",
                        "aba err (mp)"], run_rows))
+    print()
+    print("ABA rhs operations per coordinate, before / after CSE, by where the "
+          "velocity-product accelerations go (o: outwards, in auto's plan)\n")
+    print(cs.markdown(["model", "inward (Table 7.1)", "outward (a_vp)", "auto",
+                       "auto's plan"], plan_rows))
     return 0
 
 
