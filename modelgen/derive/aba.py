@@ -616,15 +616,13 @@ class Outward:
     """Pass 1 of ABA and RNEA (Featherstone Table 5.1), per joint, in link frames.
 
     ``v`` the link velocity, ``c = v x S qd`` the velocity-product
-    acceleration, ``I`` the rigid link inertia as blocks ``(A, B, C)`` at the
-    link origin; for a joint whose ``c`` goes outwards (``plan``), ``a`` the
+    acceleration; for a joint whose ``c`` goes outwards (``plan``), ``a`` the
     link acceleration at zero q_ddot (RNEA's a_vp: ``a_i = X_i a_p + c_i``,
     or ``c_i`` where the parent's goes inwards) and ``f = I a + v x* I v``;
     for the others ``a`` is None and ``f = v x* I v``.
     """
     v: tuple
     c: tuple
-    I: tuple
     a: tuple
     f: tuple
 
@@ -671,17 +669,15 @@ def outward_pass(g: GraphBuilder, tree: JointTree, qd, plan=None) -> Outward:
     count = len(tree.joints)
     plan = (True,) * count if plan is None else plan
     v, c = link_velocities(g, tree, qd)
-    I, a, f = [None] * count, [None] * count, [None] * count
+    a, f = [None] * count, [None] * count
     nothing = (ZERO,) * 6
     for i, joint in enumerate(tree.joints):
         p = joint.parent
         if plan[i]:
             a[i] = (_vec(g, add(joint_motion(g, joint, a[p]), c[i])) if p >= 0 and plan[p]
                     else c[i])
-        body = tree.inertias[i]
-        I[i] = _rigid_inertia(g, body)
-        f[i] = _link_force(g, body, v[i], a[i] if plan[i] else nothing)
-    return Outward(v, c, tuple(I), tuple(a), tuple(f))
+        f[i] = _link_force(g, tree.inertias[i], v[i], a[i] if plan[i] else nothing)
+    return Outward(v, c, tuple(a), tuple(f))
 
 
 #: where the velocity-product accelerations c_i enter the ABA (:func:`derive_aba`)
