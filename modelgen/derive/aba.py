@@ -769,36 +769,37 @@ def velocity_product_plan(tree: JointTree, qd, velocities, cost_in) -> tuple:
     forces: dict = {}
     transforms: dict = {}
 
-    def force_extra(body, vs, a):
-        key = (_renamed((body.I, body.h, body.m)), vs, a)
+    def force(body, shape, vs, a):
+        key = (shape, vs, a)
         if key not in forces:
-            variables = set(vs) | set(a)
-            forces[key] = (
-                _variable_operations(lambda g: _link_force(g, body, vs, a), variables)
-                - _variable_operations(lambda g: _link_force(g, body, vs, nothing), variables))
+            forces[key] = _variable_operations(lambda g: _link_force(g, body, vs, a),
+                                               set(vs) | set(a))
         return forces[key]
 
-    def below(joint, body, vs, ap, cs):
-        key = (_renamed((joint.kind, joint.axis, joint.fixed, joint.offset, joint.angle,
-                         joint.quaternion, joint.position)), ap, cs)
+    def below(joint, shape, ap, cs):
+        key = (shape, ap, cs)
         if key not in transforms:
             g = GraphBuilder()
             a = add(joint_motion(g, joint, ap), cs)
             transforms[key] = (_variable_operations(lambda _: a, set(ap) | set(cs), g),
                                generic("mg_a", a))
-        ops, a = transforms[key]
-        return ops + force_extra(body, vs, a)
+        return transforms[key]
 
     cost_start, after_start, after_more = [0] * count, [0] * count, [0] * count
     for i, joint in enumerate(joints):
         if joint.parent < 0:
             continue
         body = tree.inertias[i]
+        link = _renamed((body.I, body.h, body.m))
+        motion = _renamed((joint.kind, joint.axis, joint.fixed, joint.offset, joint.angle,
+                           joint.quaternion, joint.position))
         vs, cs = generic("mg_v", velocities[0][i]), generic("mg_c", velocities[1][i])
-        cp = generic("mg_a", velocities[1][joint.parent])
-        cost_start[i] = force_extra(body, vs, cs)
-        after_start[i] = below(joint, body, vs, cp, cs)
-        after_more[i] = below(joint, body, vs, dense, cs)
+        bias = force(body, link, vs, nothing)
+        cost_start[i] = force(body, link, vs, cs) - bias
+        for out, ap in ((after_start, generic("mg_a", velocities[1][joint.parent])),
+                        (after_more, dense)):
+            ops, a = below(joint, motion, ap, cs)
+            out[i] = ops + force(body, link, vs, a) - bias
     children: list = [[] for _ in range(count)]
     for i, joint in enumerate(joints):
         if joint.parent >= 0:
