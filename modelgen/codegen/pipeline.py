@@ -282,13 +282,16 @@ def generate(spec: ModelSpec, out_dir=None, *, force: bool = False, outputs=(),
     eqs = derive_equations(kin)
     columns = derive_outputs(kin, eqs, outputs) if outputs else None
     graph = columns.graph if columns else eqs.graph
+    forward = derive_aba(eqs, tree, spec, graph) if tree is not None else None
+    graph = forward.graph if forward else graph
     if tree is not None and _time_free(tree):
-        # h by RNEA in link frames (O(n), sharing ABA's outward pass)
+        # h by RNEA in link frames (O(n), sharing ABA's outward pass); after the
+        # ABA, whose program keeps the order it was written in (each joint's
+        # velocity next to its forces)
         builder = GraphBuilder(graph)
         eqs = replace(eqs, h=derive_velocity_terms(builder, tree, eqs.qd))
         graph = builder.freeze()
-    forward = derive_aba(eqs, tree, spec, graph) if tree is not None else None
-    graph = forward.graph if forward else graph
+        forward = replace(forward, graph=graph)
     linearization = None
     if linearize:       # one pass for A, B, C, D; the Jacobian is its state columns
         linearization = derive_linearization_terms(

@@ -642,12 +642,23 @@ def _joint_velocity(g, joint, qd) -> tuple:
     return _vec(g, [_total(_times(S[r], qd[k]) for k, S in joint.dofs) for r in range(6)])
 
 
+def _outwards(i):
+    """The place (GraphBuilder.place) of joint i's work in pass 1."""
+    return (0, i)
+
+
+def _inwards(count, i):
+    """The place of joint i's work in pass 2 (leaves first)."""
+    return (1, count - 1 - i)
+
+
 def link_velocities(g: GraphBuilder, tree: JointTree, qd) -> tuple:
     """``(v, c)``: every link's velocity ``v_i = X_i v_p + S_i qd_i`` and
     velocity-product acceleration ``c_i = v_i x S_i qd_i``."""
     count = len(tree.joints)
     v, c = [None] * count, [None] * count
     for i, joint in enumerate(tree.joints):
+        g.place = _outwards(i)
         vJ = _joint_velocity(g, joint, qd)
         p = joint.parent
         if p < 0:
@@ -672,6 +683,7 @@ def outward_pass(g: GraphBuilder, tree: JointTree, qd, plan=None) -> Outward:
     a, f = [None] * count, [None] * count
     nothing = (ZERO,) * 6
     for i, joint in enumerate(tree.joints):
+        g.place = _outwards(i)
         p = joint.parent
         if plan[i]:
             a[i] = (_vec(g, add(joint_motion(g, joint, a[p]), c[i])) if p >= 0 and plan[p]
@@ -860,6 +872,7 @@ def derive_aba(eqs: Equations, tree: JointTree, spec: ModelSpec, graph: Graph | 
 
 def _derive_aba(eqs, tree, spec, graph, velocity_products) -> ForwardDynamics:
     g = GraphBuilder(graph or eqs.graph)
+    start = len(g)
     n = len(eqs.qd)
     a0, gravity_labels = _ground_acceleration(spec)
     actions = list(spec.actions) + [e for e in spec.effects if e.kind == "action"]
@@ -883,6 +896,7 @@ def _derive_aba(eqs, tree, spec, graph, velocity_products) -> ForwardDynamics:
     multi: dict = {}                    # joint index -> _MultiDofInertia of a ball or free joint
     for i in reversed(range(count)):
         joint = joints[i]
+        g.place = _inwards(count, i)
         if len(joint.dofs) > 1:
             multi[i] = _multi_dof_inertia(g, joint, IA[i])
             Ia[i] = multi[i].Ia
@@ -912,6 +926,7 @@ def _derive_aba(eqs, tree, spec, graph, velocity_products) -> ForwardDynamics:
                                               for r in range(3)))
                           for X, Y in zip(IA[p], Ip))
 
+    g.place = None
     if velocity_products == "auto":
         inward = [0 if joint.parent < 0 else _inward_cost(Ia[i], velocities[1][i])
                   for i, joint in enumerate(joints)]
@@ -925,11 +940,13 @@ def _derive_aba(eqs, tree, spec, graph, velocity_products) -> ForwardDynamics:
     pA = list(outward.f)
     c = tuple((ZERO,) * 6 if plan[i] else outward.c[i] for i in range(count))
     for i, f in external.items():
+        g.place = _outwards(i)
         pA[i] = _vec(g, sub(pA[i], f))
 
     uD = [None] * count
     for i in reversed(range(count)):                        # pass 2, forces
         joint = joints[i]
+        g.place = _inwards(count, i)
         if i in multi:
             pa = multi[i].forces(g, joint, pA[i], c[i], tau)
         else:
@@ -950,6 +967,7 @@ def _derive_aba(eqs, tree, spec, graph, velocity_products) -> ForwardDynamics:
     qdd = [None] * n
     acc = [None] * count
     for i, joint in enumerate(joints):                      # pass 3: outwards
+        g.place = (2, i)
         ap = a0 if joint.parent < 0 else acc[joint.parent]
         a_prime = _vec(g, add(joint_motion(g, joint, ap), c[i]))
         if i in multi:
@@ -978,6 +996,10 @@ def _derive_aba(eqs, tree, spec, graph, velocity_products) -> ForwardDynamics:
         else:
             D_out[joint.coordinate] = D[i]
     inward = tuple(k for i in reversed(range(count)) for k, _ in joints[i].dofs)
+    # built pass by pass (the plan needs every joint's inertia), written joint by
+    # joint: each joint's inertia and force work together, as Table 7.1 has them
+    g.place = None
+    g.arrange(start)
     return ForwardDynamics(g.freeze(), tuple(qdd), tuple(D_out), inward, tuple(plan))
 
 

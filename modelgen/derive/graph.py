@@ -163,6 +163,44 @@ class GraphBuilder:
     def __init__(self, graph: Graph | None = None):
         self._assignments: list = list(graph.assignments) if graph else []
         self._memo: dict = {expr: sym for sym, expr in self._assignments}
+        #: where statements recorded from now on belong in the program (a tuple,
+        #: compared as tuples; None for nowhere in particular): see :meth:`arrange`
+        self.place = None
+        self._places: dict = {}
+
+    def __len__(self) -> int:
+        return len(self._assignments)
+
+    def arrange(self, start: int) -> None:
+        """Put the statements recorded from index ``start`` on in the order of
+        their :attr:`place`, each after what it uses.
+
+        A stage can then build its program in whatever order it needs to know
+        things (a whole pass first) and still hand the compiler the order that
+        keeps few values alive at once (each joint's work together): the C
+        compiler allocates registers along the program as written.  A
+        statement's place is raised to the latest place among what it uses;
+        statements of equal place keep the order they were recorded in.
+
+        >>> x, y = sympy.symbols("x y")
+        >>> g = GraphBuilder(); g.place = (2,); a = g.name(x * y + 1)
+        >>> g.place = (1,); b = g.name(x + y + 1); c = g.name(a * b + 2)
+        >>> g.arrange(0); [str(e) for _, e in g.freeze().assignments]
+        ['x + y + 1', 'x*y + 1', 'mg_0*mg_1 + 2']
+        """
+        head, tail = self._assignments[:start], self._assignments[start:]
+        effective: dict = {}
+        keyed = []
+        for index, (sym, expr) in enumerate(tail):
+            key = self._places.get(sym) or ()
+            for s in free_symbols(expr):
+                k = effective.get(s)
+                if k is not None and k > key:
+                    key = k
+            effective[sym] = key
+            keyed.append((key, index))
+        keyed.sort()
+        self._assignments = head + [tail[index] for _, index in keyed]
 
     def name(self, expr) -> sympy.Expr:
         """Return a symbol standing for ``expr`` (or ``expr`` itself if trivial)."""
@@ -194,6 +232,8 @@ class GraphBuilder:
             sym = sympy.Symbol(f"{PREFIX}{len(self._assignments)}")
             self._assignments.append((sym, expr))
             self._memo[expr] = sym
+            if self.place is not None:
+                self._places[sym] = self.place
         return sym
 
     def vec(self, components) -> tuple:

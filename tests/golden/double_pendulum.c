@@ -251,7 +251,7 @@ static void double_pendulum_velocity_terms_eval(const double *q, const double *q
     const double v12 = v2*v5 - v8;
     const double v13 = p[1]*v11;
     const double v14 = p[1]*v12;
-    const double v15 = v9*v12;
+    const double v15 = v12*v9;
     const double v16 = v13*v1 + v14*v0;
     const double v17 = v15 + p[2]*v16;
     h[0] = v17;
@@ -433,12 +433,12 @@ static void double_pendulum_rhs_eval(double t, const double *x, const double *u,
     const double v7 = v2*v5;
     const double v8 = v7*x[3];
     const double v9 = v6*x[3];
-    const double v10 = v7 + v4*pd[3];
+    const double v10 = v7 + v4*pd[2];
     const double v11 = v8 - v10*v4;
     const double v12 = v4*v6 - v9;
     const double v13 = p[1]*v11;
     const double v14 = p[1]*v12;
-    const double v15 = pd[4]*v12;
+    const double v15 = v12*pd[3];
     const double v16 = (v3*v3);
     const double v17 = v2*v3;
     const double v18 = v16*pd[8];
@@ -447,27 +447,27 @@ static void double_pendulum_rhs_eval(double t, const double *x, const double *u,
     const double v21 = p[2]*v20;
     const double v22 = p[2]*v19;
     const double v23 = p[2]*v22;
-    const double v24 = v23 + pd[0];
-    const double v25 = v22 + pd[1];
-    const double v26 = 1.0/v24;
-    const double v27 = v21*v26;
-    const double v28 = v25*v26;
-    const double v29 = v15*pd[5];
-    const double v30 = v14 - pd[4]*v29;
-    const double v31 = v13*v3 + v30*v2;
-    const double v32 = p[2]*v31;
-    const double v33 = v32 - u[0];
-    const double v34 = v26*v33;
+    const double v24 = v23 + pd[1];
+    const double v25 = v22 + pd[0];
+    const double v26 = v15*pd[5];
+    const double v27 = v14 - v26*pd[3];
+    const double v28 = v13*v3 + v27*v2;
+    const double v29 = p[2]*v28;
+    const double v30 = v29 - u[0];
+    const double v31 = 1.0/v24;
+    const double v32 = v21*v31;
+    const double v33 = v25*v31;
+    const double v34 = v31*v30;
     const double v35 = p[4]*v1;
     const double v36 = p[4]*v0;
-    const double v37 = -v34 - v27*v35 - v28*v36;
+    const double v37 = -v34 - v32*v35 - v33*v36;
     const double v38 = v36 + p[2]*v37;
     const double v39 = v38*v2 - v35*v3;
-    const double v40 = -v29 - pd[6]*v39;
+    const double v40 = -v26 - pd[6]*v39;
     const double v41 = v40 - v37;
     qdd[0] = v37;
     qdd[1] = v41;
-    D[0] = pd[2];
+    D[0] = pd[4];
     D[1] = v24;
 }
 
@@ -521,14 +521,14 @@ static void double_pendulum_prepare_eval(const double *p, double *pd)
 {
     (void)p;
 
-    const double v0 = 1.0/3.0*p[0]*(p[2]*p[2]);
-    const double v1 = 1.0/2.0*p[2]*p[0];
-    const double v2 = 1.0/3.0*p[1]*(p[3]*p[3]);
-    const double v3 = 1.0/2.0*p[3];
-    const double v4 = p[1]*v3;
-    const double v5 = 1.0/v2;
-    const double v6 = v4*v5;
-    const double v7 = p[1] - v4*v6;
+    const double v0 = 1.0/2.0*p[2]*p[0];
+    const double v1 = 1.0/3.0*p[0]*(p[2]*p[2]);
+    const double v2 = 1.0/2.0*p[3];
+    const double v3 = p[1]*v2;
+    const double v4 = 1.0/3.0*p[1]*(p[3]*p[3]);
+    const double v5 = 1.0/v4;
+    const double v6 = v3*v5;
+    const double v7 = p[1] - v6*v3;
     const double v8 = p[1] - v7;
     pd[0] = v0;
     pd[1] = v1;
