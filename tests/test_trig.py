@@ -4,7 +4,8 @@ against mpmath, and against glibc's sin and cos on the same arguments.
 The block between the template's ``/* ---- mg_sin, mg_cos`` and ``/* ---- end
 mg_sin, mg_cos ---- */`` markers is compiled into two small shared objects, one
 as is and one with ``-DMG_LIBM_TRIG`` (libm's sin and cos), and called through
-ctypes on about 215,000 seeded arguments: uniform in [-10, 10], log-uniform
+ctypes on about 235,000 seeded arguments: uniform in [-10, 10] and in
+[-0.8, 0.8] (below 0.78 the reduction is skipped), log-uniform
 magnitudes 1e-300..1e6 of both signs, the doubles within 3 ulps of multiples of
 pi/2 up to 1e5, within 0.1 of odd multiples of pi/4 up to 1e5 (|r| near pi/4,
 where the kernels' rounding is largest), the neighbourhood of the fallback
@@ -93,7 +94,8 @@ def libs(tmp_path_factory):
     source.write_text("#include <math.h>\n#include <stdint.h>\n#include <string.h>\n"
                       "#define MG_ALWAYS_INLINE inline\n" + _trig_block() + _DRIVER)
     variants = {"mg": ["-O2"], "libm": ["-O2", "-DMG_LIBM_TRIG"], "O0": ["-O0"],
-                "O1": ["-O1"], "native": ["-O2", "-march=native"]}
+                "O1": ["-O1"], "native": ["-O2", "-march=native"],
+                "reduced": ["-O2", "-DMG_TRIG_SMALL=0.0"]}
     out = {}
     for name, flags in variants.items():
         lib = root / f"trig_{name}.so"
@@ -111,6 +113,7 @@ def _arguments() -> dict:
     """The argument sets, seeded."""
     rng = np.random.default_rng(20261123)
     sets = {"uniform [-10, 10]": rng.uniform(-10.0, 10.0, 50_000),
+            "uniform [-0.8, 0.8] (no reduction below 0.78)": rng.uniform(-0.8, 0.8, 20_000),
             "log-uniform 1e-300..1e6": 10.0 ** rng.uniform(-300.0, 6.0, 50_000)
             * rng.choice([-1.0, 1.0], 50_000),
             "odd k pi/4 +- 0.1, < 1e5": (rng.integers(0, int(1e5 / (math.pi / 2)), 50_000) + 0.5)
@@ -198,6 +201,21 @@ def test_zeros_subnormals_inf_nan_and_beyond_the_threshold(libs):
     far = np.array([limit, -limit, np.nextafter(limit, np.inf), 1e6, -3e9, 1e22, 1e300])
     for name in ("sin", "cos"):                              # libm's own result beyond it
         assert mg(name, far).tobytes() == libm(name, far).tobytes()
+
+
+def test_small_arguments_skip_the_reduction_with_the_same_bits(libs):
+    # below MG_TRIG_SMALL the reduction would give n = 0, r = |x|, no tail: the
+    # short path must not change a bit (the "reduced" copy always reduces)
+    rng = np.random.default_rng(11)
+    small = float(re.search(r"#define MG_TRIG_SMALL (\S+)", _trig_block()).group(1))
+    edge = [small]
+    for _ in range(200):
+        edge.append(np.nextafter(edge[-1], 0.0))
+    x = np.concatenate([rng.uniform(-small, small, 50_000), edge, [0.0, -0.0, 5e-324, 1e-300],
+                        10.0 ** rng.uniform(-300, 0, 5_000)])
+    x = np.concatenate([x, -x])
+    for name in ("sin", "cos"):
+        assert libs["mg"](name, x).tobytes() == libs["reduced"](name, x).tobytes(), name
 
 
 def test_results_do_not_depend_on_optimisation_level_or_fma(libs):
