@@ -254,10 +254,12 @@ def make_routines(graph: Graph, routines, *, cse: bool = True, alone=()) -> tupl
     """
     routines = [(name, tuple(inputs), tuple(outputs)) for name, inputs, outputs in routines]
     if alone:
-        built = {r.name: r for group in
-                 [[r] for r in routines if r[0] in alone] + [[r for r in routines
-                                                             if r[0] not in alone]]
-                 for r in (make_routines(graph, group, cse=cse) if group else ())}
+        groups = [[r] for r in routines if r[0] in alone]
+        groups.append([r for r in routines if r[0] not in alone])
+        built = {}
+        for group in groups:
+            if group:
+                built.update((r.name, r) for r in make_routines(graph, group, cse=cse))
         return tuple(built[name] for name, _, _ in routines)
     all_outputs = [e for _, _, outs in routines for _, items in outs for e in items]
     before = {}

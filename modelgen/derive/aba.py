@@ -669,17 +669,18 @@ def link_velocities(g: GraphBuilder, tree: JointTree, qd) -> tuple:
     return tuple(v), tuple(c)
 
 
-def outward_pass(g: GraphBuilder, tree: JointTree, qd, plan=None) -> Outward:
+def outward_pass(g: GraphBuilder, tree: JointTree, qd, plan=None, velocities=None) -> Outward:
     """Velocities, velocity-product accelerations and forces of every link.
 
     ``plan[i]`` says whether joint i's ``c`` goes outwards (default: every
-    one, as RNEA needs).  Built in ``g``: a second call with the same ``g``
-    returns the same symbols (the graph hash-conses), so ABA and RNEA share
-    what they have in common.
+    one, as RNEA needs); ``velocities`` is :func:`link_velocities`' result if
+    the caller has it already.  Built in ``g``: a second call with the same
+    ``g`` returns the same symbols (the graph hash-conses), so ABA and RNEA
+    share what they have in common.
     """
     count = len(tree.joints)
     plan = (True,) * count if plan is None else plan
-    v, c = link_velocities(g, tree, qd)
+    v, c = velocities or link_velocities(g, tree, qd)
     a, f = [None] * count, [None] * count
     nothing = (ZERO,) * 6
     for i, joint in enumerate(tree.joints):
@@ -696,20 +697,19 @@ def outward_pass(g: GraphBuilder, tree: JointTree, qd, plan=None) -> Outward:
 VELOCITY_PRODUCTS = ("inward", "outward", "auto")
 
 
-def _variable_operations(build, variables, g=None) -> int:
-    """Operations of what ``build(g)`` returns, built in ``g`` (default a fresh
-    graph), without the statements of the parameters alone (they are hoisted)."""
-    g = GraphBuilder() if g is None else g
-    out = build(g)
-    graph = g.freeze()
+def _variable_operations(g: GraphBuilder, out, variables) -> int:
+    """Operations of ``out``, built in ``g``, without the statements of the
+    parameters alone (they are hoisted): what depends on ``variables``."""
     moving = set(variables)
     total = 0
-    for sym, e in graph.closure(out):
+    for sym, e in g.freeze().closure(out):
         if free_symbols(e) & moving:
             moving.add(sym)
             total += operation_count(e)
-    return total + sum(operation_count(sympy.sympify(e)) for e in out
-                       if free_symbols(sympy.sympify(e)) & moving)
+    for e in map(sympy.sympify, out):
+        if free_symbols(e) & moving:
+            total += operation_count(e)
+    return total
 
 
 def _renamed(data) -> tuple:
@@ -742,7 +742,7 @@ def _flat(data) -> list:
 _PLAN_MARGIN = 4
 
 
-def velocity_product_plan(tree: JointTree, qd, velocities, cost_in) -> tuple:
+def velocity_product_plan(tree: JointTree, velocities, cost_in) -> tuple:
     """Per joint: does its ``c_i`` go outwards (True) or inwards?
 
     ``velocities`` is :func:`link_velocities`' ``(v, c)``: where they are
@@ -784,8 +784,8 @@ def velocity_product_plan(tree: JointTree, qd, velocities, cost_in) -> tuple:
     def force(body, shape, vs, a):
         key = (shape, vs, a)
         if key not in forces:
-            forces[key] = _variable_operations(lambda g: _link_force(g, body, vs, a),
-                                               set(vs) | set(a))
+            g = GraphBuilder()
+            forces[key] = _variable_operations(g, _link_force(g, body, vs, a), set(vs) | set(a))
         return forces[key]
 
     def below(joint, shape, ap, cs):
@@ -793,8 +793,7 @@ def velocity_product_plan(tree: JointTree, qd, velocities, cost_in) -> tuple:
         if key not in transforms:
             g = GraphBuilder()
             a = add(joint_motion(g, joint, ap), cs)
-            transforms[key] = (_variable_operations(lambda _: a, set(ap) | set(cs), g),
-                               generic("mg_a", a))
+            transforms[key] = (_variable_operations(g, a, set(ap) | set(cs)), generic("mg_a", a))
         return transforms[key]
 
     cost_start, after_start, after_more = [0] * count, [0] * count, [0] * count
@@ -930,13 +929,13 @@ def _derive_aba(eqs, tree, spec, graph, velocity_products) -> ForwardDynamics:
     if velocity_products == "auto":
         inward = [0 if joint.parent < 0 else _inward_cost(Ia[i], velocities[1][i])
                   for i, joint in enumerate(joints)]
-        plan = velocity_product_plan(tree, eqs.qd, velocities, inward)
+        plan = velocity_product_plan(tree, velocities, inward)
     else:
         plan = tuple(velocity_products == "outward" and j.parent >= 0 for j in joints)
     # pass 1, accelerations and forces: where c goes outwards the bias force
     # carries I a_vp and c is 0 in passes 2 and 3; gravity is the ground's
     # acceleration in pass 3 either way
-    outward = outward_pass(g, tree, eqs.qd, plan)
+    outward = outward_pass(g, tree, eqs.qd, plan, velocities)
     pA = list(outward.f)
     c = tuple((ZERO,) * 6 if plan[i] else outward.c[i] for i in range(count))
     for i, f in external.items():
