@@ -6,6 +6,9 @@ that sees the repository's ``models/`` and ``tests/`` (so nothing is written
 into the checkout), with the build cache in the scratch directory too.  C
 prototypes must appear in the golden header.  A block preceded by
 ``<!-- readme-test: skip (reason) -->`` is illustration only; there are few.
+A block preceded by ``<!-- readme-test: needs MODULE ... -->`` uses an optional
+extra: it runs where those modules import and is skipped, naming them, where
+they do not (``make test`` installs only the ``test`` extra; CI installs all).
 """
 from __future__ import annotations
 
@@ -21,10 +24,12 @@ import pytest
 ROOT = Path(__file__).resolve().parent.parent
 README = ROOT / "README.md"
 SKIP = "<!-- readme-test: skip"
+NEEDS = re.compile(r"^<!-- readme-test: needs ([\w. ]+) -->$")
 
 
 def _blocks():
-    """(language, code, line, skipped) for every fenced block of the README."""
+    """(language, code, line, skipped, needs) for every fenced block of the README;
+    ``needs``: the modules its ``readme-test: needs`` line names."""
     lines = README.read_text().splitlines()
     out, i = [], 0
     while i < len(lines):
@@ -34,10 +39,12 @@ def _blocks():
             continue
         start, lang = i + 1, m.group(1)
         skipped = i > 0 and lines[i - 1].startswith(SKIP)
+        needs = NEEDS.match(lines[i - 1]) if i > 0 else None
         j = i + 1
         while not lines[j].startswith("```"):
             j += 1
-        out.append((lang, "\n".join(lines[i + 1:j]), start, skipped))
+        out.append((lang, "\n".join(lines[i + 1:j]), start, skipped,
+                    tuple(needs.group(1).split()) if needs else ()))
         i = j + 1
     return out
 
@@ -45,8 +52,15 @@ def _blocks():
 BLOCKS = _blocks()
 
 
-def _ids(kind):
-    return [f"line{line}" for lang, _, line, skipped in BLOCKS if lang == kind and not skipped]
+def _runnable(kind):
+    """pytest params (code, needs) of the blocks of ``kind`` that run, with their ids."""
+    return [pytest.param(code, needs, id=f"line{line}")
+            for lang, code, line, skipped, needs in BLOCKS if lang == kind and not skipped]
+
+
+def _require(needs):
+    for module in needs:
+        pytest.importorskip(module, reason=f"the block needs {module} (an optional extra)")
 
 
 def _scratch(tmp_path):
@@ -61,21 +75,21 @@ def _scratch(tmp_path):
 def test_the_readme_has_blocks_of_every_kind_and_few_are_skipped():
     kinds = {lang for lang, *_ in BLOCKS}
     assert {"python", "sh", "c", "yaml"} <= kinds
-    assert sum(skipped for *_, skipped in BLOCKS) <= 3
+    assert sum(skipped for *_, skipped, _ in BLOCKS) <= 3
 
 
-@pytest.mark.parametrize("code", [code for lang, code, _, skipped in BLOCKS
-                                  if lang == "python" and not skipped], ids=_ids("python"))
-def test_python_block_runs(tmp_path, code):
+@pytest.mark.parametrize("code, needs", _runnable("python"))
+def test_python_block_runs(tmp_path, code, needs):
+    _require(needs)
     env = _scratch(tmp_path)
     proc = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, env=env,
                           capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr[-3000:]
 
 
-@pytest.mark.parametrize("code", [code for lang, code, _, skipped in BLOCKS
-                                  if lang == "sh" and not skipped], ids=_ids("sh"))
-def test_shell_block_runs(tmp_path, code):
+@pytest.mark.parametrize("code, needs", _runnable("sh"))
+def test_shell_block_runs(tmp_path, code, needs):
+    _require(needs)
     env = _scratch(tmp_path)
     for line in code.splitlines():
         command = line.split("#", 1)[0].strip()
@@ -90,7 +104,7 @@ def test_shell_block_runs(tmp_path, code):
 
 def test_c_prototypes_are_those_of_the_generated_header():
     header = re.sub(r"\s+", "", (ROOT / "tests" / "golden" / "double_pendulum.h").read_text())
-    blocks = [code for lang, code, _, skipped in BLOCKS if lang == "c" and not skipped]
+    blocks = [code for lang, code, _, skipped, _ in BLOCKS if lang == "c" and not skipped]
     assert blocks
     for code in blocks:
         for declaration in code.split(";"):
