@@ -326,7 +326,9 @@ def generate(spec: ModelSpec, out_dir=None, *, force: bool = False, outputs=(),
         bodies=eqs.bodies, functions=functions,
         output_columns=[c for cols in columns.columns for c in cols] if columns else (),
         has_jacobian=bool(jacobian), has_linearize=bool(linearize),
-        npd=next(len(r.outputs[0][1]) for r in routines if r.name == "prepare"))
+        npd=next(len(r.outputs[0][1]) for r in routines if r.name == "prepare"),
+        # the crba rhs's solve skips the entries of A that are structurally zero
+        mass_pattern=None if forward else [[e != 0 for e in row] for row in eqs.A])
     sources = emit_sources(dict(context, formulation=formulation,
                                 aba_inward=list(forward.inward) if forward else []))
     t3 = time.perf_counter()
