@@ -152,14 +152,21 @@ def test_a_sparse_tree_beyond_the_dense_limit_is_still_unrolled():
     assert lines and lines[0].startswith("/* eliminated in the order")
 
 
-def test_solo12_crba_rhs_agrees_with_aba_through_the_sparse_solve(tmp_path):
+@pytest.mark.parametrize("unrolled", [True, False], ids=["unrolled", "loop"])
+def test_solo12_crba_rhs_agrees_with_aba_through_the_sparse_solve(tmp_path, monkeypatch,
+                                                                  unrolled):
     """The floating quadruped (18 speeds: four legs, then the free joint's six): the
-    crba rhs, whose solve skips the legs' zero blocks, against the ABA program."""
+    crba rhs, whose solve skips the legs' zero blocks, against the ABA program; once
+    straight-line (its default) and once through the loop that larger trees get."""
+    from modelgen.codegen import emit
+    if not unrolled:
+        monkeypatch.setattr(emit, "SPARSE_UNROLL_SIZE", 1)
     path = MODELS / "robots" / "solo12.yaml"
-    crba = modelgen.load(path, tmp_path / "crba", formulation="crba")
+    crba = modelgen.load(path, tmp_path / "crba", formulation="crba", force=True)
     aba = modelgen.load(path, tmp_path / "aba", formulation="aba")
     c_source = (tmp_path / "crba" / f"{crba.name}.c").read_text()
-    assert "the structural zeros of A skipped" in c_source
+    assert ("the structural zeros of A skipped" in c_source) == unrolled
+    assert ("LDL^T over the structurally non-zero entries" in c_source) != unrolled
     rng = np.random.default_rng(5)
     for _ in range(5):
         x = crba.project(np.concatenate([rng.uniform(-1, 1, crba.nq),

@@ -201,13 +201,17 @@ def print_routine(routine: Routine, outputs_c: dict) -> CFunction:
 UNROLL_SOLVE = 12
 
 #: A mass matrix with structural zeros (a branched tree's) is unrolled while its
-#: factorization and solve take at most the products of the dense one of 18
-#: coordinates (1,446).  Measured on the floating solo12 with the crba rhs
-#: (18 speeds, 690 products): the unrolled sparse solve took 13,730
-#: instructions and 1.29 us a call, the dense loop 22,322 and 1.56 us, and a
-#: dense unrolled one 14,622 and 1.50 us, so up to that size unrolling costs no
-#: time even without zeros.
-SPARSE_UNROLL_SIZE = 18
+#: factorization and solve take at most the products of the dense one of 30
+#: coordinates (5,830); beyond, a loop over its non-zeros.  Measured with the
+#: crba rhs, callgrind instructions and time a call:
+#:
+#: * floating solo12 (18 speeds, 690 products): unrolled sparse 13,730 and
+#:   1.29 us; the dense loop 22,322 and 1.56 us (a dense unrolled one 14,622
+#:   and 1.50 us);
+#: * floating G1 humanoid (35 speeds, 2,695 products): unrolled sparse 40,632
+#:   and 4.09 us; the sparse loop 74,379 and 5.33 us; the dense loop 91,539
+#:   and 6.08 us.
+SPARSE_UNROLL_SIZE = 30
 
 
 class Elimination(NamedTuple):
@@ -218,14 +222,19 @@ class Elimination(NamedTuple):
     below: dict         # v -> the coordinates w with L[w][v] structurally non-zero
     fill: frozenset     # the pairs {w, v} where A is zero but L is not
 
-    def earlier(self, v) -> tuple:
-        """The pivots eliminated before ``v`` whose column of L has a row ``v``."""
-        return tuple(k for k in self.order[:self.order.index(v)] if v in self.below[k])
+    def earlier(self) -> dict:
+        """v -> the pivots eliminated before ``v`` whose column of L has a row ``v``,
+        in elimination order."""
+        out = {v: [] for v in self.order}
+        for k in self.order:
+            for w in self.below[k]:
+                out[w].append(k)
+        return {v: tuple(ks) for v, ks in out.items()}
 
     def products(self) -> int:
         """Multiplications of the unrolled factorization and solve (the cost that
         decides whether it is unrolled)."""
-        earlier = {v: set(self.earlier(v)) for v in self.order}
+        earlier = {v: set(ks) for v, ks in self.earlier().items()}
         return sum(2 * len(earlier[v]) + 2 * len(self.below[v]) + 1
                    + sum(len(earlier[v] & earlier[w]) for w in self.below[v])
                    for v in self.order)
@@ -286,7 +295,8 @@ def unrolled_ldlt(n: int, tol: str, plan: Elimination | None = None) -> list:
     to skip; without it, A is dense and eliminated in index order.
     """
     plan = plan or elimination([[True] * n for _ in range(n)])
-    earlier = {v: plan.earlier(v) for v in plan.order}
+    earlier = plan.earlier()
+    earlier_sets = {v: set(ks) for v, ks in earlier.items()}
 
     def a(i, j):
         return f"A[{max(i, j) * n + min(i, j)}]"
@@ -301,7 +311,7 @@ def unrolled_ldlt(n: int, tol: str, plan: Elimination | None = None) -> list:
         lines.append(f"if (!(d{j} > {tol} * {a(j, j)}) || !({a(j, j)} > 0.0)) return {j + 1};")
         lines.append(f"const double inv{j} = 1.0 / d{j};")
         for i in plan.below[j]:
-            common = [k for k in earlier[j] if k in earlier[i]]
+            common = [k for k in earlier[j] if k in earlier_sets[i]]
             terms = "".join(f" - L{i}_{k} * u{j}_{k}" for k in common)
             # a fill-in entry: A is zero there, only the updates remain
             first = "" if frozenset((i, j)) in plan.fill else a(i, j)
@@ -329,6 +339,22 @@ def solve_lines(n: int, tol: str, pattern=None) -> list:
     return [f"/* eliminated in the order {', '.join(str(v + 1) for v in plan.order)}, "
             f"the structural zeros of A skipped: {plan.products()} products, "
             f"{len(plan.fill)} fill-ins */"] + unrolled_ldlt(n, tol, plan)
+
+
+def solve_loop(n: int, pattern=None):
+    """The tables of the looped sparse solve (when :func:`solve_lines` gives no
+    straight-line one and A has structural zeros), or None for the dense loop:
+    the elimination order and, per step, the coordinates below the pivot (CSR)."""
+    if pattern is None or all(map(all, pattern)) or solve_lines(n, "", pattern):
+        return None
+    plan = elimination(pattern)
+    below = [w for v in plan.order for w in plan.below[v]]
+    start = [0]
+    for v in plan.order:
+        start.append(start[-1] + len(plan.below[v]))
+    return {"order": ", ".join(map(str, plan.order)), "start": ", ".join(map(str, start)),
+            "below": ", ".join(map(str, below)) or "0", "nbelow": max(len(below), 1),
+            "products": plan.products(), "fill": len(plan.fill)}
 
 
 def _comment_safe(text: str) -> str:
@@ -399,6 +425,7 @@ def template_context(*, name: str, description: str, model_hash: str, n: int,
         "api": public_api(name, n, len(parameters), len(inputs), len(bodies),
                           len(output_columns), has_jacobian, has_linearize, nq),
         "solve_lines": solve_lines(n, f"{name.upper()}_PIVOT_TOL", mass_pattern),
+        "solve_loop": solve_loop(n, mass_pattern),
         "capi": capi.context(),
     }
 
