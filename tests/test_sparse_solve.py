@@ -18,7 +18,7 @@ import pytest
 
 import modelgen
 from modelgen.codegen.build import compiler
-from modelgen.codegen.emit import elimination, solve_lines, unrolled_ldlt, UNROLL_SOLVE
+from modelgen.codegen.emit import elimination, solve_code, unrolled_ldlt, UNROLL_SOLVE
 
 MODELS = Path(__file__).resolve().parent.parent / "models"
 
@@ -141,15 +141,18 @@ def test_a_dense_matrix_keeps_the_plain_ldlt_in_index_order():
     dense = [[True] * 5] * 5
     assert elimination(dense).order == (0, 1, 2, 3, 4)
     assert unrolled_ldlt(5, "TOL", elimination(dense)) == unrolled_ldlt(5, "TOL")
-    assert solve_lines(5, "TOL", dense) == unrolled_ldlt(5, "TOL")
-    assert solve_lines(UNROLL_SOLVE + 1, "TOL", None) == []      # the loop
+    assert solve_code(5, "TOL", dense) == {"solve_lines": unrolled_ldlt(5, "TOL"),
+                                           "solve_loop": None}
+    assert solve_code(UNROLL_SOLVE + 1, "TOL", None) == {"solve_lines": [],  # the dense loop
+                                                         "solve_loop": None}
 
 
 def test_a_sparse_tree_beyond_the_dense_limit_is_still_unrolled():
     parents = _random_parents(30, np.random.default_rng(11))
-    lines = solve_lines(30, "TOL", _pattern(_tree_matrix(parents, np.random.default_rng(0))))
-    # a random tree of 30 is shallow: its factorization is cheaper than the dense one of 12
-    assert lines and lines[0].startswith("/* eliminated in the order")
+    code = solve_code(30, "TOL", _pattern(_tree_matrix(parents, np.random.default_rng(0))))
+    # a random tree of 30 is shallow: its factorization is cheaper than a dense one of 30
+    assert code["solve_lines"][0].startswith("/* eliminated in the order")
+    assert code["solve_loop"] is None
 
 
 @pytest.mark.parametrize("unrolled", [True, False], ids=["unrolled", "loop"])

@@ -196,8 +196,8 @@ def print_routine(routine: Routine, outputs_c: dict) -> CFunction:
 
 #: Up to this many coordinates the solve is emitted as straight-line LDL^T
 #: (no sqrt, independent chains the compiler can interleave); above it, a
-#: right-looking Cholesky loop, unless the mass matrix is sparse enough that
-#: its straight-line factorization costs no more than the dense one of this size.
+#: right-looking Cholesky loop (for an A with structural zeros see
+#: :data:`SPARSE_UNROLL_SIZE`).
 UNROLL_SOLVE = 12
 
 #: A mass matrix with structural zeros (a branched tree's) is unrolled while its
@@ -325,36 +325,37 @@ def unrolled_ldlt(n: int, tol: str, plan: Elimination | None = None) -> list:
     return lines
 
 
-def solve_lines(n: int, tol: str, pattern=None) -> list:
-    """The straight-line solve of the crba rhs (:func:`unrolled_ldlt`), or [] for
-    the loop: a dense A is unrolled up to :data:`UNROLL_SOLVE` coordinates, one
-    with structural zeros (``pattern``) in the order of :func:`elimination` up
-    to the cost of a dense one of :data:`SPARSE_UNROLL_SIZE`."""
+def solve_code(n: int, tol: str, pattern=None) -> dict:
+    """How the crba rhs solves A q_ddot = b, for the template: ``solve_lines``, a
+    straight-line LDL^T (:func:`unrolled_ldlt`), or ``solve_loop``, the tables of
+    a loop over the non-zeros of a sparse A; neither for the dense loop.
+
+    A dense A is unrolled up to :data:`UNROLL_SOLVE` coordinates; one with
+    structural zeros (``pattern``) in the order of :func:`elimination` up to
+    the products of a dense one of :data:`SPARSE_UNROLL_SIZE`, and looped beyond.
+    """
     if pattern is None or all(map(all, pattern)):
-        return unrolled_ldlt(n, tol) if n <= UNROLL_SOLVE else []
+        return {"solve_lines": unrolled_ldlt(n, tol) if n <= UNROLL_SOLVE else [],
+                "solve_loop": None}
     plan = elimination(pattern)
+    products = plan.products()
     budget = elimination([[True] * SPARSE_UNROLL_SIZE] * SPARSE_UNROLL_SIZE).products()
-    if n > UNROLL_SOLVE and plan.products() > budget:
-        return []
-    return [f"/* eliminated in the order {', '.join(str(v + 1) for v in plan.order)}, "
-            f"the structural zeros of A skipped: {plan.products()} products, "
-            f"{len(plan.fill)} fill-ins */"] + unrolled_ldlt(n, tol, plan)
-
-
-def solve_loop(n: int, pattern=None):
-    """The tables of the looped sparse solve (when :func:`solve_lines` gives no
-    straight-line one and A has structural zeros), or None for the dense loop:
-    the elimination order and, per step, the coordinates below the pivot (CSR)."""
-    if pattern is None or all(map(all, pattern)) or solve_lines(n, "", pattern):
-        return None
-    plan = elimination(pattern)
+    if n <= UNROLL_SOLVE or products <= budget:
+        return {"solve_lines": [f"/* eliminated in the order "
+                                f"{', '.join(str(v + 1) for v in plan.order)}, the structural "
+                                f"zeros of A skipped: {products} products, "
+                                f"{len(plan.fill)} fill-ins */"] + unrolled_ldlt(n, tol, plan),
+                "solve_loop": None}
     below = [w for v in plan.order for w in plan.below[v]]
     start = [0]
     for v in plan.order:
         start.append(start[-1] + len(plan.below[v]))
-    return {"order": ", ".join(map(str, plan.order)), "start": ", ".join(map(str, start)),
-            "below": ", ".join(map(str, below)) or "0", "nbelow": max(len(below), 1),
-            "products": plan.products(), "fill": len(plan.fill)}
+    return {"solve_lines": [],
+            "solve_loop": {"order": ", ".join(map(str, plan.order)),
+                           "start": ", ".join(map(str, start)),
+                           "below": ", ".join(map(str, below)) or "0",
+                           "nbelow": max(len(below), 1), "products": products,
+                           "fill": len(plan.fill)}}
 
 
 def _comment_safe(text: str) -> str:
@@ -388,7 +389,7 @@ def template_context(*, name: str, description: str, model_hash: str, n: int,
 
     ``mass_pattern`` (n x n booleans, default dense) marks the entries of the
     mass matrix that can be non-zero: the rhs's solve skips the others
-    (:func:`solve_lines`).
+    (:func:`solve_code`).
 
     ``n`` is the number of speeds (the size of A), ``nq`` that of the
     coordinates (default ``n``; more with ball or free joints, whose
@@ -424,8 +425,7 @@ def template_context(*, name: str, description: str, model_hash: str, n: int,
         "output_columns": list(output_columns),
         "api": public_api(name, n, len(parameters), len(inputs), len(bodies),
                           len(output_columns), has_jacobian, has_linearize, nq),
-        "solve_lines": solve_lines(n, f"{name.upper()}_PIVOT_TOL", mass_pattern),
-        "solve_loop": solve_loop(n, mass_pattern),
+        **solve_code(n, f"{name.upper()}_PIVOT_TOL", mass_pattern),
         "capi": capi.context(),
     }
 
