@@ -58,8 +58,8 @@ HASH_ENV = ("CC", "MODELGEN_CFLAGS")
 #: Every function a model exports, without the "<name>_" prefix; written out
 #: here rather than taken from modelgen.codegen.emit.public_api, which renders the header.
 EXPORTED = ("abi_version", "dimensions", "default_parameters", "mass_matrix", "velocity_terms",
-            "generalized_forces", "prepare", "rhs_prepared", "rhs", "energy", "body_poses",
-            "project",
+            "generalized_forces", "prepare", "rhs_prepared", "rhs", "inverse_dynamics", "energy",
+            "body_poses", "project",
             "system", "jacobian_fd", "integrate", "integrate_batch")
 #: The model-independent integrator files copied next to every model's C.
 INTEGRATOR = ("mg_integrate.c", "mg_integrate.h")
@@ -245,7 +245,7 @@ def _checker(model_dir: Path, name: str) -> str:
     N = name.upper()
     arg = {"double t": "0.25", "const double *q": "x", "const double *qd": f"x + {N}_NQ",
            "const double *x": "x", "const double *u": "u", "const double *p": "p",
-           "double *p": "p"}
+           "double *p": "p", "const double *qdd": f"x + {N}_NQ"}
     lines = [
         f"static int event_{name}(void *ctx, double t, const double *x, double *g)",
         "{",

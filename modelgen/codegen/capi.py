@@ -24,7 +24,7 @@ import re
 from typing import NamedTuple
 
 #: Version of the C interface (model functions and mg_integrate), checked by the loader.
-ABI_VERSION = 5
+ABI_VERSION = 6
 #: Prefix of every constant, type and function of the model-independent C.
 PREFIX = "MG"
 

@@ -108,7 +108,7 @@ def render(template: str, context: dict) -> str:
 #: C parameter declaration of every input array name
 _PARAM = {"t": "double t", "q": "const double *q", "qd": "const double *qd",
           "x": "const double *x", "u": "const double *u", "p": "const double *p",
-          "a": "const double *a", "pd": "const double *pd"}
+          "a": "const double *a", "pd": "const double *pd", "qdd": "const double *qdd"}
 
 
 def _input_slots(routine: Routine) -> dict:
@@ -508,6 +508,14 @@ def public_api(name: str, n: int, n_p: int, n_u: int, n_b: int, n_y: int = 0,
                   "solved by Cholesky in place. u, p as above."])
                 + ["Returns 0, or k > 0 when pivot k (1-based) of A is not positive",
                    f"(A not positive definite); xdot[{nq}..{nx}) is then NaN."]},
+        {"ret": "void", "name": f"{name}_inverse_dynamics",
+         "params": "double t, const double *x, const double *qdd, const double *u, "
+                   "const double *p, double *Q",
+         "doc": [f"Inverse dynamics: the generalized forces Q[{n}] = A qdd + h - tau that must",
+                 "act besides the model's own (gravity, effects, actions and the inputs u)",
+                 f"for the accelerations qdd[{n}] at state x[{nx}], time t; zero at the",
+                 f"qdd that {name}_rhs gives.  O(n) by recursive Newton-Euler for a joint",
+                 "tree (N or N m per degree of freedom)."]},
         {"ret": "void", "name": f"{name}_project", "params": "double *x",
          "doc": ["Normalises the quaternions of the ball and free joints in x[NX] in place"
                  if nq != n else "Nothing to do: this model has no ball or free joints",

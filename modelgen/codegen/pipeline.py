@@ -20,11 +20,11 @@ from modelgen.derive.aba import ForwardDynamics, derive_aba, derive_aba_jacobian
 from modelgen.derive.dynamics import Equations, derive_equations
 from modelgen.derive.graph import GraphBuilder
 from modelgen.derive.joint_tree import JointTree, extract_joint_tree
-from modelgen.derive.rnea import derive_velocity_terms
+from modelgen.derive.rnea import derive_inverse_dynamics, derive_velocity_terms
 from modelgen.errors import ModelError
 from modelgen.codegen.emit import (ABI_VERSION, emit_sources, integrator_sources, print_routine,
                                    runtime_sources, template_context, templates_digest)
-from modelgen.derive.jacobian import derive_jacobian_terms
+from modelgen.derive.jacobian import accelerations, derive_jacobian_terms
 from modelgen.derive.linearize import derive_linearization_terms
 from modelgen.derive.kinematics import derive_kinematics
 from modelgen.derive.outputs import derive_outputs
@@ -84,7 +84,8 @@ def model_hash(spec: ModelSpec, outputs=(), jacobian: bool = False,
 
 
 #: The routines on the integration path (compiled as MG_PART 2, see model.c.j2).
-INTEGRATION_PATH = ("prepare", "rhs", "outputs", "jacobian_terms", "linearize_terms")
+INTEGRATION_PATH = ("prepare", "rhs", "outputs", "jacobian_terms", "linearize_terms",
+                    "inverse_dynamics")
 
 def part_statements(statements: dict) -> dict:
     """Routine name -> statements, to part -> its largest routine's statements (what
@@ -150,14 +151,15 @@ def choose_formulation(spec: ModelSpec, formulation: str = "auto"):
 
 
 def routines_for(eqs: Equations, output_exprs=(), jacobian=None,
-                 forward: ForwardDynamics | None = None, linearization=None):
+                 forward: ForwardDynamics | None = None, linearization=None, inverse=None):
     """The C routines of a model: (name, inputs, outputs) for make_routines.
 
     With ``forward`` (the ABA program) the ``rhs`` routine writes q_ddot and
     the articulated inertias D (in the order of ``forward.inward``), and
     ``jacobian_terms`` is d(q_ddot)/dx.  With ``linearization``
     (:class:`~modelgen.derive.linearize.LinearizationTerms`) ``linearize_terms``
-    writes its R and Y (derivatives with respect to [x, u]).
+    writes its R and Y (derivatives with respect to [x, u]).  ``inverse``:
+    ``(qdd symbols, Q)`` of ``inverse_dynamics``, Q = A qdd + h - tau.
     """
     n = len(eqs.qd)
     t = (("t", (eqs.t,)),)
@@ -188,7 +190,9 @@ def routines_for(eqs: Equations, output_exprs=(), jacobian=None,
         rhs,
         ("energy", (q, qd, p), (("out", (eqs.kinetic, eqs.potential)),)),
         ("body_poses", (q, p), (("T", tuple(e for pose in eqs.poses for e in pose)),)),
-    ] + ([("outputs", t + (x, u, p), (("y", tuple(output_exprs)),))] if output_exprs else []) \
+    ] + ([("inverse_dynamics", t + (x, ("qdd", inverse[0]), u, p), (("Q", inverse[1]),))]
+         if inverse else []) \
+      + ([("outputs", t + (x, u, p), (("y", tuple(output_exprs)),))] if output_exprs else []) \
       + ([("jacobian_terms", jac_inputs,
            (("D", tuple(e for row in jacobian.D for e in row)),)
            + ((("K", tuple(e for row in jacobian.K for e in row)),) if jacobian.K else ()))]
@@ -290,8 +294,16 @@ def generate(spec: ModelSpec, out_dir=None, *, force: bool = False, outputs=(),
         # velocity next to its forces)
         builder = GraphBuilder(graph)
         eqs = replace(eqs, h=derive_velocity_terms(builder, tree, eqs.qd))
+        # inverse dynamics A qdd + h by RNEA too, sharing the velocities
+        qdd = accelerations(len(eqs.qd))
+        inertial = derive_inverse_dynamics(builder, tree, eqs.qd, qdd)
         graph = builder.freeze()
         forward = replace(forward, graph=graph)
+    else:                   # A qdd + h from the composite-body A and h
+        qdd = accelerations(len(eqs.qd))
+        inertial = tuple(sum((a * b for a, b in zip(row, qdd)), eqs.h[k])
+                         for k, row in enumerate(eqs.A))
+    inverse = (qdd, tuple(e - tau for e, tau in zip(inertial, eqs.tau)))
     linearization = None
     if linearize:       # one pass for A, B, C, D; the Jacobian is its state columns
         linearization = derive_linearization_terms(
@@ -308,14 +320,15 @@ def generate(spec: ModelSpec, out_dir=None, *, force: bool = False, outputs=(),
     stage("cse")
     # the rhs (what an integration runs) is eliminated on its own
     routines = make_routines(graph, routines_for(eqs, columns.exprs if columns else (), terms,
-                                                 forward, linearization), alone=("rhs",))
+                                                 forward, linearization, inverse),
+                             alone=("rhs", "inverse_dynamics"))
     routines = _hoisted(routines)
     t2 = time.perf_counter()
     seconds["cse"] = t2 - t1
     stage("emit")
     outputs_c = {"A": "A", "h": "h", "tau": "tau", "b": "b", "out": "out", "T": "T", "y": "y",
                  "D": "D", "qdd": "qdd", "R": "R", "Y": "Y", "qdot": "qdot", "K": "K",
-                 "pd": "pd"}
+                 "pd": "pd", "Q": "Q"}
     functions = {r.name: print_routine(r, outputs_c) for r in routines}
     context = template_context(
         name=spec.name, description=spec.description,

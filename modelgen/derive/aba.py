@@ -627,7 +627,7 @@ class Outward:
     f: tuple
 
 
-def _link_force(g, body, v, a):
+def link_force(g, body, v, a):
     """``I a + v x* I v`` for a link's rigid body at its origin."""
     A = _sym(_vec(g, body.I))
     h = _vec(g, body.h)
@@ -638,7 +638,8 @@ def _link_force(g, body, v, a):
     return _com_force(g, _sym(body.I), h, body.m, centre, v, a)
 
 
-def _joint_velocity(g, joint, qd) -> tuple:
+def joint_velocity(g, joint, qd) -> tuple:
+    """``S_i qd_i``: the joint's motion subspace times its speeds (or accelerations)."""
     return _vec(g, [_total(_times(S[r], qd[k]) for k, S in joint.dofs) for r in range(6)])
 
 
@@ -659,7 +660,7 @@ def link_velocities(g: GraphBuilder, tree: JointTree, qd) -> tuple:
     v, c = [None] * count, [None] * count
     for i, joint in enumerate(tree.joints):
         g.place = _outwards(i)
-        vJ = _joint_velocity(g, joint, qd)
+        vJ = joint_velocity(g, joint, qd)
         p = joint.parent
         if p < 0:
             v[i], c[i] = vJ, (ZERO,) * 6
@@ -689,7 +690,7 @@ def outward_pass(g: GraphBuilder, tree: JointTree, qd, plan=None, velocities=Non
         if plan[i]:
             a[i] = (_vec(g, add(joint_motion(g, joint, a[p]), c[i])) if p >= 0 and plan[p]
                     else c[i])
-        f[i] = _link_force(g, tree.inertias[i], v[i], a[i] if plan[i] else nothing)
+        f[i] = link_force(g, tree.inertias[i], v[i], a[i] if plan[i] else nothing)
     return Outward(v, c, tuple(a), tuple(f))
 
 
@@ -785,7 +786,7 @@ def velocity_product_plan(tree: JointTree, velocities, cost_in) -> tuple:
         key = (shape, vs, a)
         if key not in forces:
             g = GraphBuilder()
-            forces[key] = _variable_operations(g, _link_force(g, body, vs, a), set(vs) | set(a))
+            forces[key] = _variable_operations(g, link_force(g, body, vs, a), set(vs) | set(a))
         return forces[key]
 
     def below(joint, shape, ap, cs):

@@ -1,4 +1,4 @@
-"""The velocity-product term h in O(n): recursive Newton-Euler with q_ddot = 0.
+"""The velocity-product term h and inverse dynamics in O(n): recursive Newton-Euler.
 
 Featherstone, *Rigid Body Dynamics Algorithms* (2008), §5.3, Table 5.1, in
 each link's own frame (:mod:`modelgen.derive.joint_tree` gives the links),
@@ -15,10 +15,17 @@ the generalized inertia forces at zero acceleration.  Pass 1 is
 (its ``f`` is the ABA's bias force), so over it RNEA costs only step 2:
 about 20 operations per revolute joint, against the O(n^2) projections of
 the composite-body sums.
+
+With accelerations (:func:`derive_inverse_dynamics`), pass 1 carries
+``a_i = X_i a_p + c_i + S_i qdd_i`` instead and the result is ``A qdd + h``,
+the generalized inertia forces, in O(n) (Pinocchio's ``rnea`` without
+gravity, MuJoCo's ``mj_inverse`` without the passive forces: those are in
+``tau``).
 """
 from __future__ import annotations
 
-from modelgen.derive.aba import add, dot, outward_pass, to_parent_force
+from modelgen.derive.aba import (add, dot, joint_motion, joint_velocity, link_force,
+                                 link_velocities, outward_pass, to_parent_force)
 from modelgen.derive.graph import ZERO, GraphBuilder
 from modelgen.derive.joint_tree import JointTree
 
@@ -35,17 +42,47 @@ def derive_velocity_terms(g: GraphBuilder, tree: JointTree, qd) -> tuple:
     >>> len(h)
     2
     """
-    joints = tree.joints
-    force = list(outward_pass(g, tree, qd).f)
-    h = [ZERO] * len(qd)
-    for i in reversed(range(len(joints))):
-        joint = joints[i]
+    return _inward(g, tree, outward_pass(g, tree, qd).f, len(qd))
+
+
+def derive_inverse_dynamics(g: GraphBuilder, tree: JointTree, qd, qdd) -> tuple:
+    """``A qdd + h`` (in coordinate order) by RNEA, built in ``g``: the generalized
+    forces that give the accelerations ``qdd``, less those of gravity and the
+    effects (``tau``), which the caller subtracts.
+
+    >>> from modelgen.model.chains import spatial_chain
+    >>> from modelgen.derive.joint_tree import extract_joint_tree
+    >>> from modelgen.model.spec import symbol
+    >>> spec = spatial_chain(2).spec()
+    >>> qdd = derive_inverse_dynamics(GraphBuilder(), extract_joint_tree(spec),
+    ...                               [symbol(c + "_dot") for c in spec.coordinates],
+    ...                               [symbol(c + "_acc") for c in spec.coordinates])
+    >>> len(qdd)
+    2
+    """
+    v, c = link_velocities(g, tree, qd)
+    a, force = [None] * len(tree.joints), []
+    for i, joint in enumerate(tree.joints):
+        aJ = joint_velocity(g, joint, qdd)          # S_i qdd_i
+        a[i] = g.vec(add(add(joint_motion(g, joint, a[joint.parent]), c[i]), aJ)
+                     if joint.parent >= 0 else add(c[i], aJ))
+        force.append(link_force(g, tree.inertias[i], v[i], a[i]))
+    return _inward(g, tree, force, len(qd))
+
+
+def _inward(g: GraphBuilder, tree: JointTree, force, n: int) -> tuple:
+    """RNEA's pass 2: each joint's generalized force ``S_i^T f_i``, with the link
+    forces summed into the parents, leaves first."""
+    force = list(force)
+    out = [ZERO] * n
+    for i in reversed(range(len(tree.joints))):
+        joint = tree.joints[i]
         for k, S in joint.dofs:
-            h[k] = g.name(dot(S, force[i]))
+            out[k] = g.name(dot(S, force[i]))
         if joint.parent >= 0:
             p = joint.parent
             force[p] = g.vec(add(force[p], to_parent_force(g, joint, force[i])))
-    return tuple(h)
+    return tuple(out)
 
 
-__all__ = ["derive_velocity_terms"]
+__all__ = ["derive_velocity_terms", "derive_inverse_dynamics"]

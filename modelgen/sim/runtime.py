@@ -70,6 +70,7 @@ class CompiledModel:
         self._velocity_terms = fn("velocity_terms")
         self._generalized_forces = fn("generalized_forces")
         self._rhs = fn("rhs")
+        self._inverse_dynamics = fn("inverse_dynamics")
         self._energy = fn("energy")
         self._body_poses = fn("body_poses")
         self.outputs = {o["name"]: tuple(o["columns"]) for o in manifest.get("outputs", [])}
@@ -216,6 +217,22 @@ class CompiledModel:
         self._generalized_forces(self._time(t), self._ptr(q), self._ptr(qd),
                                  self._ptr(self.input_vector(u)), self._ptr(self.params(p)),
                                  self._ptr(out))
+        return out
+
+    def inverse_dynamics(self, t, x, qdd, u=None, p=None) -> np.ndarray:
+        """The generalized forces Q = A qdd + h - tau, shape (n,), that must act besides
+        the model's own (gravity, effects, actions and the inputs ``u``) for the
+        accelerations ``qdd`` at state ``x`` = [q, qd]: zero at the qdd of :meth:`rhs`.
+        O(n) by recursive Newton-Euler for a joint tree (Pinocchio's ``rnea``,
+        MuJoCo's ``mj_inverse``, with the model's forces taken off).
+
+        >>> Q = cm.inverse_dynamics(0.0, x, qdd)                          # doctest: +SKIP
+        """
+        x, qdd = self._vector(x, self.nx, "x"), self._vector(qdd, self.n, "qdd")
+        out = np.empty(self.n)
+        self._inverse_dynamics(self._time(t), self._ptr(x), self._ptr(qdd),
+                               self._ptr(self.input_vector(u)), self._ptr(self.params(p)),
+                               self._ptr(out))
         return out
 
     def rhs(self, t, x, u=None, p=None) -> np.ndarray:
