@@ -495,8 +495,10 @@ _PIN_HARNESS = r"""// Timing harness for Pinocchio's ABA and CRBA + Cholesky, wr
 // then per joint (parents first) "parent(0 = ground, else 1-based) axis(0 = z,
 // 1 = y, 2 = x) R(9, row-major, joint frame in the parent's) p(3) mass c(3)
 // Ixx Iyy Izz Ixy Ixz Iyz (about c)", then g, then x0 (2n numbers).
-// Prints: aba_s crba_s, then q_ddot at x0 by each.  pin_bench tree.txt WHICH K
-// instead calls ABA (WHICH 0) or the CRBA path (1) K times untimed (for callgrind).
+// Prints: aba_s crba_s, then q_ddot at x0 by each, then rnea's tau at x0 and the
+// accelerations ACC(i).  pin_bench tree.txt WHICH prints the time of ABA (WHICH 0),
+// the CRBA path (1) or rnea (2) alone; pin_bench tree.txt WHICH K instead calls it
+// K times untimed (for callgrind).
 #include <cstdlib>
 #include <cstdio>
 #include <ctime>
@@ -516,6 +518,9 @@ static double now() {
 static pinocchio::Model model;
 static double x0[2048];
 
+// the accelerations given to rnea (bench/inverse_dynamics.py uses the same)
+#define ACC(i) (0.3 * (double)((i) %% 3) - 0.2)
+
 static void crba_path(pinocchio::Data &data, const Eigen::VectorXd &q, const Eigen::VectorXd &v,
                       const Eigen::VectorXd &tau, Eigen::VectorXd &qdd) {
     pinocchio::crba(model, data, q);
@@ -530,6 +535,8 @@ template <int WHICH> static double run(pinocchio::Data &data, long loops, double
     Eigen::VectorXd q = Eigen::Map<const Eigen::VectorXd>(x0, n);
     Eigen::VectorXd v = Eigen::Map<const Eigen::VectorXd>(x0 + n, n);
     Eigen::VectorXd tau = Eigen::VectorXd::Zero(n), qdd = Eigen::VectorXd::Zero(n);
+    Eigen::VectorXd acc(n);
+    for (int i = 0; i < n; ++i) acc[i] = ACC(i);
     const double start = now();
     for (long k = 0; k < loops; ++k) {
         const int j = (int)(k %% n);
@@ -537,8 +544,11 @@ template <int WHICH> static double run(pinocchio::Data &data, long loops, double
         if (WHICH == 0) {
             pinocchio::aba(model, data, q, v, tau);
             qdd = data.ddq;
-        } else {
+        } else if (WHICH == 1) {
             crba_path(data, q, v, tau, qdd);
+        } else {
+            pinocchio::rnea(model, data, q, v, acc);
+            qdd = data.tau;
         }
         sink += qdd[n - 1];
     }
@@ -594,18 +604,27 @@ static int read_chain(const char *path) {
 }
 
 int main(int argc, char **argv) {
-    if ((argc != 2 && argc != 4) || !read_chain(argv[1])) {
+    if (argc < 2 || argc > 4 || !read_chain(argv[1])) {
         std::fprintf(stderr, "usage: pin_bench chain.txt (see the source)\n");
         return 2;
     }
     pinocchio::Data data(model);
     double sink = 0.0;
-    if (argc == 4) {
+    if (argc >= 3) {
+        const int which = std::atoi(argv[2]);
+        if (argc == 3) {
+            const double t = which == 0 ? best<0>(data, sink) : which == 1 ? best<1>(data, sink)
+                                                                           : best<2>(data, sink);
+            std::printf("%%.9e %%.3g\n", t, sink * 0.0);
+            return 0;
+        }
         const long loops = std::atol(argv[3]);
-        if (std::atoi(argv[2]) == 0)
+        if (which == 0)
             run<0>(data, loops, sink);
-        else
+        else if (which == 1)
             run<1>(data, loops, sink);
+        else
+            run<2>(data, loops, sink);
         std::printf("%%.17g\n", sink);
         return 0;
     }
@@ -620,6 +639,11 @@ int main(int argc, char **argv) {
     std::printf("\n");
     crba_path(data, q, v, tau, qdd);
     for (int i = 0; i < n; ++i) std::printf("%%.17g ", qdd[i]);
+    std::printf("\n");
+    Eigen::VectorXd acc(n);
+    for (int i = 0; i < n; ++i) acc[i] = ACC(i);
+    pinocchio::rnea(model, data, q, v, acc);
+    for (int i = 0; i < n; ++i) std::printf("%%.17g ", data.tau[i]);
     std::printf("\n");
     return 0;
 }

@@ -124,6 +124,12 @@ def _compare_with_pinocchio(pin, path: Path, out_dir: Path, samples: int = 4) ->
             qdd_ref = np.linalg.solve(a_ref, tau - nle)
         qdd_mg = cm.rhs(0.0, np.concatenate([q, qd]), u)[n:]
         assert np.max(np.abs(qdd_mg - qdd_ref)) <= TOL * max(1.0, np.max(np.abs(qdd_ref)))
+        # inverse dynamics: Pinocchio's rnea (M a + C v + g) is Q plus the model's other
+        # forces (the inputs and the damping)
+        acc = rng.uniform(-3, 3, n)
+        rnea = jmap.T @ pin.rnea(pm, pd, pq, pv, jmap @ acc)
+        Q = cm.inverse_dynamics(0.0, np.concatenate([q, qd]), acc, u)
+        assert np.max(np.abs(Q + tau - rnea)) <= TOL * max(1.0, np.max(np.abs(rnea)))
 
 
 @pytest.fixture(scope="module")

@@ -1,0 +1,188 @@
+"""Inverse dynamics in C: modelgen's ``<name>_inverse_dynamics`` against Pinocchio's ``rnea``.
+
+Run from the repository root (needs the ``bench`` extra: ``pin`` and ``cmeel-eigen``)::
+
+    .venv/bin/python bench/inverse_dynamics.py                 # n = 7 20 50 100 and arm7
+    .venv/bin/python bench/inverse_dynamics.py --n 7 20 --rounds 5
+
+Method
+    The models and the Pinocchio harness are those of ``bench/codegen_scaling.py``
+    (the spatial chain of ``spatial_chain(n)`` and ``models/arm7.yaml``, built
+    in C++ from the same definition, compiled ``-O3 -march=native``).  The
+    state x0 is the one that script uses; the accelerations are
+    ``0.3 (i mod 3) - 0.2``.  Both compute the generalized forces that give
+    those accelerations: Pinocchio's ``rnea(q, v, a)`` = M a + C v + g, and
+    modelgen's Q = A a + h - tau, the same thing for a model whose only effect
+    is gravity (*agree*: the largest difference over the largest |Q| at x0).
+    Time: each harness calls its function in a loop, perturbing one q from the
+    previous output (a dependency chain), minimum over 5 repeats of >= 0.2 s,
+    run alternately ``--rounds`` times, minimum kept.  Instructions: callgrind,
+    K = 200 calls minus none (``codegen_scaling.instructions_per_call``);
+    Pinocchio counted in its build without AVX-512.
+"""
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(REPO))
+_spec = importlib.util.spec_from_file_location("codegen_scaling", REPO / "bench" / "codegen_scaling.py")
+cs = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(cs)
+
+import modelgen  # noqa: E402
+from modelgen.codegen.build import compiler  # noqa: E402
+from modelgen.model.api import load_model  # noqa: E402
+from modelgen.model.chains import spatial_chain  # noqa: E402
+
+_HARNESS = r"""/* {name}_inverse_dynamics in a loop, written by bench/inverse_dynamics.py.
+ * No argument: prints the best time per call.  K: K calls untimed (callgrind). */
+#define _POSIX_C_SOURCE 199309L
+#include <stdio.h>
+#include <stdlib.h>
+#include <time.h>
+#include "{name}.h"
+#define NX {nx}
+#define NV {nv}
+static const double x0[NX] = {{{x0}}};
+static const double p[{np_}] = {{{p}}};
+static double u[{nu_}];
+static double x[NX], a[NV], Q[NV], sink;
+
+static double now(void)
+{{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}}
+
+static double run(long loops)
+{{
+    long k;
+    const double start = now();
+    for (k = 0; k < loops; ++k) {{
+        const int j = (int)(k % {nq});
+        x[j] = x0[j] + 1e-9 * Q[NV - 1 - j % NV];
+        {name}_inverse_dynamics(0.0, x, a, u, p, Q);
+        sink += Q[NV - 1];
+    }}
+    return now() - start;
+}}
+
+int main(int argc, char **argv)
+{{
+    long loops = 1;
+    int r, i;
+    double best = 1e300;
+    for (i = 0; i < NX; ++i)
+        x[i] = x0[i];
+    for (i = 0; i < NV; ++i)
+        a[i] = 0.3 * (double)(i % 3) - 0.2;
+    if (argc == 2) {{
+        run(atol(argv[1]));
+        printf("%.17g\n", sink);
+        return 0;
+    }}
+    while (run(loops) < {min_seconds})
+        loops *= 2;
+    for (r = 0; r < {repeats}; ++r) {{
+        const double t = run(loops) / (double)loops;
+        if (t < best)
+            best = t;
+    }}
+    printf("%.9e %.17g\n", best, sink);
+    return 0;
+}}
+"""
+
+
+def accelerations(n: int) -> np.ndarray:
+    return np.array([0.3 * (i % 3) - 0.2 for i in range(n)])
+
+
+def build_harness(cm, x0, work: Path) -> Path:
+    """The timing and counting harness of ``<name>_inverse_dynamics`` (``-O2``, like
+    the build's integration path, linked with the built library's objects' source)."""
+    src_dir = Path(cm.path).parent
+    work.mkdir(parents=True, exist_ok=True)
+    src = work / "id_bench.c"
+    src.write_text(_HARNESS.format(
+        name=cm.name, nx=cm.nx, nv=cm.n, nq=cm.nq, x0=cs._c_array(x0),
+        np_=max(len(cm.parameters), 1), p=cs._c_array(cm.params()) or "0.0",
+        nu_=max(len(cm.inputs), 1), min_seconds=cs.MIN_SECONDS, repeats=cs.REPEATS))
+    # the model's C compiled by the command its build used for the integration path
+    exe, _ = cs.build_rhs_harness(cm, x0, work / "rhs")
+    out = work / "id_bench"
+    cs._run_checked([*compiler(), "-O2", "-std=c99", f"-I{src_dir}", str(src),
+                     str(work / "rhs" / "model_rhs.o"), str(src_dir / "mg_integrate.c"),
+                     "-o", str(out), "-lm"])
+    return out
+
+
+def measure(kind, arg, work: Path, pin, pin_count, rounds: int) -> dict:
+    spec = spatial_chain(arg).spec() if kind == "chain" else load_model(arg)
+    cm = modelgen.load(spec, work / "model")
+    rng = np.random.default_rng(1000 + cm.n)           # codegen_scaling's state
+    x0 = np.concatenate([rng.uniform(-np.pi, np.pi, cm.n), rng.uniform(-2, 2, cm.n)])
+    a = accelerations(cm.n)
+    exe = build_harness(cm, x0, work / "harness")
+    if kind == "chain":
+        tree = cs.pinocchio_chain_file(cm.n, cm.parameters, x0, work / "pin.txt")
+    else:
+        links = cs.tree_links(spec, cm.parameters)
+        tree = cs.pinocchio_tree_file(links, float(cm.parameters["g"]), x0, work / "pin.txt")
+    mg_t, pin_t = [], []
+    for _ in range(rounds):
+        mg_t.append(float(cs._run_checked([str(exe)]).split()[0]) * 1e6)
+        pin_t.append(float(cs._run_checked([str(pin), str(tree), "2"]).split()[0]) * 1e6)
+    tau_pin = np.array(cs._run_checked([str(pin), str(tree)]).splitlines()[3].split(), float)
+    Q = cm.inverse_dynamics(0.0, x0, a)
+    row = {"model": cm.name if kind == "file" else str(arg), "n": cm.n,
+           "ops": cm.manifest["ops"]["inverse_dynamics"]["after_cse"],
+           "mg_us": min(mg_t), "pin_us": min(pin_t),
+           "agree": float(np.max(np.abs(Q - tau_pin)) / np.max(np.abs(Q)))}
+    row["mg_instr"] = cs.instructions_per_call([str(exe)])
+    row["pin_instr"] = (cs.instructions_per_call([str(pin_count), str(tree), "2"])
+                        if pin_count else None)
+    return row
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--n", type=int, nargs="+", default=[7, 20, 50, 100])
+    parser.add_argument("--arm", default=str(REPO / "models" / "arm7.yaml"))
+    parser.add_argument("--rounds", type=int, default=3)
+    args = parser.parse_args(argv)
+    root = Path(tempfile.mkdtemp(prefix="modelgen-inverse-"))
+    pin, why = cs.build_pinocchio_harness(root / "pin")
+    if pin is None:
+        print(f"Pinocchio not available: {why}", file=sys.stderr)
+        return 1
+    pin_count = cs.build_pinocchio_harness(root / "pin", count=True)[0] \
+        if cs.shutil.which("valgrind") else None
+    jobs = [("chain", n) for n in args.n] + ([("file", args.arm)] if args.arm else [])
+    rows = []
+    for kind, arg in jobs:
+        print(f"... {kind} {arg}", file=sys.stderr, flush=True)
+        rows.append(measure(kind, arg, root / f"{kind}_{Path(str(arg)).stem}", pin, pin_count,
+                            args.rounds))
+    print("# Inverse dynamics in C: modelgen against Pinocchio's rnea\n")
+    body = [[r["model"], r["n"], f"{r['ops'] / r['n']:.1f}", cs.fmt(r["mg_us"]),
+             cs.fmt(r["pin_us"]), f"**{cs.fmt(r['pin_us'] / r['mg_us'])}**",
+             cs.fmt(r["mg_instr"], ",.0f"), cs.fmt(r["pin_instr"], ",.0f"),
+             f"**{cs.fmt(r['pin_instr'] / r['mg_instr'] if r['pin_instr'] else None)}**",
+             f"{r['agree']:.1e}"] for r in rows]
+    print(cs.markdown(["model", "n", "ops / coordinate", "modelgen µs", "rnea µs", "rnea / mg",
+                       "modelgen instr", "rnea instr", "instr ratio", "agree"], body))
+    cs.shutil.rmtree(root, ignore_errors=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
