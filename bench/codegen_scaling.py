@@ -196,7 +196,9 @@ int main(void)
 _MJ_HARNESS = r"""/* Timing harness for MuJoCo's mj_forward and mj_step, written by
  * bench/codegen_scaling.py.  Usage: mjbench model.xml state.txt [K]
  * where state.txt holds qpos then qvel (nq + nv numbers).  With K, it calls
- * mj_forward K times untimed and exits (for callgrind). */
+ * mj_forward K times untimed and exits (for callgrind).  mjbench model.xml
+ * state.txt inverse [K] does the same with mj_inverse at the accelerations
+ * 0.3 (i mod 3) - 0.2 (bench/inverse_dynamics.py), printing its best time. */
 #define _POSIX_C_SOURCE 199309L
 #include <stdio.h>
 #include <stdlib.h>
@@ -237,6 +239,24 @@ static double run_forward(long loops)
     return now() - start;
 }
 
+static double run_inverse(long loops)
+{
+    long k;
+    int i;
+    const int nv = m->nv;
+    double start;
+    for (i = 0; i < nv; ++i)
+        d->qacc[i] = 0.3 * (double)(i % 3) - 0.2;
+    start = now();
+    for (k = 0; k < loops; ++k) {
+        const int j = (int)(k % nv);
+        d->qpos[j] = q0[j] + 1e-9 * d->qfrc_inverse[nv - 1 - j];
+        mj_inverse(m, d);
+        sink += d->qfrc_inverse[nv - 1];
+    }
+    return now() - start;
+}
+
 static double run_step(long loops)
 {
     long k;
@@ -273,8 +293,8 @@ int main(int argc, char **argv)
     FILE *f;
     int i;
     double forward, step;
-    if (argc != 3 && argc != 4) {
-        fprintf(stderr, "usage: %s model.xml state.txt [K]\n", argv[0]);
+    if (argc < 3 || argc > 5) {
+        fprintf(stderr, "usage: %s model.xml state.txt [inverse] [K]\n", argv[0]);
         return 2;
     }
     m = mj_loadXML(argv[1], NULL, error, sizeof(error));
@@ -299,6 +319,14 @@ int main(int argc, char **argv)
     fclose(f);
     reset();
     mj_forward(m, d);
+    if (argc >= 4 && strcmp(argv[3], "inverse") == 0) {
+        if (argc == 5)
+            run_inverse(atol(argv[4]));
+        else
+            printf("%.9e ", best_of(run_inverse));
+        printf("%.17g\n", sink);
+        return 0;
+    }
     if (argc == 4) {
         run_forward(atol(argv[3]));
         printf("%.17g\n", sink);

@@ -1,4 +1,5 @@
-"""Inverse dynamics in C: modelgen's ``<name>_inverse_dynamics`` against Pinocchio's ``rnea``.
+"""Inverse dynamics in C: modelgen's ``<name>_inverse_dynamics`` against Pinocchio's ``rnea``
+and MuJoCo's ``mj_inverse``.
 
 Run from the repository root (needs the ``bench`` extra: ``pin`` and ``cmeel-eigen``)::
 
@@ -10,10 +11,12 @@ Method
     (the spatial chain of ``spatial_chain(n)`` and ``models/arm7.yaml``, built
     in C++ from the same definition, compiled ``-O3 -march=native``).  The
     state x0 is the one that script uses; the accelerations are
-    ``0.3 (i mod 3) - 0.2``.  Both compute the generalized forces that give
-    those accelerations: Pinocchio's ``rnea(q, v, a)`` = M a + C v + g, and
-    modelgen's Q = A a + h - tau, the same thing for a model whose only effect
-    is gravity (*agree*: the largest difference over the largest |Q| at x0).
+    ``0.3 (i mod 3) - 0.2``.  All compute the generalized forces that give
+    those accelerations: Pinocchio's ``rnea(q, v, a)`` = M a + C v + g,
+    MuJoCo's ``mj_inverse`` (``qfrc_inverse``; the MJCF of codegen_scaling, no
+    contacts, damping or armature) and modelgen's Q = A a + h - tau, the same
+    thing for a model whose only effect is gravity (*agree*: the largest
+    difference to modelgen over the largest |Q| at x0, of either peer).
     Time: each harness calls its function in a loop, perturbing one q from the
     previous output (a dependency chain), minimum over 5 repeats of >= 0.2 s,
     run alternately ``--rounds`` times, minimum kept.  Instructions: callgrind,
@@ -125,31 +128,48 @@ def build_harness(cm, x0, work: Path) -> Path:
     return out
 
 
-def measure(kind, arg, work: Path, pin, pin_count, rounds: int) -> dict:
+def measure(kind, arg, work: Path, pin, pin_count, mj, rounds: int) -> dict:
     spec = spatial_chain(arg).spec() if kind == "chain" else load_model(arg)
     cm = modelgen.load(spec, work / "model")
     rng = np.random.default_rng(1000 + cm.n)           # codegen_scaling's state
     x0 = np.concatenate([rng.uniform(-np.pi, np.pi, cm.n), rng.uniform(-2, 2, cm.n)])
     a = accelerations(cm.n)
     exe = build_harness(cm, x0, work / "harness")
+    g = float(cm.parameters["g"])
     if kind == "chain":
         tree = cs.pinocchio_chain_file(cm.n, cm.parameters, x0, work / "pin.txt")
+        xml = cs.chain_mjcf(cm.n, cm.parameters)
     else:
         links = cs.tree_links(spec, cm.parameters)
-        tree = cs.pinocchio_tree_file(links, float(cm.parameters["g"]), x0, work / "pin.txt")
-    mg_t, pin_t = [], []
+        tree = cs.pinocchio_tree_file(links, g, x0, work / "pin.txt")
+        xml = cs.tree_mjcf(cm.name, links, g)
+    xml_path, state = work / "model.xml", work / "model.state"
+    xml_path.write_text(xml)
+    state.write_text(" ".join(repr(float(v)) for v in x0) + "\n")
+    mj_cmd = [str(mj), str(xml_path), str(state), "inverse"] if mj else None
+    mg_t, pin_t, mj_t = [], [], []
     for _ in range(rounds):
         mg_t.append(float(cs._run_checked([str(exe)]).split()[0]) * 1e6)
         pin_t.append(float(cs._run_checked([str(pin), str(tree), "2"]).split()[0]) * 1e6)
-    tau_pin = np.array(cs._run_checked([str(pin), str(tree)]).splitlines()[3].split(), float)
+        if mj_cmd:
+            mj_t.append(float(cs._run_checked(mj_cmd).split()[0]) * 1e6)
     Q = cm.inverse_dynamics(0.0, x0, a)
+    peers = [np.array(cs._run_checked([str(pin), str(tree)]).splitlines()[3].split(), float)]
+    if mj_cmd:
+        import mujoco
+        model = mujoco.MjModel.from_xml_path(str(xml_path))
+        data = mujoco.MjData(model)
+        data.qpos[:], data.qvel[:], data.qacc[:] = x0[:cm.n], x0[cm.n:], a
+        mujoco.mj_inverse(model, data)
+        peers.append(np.array(data.qfrc_inverse))
     row = {"model": cm.name if kind == "file" else str(arg), "n": cm.n,
            "ops": cm.manifest["ops"]["inverse_dynamics"]["after_cse"],
-           "mg_us": min(mg_t), "pin_us": min(pin_t),
-           "agree": float(np.max(np.abs(Q - tau_pin)) / np.max(np.abs(Q)))}
+           "mg_us": min(mg_t), "pin_us": min(pin_t), "mj_us": min(mj_t) if mj_t else None,
+           "agree": max(float(np.max(np.abs(Q - tau)) / np.max(np.abs(Q))) for tau in peers)}
     row["mg_instr"] = cs.instructions_per_call([str(exe)])
     row["pin_instr"] = (cs.instructions_per_call([str(pin_count), str(tree), "2"])
                         if pin_count else None)
+    row["mj_instr"] = cs.instructions_per_call(mj_cmd) if mj_cmd else None
     return row
 
 
@@ -166,20 +186,29 @@ def main(argv=None) -> int:
         return 1
     pin_count = cs.build_pinocchio_harness(root / "pin", count=True)[0] \
         if cs.shutil.which("valgrind") else None
+    mj = cs.build_mujoco_harness(root / "mujoco")[0] if cs.have_mujoco() else None
+    if mj is None:
+        print("MuJoCo not available: its columns stay empty", file=sys.stderr)
     jobs = [("chain", n) for n in args.n] + ([("file", args.arm)] if args.arm else [])
     rows = []
     for kind, arg in jobs:
         print(f"... {kind} {arg}", file=sys.stderr, flush=True)
         rows.append(measure(kind, arg, root / f"{kind}_{Path(str(arg)).stem}", pin, pin_count,
-                            args.rounds))
-    print("# Inverse dynamics in C: modelgen against Pinocchio's rnea\n")
+                            mj, args.rounds))
+    print("# Inverse dynamics in C: modelgen against Pinocchio's rnea and MuJoCo's mj_inverse\n")
+
+    def ratio(peer, mine):
+        return f"**{cs.fmt(peer / mine if peer else None)}**"
     body = [[r["model"], r["n"], f"{r['ops'] / r['n']:.1f}", cs.fmt(r["mg_us"]),
-             cs.fmt(r["pin_us"]), f"**{cs.fmt(r['pin_us'] / r['mg_us'])}**",
-             cs.fmt(r["mg_instr"], ",.0f"), cs.fmt(r["pin_instr"], ",.0f"),
-             f"**{cs.fmt(r['pin_instr'] / r['mg_instr'] if r['pin_instr'] else None)}**",
+             cs.fmt(r["pin_us"]), cs.fmt(r["mj_us"]), ratio(r["pin_us"], r["mg_us"]),
+             ratio(r["mj_us"], r["mg_us"]), cs.fmt(r["mg_instr"], ",.0f"),
+             cs.fmt(r["pin_instr"], ",.0f"), cs.fmt(r["mj_instr"], ",.0f"),
+             ratio(r["pin_instr"], r["mg_instr"]), ratio(r["mj_instr"], r["mg_instr"]),
              f"{r['agree']:.1e}"] for r in rows]
-    print(cs.markdown(["model", "n", "ops / coordinate", "modelgen µs", "rnea µs", "rnea / mg",
-                       "modelgen instr", "rnea instr", "instr ratio", "agree"], body))
+    print(cs.markdown(["model", "n", "ops / coordinate", "modelgen µs", "rnea µs",
+                       "mj_inverse µs", "rnea / mg", "mj_inverse / mg", "modelgen instr",
+                       "rnea instr", "mj_inverse instr", "instr: rnea / mg",
+                       "instr: mj_inverse / mg", "agree"], body))
     cs.shutil.rmtree(root, ignore_errors=True)
     return 0
 
