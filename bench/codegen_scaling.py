@@ -134,13 +134,17 @@ COUNT_CALLS = 200        # calls per callgrind count (instructions_per_call)
 # C harnesses
 # ---------------------------------------------------------------------------------
 
-_MG_HARNESS = r"""/* Timing harness for {name}_rhs, written by bench/codegen_scaling.py. */
+_MG_HARNESS = r"""/* {what}, written by bench/codegen_scaling.py.
+ * No argument: prints the best time per call, the loops, the status and a sink.
+ * K: K calls untimed, then the status and the sink (for callgrind). */
 #define _POSIX_C_SOURCE 199309L
 #include <stdio.h>
+#include <stdlib.h>
 #include <time.h>
 #include "{name}.h"
 
 #define NX {nx}
+#define NOUT {nout}
 
 static double now(void)
 {{
@@ -153,7 +157,7 @@ static const double x0[NX] = {{{x0}}};
 static const double p[{np_}] = {{{p}}};
 static double pd[{NAME}_NPD_ALLOC];
 static double u[{nu_}];
-static double x[NX], xdot[NX];
+static double x[NX], a[NX], out[NOUT];
 static int status;
 static double sink;
 
@@ -165,22 +169,29 @@ static double run(long loops)
     const double start = now();
     for (k = 0; k < loops; ++k) {{
         const int j = (int)(k % NX);
-        x[j] = x0[j] + 1e-9 * xdot[NX - 1 - j];
-        status |= {name}_rhs_prepared(0.0, x, u, p, pd, xdot);
-        sink += xdot[NX - 1];
+        x[j] = x0[j] + 1e-9 * out[NOUT - 1 - j % NOUT];
+        status |= {call};
+        sink += out[NOUT - 1];
     }}
     return now() - start;
 }}
 
-int main(void)
+int main(int argc, char **argv)
 {{
     long loops = 1;
     int r, i;
     double best = 1e300;
-    for (i = 0; i < NX; ++i)
+    for (i = 0; i < NX; ++i) {{
         x[i] = x0[i];
+        a[i] = 0.3 * (double)(i % 3) - 0.2;     /* accelerations, for inverse dynamics */
+    }}
     {name}_prepare(p, pd);      /* once, as the peers' models hold their inertias */
-    status = {name}_rhs_prepared(0.0, x, u, p, pd, xdot);
+    status = {call};
+    if (argc == 2) {{
+        run(atol(argv[1]));
+        printf("%d %.17g\n", status, sink);
+        return 0;
+    }}
     while (run(loops) < {min_seconds})
         loops *= 2;
     for (r = 0; r < {repeats}; ++r) {{
@@ -356,24 +367,14 @@ def _c_array(values) -> str:
     return ", ".join(repr(float(v)) for v in values)
 
 
-def build_rhs_harness(cm, x0, work: Path):
-    """Compile the C timing harness of ``<name>_rhs``; returns (executable, command).
-
-    ``<name>.c`` is compiled by the exact command modelgen's build used for the
-    part holding the rhs (from the manifest), the harness itself at -O2.
-    """
+def compile_model(cm, work: Path):
+    """``<name>.c``'s integration path (part 2: the rhs, inverse dynamics...) compiled
+    by the exact command modelgen's build used (from the manifest) into
+    ``work/model_rhs.o``; returns that command."""
     from modelgen.codegen.build import compile_flags, compiler
     name, manifest = cm.name, cm.manifest
     src_dir = Path(cm.path).parent
     work.mkdir(parents=True, exist_ok=True)
-    harness = work / "rhs_bench.c"
-    harness.write_text(_MG_HARNESS.format(
-        name=name, NAME=name.upper(), nx=cm.nx, x0=_c_array(x0),
-        np_=max(len(cm.parameters), 1),
-        p=_c_array(cm.params()) or "0.0", nu_=max(len(cm.inputs), 1),
-        min_seconds=MIN_SECONDS, repeats=REPEATS))
-
-    # The rhs lives in part 2 of <name>.c; compile it exactly as the build did.
     commands = [shlex.split(c) for c in manifest.get("compile_commands", [])]
     part2 = [c for c in commands if "-DMG_PART=2" in c]
     if part2:
@@ -384,45 +385,44 @@ def build_rhs_harness(cm, x0, work: Path):
         statements = max(r["statements"] for r in manifest["ops"].values())
         cmd = [*compiler(), *compile_flags(statements, 2), "-DMG_PART=2", "-c",
                str(src_dir / f"{name}.c"), "-o", str(work / "model_rhs.o")]
-    cc = compiler()
     _run_checked(cmd)
-    _run_checked([*cc, "-O2", "-std=c99", f"-I{src_dir}", "-c", str(harness),
-                  "-o", str(work / "rhs_bench.o")])
-    exe = work / "rhs_bench"
+    return shlex.join(cmd)
+
+
+def build_model_harness(cm, x0, work: Path, function: str = "rhs_prepared"):
+    """Compile the C harness (:data:`_MG_HARNESS`) of ``<name>_rhs_prepared`` or of
+    ``<name>_inverse_dynamics`` (at the accelerations 0.3 (i mod 3) - 0.2); returns
+    (executable, the command that compiled the model's C).  The harness itself is
+    compiled at -O2.  It times the function, or with an argument K calls it K times
+    for :func:`instructions_per_call`.
+    """
+    from modelgen.codegen.build import compiler
+    name = cm.name
+    src_dir = Path(cm.path).parent
+    command = compile_model(cm, work)
+    if function == "rhs_prepared":
+        call, nout = f"{name}_rhs_prepared(0.0, x, u, p, pd, out)", cm.nx
+    elif function == "inverse_dynamics":
+        call, nout = f"({name}_inverse_dynamics(0.0, x, a, u, p, out), 0)", cm.n
+    else:
+        raise ValueError(f"no harness for {function!r}")
+    harness = work / f"{function}_bench.c"
+    harness.write_text(_MG_HARNESS.format(
+        what=f"Harness of {name}_{function}", name=name, NAME=name.upper(), nx=cm.nx,
+        nout=nout, call=call, x0=_c_array(x0), np_=max(len(cm.parameters), 1),
+        p=_c_array(cm.params()) or "0.0", nu_=max(len(cm.inputs), 1),
+        min_seconds=MIN_SECONDS, repeats=REPEATS))
+    exe = work / f"{function}_bench"
     # the model's integrate wrappers call the shared integrators, copied beside it
-    _run_checked([*cc, "-O2", "-std=c99", f"-I{src_dir}", str(work / "rhs_bench.o"),
+    _run_checked([*compiler(), "-O2", "-std=c99", f"-I{src_dir}", str(harness),
                   str(work / "model_rhs.o"), str(src_dir / "mg_integrate.c"), "-o", str(exe),
                   "-lm"])
-    return exe, shlex.join(cmd)
+    return exe, command
 
 
-_MG_COUNT = r"""/* {name}_rhs_prepared called K times (argv[1]), for callgrind
- * (bench/codegen_scaling.py). */
-#include <stdio.h>
-#include <stdlib.h>
-#include "{name}.h"
-static const double x0[{nx}] = {{{x0}}};
-static const double p[{np_}] = {{{p}}};
-static double pd[{NAME}_NPD_ALLOC];
-static double u[{nu_}];
-int main(int argc, char **argv)
-{{
-    double x[{nx}], xdot[{nx}] = {{0}}, sink = 0.0;
-    long k, calls = argc == 2 ? atol(argv[1]) : 0;
-    int status = 0;
-    for (k = 0; k < {nx}; ++k)
-        x[k] = x0[k];
-    {name}_prepare(p, pd);
-    for (k = 0; k < calls; ++k) {{
-        const int j = (int)(k % {nx});
-        x[j] = x0[j] + 1e-9 * xdot[{nx} - 1 - j];
-        status |= {name}_rhs_prepared(0.0, x, u, p, pd, xdot);
-        sink += xdot[{nx} - 1];
-    }}
-    printf("%d %.17g\n", status, sink);
-    return 0;
-}}
-"""
+def build_rhs_harness(cm, x0, work: Path):
+    """The harness of ``<name>_rhs_prepared`` (:func:`build_model_harness`)."""
+    return build_model_harness(cm, x0, work)
 
 
 def callgrind_total(cmd) -> int:
@@ -451,24 +451,13 @@ def rhs_instructions(cm, x0, work: Path, calls: int = COUNT_CALLS):
     of the harness loop; :func:`instructions_per_call`), or None without valgrind."""
     if shutil.which("valgrind") is None:
         return None
-    exe, _ = build_rhs_harness(cm, x0, work)        # compiles model_rhs.o as the build did
-    src = work / "rhs_count.c"
-    src.write_text(_MG_COUNT.format(name=cm.name, NAME=cm.name.upper(), nx=cm.nx,
-                                    x0=_c_array(x0),
-                                    np_=max(len(cm.parameters), 1),
-                                    p=_c_array(cm.params()) or "0.0",
-                                    nu_=max(len(cm.inputs), 1)))
-    from modelgen.codegen.build import compiler
-    src_dir = Path(cm.path).parent
-    counter = work / "rhs_count"
-    _run_checked([*compiler(), "-O2", "-std=c99", f"-I{src_dir}", str(src),
-                  str(work / "model_rhs.o"), str(src_dir / "mg_integrate.c"), "-o",
-                  str(counter), "-lm"])
-    return instructions_per_call([str(counter)], calls)
+    exe, _ = build_rhs_harness(cm, x0, work)
+    return instructions_per_call([str(exe)], calls)
 
 
 def run_rhs_harness(exe: Path) -> float:
-    """One run of the rhs harness: per-call time in µs (min over REPEATS)."""
+    """One run of a harness of :func:`build_model_harness`: per-call time in µs (min
+    over REPEATS)."""
     best, _loops, status, _sink = _run_checked([str(exe)]).split()
     if int(status):
         raise RuntimeError(f"{exe}: the rhs returned status {status}")

@@ -17,8 +17,8 @@ Method
     contacts, damping or armature) and modelgen's Q = A a + h - tau, the same
     thing for a model whose only effect is gravity (*agree*: the largest
     difference to modelgen over the largest |Q| at x0, of either peer).
-    Time: each harness calls its function in a loop, perturbing one q from the
-    previous output (a dependency chain), minimum over 5 repeats of >= 0.2 s,
+    Time: each harness calls its function in a loop, perturbing one entry of x
+    from the previous output (a dependency chain), minimum over 5 repeats of >= 0.2 s,
     run alternately ``--rounds`` times, minimum kept.  Instructions: callgrind,
     K = 200 calls minus none (``codegen_scaling.instructions_per_call``);
     Pinocchio counted in its build without AVX-512.
@@ -40,92 +40,13 @@ cs = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(cs)
 
 import modelgen  # noqa: E402
-from modelgen.codegen.build import compiler  # noqa: E402
 from modelgen.model.api import load_model  # noqa: E402
 from modelgen.model.chains import spatial_chain  # noqa: E402
 
-_HARNESS = r"""/* {name}_inverse_dynamics in a loop, written by bench/inverse_dynamics.py.
- * No argument: prints the best time per call.  K: K calls untimed (callgrind). */
-#define _POSIX_C_SOURCE 199309L
-#include <stdio.h>
-#include <stdlib.h>
-#include <time.h>
-#include "{name}.h"
-#define NX {nx}
-#define NV {nv}
-static const double x0[NX] = {{{x0}}};
-static const double p[{np_}] = {{{p}}};
-static double u[{nu_}];
-static double x[NX], a[NV], Q[NV], sink;
-
-static double now(void)
-{{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
-}}
-
-static double run(long loops)
-{{
-    long k;
-    const double start = now();
-    for (k = 0; k < loops; ++k) {{
-        const int j = (int)(k % {nq});
-        x[j] = x0[j] + 1e-9 * Q[NV - 1 - j % NV];
-        {name}_inverse_dynamics(0.0, x, a, u, p, Q);
-        sink += Q[NV - 1];
-    }}
-    return now() - start;
-}}
-
-int main(int argc, char **argv)
-{{
-    long loops = 1;
-    int r, i;
-    double best = 1e300;
-    for (i = 0; i < NX; ++i)
-        x[i] = x0[i];
-    for (i = 0; i < NV; ++i)
-        a[i] = 0.3 * (double)(i % 3) - 0.2;
-    if (argc == 2) {{
-        run(atol(argv[1]));
-        printf("%.17g\n", sink);
-        return 0;
-    }}
-    while (run(loops) < {min_seconds})
-        loops *= 2;
-    for (r = 0; r < {repeats}; ++r) {{
-        const double t = run(loops) / (double)loops;
-        if (t < best)
-            best = t;
-    }}
-    printf("%.9e %.17g\n", best, sink);
-    return 0;
-}}
-"""
-
 
 def accelerations(n: int) -> np.ndarray:
+    """The accelerations every harness uses (codegen_scaling's C harnesses too)."""
     return np.array([0.3 * (i % 3) - 0.2 for i in range(n)])
-
-
-def build_harness(cm, x0, work: Path) -> Path:
-    """The timing and counting harness of ``<name>_inverse_dynamics`` (``-O2``, like
-    the build's integration path, linked with the built library's objects' source)."""
-    src_dir = Path(cm.path).parent
-    work.mkdir(parents=True, exist_ok=True)
-    src = work / "id_bench.c"
-    src.write_text(_HARNESS.format(
-        name=cm.name, nx=cm.nx, nv=cm.n, nq=cm.nq, x0=cs._c_array(x0),
-        np_=max(len(cm.parameters), 1), p=cs._c_array(cm.params()) or "0.0",
-        nu_=max(len(cm.inputs), 1), min_seconds=cs.MIN_SECONDS, repeats=cs.REPEATS))
-    # the model's C compiled by the command its build used for the integration path
-    exe, _ = cs.build_rhs_harness(cm, x0, work / "rhs")
-    out = work / "id_bench"
-    cs._run_checked([*compiler(), "-O2", "-std=c99", f"-I{src_dir}", str(src),
-                     str(work / "rhs" / "model_rhs.o"), str(src_dir / "mg_integrate.c"),
-                     "-o", str(out), "-lm"])
-    return out
 
 
 def measure(kind, arg, work: Path, pin, pin_count, mj, rounds: int) -> dict:
@@ -134,7 +55,7 @@ def measure(kind, arg, work: Path, pin, pin_count, mj, rounds: int) -> dict:
     rng = np.random.default_rng(1000 + cm.n)           # codegen_scaling's state
     x0 = np.concatenate([rng.uniform(-np.pi, np.pi, cm.n), rng.uniform(-2, 2, cm.n)])
     a = accelerations(cm.n)
-    exe = build_harness(cm, x0, work / "harness")
+    exe, _ = cs.build_model_harness(cm, x0, work / "harness", "inverse_dynamics")
     g = float(cm.parameters["g"])
     if kind == "chain":
         tree = cs.pinocchio_chain_file(cm.n, cm.parameters, x0, work / "pin.txt")
@@ -149,7 +70,7 @@ def measure(kind, arg, work: Path, pin, pin_count, mj, rounds: int) -> dict:
     mj_cmd = [str(mj), str(xml_path), str(state), "inverse"] if mj else None
     mg_t, pin_t, mj_t = [], [], []
     for _ in range(rounds):
-        mg_t.append(float(cs._run_checked([str(exe)]).split()[0]) * 1e6)
+        mg_t.append(cs.run_rhs_harness(exe))
         pin_t.append(float(cs._run_checked([str(pin), str(tree), "2"]).split()[0]) * 1e6)
         if mj_cmd:
             mj_t.append(float(cs._run_checked(mj_cmd).split()[0]) * 1e6)

@@ -11,8 +11,8 @@ Method
       (libm's sin and cos): the same C text, compiled by the build's own
       command, so only the trig functions differ.
     * instructions per rhs call: callgrind, ``<name>_rhs`` inclusive of the
-      trig functions (bench/codegen_scaling.py's ``rhs_instructions``, 2,000
-      calls from a seeded random state); noise-free.
+      trig functions (bench/codegen_scaling.py's ``rhs_instructions``, 200
+      calls minus none from a seeded random state); noise-free.
     * rhs time: bench/codegen_scaling.py's harness (min over 5 repeats of
       >= 0.2 s), the two builds alternated ``--rounds`` times, minimum kept:
       on a shared machine only the minimum means something.

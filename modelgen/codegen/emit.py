@@ -327,6 +327,12 @@ def unrolled_ldlt(n: int, tol: str, plan: Elimination | None = None) -> list:
     return lines
 
 
+@functools.lru_cache(maxsize=None)
+def _dense_products(n: int) -> int:
+    """The products of the straight-line LDL^T of a dense n x n A."""
+    return elimination([[True] * n] * n).products()
+
+
 def solve_code(n: int, tol: str, pattern=None) -> dict:
     """How the crba rhs solves A q_ddot = b, for the template: ``solve_lines``, a
     straight-line LDL^T (:func:`unrolled_ldlt`), or ``solve_loop``, the tables of
@@ -341,8 +347,7 @@ def solve_code(n: int, tol: str, pattern=None) -> dict:
                 "solve_loop": None}
     plan = elimination(pattern)
     products = plan.products()
-    budget = elimination([[True] * SPARSE_UNROLL_SIZE] * SPARSE_UNROLL_SIZE).products()
-    if n <= UNROLL_SOLVE or products <= budget:
+    if n <= UNROLL_SOLVE or products <= _dense_products(SPARSE_UNROLL_SIZE):
         return {"solve_lines": [f"/* eliminated in the order "
                                 f"{', '.join(str(v + 1) for v in plan.order)}, the structural "
                                 f"zeros of A skipped: {products} products, "

@@ -24,7 +24,7 @@ from modelgen.derive.rnea import derive_inverse_dynamics, derive_velocity_terms
 from modelgen.errors import ModelError
 from modelgen.codegen.emit import (ABI_VERSION, emit_sources, integrator_sources, print_routine,
                                    runtime_sources, template_context, templates_digest)
-from modelgen.derive.jacobian import accelerations, derive_jacobian_terms
+from modelgen.derive.jacobian import accelerations, derive_jacobian_terms, residual
 from modelgen.derive.linearize import derive_linearization_terms
 from modelgen.derive.kinematics import derive_kinematics
 from modelgen.derive.outputs import derive_outputs
@@ -294,16 +294,15 @@ def generate(spec: ModelSpec, out_dir=None, *, force: bool = False, outputs=(),
         # velocity next to its forces)
         builder = GraphBuilder(graph)
         eqs = replace(eqs, h=derive_velocity_terms(builder, tree, eqs.qd))
-        # inverse dynamics A qdd + h by RNEA too, sharing the velocities
+        # inverse dynamics A qdd + h - tau, A qdd + h by RNEA too, sharing the velocities
         qdd = accelerations(len(eqs.qd))
-        inertial = derive_inverse_dynamics(builder, tree, eqs.qd, qdd)
+        inverse = (qdd, tuple(e - tau for e, tau in
+                              zip(derive_inverse_dynamics(builder, tree, eqs.qd, qdd), eqs.tau)))
         graph = builder.freeze()
         forward = replace(forward, graph=graph)
-    else:                   # A qdd + h from the composite-body A and h
-        qdd = accelerations(len(eqs.qd))
-        inertial = tuple(sum((a * b for a, b in zip(row, qdd)), eqs.h[k])
-                         for k, row in enumerate(eqs.A))
-    inverse = (qdd, tuple(e - tau for e, tau in zip(inertial, eqs.tau)))
+    else:       # minus the residual tau - h - A qdd of the composite-body equations
+        qdd, r = residual(eqs)
+        inverse = (qdd, tuple(-e for e in r))
     linearization = None
     if linearize:       # one pass for A, B, C, D; the Jacobian is its state columns
         linearization = derive_linearization_terms(
