@@ -78,6 +78,7 @@ from typing import Mapping, Optional
 import sympy
 
 from modelgen.errors import ExpressionError
+from modelgen.model.expr_print import FUNCTION_NAMES, Unprintable, expression_text, integer_text
 
 __all__ = [
     "FUNCTIONS", "CONSTANTS", "MAX_LENGTH", "MAX_DEPTH", "MAX_NUMBER_CHARS",
@@ -111,16 +112,6 @@ FUNCTIONS: Mapping[str, tuple] = {
 
 #: Named constants of the grammar.
 CONSTANTS: Mapping[str, sympy.Expr] = {"pi": sympy.pi}
-
-#: sympy function class -> name in the grammar (for the printer).
-_FUNCTION_NAMES = {
-    sympy.sin: "sin", sympy.cos: "cos", sympy.tan: "tan",
-    sympy.asin: "asin", sympy.acos: "acos", sympy.atan: "atan",
-    sympy.atan2: "atan2",
-    sympy.sinh: "sinh", sympy.cosh: "cosh", sympy.tanh: "tanh",
-    sympy.exp: "exp", sympy.log: "log",
-    sympy.Abs: "abs", sympy.sign: "sign",
-}
 
 _GRAMMAR_HINT = ("use numbers, names, + - * / **, parentheses and the functions "
                  + " ".join(FUNCTIONS))
@@ -554,7 +545,7 @@ def _float_value(e, memo: dict) -> float:
         elif e.is_Pow:
             name = "**"
         else:
-            name = _FUNCTION_NAMES.get(e.func)
+            name = FUNCTION_NAMES.get(e.func)
             if name is None:
                 raise _NotADouble(f"{_shorten(str(e))} is not a real number",
                                   "check divisors, logarithms, roots and powers")
@@ -595,7 +586,7 @@ def _check_numbers(result: sympy.Expr, text: Optional[str]) -> None:
         e = stack.pop()
         if e.is_Rational:
             for part in (e.p, e.q):
-                if len(_fmt_integer(abs(part))) > MAX_NUMBER_CHARS:
+                if len(integer_text(abs(part))) > MAX_NUMBER_CHARS:
                     raise ExpressionParseError(
                         f"a number in the expression has more than {MAX_NUMBER_CHARS} digits",
                         text, None, "use fewer significant digits")
@@ -703,7 +694,7 @@ def _stable(result: sympy.Expr, text: str, allowed: Mapping[str, sympy.Symbol]) 
     for _ in range(4):
         try:
             printed = _fmt(result)[0]
-        except _Unprintable as exc:
+        except Unprintable as exc:
             raise ExpressionParseError(
                 f"sympy rewrites the expression as {_quote(str(result))}, and "
                 f"{type(exc.node).__name__} is not part of modelgen's expression grammar",
@@ -720,9 +711,6 @@ def _stable(result: sympy.Expr, text: str, allowed: Mapping[str, sympy.Symbol]) 
 
 
 # -- printer -----------------------------------------------------------------
-
-_PREC_ADD, _PREC_MUL, _PREC_NEG, _PREC_POW, _PREC_ATOM = 10, 20, 25, 30, 40
-
 
 def format_expression(expr) -> str:
     """Write a sympy expression in the grammar of :func:`parse_expression`.
@@ -754,132 +742,18 @@ def format_expression(expr) -> str:
                                    None)
     try:
         return _fmt(expr)[0]
-    except _Unprintable as exc:
+    except Unprintable as exc:
         raise ExpressionParseError(
             f"cannot write {_quote(str(exc.node))}: {type(exc.node).__name__} is not part of "
             "modelgen's expression grammar", None, None, _GRAMMAR_HINT) from None
 
 
-def _wrap(item: tuple, minimum: int) -> str:
-    text, prec = item
-    return f"({text})" if prec < minimum else text
-
-
 def _fmt(e) -> tuple:
-    """(text, precedence) of ``e``; the precedence tells the caller when to wrap."""
-    if e.is_Integer:
-        text = _fmt_integer(abs(e.p))
-        return ("-" + text, _PREC_NEG) if e < 0 else (text, _PREC_ATOM)
-    if e.is_Rational:
-        denominator = _fmt_integer(e.q)
-        if denominator.startswith("1e"):  # a small decimal fraction: 3e-20
-            text = f"{abs(e.p)}e-{denominator[2:]}"
-            return ("-" + text, _PREC_NEG) if e.p < 0 else (text, _PREC_ATOM)
-        text = f"{_fmt_integer(abs(e.p))}/{denominator}"
-        return ("-" + text, _PREC_NEG) if e.p < 0 else (text, _PREC_MUL)
-    if isinstance(e, sympy.Float):
-        value = float(e)
-        if not math.isfinite(value):
-            raise ExpressionParseError(f"{value!r} is not a finite number", None)
-        return (repr(value), _PREC_NEG if value < 0 else _PREC_ATOM)
-    if e is sympy.pi:
-        return ("pi", _PREC_ATOM)
-    if e is sympy.E:
-        return ("exp(1)", _PREC_ATOM)
-    if e.is_Symbol:
-        return (e.name, _PREC_ATOM)
-    if e.is_Add:
-        return _fmt_add(e)
-    if e.is_Mul:
-        return _fmt_mul(e)
-    if e.is_Pow:
-        return _fmt_pow(e.base, e.exp)
-    name = _FUNCTION_NAMES.get(e.func)
-    if name is not None and e.args:
-        return (f"{name}({', '.join(_fmt(a)[0] for a in e.args)})", _PREC_ATOM)
-    raise _Unprintable(e)
-
-
-def _fmt_integer(n: int) -> str:
-    """A non-negative integer as a literal: digits, or ``<digits>e<k>`` when shorter.
-
-    >>> _fmt_integer(10**19), _fmt_integer(1000), _fmt_integer(12 * 10**40)
-    ('1e19', '1000', '12e40')
-    """
-    digits = str(n)
-    if len(digits) <= 15:
-        return digits
-    mantissa = digits.rstrip("0")
-    zeros = len(digits) - len(mantissa)
-    if zeros < 3:
-        return digits
-    return f"{mantissa}e{zeros}"
-
-
-class _Unprintable(Exception):
-    """Internal: a node outside the grammar (turned into ExpressionParseError)."""
-
-    def __init__(self, node):
-        super().__init__(str(node))
-        self.node = node
-
-
-def _negative_coefficient(term) -> bool:
-    coefficient = term.as_coeff_Mul()[0]
-    return coefficient.is_Number and coefficient < 0
-
-
-def _fmt_add(e) -> tuple:
-    parts = []
-    for i, term in enumerate(e.as_ordered_terms()):
-        if i and _negative_coefficient(term):
-            parts.append(" - " + _wrap(_fmt(-term), _PREC_MUL))
-        elif i:
-            parts.append(" + " + _wrap(_fmt(term), _PREC_MUL))
-        else:
-            parts.append(_wrap(_fmt(term), _PREC_MUL))
-    return ("".join(parts), _PREC_ADD)
-
-
-def _fmt_mul(e) -> tuple:
-    coefficient, factors = e.as_coeff_mul()
-    sign = ""
-    if coefficient.is_Number and coefficient < 0:
-        sign, coefficient = "-", -coefficient
-    numerator, denominator = [], []
-    if coefficient.is_Rational:
-        if coefficient.p != 1:
-            numerator.append((_fmt_integer(coefficient.p), _PREC_ATOM))
-        if coefficient.q != 1:
-            denominator.append((_fmt_integer(coefficient.q), _PREC_ATOM))
-    elif coefficient != 1:  # a Float coefficient
-        numerator.append(_fmt(coefficient))
-    for factor in factors:
-        if factor.is_Pow and factor.exp.is_Number and factor.exp < 0:
-            if factor.exp == -1:
-                denominator.append(_fmt(factor.base))
-            else:
-                denominator.append(_fmt_pow(factor.base, -factor.exp))
-        else:
-            numerator.append(_fmt(factor))
-    if sign and numerator and numerator[0][1] <= _PREC_MUL:
-        # "-(a + b)*c" would negate the sum before multiplying; "-1*(a + b)*c"
-        # keeps the -1 as a separate factor, as in the expression printed
-        numerator.insert(0, ("1", _PREC_ATOM))
-    text = "*".join(_wrap(item, _PREC_MUL + 1) for item in numerator) or "1"
-    for item in denominator:
-        text += "/" + _wrap(item, _PREC_POW)
-    return (sign + text, _PREC_NEG if sign else _PREC_MUL)
-
-
-def _fmt_pow(base, exponent) -> tuple:
-    if exponent == sympy.S.Half:
-        return (f"sqrt({_fmt(base)[0]})", _PREC_ATOM)
-    if exponent.is_Number and exponent < 0:
-        if exponent == -1:
-            inner = _fmt(base)
-        else:
-            inner = _fmt_pow(base, -exponent)
-        return ("1/" + _wrap(inner, _PREC_POW), _PREC_MUL)
-    return (_wrap(_fmt(base), _PREC_ATOM) + "**" + _wrap(_fmt(exponent), _PREC_ATOM),
-            _PREC_POW)
+    """:func:`~modelgen.model.expr_print.expression_text`, with a non-finite float
+    reported as the :class:`ExpressionParseError` it is."""
+    try:
+        return expression_text(e)
+    except Unprintable as exc:
+        if exc.reason:
+            raise ExpressionParseError(exc.reason, None) from None
+        raise
