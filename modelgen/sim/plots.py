@@ -67,7 +67,7 @@ def result_figure(res, *, title: str = "", conservative=None):
             scale = res.energy_change().scale   # the largest |T| + |V|: E(0) may be 0
             change = np.abs(total[1:] - total[0]) / (scale if scale > 0 else 1.0)
             ax.semilogy(t[1:], np.maximum(change, 1e-17))
-            ax.set_ylabel("|E - E(0)| / max(|T| + |V|)" if scale > 0 else "|E - E(0)| [J]")
+            ax.set_ylabel("|E - E(0)| / E scale" if scale > 0 else "|E - E(0)| [J]")
         else:
             name = panel[1]
             values = np.asarray(res.outputs[name]).reshape(len(t), -1)

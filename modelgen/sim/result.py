@@ -118,9 +118,9 @@ class Result:
         """E(end) - E(0) of a run with recorded energies, against the largest
         ``|T| + |V|`` of the run (see :class:`EnergyChange`).
 
-        >>> r = Result(np.zeros(3), np.zeros((2, 3)), energy=np.array([[0., 0.], [1., -1.], [2., -2.2]]))
-        >>> r.energy_change().relative.round(6)
-        -0.05
+        >>> T_V = np.array([[0.0, 0.0], [1.0, -1.0], [2.0, -3.0]])   # from rest, E(0) = 0
+        >>> Result(np.arange(3.0), np.zeros((2, 3)), energy=T_V).energy_change()
+        EnergyChange(change=-1.0, scale=5.0, relative=-0.2)
         """
         if self.energy is None or not len(self.energy):
             raise ValueError("this result has no recorded energies")

@@ -8,6 +8,7 @@ callable with cached pointers and preallocated buffers.
 """
 from __future__ import annotations
 
+import numbers
 from pathlib import Path
 
 import numpy as np
@@ -171,7 +172,8 @@ class CompiledModel:
         """
         if u is None:
             return np.zeros(len(self.inputs))
-        if len(self.inputs) == 1 and not isinstance(u, dict) and np.ndim(u) == 0:
+        if len(self.inputs) == 1 and (isinstance(u, numbers.Number)
+                                      or (isinstance(u, np.ndarray) and u.ndim == 0)):
             u = [u]
         if isinstance(u, dict):
             out = np.zeros(len(self.inputs))
