@@ -216,17 +216,15 @@ def _report(result, out: Path, name: str, args, title: str, conservative,
                                   trace=args.trace, movie=args.animate_format):
             print(f"wrote {path}")
     if result.energy is not None and len(result.t):
-        total = result.energy.sum(axis=1)
-        scale = max(float(np.max(np.abs(result.energy[0]))), 1e-300)
-        change = (total[-1] - total[0]) / scale
-        label = "relative energy error" if conservative else "relative energy change"
-        print(f"{label} {change:.3e} (against the initial energies); {len(result.t)} samples "
+        energy = result.energy_change()
+        print(f"{energy.describe(bool(conservative))}; {len(result.t)} samples "
               f"to t = {result.t[-1]:g} s")
         if result.work:
             balance = float(np.max(np.abs(result.info["energy_balance"])))
             work = ", ".join(f"{name} {w[-1]:.6g} J" for name, w in result.work.items())
+            relative = f" (relative {balance / energy.scale:.3e})" if energy.scale > 0 else ""
             print(f"work done: {work}; energy balance E - E(0) - sum of work: max "
-                  f"{balance:.3e} J (relative {balance / scale:.3e})")
+                  f"{balance:.3e} J{relative}")
     if result.info.get("stability_warning"):
         print(f"modelgen: warning: {result.info['stability_warning']}", file=sys.stderr)
     if not result.success:

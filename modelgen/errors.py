@@ -98,6 +98,19 @@ class SimulationError(ModelgenError):
     """Invalid arguments to a run-time call (wrong shapes, NaN parameters...)."""
 
 
+class ArgumentTypeError(SimulationError, TypeError):
+    """An argument of the Python API of the wrong type (``events=42``, an event's
+    ``terminal = "yes"``, an ``out=`` array of integers, a feedback ``u`` that
+    returns None): ``except TypeError`` catches it too, as with scipy's
+    ``solve_ivp``."""
+
+
+class ArgumentValueError(SimulationError, ValueError):
+    """An argument of the Python API of the right type but a wrong value (an
+    event's ``terminal = -1``, ``max_steps=2.5``, an ``out=`` array of the wrong
+    shape): ``except ValueError`` catches it too, as with scipy's ``solve_ivp``."""
+
+
 class MassMatrixError(SimulationError):
     """The mass matrix is not positive definite, or singular to working precision,
     at the given state (``kind`` says which)."""

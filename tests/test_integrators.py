@@ -543,12 +543,14 @@ def test_feedback_input_from_a_python_callable_works_with_every_method(dp, metho
     assert np.max(np.abs(res.y - ref.y)) < tol, (method, np.max(np.abs(res.y - ref.y)))
 
 
-def test_an_exception_in_the_input_callable_keeps_the_trajectory_so_far(sp):
+def test_an_exception_in_the_input_callable_is_raised_with_the_trajectory_so_far(sp):
     def broken(t, x):
         if t > 0.5:
             raise ValueError("input function broke")
         return []
-    res = sp.simulate([1.0, 0.0], (0, 2), u=broken)
+    with pytest.raises(ValueError, match="input function broke") as info:
+        sp.simulate([1.0, 0.0], (0, 2), u=broken)
+    res = info.value.partial_result
     assert res.status == capi.STATUS_BY_NAME["INPUT_ERROR"].code and not res.success
     assert "ValueError: input function broke" in res.message
     assert res.t[0] == 0.0 and 0.3 < res.t[-1] <= 0.6

@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import concurrent.futures
 import functools
+import numbers
 import signal
 import threading
 import warnings
@@ -36,7 +37,8 @@ import numpy as np
 
 from modelgen.codegen.capi import (ALIASES, LIMITS, MAX_EVENTS, METHODS, STAT_NAMES, STATUS,
                                    STATUS_BY_NAME, STOP_X, Method, define_values, work_size)
-from modelgen.errors import MassMatrixError, SimulationError
+from modelgen.errors import (ArgumentTypeError, ArgumentValueError, MassMatrixError,
+                             SimulationError)
 from modelgen.sim.conditioning import condition_number, failure_kind, growth_note
 from modelgen.sim.result import Result, make_result
 
@@ -49,6 +51,7 @@ __all__ = ["METHODS", "ALIASES", "STATUS", "Method", "method_of",
 BUFFER_FULL = STATUS_BY_NAME["BUFFER_FULL"].code
 MAX_STEPS = STATUS_BY_NAME["MAX_STEPS"].code
 INTERRUPTED = STATUS_BY_NAME["INTERRUPTED"].code
+INPUT_ERROR = STATUS_BY_NAME["INPUT_ERROR"].code
 #: the step budget of a run when max_steps is not given (fixed-step runs get at
 #: least the steps they need)
 DEFAULT_MAX_STEPS = 100_000
@@ -56,6 +59,19 @@ DEFAULT_MAX_STEPS = 100_000
 _LONG = np.dtype("l")
 #: fixed step counts from here on do not fit the C integrator's counter (a C long)
 _MAX_FIXED_STEPS = float(np.iinfo(_LONG).max)
+#: the smallest rtol of an adaptive run; a smaller one is raised to it with a warning,
+#: as solve_ivp does with its 100 eps.  Hairer's DOP853 and RODAS, which these
+#: integrators follow, refuse rtol <= 10 uround: below it the error estimate is
+#: rounding noise and the step size collapses
+MIN_RTOL = 10.0 * np.finfo(float).eps
+#: the smallest atol of an adaptive run (0 included), raised to it with a warning: the
+#: error norm and the initial step square ratios value / (atol + rtol |x|), which
+#: overflow past 1e154 (an infinite error norm, reported as a non-finite state) or
+#: are 0 / 0 for a component that stays at zero with atol = 0; from 1e-100 on,
+#: states and derivatives up to 1e50 stay representable
+MIN_ATOL = 1e-100
+#: the largest event count the C takes (an int)
+_MAX_COUNT = int(np.iinfo(np.intc).max)
 
 
 def method_of(name: str) -> Method:
@@ -134,6 +150,8 @@ def _checked(check):
     def wrapper(*args, **kwargs):
         try:
             return check(*args, **kwargs)
+        except SimulationError:         # already clear (ArgumentTypeError is a TypeError)
+            raise
         except (TypeError, ValueError, OverflowError) as exc:
             raise SimulationError(f"invalid argument to simulate ({check.__name__.strip('_')}): "
                                   f"{type(exc).__name__}: {exc}") from None
@@ -178,8 +196,29 @@ def _times(t_eval, t0, t1, sign=1.0):
     return np.ascontiguousarray(sign * t_eval)
 
 
+def _whole(value, what: str) -> int:
+    """``value`` as an int: an integer, or a float with an integral value (``1e6``);
+    never truncated (``2.5`` is an error, not 2)."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
+        raise ArgumentTypeError(f"{what} must be an integer, got {value!r}")
+    if not isinstance(value, numbers.Integral) and not float(value).is_integer():
+        raise ArgumentValueError(f"{what} must be a whole number, got {value!r}")
+    return int(value)
+
+
+def _floor(tol, least: float, name: str, stacklevel: int):
+    """``tol`` with every value below ``least`` raised to it, with a warning (as
+    solve_ivp raises rtol below 100 eps)."""
+    if np.all(tol >= least):
+        return tol
+    warnings.warn(f"{name} below {least:.3g} is raised to {least:.3g} "
+                  f"(the integrators cannot control errors below it)", RuntimeWarning,
+                  stacklevel=stacklevel + 1)
+    return np.maximum(tol, least)
+
+
 @_checked
-def _options(cm, method, rtol, atol, step, first_step, max_step, max_steps):
+def _options(cm, method, rtol, atol, step, first_step, max_step, max_steps, stacklevel=2):
     m = method_of(method)
     nx = cm.nx
     if step is None:
@@ -193,11 +232,16 @@ def _options(cm, method, rtol, atol, step, first_step, max_step, max_steps):
     rtol, atol = _tolerance(rtol, nx, "rtol"), _tolerance(atol, nx, "atol")
     if step is None and np.any(rtol + atol == 0):
         raise SimulationError("rtol and atol must not both be zero")
+    if step is None:
+        # ``stacklevel`` is the caller's (its frame 1); this check and its _checked
+        # wrapper come between
+        rtol = _floor(rtol, MIN_RTOL, "rtol", stacklevel + 2)
+        atol = _floor(atol, MIN_ATOL, "atol", stacklevel + 2)
     first = 0.0 if first_step is None else float(first_step)
     hmax = 0.0 if max_step is None or max_step == np.inf else float(max_step)
     if not (np.isfinite(first) and first >= 0 and np.isfinite(hmax) and hmax >= 0):
         raise SimulationError("first_step and max_step must be positive")
-    max_steps = min(int(max_steps), int(np.iinfo(_LONG).max))
+    max_steps = min(_whole(max_steps, "max_steps"), int(np.iinfo(_LONG).max))
     if max_steps < 1:
         raise SimulationError(f"max_steps must be >= 1, got {max_steps}")
     return m, rtol, atol, fixed, first, hmax, max_steps
@@ -206,11 +250,12 @@ def _options(cm, method, rtol, atol, step, first_step, max_step, max_steps):
 class _Inputs:
     """The ``mg_inputs`` struct of one call, and what its pointers point to.
 
-    ``u`` is None (zeros), a constant vector or dict, samples ``(times,
-    values, "linear" | "hold")``, or a callable ``u(t, x)`` called from the C
-    through a cffi callback (feedback; works with every method).  An exception
-    in the callable stops the integration with status INPUT_ERROR; the
-    trajectory up to it is kept and the exception is named in the message.
+    ``u`` is None (zeros), a constant vector, dict or (one input) number,
+    samples ``(times, values, "linear" | "hold")``, or a callable ``u(t, x)``
+    called from the C through a cffi callback (feedback; works with every
+    method) that returns any constant form but None.  An exception in the
+    callable stops the integration with status INPUT_ERROR and is kept in
+    ``errors``; :func:`simulate` re-raises it.
     """
 
     def __init__(self, cm, u, sign=1.0):
@@ -223,7 +268,13 @@ class _Inputs:
 
             def call(ctx, t, x_ptr, u_ptr):
                 x = np.frombuffer(ffi.buffer(x_ptr, 8 * nx), dtype=float).copy()
-                value = cm.input_vector(u(sign * t, x))
+                got = u(sign * t, x)
+                if got is None:         # input_vector's "zeros": here a forgotten return
+                    raise ArgumentTypeError(
+                        f"{cm.name}: the feedback u(t, x) returned None at t={sign * t!r}; "
+                        f"it must return the inputs ({', '.join(cm.inputs) or 'none'}) as a "
+                        "sequence or a dict by name" + (", or a number" if nu == 1 else ""))
+                value = cm.input_vector(got)
                 for k in range(nu):
                     u_ptr[k] = value[k]
                 return 0
@@ -257,34 +308,59 @@ class _Inputs:
 
 
 def _events(events):
+    """The event functions as a list: ``events`` is None, a callable ``g(t, x)`` or
+    a sequence of them."""
     if events is None:
         return []
     if callable(events):
         events = [events]
-    events = list(events)
+    what = "events must be a callable g(t, x) or a sequence of callables"
+    if isinstance(events, (str, bytes, dict)):
+        raise ArgumentTypeError(f"{what}, got {events!r}")
+    try:
+        events = list(events)
+    except TypeError:
+        raise ArgumentTypeError(f"{what}, got {events!r}") from None
     if len(events) > MAX_EVENTS:
         raise SimulationError(f"at most {MAX_EVENTS} event functions, got {len(events)}")
-    for ev in events:
+    for i, ev in enumerate(events):
         if not callable(ev):
-            raise SimulationError(f"events must be callables g(t, x), got {ev!r}")
+            raise ArgumentTypeError(f"{what}; events[{i}] is {ev!r}")
     return events
 
 
-def _terminal(ev) -> int:
+def _event_name(ev, i: int) -> str:
+    return f"event {i} ({getattr(ev, '__name__', type(ev).__name__)})"
+
+
+def _terminal(ev, i: int) -> int:
+    """The event's ``terminal`` as solve_ivp reads it: False, None or 0 never stop;
+    True stops at the first occurrence, a whole number k >= 1 at the k-th."""
     value = getattr(ev, "terminal", False)
-    if value is True:
-        return 1
-    if value is False or value is None:
+    if value is None or isinstance(value, (bool, np.bool_)):
+        return int(bool(value))
+    what = (f"{_event_name(ev, i)}: terminal must be a bool or a positive int count of "
+            f"occurrences, got {value!r}")
+    if not isinstance(value, numbers.Real):
+        raise ArgumentTypeError(what)
+    if not (float(value).is_integer() and 0 <= value <= _MAX_COUNT):
+        raise ArgumentValueError(what)
+    return int(value)
+
+
+def _direction(ev, i: int) -> int:
+    """The sign of the event's ``direction``, as solve_ivp uses it: > 0 rising zeros
+    only, < 0 falling ones, 0 (or None, or no attribute) both."""
+    value = getattr(ev, "direction", 0)
+    if value is None:
         return 0
-    value = int(value)
-    if value < 0:
-        raise SimulationError(f"event terminal must be a bool or a count >= 0, got {value}")
-    return value
-
-
-def _direction(ev) -> int:
-    d = float(getattr(ev, "direction", 0.0))
-    return 1 if d > 0 else (-1 if d < 0 else 0)
+    what = (f"{_event_name(ev, i)}: direction must be a real number (its sign selects the "
+            f"crossings: > 0 rising, < 0 falling, 0 both), got {value!r}")
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
+        raise ArgumentTypeError(what)
+    if np.isnan(value):
+        raise ArgumentValueError(what)
+    return 1 if value > 0 else (-1 if value < 0 else 0)
 
 
 # -- simulate ------------------------------------------------------------------------
@@ -325,14 +401,20 @@ def simulate(cm, x0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10
 
     ``t_eval`` samples the solution through each method's dense output (the
     steps are not shortened to hit them); without it every accepted step is
-    recorded.  ``events`` are callables ``g(t, x)`` with optional attributes
-    ``terminal`` (bool, or the occurrence count at which to stop) and
-    ``direction``, as in ``solve_ivp``; their zeros are located on the dense
-    output.  ``u`` is None, constant (vector or dict), samples
-    ``(times, values, "linear" | "hold")``, or a feedback callable
-    ``u(t, x)`` (called from the C; any method).  ``p`` is None, a dict of
+    recorded.  ``x0`` is an array of ``nx`` values or a dict of coordinate and
+    speed names -> values (the others from :meth:`CompiledModel.neutral_state`:
+    zero, quaternions (1, 0, 0, 0)).  ``events`` is a callable ``g(t, x)`` or a
+    sequence of them, with optional attributes ``terminal`` (bool, or the
+    occurrence count at which to stop) and ``direction`` (a real number whose
+    sign selects rising or falling zeros, 0 both), as in ``solve_ivp``; their zeros
+    are located on the dense output.  ``u`` is None, constant (vector, dict, or a
+    number for a one-input model), samples ``(times, values, "linear" | "hold")``,
+    or a feedback callable ``u(t, x)`` (called from the C; any method) returning
+    one of the constant forms.  ``p`` is None, a dict of
     overrides or a vector.  ``rtol``/``atol`` are scalars or one value per
-    state; ``step`` selects fixed steps.  ``max_steps`` (attempted steps) defaults
+    state; an adaptive run raises rtol below :data:`MIN_RTOL` and atol below
+    :data:`MIN_ATOL` to them, with a warning.  ``step`` selects fixed steps.
+    ``max_steps`` (attempted steps, a whole number) defaults
     to :data:`DEFAULT_MAX_STEPS`, or for fixed steps to the steps the span needs if
     that is more.  ``chunk`` is the number of rows per C
     call when every step is recorded.  ``interrupt`` is None or a writable
@@ -344,7 +426,13 @@ def simulate(cm, x0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10
     C call: for a progress bar.  With ``outputs`` a scene's
     outputs are recorded by the C at every row (``res.outputs``).  A failure returns what was
     computed up to it, with ``status < 0`` and a message naming the time (and
-    the state).
+    the state).  An exception raised by a feedback ``u(t, x)`` (a typo's
+    NameError...) is re-raised, as solve_ivp would, with the result up to it
+    (status INPUT_ERROR) attached as ``exc.partial_result``; an exception in an
+    event function ends the run with status EVENT_ERROR (``res.info["exception"]``).
+    Arguments of the wrong type or value raise :class:`~modelgen.errors.ArgumentTypeError`
+    or :class:`~modelgen.errors.ArgumentValueError` (a ``TypeError``/``ValueError``
+    too) or :class:`~modelgen.errors.SimulationError`.
 
     >>> res = simulate(cm, [np.pi / 2, 0.0], (0.0, 3.0), rtol=1e-10, events=g)  # doctest: +SKIP
     >>> res.t_events[0], res.y.shape, res.message                             # doctest: +SKIP
@@ -352,7 +440,7 @@ def simulate(cm, x0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10
     ffi, nx = cm.ffi, cm.nx
     m, rtol, atol, fixed, first, hmax, budget = _options(
         cm, method, rtol, atol, step, first_step, max_step,
-        DEFAULT_MAX_STEPS if max_steps is None else max_steps)
+        DEFAULT_MAX_STEPS if max_steps is None else max_steps, stacklevel=4)
     t0, t1, sign = _span(t_span)
     times = None if t_eval is None else _times(t_eval, t0, t1, sign)
     t0, t1 = sign * t0, sign * t1          # from here on s = sign * t, increasing
@@ -360,7 +448,7 @@ def simulate(cm, x0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10
     if max_steps is None and fixed > 0:      # a fixed-step run's step count is known
         budget = max(budget, int(np.ceil((t1 - t0) / fixed)) + 2)
     max_steps = budget
-    x = cm._vector(x0, nx, "x0").copy()
+    x = cm.state_vector(x0, "x0").copy()
     if not np.all(np.isfinite(x)):
         raise SimulationError(f"{cm.name}: x0 must be finite")
     _check_quaternions(cm, x[None, :], "x0")
@@ -369,8 +457,10 @@ def simulate(cm, x0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10
     p_vec = cm.params(p).copy()
     events = _events(events)
     n_ev = len(events)
-    terminal = np.array([_terminal(ev) for ev in events] or [0], dtype=np.intc)
-    direction = np.array([_direction(ev) for ev in events] or [0], dtype=np.intc)
+    terminal = np.array([_terminal(ev, i) for i, ev in enumerate(events)] or [0],
+                        dtype=np.intc)
+    direction = np.array([_direction(ev, i) for i, ev in enumerate(events)] or [0],
+                         dtype=np.intc)
 
     errors = []
     opt = _c_options(cm, m, rtol, atol, fixed, first, hmax, max_steps)
@@ -471,6 +561,10 @@ def simulate(cm, x0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10
 
     pivot = int(stats_total["pivot"])
     failure = errors[0] if errors else inputs.error()
+    if isinstance(failure, KeyboardInterrupt) and status == INPUT_ERROR:
+        # Ctrl-C raised inside u(t, x) (a plain call: no worker thread took the
+        # signal): an interrupt like any other, the trajectory so far kept
+        status, failure = INTERRUPTED, None
     t_reached, t_fail = sign * float(stop[0]), sign * float(stop[2])
     message = status_message(
         int(status), t=t_reached, h=sign * float(stop[1]), t_fail=t_fail,
@@ -503,7 +597,23 @@ def simulate(cm, x0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10
         res.output_columns = dict(cm.outputs)
     if failure is not None:
         res.info["exception"] = failure
+        if status == INPUT_ERROR and isinstance(failure, Exception):
+            _reraise(failure, res, f"near t={t_reached!r}")
     return res
+
+
+def _reraise(exc: Exception, res: Result, where: str):
+    """Re-raise the exception of a feedback ``u(t, x)``, as solve_ivp would, with the
+    result up to it attached as ``exc.partial_result``."""
+    try:
+        exc.partial_result = res
+    except AttributeError:          # an exception type with __slots__: not attachable
+        pass
+    else:
+        if hasattr(exc, "add_note"):        # Python 3.11+
+            exc.add_note(f"modelgen: raised by the feedback u(t, x) {where}; the run "
+                         "up to there is this exception's .partial_result")
+    raise exc
 
 
 def _max_steps_note(max_steps, t_span, t_reached) -> str:
@@ -607,7 +717,8 @@ def simulate_batch(cm, X0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol
     One C call loops over the runs (``threads`` > 1 splits them between Python
     threads; the C call releases the GIL, so they run in parallel).  ``P`` is
     None (defaults), one parameter vector, an array (n_runs, n_p) or a dict of
-    parameter -> value or per-run values.  ``t_eval`` defaults to ``[t1]``
+    parameter -> value or per-run values.  A row of ``X0`` may be a dict of state
+    names (see :func:`simulate`'s ``x0``).  ``t_eval`` defaults to ``[t1]``
     (final states).  Returns ``t`` (n_t,), ``y`` (n_runs, nx, n_t) (NaN after a
     failure), and per run ``status``, ``success``, ``message``, ``nfev``...; with
     ``outputs`` a scene's outputs, recorded by the C at every time, in
@@ -617,8 +728,10 @@ def simulate_batch(cm, X0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol
     """
     nx = cm.nx
     m, rtol, atol, fixed, first, hmax, max_steps = _options(
-        cm, method, rtol, atol, step, first_step, max_step, max_steps)
+        cm, method, rtol, atol, step, first_step, max_step, max_steps, stacklevel=3)
     t0, t1, sign = _span(t_span)
+    if isinstance(X0, (list, tuple)) and any(isinstance(row, dict) for row in X0):
+        X0 = [cm.state_vector(row, f"X0[{r}]") for r, row in enumerate(X0)]
     X0 = np.ascontiguousarray(X0, dtype=float)
     if X0.ndim != 2 or X0.shape[1] != nx:
         raise SimulationError(f"{cm.name}: X0 must have shape (n_runs, {nx}), got {X0.shape}")
@@ -689,6 +802,10 @@ def simulate_batch(cm, X0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol
         res.outputs = {name: y_out[:, :, [cm.output_columns.index(c) for c in cols]]
                        for name, cols in cm.outputs.items()}
         res.output_columns = dict(cm.outputs)
-    if inputs.error() is not None:
-        res.info["exception"] = inputs.error()
+    failure = inputs.error()
+    if failure is not None:
+        res.info["exception"] = failure
+        if isinstance(failure, Exception):
+            r = int(np.argmax(status == INPUT_ERROR))
+            _reraise(failure, res, f"in run {r} near t={sign * float(stop[r, 0])!r}")
     return res

@@ -64,10 +64,10 @@ def result_figure(res, *, title: str = "", conservative=None):
             ax.set_ylabel("energy balance\nerror [J]")
         elif panel == "energy_error":
             total = res.energy.sum(axis=1)
-            scale = max(np.max(np.abs(res.energy[0])), 1e-300)
-            change = np.abs(total[1:] - total[0]) / scale
+            scale = res.energy_change().scale   # the largest |T| + |V|: E(0) may be 0
+            change = np.abs(total[1:] - total[0]) / (scale if scale > 0 else 1.0)
             ax.semilogy(t[1:], np.maximum(change, 1e-17))
-            ax.set_ylabel("|E - E(0)| / E scale")
+            ax.set_ylabel("|E - E(0)| / E scale" if scale > 0 else "|E - E(0)| [J]")
         else:
             name = panel[1]
             values = np.asarray(res.outputs[name]).reshape(len(t), -1)

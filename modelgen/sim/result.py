@@ -23,9 +23,31 @@ from __future__ import annotations
 import csv
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Optional
+from typing import Any, Callable, NamedTuple, Optional
 
 import numpy as np
+
+
+class EnergyChange(NamedTuple):
+    """The change of the total energy over a run, and the scale it is measured against.
+
+    ``scale`` is the largest ``|T| + |V|`` of the run, not E(0): a body released
+    from rest where its potential is zero starts with E(0) = 0 exactly, and a
+    change divided by it would be noise over zero.  ``relative`` (``change /
+    scale``, at most 2 in size) is None when the scale is 0: the energies stayed
+    exactly zero, and only ``change`` in J means anything.
+    """
+    change: float        # E(end) - E(0) [J]
+    scale: float         # max over the run of |T| + |V| [J]
+    relative: Optional[float]
+
+    def describe(self, conservative: bool = False) -> str:
+        """One line: the relative change (or error, for a conservative run) and its scale."""
+        label = "energy error" if conservative else "energy change"
+        if self.relative is None:
+            return f"{label} {self.change:.3e} J (the energies stayed zero)"
+        return (f"relative {label} {self.relative:.3e} (against the largest |T| + |V| of "
+                f"the run, {self.scale:.6g} J)")
 
 
 @dataclass
@@ -91,6 +113,23 @@ class Result:
     def keys(self) -> list:
         """Everything ``res[...]`` accepts: states, outputs, then the fields."""
         return self.names() + [f for f in _FIELDS if f not in self.names()]
+
+    def energy_change(self) -> EnergyChange:
+        """E(end) - E(0) of a run with recorded energies, against the largest
+        ``|T| + |V|`` of the run (see :class:`EnergyChange`).
+
+        >>> T_V = np.array([[0.0, 0.0], [1.0, -1.0], [2.0, -3.0]])   # from rest, E(0) = 0
+        >>> Result(np.arange(3.0), np.zeros((2, 3)), energy=T_V).energy_change()
+        EnergyChange(change=-1.0, scale=5.0, relative=-0.2)
+        """
+        if self.energy is None or not len(self.energy):
+            raise ValueError("this result has no recorded energies")
+        energy = np.asarray(self.energy, dtype=float)
+        total = energy.sum(axis=1)
+        change = float(total[-1] - total[0])
+        sizes = np.abs(energy).sum(axis=1)
+        scale = float(np.max(sizes[np.isfinite(sizes)], initial=0.0))
+        return EnergyChange(change, scale, change / scale if scale > 0 else None)
 
     # -- tables ---------------------------------------------------------------------
     def columns(self) -> list:

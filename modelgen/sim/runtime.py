@@ -8,13 +8,15 @@ callable with cached pointers and preallocated buffers.
 """
 from __future__ import annotations
 
+import numbers
 from pathlib import Path
 
 import numpy as np
 
 from modelgen.codegen.build import manifest_problem
 from modelgen.codegen.emit import ABI_VERSION
-from modelgen.errors import BuildError, DerivationError, MassMatrixError, SimulationError
+from modelgen.errors import (ArgumentTypeError, ArgumentValueError, BuildError,
+                             DerivationError, MassMatrixError, SimulationError)
 from modelgen.sim import integrate
 from modelgen.sim.library import ModelLibrary
 from modelgen.sim import linearize as linearization
@@ -162,9 +164,17 @@ class CompiledModel:
         return out
 
     def input_vector(self, u=None) -> np.ndarray:
-        """Input vector from None (zeros), a dict by name, or an array."""
+        """Input vector from None (zeros), a dict by name, or an array; a model with
+        one input also takes a plain number.
+
+        >>> cm.input_vector(0.5)          # a one-input model, e.g. the cart-pole  # doctest: +SKIP
+        array([0.5])
+        """
         if u is None:
             return np.zeros(len(self.inputs))
+        if len(self.inputs) == 1 and (isinstance(u, numbers.Number)
+                                      or (isinstance(u, np.ndarray) and u.ndim == 0)):
+            u = [u]
         if isinstance(u, dict):
             out = np.zeros(len(self.inputs))
             for key, value in u.items():
@@ -177,6 +187,25 @@ class CompiledModel:
         if not np.all(np.isfinite(out)):
             bad = [name for name, v in zip(self.inputs, out) if not np.isfinite(v)]
             raise SimulationError(f"{self.name}: inputs must be finite; got {bad}")
+        return out
+
+    def state_vector(self, x, what: str = "x0", base=None) -> np.ndarray:
+        """The state from an array of ``nx`` values, or from a dict of coordinate and
+        speed names -> values over ``base`` (default :meth:`neutral_state`: every
+        coordinate and speed zero, every quaternion (1, 0, 0, 0)), as a scene's
+        ``x0`` takes its missing entries from the scene's initial state.
+
+        >>> cm.state_vector({"q1": 0.5})                              # doctest: +SKIP
+        array([0.5, 0. , 0. , 0. ])
+        """
+        if not isinstance(x, dict):
+            return self._vector(x, self.nx, what)
+        out = self.neutral_state() if base is None else self._vector(base, self.nx, "base")
+        for name, value in x.items():
+            if name not in self.state_names:
+                raise SimulationError(f"{self.name}: {what} names unknown state {name!r}; "
+                                      f"states are {', '.join(self.state_names)}")
+            out[self.state_names.index(name)] = self._vector([value], 1, f"{what}[{name!r}]")[0]
         return out
 
     # -- model functions ---------------------------------------------------------
@@ -259,6 +288,10 @@ class CompiledModel:
         Pointers are created once and x is copied into a preallocated buffer.
         ``f(t, x)`` returns a fresh array (safe for solve_ivp, which keeps the
         arrays it is given); ``f(t, x, out)`` writes into ``out`` instead.
+        ``out`` must be a writable float64 numpy array of shape (nx,) (a strided
+        view is fine: it is written element by element); anything else raises
+        :class:`~modelgen.errors.ArgumentTypeError` or
+        :class:`~modelgen.errors.ArgumentValueError` instead of rounding into it.
         The fastest path copies nothing: write the state into ``f.x``, call
         ``f.inplace(t)``, and read ``f.out`` (overwritten by the next call).
 
@@ -295,6 +328,9 @@ class CompiledModel:
                 fail(status, t)
             if out is None:
                 return out_buf.copy()
+            if (type(out) is not np.ndarray or out.dtype != np.float64 or out.shape != (nx,)
+                    or not out.flags.writeable):
+                self._check_out(out, nx)
             out[:] = out_buf
             return out
 
@@ -309,6 +345,21 @@ class CompiledModel:
         f.inplace = inplace
         f.x, f.out, f.p, f.u = x_buf, out_buf, p_arr, u_arr   # buffers live with f
         return f
+
+    def _check_out(self, out, size: int) -> None:
+        """Refuse an ``out=`` array that cannot take ``size`` doubles exactly (numpy
+        would round floats into an integer array, or broadcast a wrong shape)."""
+        if not isinstance(out, np.ndarray):
+            raise ArgumentTypeError(f"{self.name}: out must be a numpy float64 array of shape "
+                                    f"({size},), got {type(out).__name__}")
+        if out.dtype != np.float64:
+            raise ArgumentTypeError(f"{self.name}: out must have dtype float64, got {out.dtype} "
+                                    f"(values would be converted); use np.empty({size})")
+        if out.shape != (size,):
+            raise ArgumentValueError(f"{self.name}: out must have shape ({size},), got "
+                                     f"{out.shape}")
+        if not out.flags.writeable:
+            raise ArgumentValueError(f"{self.name}: out is read-only")
 
     def energy(self, q, qd, p=None) -> np.ndarray:
         """[kinetic, potential] in J; potential of gravity (zero at O) and of springs."""
@@ -360,9 +411,13 @@ class CompiledModel:
         then decreases too), as ``solve_ivp`` does.
         ``t_eval`` samples through each method's dense output (otherwise every
         step is recorded); ``events`` are ``g(t, x)`` callables with
-        ``terminal``/``direction`` attributes, as in ``solve_ivp``.  ``u`` is None
-        (zeros), a vector or dict of constant inputs, a tuple ``(times, values,
-        "linear" | "hold")`` of samples, or a callable ``u(t, x)`` (feedback).
+        ``terminal``/``direction`` attributes, as in ``solve_ivp``.  ``x0`` is an
+        array or a dict of state names (the others zero, quaternions (1, 0, 0, 0)).
+        ``u`` is None (zeros), a vector or dict of constant inputs (a number for a
+        one-input model), a tuple ``(times, values, "linear" | "hold")`` of
+        samples, or a callable ``u(t, x)`` (feedback) returning a constant form;
+        an exception it raises is re-raised with the run up to it as
+        ``exc.partial_result``.
         ``p`` overrides parameters.  ``max_steps`` defaults to 100,000, or for a
         fixed ``step`` to the steps the span needs if that is more (a run that
         hits it stops with status -1, warns and says how to raise it).  ``dense_output=True``
@@ -429,7 +484,7 @@ class CompiledModel:
         limit = STABILITY_LIMIT.get(name)
         if limit is None:            # implicit methods: A-stable
             return None
-        x = self._vector(x0, self.nx, "x0")
+        x = self.state_vector(x0, "x0")
         try:
             J = self.jac(t0, x, _input_at(self, u, t0, x), p)
             lam = float(np.max(np.abs(np.linalg.eigvals(J))))

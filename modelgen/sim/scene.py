@@ -14,7 +14,7 @@ from modelgen.sim.animate import animate
 from modelgen.sim.integrate import method_of
 from modelgen.sim.result import Result
 from modelgen.sim.runtime import STABILITY_LIMIT, CompiledModel, check_mass_matrix
-from modelgen.sim.work import PER, energy_balance, quadrature_times
+from modelgen.sim.mechanical_work import PER, energy_balance, quadrature_times
 
 
 #: a run needing more steps than this for stability alone is called stiff
@@ -219,16 +219,7 @@ class Scene:
         s, cm = self.spec, self.model
         if x0 is None:
             return np.array(s.initial, dtype=float)
-        if isinstance(x0, dict):
-            x = np.array(s.initial, dtype=float)
-            for name, value in x0.items():
-                if name not in cm.state_names:
-                    raise SimulationError(
-                        f"scene {s.name}: x0 names unknown state {name!r}; states are "
-                        f"{', '.join(cm.state_names)}")
-                x[cm.state_names.index(name)] = float(value)
-            return x
-        return np.array(x0, dtype=float)
+        return cm.state_vector(x0, "x0", base=s.initial)
 
 
 def _keep_samples(res: Result, rows: slice) -> None:
