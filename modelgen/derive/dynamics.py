@@ -29,8 +29,8 @@ from dataclasses import dataclass
 import sympy
 
 from modelgen.derive.effects import action_forces, derive_effect
-from modelgen.derive.graph import (ZERO, ZERO3, Graph, GraphBuilder, add, cross, dot, matvec,
-                                   scale, sub)
+from modelgen.derive.graph import Graph, GraphBuilder
+from modelgen.derive.spatial import ZERO, ZERO3, add, cross, dot, matvec, scale, sub
 from modelgen.derive.kinematics import Kinematics, quaternion_columns
 from modelgen.model.spec import TIME, symbol
 

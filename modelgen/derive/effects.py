@@ -21,7 +21,8 @@ from typing import Optional
 
 import sympy
 
-from modelgen.derive.graph import ZERO, GraphBuilder, add, cross, dot, matvec, scale, sub
+from modelgen.derive.graph import GraphBuilder
+from modelgen.derive.spatial import ZERO, add, cross, dot, matvec, scale, sub
 from modelgen.derive.kinematics import Kinematics
 from modelgen.model.spec import (CANONICAL_BASE, ActionSpec, DamperEffect, DragEffect,
                                  FrictionEffect, GravityEffect, JointDampingEffect, SpringEffect,

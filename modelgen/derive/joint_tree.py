@@ -41,12 +41,11 @@ from dataclasses import dataclass
 
 import sympy
 
-from modelgen.derive.graph import ZERO, ZERO3, add, matvec
+from modelgen.derive.spatial import (IDENTITY3, ONE, ZERO, ZERO3, add, matmul, matvec, rotation,
+                                     transpose)
 from modelgen.errors import ModelError
 from modelgen.model.spec import CANONICAL_BASE, CANONICAL_POINT, ModelSpec, symbol
 
-ONE = sympy.S.One
-IDENTITY3 = ((ONE, ZERO, ZERO), (ZERO, ONE, ZERO), (ZERO, ZERO, ONE))
 
 
 @dataclass(frozen=True)
@@ -106,13 +105,6 @@ class JointTree:
     inertias: tuple       # tuple[LinkInertia, ...], one per joint
     body_links: tuple     # ((body name, joint index or -1 for the ground), ...)
 
-    def joint_of(self, coordinate: int) -> int:
-        """Index in ``joints`` of the joint of coordinate number ``coordinate``."""
-        for i, joint in enumerate(self.joints):
-            if joint.coordinate == coordinate:
-                return i
-        raise KeyError(coordinate)
-
 
 def _error(spec: ModelSpec, key: str, problem: str) -> ModelError:
     return ModelError(
@@ -142,29 +134,6 @@ def _linear_in(expr, coordinates: dict):
     return slopes, rest
 
 
-def _rotation(axis: int, angle) -> tuple:
-    """E of a rotation by ``angle`` about ``axis``: parent -> child components."""
-    c, s = sympy.cos(angle), sympy.sin(angle)
-    if axis == 1:
-        return ((ONE, ZERO, ZERO), (ZERO, c, s), (ZERO, -s, c))
-    if axis == 2:
-        return ((c, ZERO, -s), (ZERO, ONE, ZERO), (s, ZERO, c))
-    return ((c, s, ZERO), (-s, c, ZERO), (ZERO, ZERO, ONE))
-
-
-def _matmul(a, b) -> tuple:
-    """a @ b for 3x3 tuples of rows, skipping constant zeros and ones."""
-    def term(x, y):
-        return y if x == 1 else x if y == 1 else x * y
-    return tuple(tuple(sympy.Add(*[term(a[i][l], b[l][j]) for l in range(3)
-                                   if a[i][l] != 0 and b[l][j] != 0]) for j in range(3))
-                 for i in range(3))
-
-
-def _transpose(a) -> tuple:
-    return tuple(tuple(a[j][i] for j in range(3)) for i in range(3))
-
-
 class _Compose:
     """A constant transform X = rot(E) xlt(r) built op by op."""
 
@@ -172,10 +141,10 @@ class _Compose:
         self.E, self.r = IDENTITY3, ZERO3
 
     def rotate(self, E_op):
-        self.E = _matmul(E_op, self.E)
+        self.E = matmul(E_op, self.E)
 
     def translate(self, c):
-        self.r = add(self.r, matvec(_transpose(self.E), c))
+        self.r = add(self.r, matvec(transpose(self.E), c))
 
     def value(self) -> tuple:
         return (self.E, self.r)
@@ -287,7 +256,7 @@ def _body_ops(spec: ModelSpec, body, bases: dict, points: dict, linear: dict) ->
 def _spatial_inertia(body, E, r) -> tuple:
     """(I about the link origin as 6 entries, h, m) of a body at (E, r) from the link."""
     m = body.mass
-    Ic = body.inertia if E == IDENTITY3 else _matmul(_transpose(E), _matmul(body.inertia, E))
+    Ic = body.inertia if E == IDENTITY3 else matmul(transpose(E), matmul(body.inertia, E))
     c = r
     cc = c[0] ** 2 + c[1] ** 2 + c[2] ** 2
     I = tuple(Ic[i][j] + m * ((cc if i == j else 0) - c[i] * c[j])
@@ -380,7 +349,7 @@ def extract_joint_tree(spec: ModelSpec) -> JointTree:
         fixed = _Compose()
         for _, _, okind, odata in reversed(ops):
             if okind == "rot":
-                fixed.rotate(_rotation(odata.axis, odata.angle))
+                fixed.rotate(rotation(odata.axis, sympy.cos(odata.angle), sympy.sin(odata.angle)))
             else:
                 fixed.translate(odata)
         if kind in ("ball", "free"):
@@ -422,7 +391,7 @@ def extract_joint_tree(spec: ModelSpec) -> JointTree:
         rel = _Compose()
         for _, _, okind, odata in reversed(ops):
             if okind == "rot":
-                rel.rotate(_rotation(odata.axis, odata.angle))
+                rel.rotate(rotation(odata.axis, sympy.cos(odata.angle), sympy.sin(odata.angle)))
             else:
                 rel.translate(odata)
         E, r = rel.value()

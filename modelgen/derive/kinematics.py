@@ -33,13 +33,11 @@ from dataclasses import dataclass
 import sympy
 
 from modelgen.derive.calculus import diff
-from modelgen.derive.graph import (ZERO, ZERO3, Graph, GraphBuilder, add, cross, is_zero_vec,
-                    matvec, scale, sub)
+from modelgen.derive.graph import Graph, GraphBuilder
+from modelgen.derive.spatial import (IDENTITY3, ZERO, ZERO3, add, cross, is_zero_vec, matvec,
+                                     rotation, scale, sub, transpose)
 from modelgen.errors import ModelError
 from modelgen.model.spec import CANONICAL_BASE, CANONICAL_POINT, TIME, ModelSpec, symbol
-
-IDENTITY = ((sympy.S.One, ZERO, ZERO), (ZERO, sympy.S.One, ZERO), (ZERO, ZERO, sympy.S.One))
-
 
 @dataclass(frozen=True)
 class BaseKinematics:
@@ -76,15 +74,6 @@ class Kinematics:
         return add(beta, cross(w, pk.r))
 
 
-def _rotation_columns(axis: int, c, s):
-    """Child unit vectors in parent components for a right-handed rotation."""
-    if axis == 1:
-        return ((1, 0, 0), (0, c, s), (0, -s, c))
-    if axis == 2:
-        return ((c, 0, -s), (0, 1, 0), (s, 0, c))
-    return ((c, s, 0), (-s, c, 0), (0, 0, 1))
-
-
 def quaternion_columns(quaternion):
     """Child unit vectors in parent components for a unit quaternion (w, x, y, z).
 
@@ -95,10 +84,6 @@ def quaternion_columns(quaternion):
     return ((1 - 2 * (y * y + z * z), 2 * (x * y + w * z), 2 * (x * z - w * y)),
             (2 * (x * y - w * z), 1 - 2 * (x * x + z * z), 2 * (y * z + w * x)),
             (2 * (x * z + w * y), 2 * (y * z - w * x), 1 - 2 * (x * x + y * y)))
-
-
-def _rows_from_columns(cols):
-    return tuple(tuple(cols[j][i] for j in range(3)) for i in range(3))
 
 
 def _column(R, j):
@@ -170,7 +155,7 @@ def derive_kinematics(spec: ModelSpec, graph: Graph | None = None) -> Kinematics
     d = _Deriver(q[:simple], qd[:simple])
     speed_index = {v: k for k, v in enumerate(qd)}
 
-    bases = {CANONICAL_BASE: BaseKinematics(IDENTITY, ZERO3, ZERO3, {})}
+    bases = {CANONICAL_BASE: BaseKinematics(IDENTITY3, ZERO3, ZERO3, {})}
     for b in spec.bases:
         parent = bases[b.parent]
         if b.quaternion:
@@ -178,9 +163,9 @@ def derive_kinematics(spec: ModelSpec, graph: Graph | None = None) -> Kinematics
             continue
         theta = b.angle
         c, s = g.name(sympy.cos(theta)), g.name(sympy.sin(theta))
-        local = _rotation_columns(b.axis, c, s)
+        local = rotation(b.axis, c, s)        # rows: the base's unit vectors
         cols = [g.vec(matvec(parent.R, col)) for col in local]
-        R = _rows_from_columns(cols)
+        R = transpose(cols)
         e = _column(parent.R, b.axis - 1)
         grad = d.gradient(theta)
         theta_dot = g.name(d.rate(theta, grad))
@@ -250,7 +235,7 @@ def _quaternion_base(g: GraphBuilder, parent: BaseKinematics, b, speed_index: di
     """
     local = quaternion_columns(b.quaternion)
     cols = [g.vec(matvec(parent.R, tuple(g.name(x) for x in col))) for col in local]
-    R = _rows_from_columns(cols)
+    R = transpose(cols)
     rel = g.vec(matvec(R, b.rates))
     omega = g.vec(add(parent.omega, rel))
     alpha = g.vec(add(parent.alpha_bias, cross(parent.omega, rel)))

@@ -12,7 +12,8 @@ from dataclasses import dataclass
 import sympy
 
 from modelgen.derive.dynamics import Equations
-from modelgen.derive.graph import Graph, GraphBuilder, sub
+from modelgen.derive.graph import Graph, GraphBuilder
+from modelgen.derive.spatial import sub
 from modelgen.derive.kinematics import Kinematics
 
 AXES = ("x", "y", "z")

@@ -22,7 +22,7 @@ import sympy
 
 from modelgen.derive.dynamics import derive_equations
 from modelgen.errors import ModelError
-from modelgen.derive.graph import add
+from modelgen.derive.spatial import add
 from modelgen.derive.kinematics import derive_kinematics
 from modelgen.model.spec import ModelSpec, symbol
 

@@ -24,9 +24,10 @@ gravity, MuJoCo's ``mj_inverse`` without the passive forces: those are in
 """
 from __future__ import annotations
 
-from modelgen.derive.aba import (add, dot, joint_motion, joint_velocity, link_force,
-                                 link_velocities, outward_pass, to_parent_force)
-from modelgen.derive.graph import ZERO, GraphBuilder
+from modelgen.derive.aba import (joint_motion, joint_velocity, link_force, link_velocities,
+                                 outward_pass, to_parent_force)
+from modelgen.derive.graph import GraphBuilder
+from modelgen.derive.spatial import ZERO, add, dot
 from modelgen.derive.joint_tree import JointTree
 
 
