@@ -11,7 +11,7 @@ without gravity and external forces:
 
 This is ``h`` of ``A q_ddot + h = tau`` (:mod:`modelgen.derive.dynamics`):
 the generalized inertia forces at zero acceleration.  Pass 1 is
-:func:`modelgen.derive.aba.outward_pass`, which the ABA program uses too
+:func:`modelgen.derive.recursion.outward_pass`, which the ABA program uses too
 (its ``f`` is the ABA's bias force), so over it RNEA costs only step 2:
 about 20 operations per revolute joint, against the O(n^2) projections of
 the composite-body sums.
@@ -24,8 +24,8 @@ gravity, MuJoCo's ``mj_inverse`` without the passive forces: those are in
 """
 from __future__ import annotations
 
-from modelgen.derive.aba import (joint_motion, joint_velocity, link_force, link_velocities,
-                                 outward_pass, to_parent_force)
+from modelgen.derive.recursion import (joint_motion, joint_velocity, link_force,
+                                       link_velocities, outward_pass, to_parent_force)
 from modelgen.derive.graph import GraphBuilder
 from modelgen.derive.spatial import ZERO, add, dot
 from modelgen.derive.joint_tree import JointTree
