@@ -299,137 +299,193 @@ def derive_aba(eqs: Equations, tree: JointTree, spec: ModelSpec, graph: Graph | 
     return _derive_aba(eqs, tree, spec, graph, velocity_products)
 
 
+@dataclass(frozen=True)
+class _Inertias:
+    """Pass 2's inertia half, per joint (tree order): what the force half and
+    pass 3 read.  ``multi`` holds the ball and free joints, the others have
+    ``U``, ``D``, ``nUd`` (-U/D)."""
+    U: list
+    D: list
+    nUd: list
+    Ia: list          # articulated inertia passed to the parent (blocks)
+    multi: dict       # joint index -> _MultiDofInertia
+
+
 def _derive_aba(eqs, tree, spec, graph, velocity_products) -> ForwardDynamics:
-    g = GraphBuilder(graph or eqs.graph)
-    start = len(g)
+    """The three passes of Table 7.1 (:func:`derive_aba`), built pass by pass."""
+    builder = GraphBuilder(graph or eqs.graph)
+    start = len(builder)
+    a0, tau, external = _loads(builder, eqs, tree, spec)
+    velocities = link_velocities(builder, tree, eqs.qd)
+    inertias = _backward_inertias(builder, tree)
+    builder.place = None
+    if velocity_products == "auto":
+        inward = [0 if joint.parent < 0 else _inward_cost(inertias.Ia[i], velocities[1][i])
+                  for i, joint in enumerate(tree.joints)]
+        plan = velocity_product_plan(tree, velocities, inward)
+    else:
+        plan = tuple(velocity_products == "outward" and j.parent >= 0 for j in tree.joints)
+    pA, c = _forward_bias(builder, tree, eqs.qd, plan, velocities, external)
+    uD = _backward_forces(builder, tree, inertias, pA, c, tau)
+    qdd = _forward_accelerations(builder, tree, inertias, uD, c, a0, len(eqs.qd))
+    D = [None] * len(eqs.qd)
+    for i, joint in enumerate(tree.joints):
+        if i in inertias.multi:
+            for (k, _), d in zip(joint.dofs, inertias.multi[i].pivots, strict=True):
+                D[k] = d
+        else:
+            D[joint.coordinate] = inertias.D[i]
+    inward = tuple(k for joint in reversed(tree.joints) for k, _ in joint.dofs)
+    # built pass by pass (the plan needs every joint's inertia), written joint by
+    # joint: each joint's inertia and force work together, as Table 7.1 has them
+    builder.place = None
+    builder.arrange(start)
+    return ForwardDynamics(builder.freeze(), tuple(qdd), tuple(D), inward, tuple(plan))
+
+
+def _loads(builder, eqs, tree, spec) -> tuple:
+    """``(a0, tau, external)``: the ground's acceleration (gravity in E), the
+    generalized forces of the other effects, and the actions as spatial forces
+    on their links ({joint index: force})."""
     n = len(eqs.qd)
     a0, gravity_labels = _ground_acceleration(spec)
     actions = list(spec.actions) + [e for e in spec.effects if e.kind == "action"]
     local = set(gravity_labels) | {a.name for a in actions}
     others = [part for label, part in eqs.tau_parts if label not in local]
-    tau = [named(g, sympy.Add(*[part[k] for part in others])) for k in range(n)]
+    tau = [named(builder, sympy.Add(*[part[k] for part in others])) for k in range(n)]
     link_of = dict(tree.body_links)
-    external: dict = {}                 # joint index -> spatial force on its link
+    external: dict = {}
     for act in actions:
         i = link_of[act.body]
         if i >= 0:
-            f = action_force(g, spec, tree.joints[i], act)
-            external[i] = name_vec(g, add(external[i], f)) if i in external else f
+            f = action_force(builder, spec, tree.joints[i], act)
+            external[i] = name_vec(builder, add(external[i], f)) if i in external else f
+    return a0, tau, external
 
+
+def _backward_inertias(builder, tree) -> _Inertias:
+    """Pass 2, inertias (Pinocchio's AbaBackwardStep without the forces): U, D
+    and Ia of every joint, leaves first, each Ia added into the parent's IA.
+    They do not depend on where the c go."""
     joints = tree.joints
     count = len(joints)
-    velocities = link_velocities(g, tree, eqs.qd)
-    # pass 2, inertias (they do not depend on where c goes): U, D, Ia of every joint
-    IA = [_rigid_inertia(g, body) for body in tree.inertias]
+    IA = [_rigid_inertia(builder, body) for body in tree.inertias]
     U, D, nUd, Ia = [None] * count, [None] * count, [None] * count, [None] * count
-    multi: dict = {}                    # joint index -> _MultiDofInertia of a ball or free joint
+    multi: dict = {}
     for i in reversed(range(count)):
         joint = joints[i]
-        g.place = inward_place(count, i)
+        builder.place = inward_place(count, i)
         if len(joint.dofs) > 1:
-            multi[i] = _multi_dof_inertia(g, joint, IA[i])
+            multi[i] = _multi_dof_inertia(builder, joint, IA[i])
             Ia[i] = multi[i].Ia
         else:
             S = joint.S
             j = _single(S)
-            U[i] = name_vec(g, inertia_times(IA[i], S))
-            D[i] = g.name(dot(S, U[i]))
-            invD = g.name(1 / D[i])
+            U[i] = name_vec(builder, inertia_times(IA[i], S))
+            D[i] = builder.name(dot(S, U[i]))
+            invD = builder.name(1 / D[i])
             # -U/D is named with its sign, so that Ia, pa and qdd are sums of
             # products; for a one-entry S its entry j is exactly -1/S_j (U_j = D / S_j)
-            nUd[i] = tuple(-1 / S[r] if r == j else named(g, -x * invD) if not is_zero(x) else ZERO
+            nUd[i] = tuple(-1 / S[r] if r == j else
+                           named(builder, -x * invD) if not is_zero(x) else ZERO
                            for r, x in enumerate(U[i]))
             if joint.parent >= 0:
                 A, B, C = IA[i]
-
-                def update(M, r0, s0):
-                    return tuple(tuple(total((M[r][s], times(U[i][r0 + r], nUd[i][s0 + s])))
-                                       for s in range(3)) for r in range(3))
-
-                A, B, C = _drop_subspace((update(A, 0, 0), update(B, 0, 3), update(C, 3, 3)), S)
-                Ia[i] = (name_symmetric(g, A), name_matrix(g, B), name_symmetric(g, C))
+                A, B, C = _drop_subspace((_rank_one(A, U[i], nUd[i], 0, 0),
+                                          _rank_one(B, U[i], nUd[i], 0, 3),
+                                          _rank_one(C, U[i], nUd[i], 3, 3)), S)
+                Ia[i] = (name_symmetric(builder, A), name_matrix(builder, B),
+                         name_symmetric(builder, C))
         if joint.parent >= 0:
             p = joint.parent
-            Ip = to_parent_inertia(g, joint, Ia[i])
-            IA[p] = tuple(name_matrix(g, tuple(tuple(total((X[r][s], Y[r][s])) for s in range(3))
-                                              for r in range(3)))
-                          for X, Y in zip(IA[p], Ip))
+            Ip = to_parent_inertia(builder, joint, Ia[i])
+            IA[p] = tuple(name_matrix(builder, tuple(tuple(total((X[r][s], Y[r][s]))
+                                                           for s in range(3)) for r in range(3)))
+                          for X, Y in zip(IA[p], Ip, strict=True))
+    return _Inertias(U, D, nUd, Ia, multi)
 
-    g.place = None
-    if velocity_products == "auto":
-        inward = [0 if joint.parent < 0 else _inward_cost(Ia[i], velocities[1][i])
-                  for i, joint in enumerate(joints)]
-        plan = velocity_product_plan(tree, velocities, inward)
-    else:
-        plan = tuple(velocity_products == "outward" and j.parent >= 0 for j in joints)
-    # pass 1, accelerations and forces: where c goes outwards the bias force
-    # carries I a_vp and c is 0 in passes 2 and 3; gravity is the ground's
-    # acceleration in pass 3 either way
-    outward = outward_pass(g, tree, eqs.qd, plan, velocities)
+
+def _rank_one(M, U, nUd, r0, s0) -> tuple:
+    """The 3x3 block at (r0, s0) of ``IA - U U^T / D``, ``M`` that block of IA."""
+    return tuple(tuple(total((M[r][s], times(U[r0 + r], nUd[s0 + s]))) for s in range(3))
+                 for r in range(3))
+
+
+def _forward_bias(builder, tree, qd, plan, velocities, external) -> tuple:
+    """Pass 1, accelerations and forces (Pinocchio's AbaForwardStep1): ``(pA, c)``,
+    the bias forces less the actions, and the c that passes 2 and 3 use.
+
+    Where c goes outwards the bias force carries ``I a_vp`` and c is 0 in
+    passes 2 and 3; gravity is the ground's acceleration in pass 3 either way.
+    """
+    outward = outward_pass(builder, tree, qd, plan, velocities)
     pA = list(outward.f)
-    c = tuple((ZERO,) * 6 if plan[i] else outward.c[i] for i in range(count))
+    c = tuple((ZERO,) * 6 if plan[i] else outward.c[i] for i in range(len(tree.joints)))
     for i, f in external.items():
-        g.place = outward_place(i)
-        pA[i] = name_vec(g, sub(pA[i], f))
+        builder.place = outward_place(i)
+        pA[i] = name_vec(builder, sub(pA[i], f))
+    return pA, c
 
+
+def _backward_forces(builder, tree, inertias, pA, c, tau) -> list:
+    """Pass 2, forces (the rest of Pinocchio's AbaBackwardStep): ``u_i / D_i``
+    of every one-dof joint, leaves first, each ``pa`` added into the parent's
+    ``pA`` (which this updates)."""
+    joints = tree.joints
+    count = len(joints)
     uD = [None] * count
-    for i in reversed(range(count)):                        # pass 2, forces
+    for i in reversed(range(count)):
         joint = joints[i]
-        g.place = inward_place(count, i)
-        if i in multi:
-            pa = multi[i].forces(g, joint, pA[i], c[i], tau)
+        builder.place = inward_place(count, i)
+        if i in inertias.multi:
+            pa = inertias.multi[i].forces(builder, joint, pA[i], c[i], tau)
         else:
             S = joint.S
             j = _single(S)
             tau_i = tau[joint.coordinate]
-            uD[i] = named(g, (tau_i - dot(S, pA[i])) * g.name(1 / D[i]))
+            uD[i] = named(builder, (tau_i - dot(S, pA[i])) * builder.name(1 / inertias.D[i]))
             if joint.parent < 0:
                 continue
             # pa = pA + Ia c + U u/D; with a one-entry S, S^T pa = tau exactly
             # (Ia S = 0 and S^T U = D), so entry j is tau / S_j
-            pa = add(add(pA[i], inertia_times(Ia[i], c[i])), tuple(times(x, uD[i]) for x in U[i]))
-            pa = name_vec(g, [tau_i / S[r] if r == j else x for r, x in enumerate(pa)])
+            pa = add(add(pA[i], inertia_times(inertias.Ia[i], c[i])),
+                     tuple(times(x, uD[i]) for x in inertias.U[i]))
+            pa = name_vec(builder, [tau_i / S[r] if r == j else x for r, x in enumerate(pa)])
         if joint.parent >= 0:
             p = joint.parent
-            pA[p] = name_vec(g, add(pA[p], to_parent_force(g, joint, pa)))
+            pA[p] = name_vec(builder, add(pA[p], to_parent_force(builder, joint, pa)))
+    return uD
 
+
+def _forward_accelerations(builder, tree, inertias, uD, c, a0, n) -> list:
+    """Pass 3 (Pinocchio's AbaForwardStep2): ``qdd`` in coordinate order, from
+    ``a'_i = X_i a_p + c_i``, ``qdd_i = (u_i - U_i^T a'_i) / D_i``."""
     qdd = [None] * n
-    acc = [None] * count
-    for i, joint in enumerate(joints):                      # pass 3: outwards
-        g.place = (2, i)
+    acc = [None] * len(tree.joints)
+    for i, joint in enumerate(tree.joints):
+        builder.place = (2, i)
         ap = a0 if joint.parent < 0 else acc[joint.parent]
-        a_prime = name_vec(g, add(joint_motion(g, joint, ap), c[i]))
-        if i in multi:
-            acc[i] = multi[i].outward(g, joint, a_prime, qdd)
+        a_prime = name_vec(builder, add(joint_motion(builder, joint, ap), c[i]))
+        if i in inertias.multi:
+            acc[i] = inertias.multi[i].outward(builder, joint, a_prime, qdd)
             continue
         k = joint.coordinate
-        # (u - U^T a') / D
+        nUd = inertias.nUd[i]
         j = _single(joint.S)
         if j is not None and joint.S[j] == 1:
             # entry j of -U/D is -1: a_j = a'_j + qdd = u/D + the other terms, named
             # once, and qdd = a_j - a'_j
             # named as it stands (not by named): qdd = rest - a'_j is then one
             # subtraction, where a negated name would make it -(name) - a'_j
-            rest = g.name(total([uD[i]] + [times(x, y) for r, (x, y) in
-                                            enumerate(zip(nUd[i], a_prime)) if r != j]))
-            qdd[k] = g.name(total((rest, neg(a_prime[j]))))
+            rest = builder.name(total([uD[i]] + [times(x, y) for r, (x, y) in
+                                                 enumerate(zip(nUd, a_prime, strict=True))
+                                                 if r != j]))
+            qdd[k] = builder.name(total((rest, neg(a_prime[j]))))
             acc[i] = tuple(rest if r == j else x for r, x in enumerate(a_prime))
         else:
-            qdd[k] = g.name(total((uD[i], dot(nUd[i], a_prime))))
-            acc[i] = name_vec(g, add(a_prime, tuple(times(s, qdd[k]) for s in joint.S)))
-    D_out = [None] * n
-    for i, joint in enumerate(joints):
-        if i in multi:
-            for (k, _), d in zip(joint.dofs, multi[i].pivots):
-                D_out[k] = d
-        else:
-            D_out[joint.coordinate] = D[i]
-    inward = tuple(k for i in reversed(range(count)) for k, _ in joints[i].dofs)
-    # built pass by pass (the plan needs every joint's inertia), written joint by
-    # joint: each joint's inertia and force work together, as Table 7.1 has them
-    g.place = None
-    g.arrange(start)
-    return ForwardDynamics(g.freeze(), tuple(qdd), tuple(D_out), inward, tuple(plan))
+            qdd[k] = builder.name(total((uD[i], dot(nUd, a_prime))))
+            acc[i] = name_vec(builder, add(a_prime, tuple(times(s, qdd[k]) for s in joint.S)))
+    return qdd
 
 
 def _inward_cost(Ia, c) -> int:
