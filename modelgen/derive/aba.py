@@ -127,12 +127,12 @@ def _ground_acceleration(eqs_spec) -> tuple:
 VELOCITY_PRODUCTS = ("inward", "outward", "auto")
 
 
-def _variable_operations(g: GraphBuilder, out, variables) -> int:
-    """Operations of ``out``, built in ``g``, without the statements of the
+def _variable_operations(builder: GraphBuilder, out, variables) -> int:
+    """Operations of ``out``, built in ``builder``, without the statements of the
     parameters alone (they are hoisted): what depends on ``variables``."""
     moving = set(variables)
     total = 0
-    for sym, e in g.freeze().closure(out):
+    for sym, e in builder.freeze().closure(out):
         if free_symbols(e) & moving:
             moving.add(sym)
             total += operation_count(e)
@@ -214,16 +214,18 @@ def velocity_product_plan(tree: JointTree, velocities, cost_in) -> tuple:
     def force(body, shape, vs, a):
         key = (shape, vs, a)
         if key not in forces:
-            g = GraphBuilder()
-            forces[key] = _variable_operations(g, link_force(g, body, vs, a), set(vs) | set(a))
+            builder = GraphBuilder()
+            forces[key] = _variable_operations(builder, link_force(builder, body, vs, a),
+                                               set(vs) | set(a))
         return forces[key]
 
     def below(joint, shape, ap, cs):
         key = (shape, ap, cs)
         if key not in transforms:
-            g = GraphBuilder()
-            a = add(joint_motion(g, joint, ap), cs)
-            transforms[key] = (_variable_operations(g, a, set(ap) | set(cs)), generic("mg_a", a))
+            builder = GraphBuilder()
+            a = add(joint_motion(builder, joint, ap), cs)
+            transforms[key] = (_variable_operations(builder, a, set(ap) | set(cs)),
+                               generic("mg_a", a))
         return transforms[key]
 
     cost_start, after_start, after_more = [0] * count, [0] * count, [0] * count
@@ -496,11 +498,12 @@ def _inward_cost(Ia, c) -> int:
         sum(1 for x in c if not is_zero(x))
 
 
-def _rigid_inertia(g, body) -> tuple:
+def _rigid_inertia(builder, body) -> tuple:
     """A link's rigid inertia as blocks (A, B, C) at its origin."""
-    m = g.name(body.m)
-    h = name_vec(g, body.h)
-    return (symmetric(name_vec(g, body.I)), skew(h), ((m, ZERO, ZERO), (ZERO, m, ZERO), (ZERO, ZERO, m)))
+    m = builder.name(body.m)
+    h = name_vec(builder, body.h)
+    return (symmetric(name_vec(builder, body.I)), skew(h),
+            ((m, ZERO, ZERO), (ZERO, m, ZERO), (ZERO, ZERO, m)))
 
 
 # -- ball and free joints: several degrees of freedom (Featherstone Table 7.1 with
@@ -516,62 +519,62 @@ class _MultiDofInertia:
     Ia: tuple         # articulated inertia passed to the parent (blocks)
     u: tuple = ()     # tau - S^T pA (k)
 
-    def forces(self, g, joint, pA, c, tau) -> tuple:
+    def forces(self, builder, joint, pA, c, tau) -> tuple:
         """``pa = pA + Ia c + U D^-1 u`` (and ``u``, kept for the outward pass)."""
         k = len(joint.dofs)
-        self.u = tuple(g.name(tau[idx] - dot(col, pA)) for idx, col in joint.dofs)
-        Du = [g.name(total(times(self.Dinv[a][b], self.u[b]) for b in range(k)))
+        self.u = tuple(builder.name(tau[idx] - dot(col, pA)) for idx, col in joint.dofs)
+        Du = [builder.name(total(times(self.Dinv[a][b], self.u[b]) for b in range(k)))
               for a in range(k)]
-        return g.vec(add(add(pA, inertia_times(self.Ia, c)),
-                         tuple(total(times(self.U[a][r], Du[a]) for a in range(k))
-                               for r in range(6))))
+        return builder.vec(add(add(pA, inertia_times(self.Ia, c)),
+                               tuple(total(times(self.U[a][r], Du[a]) for a in range(k))
+                                     for r in range(6))))
 
-    def outward(self, g, joint, a_prime, qdd) -> tuple:
+    def outward(self, builder, joint, a_prime, qdd) -> tuple:
         """qdd of the joint's speeds (written into ``qdd``) and the link acceleration."""
         k = len(joint.dofs)
-        rhs = [g.name(self.u[a] - dot(self.U[a], a_prime)) for a in range(k)]
+        rhs = [builder.name(self.u[a] - dot(self.U[a], a_prime)) for a in range(k)]
         acc = a_prime
         for a, (idx, col) in enumerate(joint.dofs):
-            qdd[idx] = g.name(total(times(self.Dinv[a][b], rhs[b]) for b in range(k)))
+            qdd[idx] = builder.name(total(times(self.Dinv[a][b], rhs[b]) for b in range(k)))
             acc = add(acc, tuple(times(s, qdd[idx]) for s in col))
-        return g.vec(acc)
+        return builder.vec(acc)
 
 
-def _ldlt_inverse(g, D) -> tuple:
+def _ldlt_inverse(builder, D) -> tuple:
     """(D^-1, pivots) of a symmetric k x k D by an unrolled LDL^T."""
     k = len(D)
     L = [[ZERO] * k for _ in range(k)]
     d = [None] * k
     for j in range(k):
-        d[j] = g.name(D[j][j] - total(times(times(L[j][m], L[j][m]), d[m]) for m in range(j)))
-        inv = g.name(1 / d[j])
+        d[j] = builder.name(D[j][j] - total(times(times(L[j][m], L[j][m]), d[m]) for m in range(j)))
+        inv = builder.name(1 / d[j])
         for i in range(j + 1, k):
-            L[i][j] = g.name((D[i][j] - total(times(times(L[i][m], L[j][m]), d[m])
+            L[i][j] = builder.name((D[i][j] - total(times(times(L[i][m], L[j][m]), d[m])
                                                 for m in range(j))) * inv)
     # columns of the inverse: solve L d L^T x = e_c
     cols = []
     for col in range(k):
         y = [None] * k
         for i in range(k):
-            y[i] = g.name((ONE if i == col else ZERO) - total(times(L[i][m], y[m])
+            y[i] = builder.name((ONE if i == col else ZERO) - total(times(L[i][m], y[m])
                                                                for m in range(i)))
         x = [None] * k
         for i in reversed(range(k)):
-            x[i] = g.name(y[i] / d[i] - total(times(L[m][i], x[m]) for m in range(i + 1, k)))
+            x[i] = builder.name(y[i] / d[i] - total(times(L[m][i], x[m]) for m in range(i + 1, k)))
         cols.append(x)
     inverse = tuple(tuple(cols[c][r] for c in range(k)) for r in range(k))
     return inverse, tuple(d)
 
 
-def _multi_dof_inertia(g, joint, IA) -> _MultiDofInertia:
+def _multi_dof_inertia(builder, joint, IA) -> _MultiDofInertia:
     """U, D^-1 and the inertia the parent receives, for a joint with k columns."""
     S = [col for _, col in joint.dofs]
     k = len(S)
-    U = [g.vec(inertia_times(IA, col)) for col in S]
-    D = [[g.name(dot(S[a], U[b])) for b in range(k)] for a in range(k)]
-    Dinv, pivots = _ldlt_inverse(g, D)
+    U = [builder.vec(inertia_times(IA, col)) for col in S]
+    D = [[builder.name(dot(S[a], U[b])) for b in range(k)] for a in range(k)]
+    Dinv, pivots = _ldlt_inverse(builder, D)
     # U D^-1 (6 x k)
-    UD = [g.vec(total(times(U[b][r], Dinv[b][a]) for b in range(k)) for r in range(6))
+    UD = [builder.vec(total(times(U[b][r], Dinv[b][a]) for b in range(k)) for r in range(6))
           for a in range(k)]
     A, B, C = IA
 
@@ -579,8 +582,8 @@ def _multi_dof_inertia(g, joint, IA) -> _MultiDofInertia:
         return tuple(tuple(total((M[r][s], neg(total(times(UD[a][r0 + r], U[a][s0 + s])
                                                          for a in range(k)))))
                            for s in range(3)) for r in range(3))
-    Ia = (name_symmetric(g, update(A, 0, 0)), name_matrix(g, update(B, 0, 3)),
-          name_symmetric(g, update(C, 3, 3)))
+    Ia = (name_symmetric(builder, update(A, 0, 0)), name_matrix(builder, update(B, 0, 3)),
+          name_symmetric(builder, update(C, 3, 3)))
     return _MultiDofInertia(tuple(U), Dinv, pivots, tuple(UD), Ia)
 
 

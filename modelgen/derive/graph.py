@@ -150,10 +150,10 @@ class Graph:
 class GraphBuilder:
     """Records named intermediates while a stage computes.
 
-    >>> g = GraphBuilder()
+    >>> builder = GraphBuilder()
     >>> x, y = sympy.symbols("x y")
-    >>> a = g.name(x*y + 1)
-    >>> a, g.name(x*y + 1) is a, g.name(2*x)
+    >>> a = builder.name(x*y + 1)
+    >>> a, builder.name(x*y + 1) is a, builder.name(2*x)
     (mg_0, True, 2*x)
     """
 
@@ -180,9 +180,9 @@ class GraphBuilder:
         statements of equal place keep the order they were recorded in.
 
         >>> x, y = sympy.symbols("x y")
-        >>> g = GraphBuilder(); g.place = (2,); a = g.name(x * y + 1)
-        >>> g.place = (1,); b = g.name(x + y + 1); c = g.name(a * b + 2)
-        >>> g.arrange(0); [str(e) for _, e in g.freeze().assignments]
+        >>> builder = GraphBuilder(); builder.place = (2,); a = builder.name(x * y + 1)
+        >>> builder.place = (1,); b = builder.name(x + y + 1); c = builder.name(a * b + 2)
+        >>> builder.arrange(0); [str(e) for _, e in builder.freeze().assignments]
         ['x + y + 1', 'x*y + 1', 'mg_0*mg_1 + 2']
         """
         head, tail = self._assignments[:start], self._assignments[start:]

@@ -40,7 +40,7 @@ def derive_outputs(kin: Kinematics, eqs: Equations, outputs) -> OutputColumns:
     >>> cols.columns[0]                                        # doctest: +SKIP
     ('tip.x', 'tip.y', 'tip.z')
     """
-    g = GraphBuilder(eqs.graph)
+    builder = GraphBuilder(eqs.graph)
     names, columns, exprs = [], [], []
     parts = dict(eqs.tau_parts)
     body_index = {b: i for i, b in enumerate(eqs.bodies)}
@@ -83,5 +83,5 @@ def derive_outputs(kin: Kinematics, eqs: Equations, outputs) -> OutputColumns:
             raise ValueError(f"unknown output kind {out.kind!r}")
         names.append(out.name)
         columns.append(tuple(cols))
-        exprs.extend(g.name(v) for v in values)
-    return OutputColumns(g.freeze(), tuple(names), tuple(columns), tuple(exprs))
+        exprs.extend(builder.name(v) for v in values)
+    return OutputColumns(builder.freeze(), tuple(names), tuple(columns), tuple(exprs))
