@@ -178,17 +178,81 @@ def derive_equations(kin: Kinematics) -> Equations:
     spec = kin.spec
     builder = GraphBuilder(kin.graph)
     n = spec.n
-
-    # -- per body: spatial partials, inertias, bias and external forces -------
-    S = []            # per body: {k: 6-tuple}
-    M = {}            # body index -> _Spatial
-    bias = {}         # body index -> 6-tuple spatial force at O (N_O, F)
+    per_body = _body_terms(builder, kin)
+    potential = per_body.potential
     ext_parts = []    # [(label, {body index: 6-tuple})]
+    if spec.gravity is not None:
+        ext_parts.append(("gravity", per_body.gravity))
+    for act in spec.actions:
+        ext_parts.append((act.name, action_forces(builder, kin, act)))
+
+    # effects (modelgen.derive.effects): forces on bodies, projected with the
+    # groups below, or generalized forces computed directly (springs and
+    # dampers between points; effects on coordinates)
+    direct_parts = []
+    for eff in spec.effects:
+        terms = derive_effect(builder, kin, eff)
+        if terms.body_forces is not None:
+            ext_parts.append((eff.name, terms.body_forces))
+        else:
+            direct_parts.append((eff.name, terms.generalized))
+        potential += terms.potential
+
+    # -- group bodies by identical spatial partials ----------------------------
+    groups = []       # per k: [(S, frozenset of bodies)]
+    for k in range(n):
+        by_motion: dict = {}
+        for i in range(len(spec.bodies)):
+            if k in per_body.S[i]:
+                by_motion.setdefault(per_body.S[i][k], []).append(i)
+        groups.append([(motion, frozenset(members)) for motion, members in by_motion.items()])
+
+    A = _mass_matrix(builder, per_body.M, groups, n)
+    h = _project(builder, per_body.bias, groups, n)
+    # tau projects the sum of all external forces once; the per-effect parts
+    # stay in the graph and cost nothing unless a routine outputs them.
+    total_ext: dict = {}
+    for _, forces in ext_parts:
+        for i, f in forces.items():
+            total_ext[i] = builder.vec(add(total_ext[i], f)) if i in total_ext else f
+    tau = _project(builder, total_ext, groups, n)
+    if direct_parts:
+        tau = tuple(builder.name(tau[k] + sympy.Add(*[part[k] for _, part in direct_parts]))
+                    for k in range(n))
+    tau_parts = tuple((label, _project(builder, forces, groups, n))
+                      for label, forces in ext_parts) + tuple(direct_parts)
+
+    kinetic, potential = builder.name(per_body.kinetic), builder.name(potential)
+    qdot = kinematic_relation(builder, spec)
+    return Equations(
+        name=spec.name, graph=builder.freeze(), t=TIME, q=kin.q, qd=kin.qd,
+        u=tuple(symbol(x) for x in spec.inputs),
+        p=tuple(symbol(x) for x in spec.parameter_names),
+        bodies=tuple(b.name for b in spec.bodies),
+        A=tuple(tuple(row) for row in A), h=h, tau=tau, tau_parts=tau_parts,
+        kinetic=kinetic, potential=potential, poses=tuple(per_body.poses), qdot=qdot)
+
+
+@dataclass(frozen=True)
+class _BodyTerms:
+    """Per body (spec order): what :func:`derive_equations` sums and projects."""
+    S: list           # {k: 6-tuple spatial partial}
+    M: dict           # body index -> _Spatial
+    bias: dict        # body index -> 6-tuple spatial force at O (N_O, F)
+    gravity: dict     # body index -> spatial force of the top-level gravity
+    kinetic: sympy.Expr
+    potential: sympy.Expr
+    poses: list
+
+
+def _body_terms(builder: GraphBuilder, kin: Kinematics) -> _BodyTerms:
+    """Spatial partials, inertias, bias and gravity forces, energies and poses of
+    every body."""
+    spec = kin.spec
+    S, M, bias, grav_forces, poses = [], {}, {}, {}, []
     kinetic = ZERO
     potential = ZERO
-    poses = []
     gravity = spec.gravity
-    grav_forces = {}
     for i, body in enumerate(spec.bodies):
         B = kin.bases[body.base]
         G = kin.points[body.G]
@@ -229,34 +293,12 @@ def derive_equations(kin: Kinematics) -> Equations:
         R = B.R
         poses.append(tuple(R[0]) + (r[0],) + tuple(R[1]) + (r[1],) + tuple(R[2]) + (r[2],)
                      + (ZERO, ZERO, ZERO, sympy.S.One))
+    return _BodyTerms(S, M, bias, grav_forces, kinetic, potential, poses)
 
-    if gravity is not None:
-        ext_parts.append(("gravity", grav_forces))
-    for act in spec.actions:
-        ext_parts.append((act.name, action_forces(builder, kin, act)))
 
-    # effects (modelgen.derive.effects): forces on bodies, projected with the
-    # groups below, or generalized forces computed directly (springs and
-    # dampers between points; effects on coordinates)
-    direct_parts = []
-    for eff in spec.effects:
-        terms = derive_effect(builder, kin, eff)
-        if terms.body_forces is not None:
-            ext_parts.append((eff.name, terms.body_forces))
-        else:
-            direct_parts.append((eff.name, terms.generalized))
-        potential += terms.potential
-
-    # -- group bodies by identical spatial partials ----------------------------
-    groups = []       # per k: [(S, frozenset of bodies)]
-    for k in range(n):
-        by_motion: dict = {}
-        for i in range(len(spec.bodies)):
-            if k in S[i]:
-                by_motion.setdefault(S[i][k], []).append(i)
-        groups.append([(motion, frozenset(members)) for motion, members in by_motion.items()])
-
-    # -- mass matrix: composite inertias ---------------------------------------
+def _mass_matrix(builder: GraphBuilder, M: dict, groups, n: int) -> list:
+    """A by composite inertias: ``A_kl`` sums ``S_k . (I_XY S_l)`` over the groups
+    X of k and Y of l, with ``I_XY`` the summed inertia of the bodies in both."""
     inertia_sums = _SetSums(M, lambda a, b, gb: a.plus(b, gb), builder)
     _warm(inertia_sums, [X & Y for k in range(n) for l in range(k, n)
                          for _, X in groups[k] for _, Y in groups[l] if X & Y])
@@ -275,44 +317,23 @@ def derive_equations(kin: Kinematics) -> Equations:
                         forces_memo[key] = inertia_sums(XY).times(Sl, builder)
                     total += dot(Sk, forces_memo[key])
             A[k][l] = A[l][k] = builder.name(total)
+    return A
 
-    # -- velocity-product term and generalized forces: grouped force sums ------
-    def project(per_body: dict) -> tuple:
-        sums = _SetSums(per_body, _sum_vectors, builder)
-        _warm(sums, [frozenset(i for i in X if i in per_body)
-                     for k in range(n) for _, X in groups[k]] and
-              [s for s in (frozenset(i for i in X if i in per_body)
-                           for k in range(n) for _, X in groups[k]) if s])
-        out = []
-        for k in range(n):
-            total = ZERO
-            for Sk, X in groups[k]:
-                X = frozenset(i for i in X if i in per_body)
-                if X:
-                    total += dot(Sk, sums(X))
-            out.append(builder.name(total))
-        return tuple(out)
 
-    h = project(bias)
-    # tau projects the sum of all external forces once; the per-effect parts
-    # stay in the graph and cost nothing unless a routine outputs them.
-    total_ext: dict = {}
-    for _, forces in ext_parts:
-        for i, f in forces.items():
-            total_ext[i] = builder.vec(add(total_ext[i], f)) if i in total_ext else f
-    tau = project(total_ext)
-    if direct_parts:
-        tau = tuple(builder.name(tau[k] + sympy.Add(*[part[k] for _, part in direct_parts]))
-                    for k in range(n))
-    tau_parts = tuple((label, project(forces)) for label, forces in ext_parts) \
-        + tuple(direct_parts)
-
-    kinetic, potential = builder.name(kinetic), builder.name(potential)
-    qdot = kinematic_relation(builder, spec)
-    return Equations(
-        name=spec.name, graph=builder.freeze(), t=TIME, q=kin.q, qd=kin.qd,
-        u=tuple(symbol(x) for x in spec.inputs),
-        p=tuple(symbol(x) for x in spec.parameter_names),
-        bodies=tuple(b.name for b in spec.bodies),
-        A=tuple(tuple(row) for row in A), h=h, tau=tau, tau_parts=tau_parts,
-        kinetic=kinetic, potential=potential, poses=tuple(poses), qdot=qdot)
+def _project(builder: GraphBuilder, per_body: dict, groups, n: int) -> tuple:
+    """Generalized forces of the spatial forces ``per_body`` (body index ->
+    force at O): grouped force sums dotted with each group's partial."""
+    sums = _SetSums(per_body, _sum_vectors, builder)
+    _warm(sums, [frozenset(i for i in X if i in per_body)
+                 for k in range(n) for _, X in groups[k]] and
+          [s for s in (frozenset(i for i in X if i in per_body)
+                       for k in range(n) for _, X in groups[k]) if s])
+    out = []
+    for k in range(n):
+        total = ZERO
+        for Sk, X in groups[k]:
+            X = frozenset(i for i in X if i in per_body)
+            if X:
+                total += dot(Sk, sums(X))
+        out.append(builder.name(total))
+    return tuple(out)

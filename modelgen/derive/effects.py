@@ -134,7 +134,7 @@ def _between_points(builder: GraphBuilder, kin: Kinematics, eff, tension_of) -> 
     F_b = builder.vec(scale(-tension, unit))            # on B; -F_b on A
     on_b = _point_force_power(builder, kin, eff.point_b, F_b, n)
     on_a = _point_force_power(builder, kin, eff.point_a, F_b, n)
-    tau = [b - a for a, b in zip(on_a, on_b)]
+    tau = [b - a for a, b in zip(on_a, on_b, strict=True)]
     return EffectTerms(generalized=tuple(builder.name(x) for x in tau), potential=potential)
 
 

@@ -196,7 +196,7 @@ def derive_kinematics(spec: ModelSpec, graph: Graph | None = None) -> Kinematics
             v = add(v, rel_v)
             a = add(a, cross(add(B.omega, J.omega), rel_v))
         elif moving:   # coordinates that change in time (prismatic-like)
-            cdot = tuple(d.rate(ci, gi) for ci, gi in zip(p.coordinates, grads))
+            cdot = tuple(d.rate(ci, gi) for ci, gi in zip(p.coordinates, grads, strict=True))
             rel_v = builder.vec(matvec(B.R, builder.vec(cdot)))
             cddot = builder.vec(d.bias_rate(x) for x in cdot)
             v = add(v, rel_v)

@@ -74,7 +74,7 @@ def derive_outputs(kin: Kinematics, eqs: Equations, outputs) -> OutputColumns:
             cols = [f"{out.name}.{c}" for c in kin.spec.dof_names]
         elif out.kind == "power":
             # the power of the effect's forces: its generalized force . q_dot
-            values = [sympy.Add(*[f * v for f, v in zip(parts[a["effect"]], eqs.qd)])]
+            values = [sympy.Add(*[f * v for f, v in zip(parts[a["effect"]], eqs.qd, strict=True)])]
             cols = [out.name]
         elif out.kind == "pose":
             values = list(eqs.poses[body_index[a["body"]]])

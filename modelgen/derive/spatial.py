@@ -116,11 +116,11 @@ def _minus(x, y):
 # -- 3-vectors ---------------------------------------------------------------------
 
 def add(a, b):
-    return tuple(_plus(x, y) for x, y in zip(a, b))
+    return tuple(_plus(x, y) for x, y in zip(a, b, strict=True))
 
 
 def sub(a, b):
-    return tuple(_minus(x, y) for x, y in zip(a, b))
+    return tuple(_minus(x, y) for x, y in zip(a, b, strict=True))
 
 
 def scale(s, a):
@@ -128,7 +128,7 @@ def scale(s, a):
 
 
 def dot(a, b):
-    return total([times(x, y) for x, y in zip(a, b)])
+    return total([times(x, y) for x, y in zip(a, b, strict=True)])
 
 
 def cross(a, b):
