@@ -20,6 +20,7 @@ import modelgen
 from modelgen.codegen import cse, pipeline
 from modelgen.codegen.cse import count_ops, make_routines
 from modelgen.derive import graph as graph_module
+from modelgen.derive import spatial
 from modelgen.derive.graph import Graph, free_symbols
 from modelgen.model.chains import spatial_chain
 
@@ -179,9 +180,9 @@ def test_vector_helpers_build_what_sympy_builds():
                       a[0] * b[1] - a[1] * b[0]),
             "matvec": tuple(sympy.Add(*[x * y for x, y in zip(row, a)]) for row in m),
         }
-        got = {"add": graph_module.add(a, b), "sub": graph_module.sub(a, b),
-               "scale": graph_module.scale(s, a), "dot": (graph_module.dot(a, b),),
-               "cross": graph_module.cross(a, b), "matvec": graph_module.matvec(m, a)}
+        got = {"add": spatial.add(a, b), "sub": spatial.sub(a, b),
+               "scale": spatial.scale(s, a), "dot": (spatial.dot(a, b),),
+               "cross": spatial.cross(a, b), "matvec": spatial.matvec(m, a)}
         for name, value in expected.items():
             assert got[name] == value, (name, a, b, s)
             assert [type(v) for v in got[name]] == [type(v) for v in value], (name, a, b, s)
@@ -190,7 +191,7 @@ def test_vector_helpers_build_what_sympy_builds():
 def test_product_is_sympys_product_on_every_pair():
     sympy_pool = [sympy.sympify(v) for v in _pool()]
     for x, y in itertools.product(sympy_pool, repeat=2):
-        got, expected = graph_module.product(x, y), x * y
+        got, expected = spatial.product(x, y), x * y
         assert got == expected and type(got) is type(expected), (x, y)
         assert got.args == expected.args, (x, y)
 

@@ -29,8 +29,8 @@ from dataclasses import dataclass
 import sympy
 
 from modelgen.derive.effects import action_forces, derive_effect
-from modelgen.derive.graph import (ZERO, ZERO3, Graph, GraphBuilder, add, cross, dot, matvec,
-                                   scale, sub)
+from modelgen.derive.graph import Graph, GraphBuilder
+from modelgen.derive.spatial import ZERO, ZERO3, add, cross, dot, matvec, scale, sub
 from modelgen.derive.kinematics import Kinematics, quaternion_columns
 from modelgen.model.spec import TIME, symbol
 
@@ -63,16 +63,16 @@ class Equations:
         return len(self.q) != len(self.qd)
 
 
-def _transform_inertia(g: GraphBuilder, R, inertia):
+def _transform_inertia(builder: GraphBuilder, R, inertia):
     """I_E = R I R^T as a named symmetric 3x3 (tuple of rows)."""
     # X = I R^T  (X[i][j] = sum_l I[i][l] R[j][l])
     X = [[sympy.Add(*[inertia[i][l] * R[j][l] for l in range(3)]) for j in range(3)]
          for i in range(3)]
-    X = [[g.name(x) for x in row] for row in X]
+    X = [[builder.name(x) for x in row] for row in X]
     out = [[None] * 3 for _ in range(3)]
     for i in range(3):
         for j in range(i, 3):
-            out[i][j] = out[j][i] = g.name(sympy.Add(*[R[i][l] * X[l][j] for l in range(3)]))
+            out[i][j] = out[j][i] = builder.name(sympy.Add(*[R[i][l] * X[l][j] for l in range(3)]))
     return tuple(tuple(row) for row in out)
 
 
@@ -83,11 +83,11 @@ class _Spatial:
     h: tuple
     m: sympy.Expr
 
-    def plus(self, other, g):
-        return _Spatial(g.vec(add(self.I, other.I)), g.vec(add(self.h, other.h)),
-                        g.name(self.m + other.m))
+    def plus(self, other, builder):
+        return _Spatial(builder.vec(add(self.I, other.I)), builder.vec(add(self.h, other.h)),
+                        builder.name(self.m + other.m))
 
-    def times(self, S, g):
+    def times(self, S, builder):
         """M S for a spatial motion S = (c, beta): (I_O c + h x beta, m beta + c x h)."""
         c, beta = S[:3], S[3:]
         xx, yy, zz, xy, xz, yz = self.I
@@ -96,11 +96,11 @@ class _Spatial:
               xz * c[0] + yz * c[1] + zz * c[2])
         ang = add(Ic, cross(self.h, beta))
         lin = add(scale(self.m, beta), cross(c, self.h))
-        return g.vec(ang + lin)
+        return builder.vec(ang + lin)
 
 
-def _sum_vectors(a, b, g):
-    return g.vec(add(a, b))
+def _sum_vectors(a, b, builder):
+    return builder.vec(add(a, b))
 
 
 class _SetSums:
@@ -110,10 +110,10 @@ class _SetSums:
     nested sets along a chain cost one addition each, as in CRBA.
     """
 
-    def __init__(self, items: dict, plus, g):
+    def __init__(self, items: dict, plus, builder):
         self.items = items          # body index -> quantity
         self.plus = plus
-        self.g = g
+        self.builder = builder
         self.memo: dict = {}
 
     def __call__(self, bodies: frozenset):
@@ -124,10 +124,12 @@ class _SetSums:
         for known in sorted((s for s in self.memo if s < bodies),
                             key=lambda s: (-len(s), sorted(s))):
             if known <= remaining:
-                total = self.memo[known] if total is None else self.plus(total, self.memo[known], self.g)
+                total = (self.memo[known] if total is None else
+                         self.plus(total, self.memo[known], self.builder))
                 remaining -= known
         for i in sorted(remaining):
-            total = self.items[i] if total is None else self.plus(total, self.items[i], self.g)
+            total = (self.items[i] if total is None else
+                     self.plus(total, self.items[i], self.builder))
         self.memo[bodies] = total
         return total
 
@@ -138,16 +140,16 @@ def _warm(sums: _SetSums, sets):
         sums(s)
 
 
-def kinematic_relation(g: GraphBuilder, spec) -> tuple:
+def kinematic_relation(builder: GraphBuilder, spec) -> tuple:
     """dq/dt = N(q) qd: a simple coordinate's rate is its speed; a joint's
     quaternion turns as ``dquat/dt = quat * (0, w) / 2`` (w in the joint's own
     base), and a free joint's position as ``dr/dt = R(quat) v``.
 
     >>> from modelgen.model.api import Model
     >>> spec = Model("m").add_joint("J", "ball", parent="E", base="B").spec()
-    >>> g = GraphBuilder()
-    >>> qdot = kinematic_relation(g, spec)
-    >>> g.freeze().expand(qdot[0])
+    >>> builder = GraphBuilder()
+    >>> qdot = kinematic_relation(builder, spec)
+    >>> builder.freeze().expand(qdot[0])
     -J_qx*J_wx/2 - J_qy*J_wy/2 - J_qz*J_wz/2
     """
     out = [symbol(v) for v in spec.speeds[:len(spec.simple_coordinates)]]
@@ -161,9 +163,9 @@ def kinematic_relation(g: GraphBuilder, spec) -> tuple:
                     half * (w * wy + z * wx - x * wz), half * (w * wz + x * wy - y * wx)]
         if joint.kind == "free":
             cols = quaternion_columns((w, x, y, z))
-            out += [g.name(sympy.Add(*[cols[j][i] * vs[j] for j in range(3)]))
+            out += [builder.name(sympy.Add(*[cols[j][i] * vs[j] for j in range(3)]))
                     for i in range(3)]
-        out += [g.name(e) for e in quat_dot]
+        out += [builder.name(e) for e in quat_dot]
     return tuple(out)
 
 
@@ -174,71 +176,22 @@ def derive_equations(kin: Kinematics) -> Equations:
     >>> eqs = derive_equations(derive_kinematics(load_model("models/simple_pendulum.yaml")))  # doctest: +SKIP
     """
     spec = kin.spec
-    g = GraphBuilder(kin.graph)
+    builder = GraphBuilder(kin.graph)
     n = spec.n
-
-    # -- per body: spatial partials, inertias, bias and external forces -------
-    S = []            # per body: {k: 6-tuple}
-    M = {}            # body index -> _Spatial
-    bias = {}         # body index -> 6-tuple spatial force at O (N_O, F)
+    per_body = _body_terms(builder, kin)
+    potential = per_body.potential
     ext_parts = []    # [(label, {body index: 6-tuple})]
-    kinetic = ZERO
-    potential = ZERO
-    poses = []
-    gravity = spec.gravity
-    grav_forces = {}
-    for i, body in enumerate(spec.bodies):
-        B = kin.bases[body.base]
-        G = kin.points[body.G]
-        r = G.r
-        Si = {}
-        for k in sorted(set(B.partials) | set(G.partials)):
-            c = B.partials.get(k, ZERO3)
-            w, beta = G.partials.get(k, (ZERO3, ZERO3))
-            if w != c:
-                beta = g.vec(add(beta, cross(sub(w, c), r)))
-            if any(x != 0 for x in c + beta):
-                Si[k] = c + tuple(beta)
-        S.append(Si)
-
-        m = body.mass
-        IE = _transform_inertia(g, B.R, body.inertia)
-        h_vec = g.vec(scale(m, r))
-        rr = g.name(r[0] ** 2 + r[1] ** 2 + r[2] ** 2)
-        I_O = (g.name(IE[0][0] + m * (rr - r[0] ** 2)),
-               g.name(IE[1][1] + m * (rr - r[1] ** 2)),
-               g.name(IE[2][2] + m * (rr - r[2] ** 2)),
-               g.name(IE[0][1] - r[0] * h_vec[1]),
-               g.name(IE[0][2] - r[0] * h_vec[2]),
-               g.name(IE[1][2] - r[1] * h_vec[2]))
-        M[i] = _Spatial(I_O, h_vec, m)
-
-        omega, alpha = B.omega, B.alpha_bias
-        I_omega = g.vec(matvec(IE, omega))
-        F = g.vec(scale(m, G.a_bias))
-        N_G = add(matvec(IE, alpha), cross(omega, I_omega))
-        bias[i] = g.vec(add(N_G, cross(r, F))) + F
-
-        kinetic += (m * (G.v[0] ** 2 + G.v[1] ** 2 + G.v[2] ** 2) + dot(omega, I_omega)) / 2
-        if gravity is not None:
-            Fg = g.vec(scale(m, gravity))
-            grav_forces[i] = g.vec(cross(r, Fg)) + Fg
-            potential -= dot(Fg, r)
-        R = B.R
-        poses.append(tuple(R[0]) + (r[0],) + tuple(R[1]) + (r[1],) + tuple(R[2]) + (r[2],)
-                     + (ZERO, ZERO, ZERO, sympy.S.One))
-
-    if gravity is not None:
-        ext_parts.append(("gravity", grav_forces))
+    if spec.gravity is not None:
+        ext_parts.append(("gravity", per_body.gravity))
     for act in spec.actions:
-        ext_parts.append((act.name, action_forces(g, kin, act)))
+        ext_parts.append((act.name, action_forces(builder, kin, act)))
 
     # effects (modelgen.derive.effects): forces on bodies, projected with the
     # groups below, or generalized forces computed directly (springs and
     # dampers between points; effects on coordinates)
     direct_parts = []
     for eff in spec.effects:
-        terms = derive_effect(g, kin, eff)
+        terms = derive_effect(builder, kin, eff)
         if terms.body_forces is not None:
             ext_parts.append((eff.name, terms.body_forces))
         else:
@@ -250,12 +203,103 @@ def derive_equations(kin: Kinematics) -> Equations:
     for k in range(n):
         by_motion: dict = {}
         for i in range(len(spec.bodies)):
-            if k in S[i]:
-                by_motion.setdefault(S[i][k], []).append(i)
+            if k in per_body.S[i]:
+                by_motion.setdefault(per_body.S[i][k], []).append(i)
         groups.append([(motion, frozenset(members)) for motion, members in by_motion.items()])
 
-    # -- mass matrix: composite inertias ---------------------------------------
-    inertia_sums = _SetSums(M, lambda a, b, gb: a.plus(b, gb), g)
+    A = _mass_matrix(builder, per_body.M, groups, n)
+    h = _project(builder, per_body.bias, groups, n)
+    # tau projects the sum of all external forces once; the per-effect parts
+    # stay in the graph and cost nothing unless a routine outputs them.
+    total_ext: dict = {}
+    for _, forces in ext_parts:
+        for i, f in forces.items():
+            total_ext[i] = builder.vec(add(total_ext[i], f)) if i in total_ext else f
+    tau = _project(builder, total_ext, groups, n)
+    if direct_parts:
+        tau = tuple(builder.name(tau[k] + sympy.Add(*[part[k] for _, part in direct_parts]))
+                    for k in range(n))
+    tau_parts = tuple((label, _project(builder, forces, groups, n))
+                      for label, forces in ext_parts) + tuple(direct_parts)
+
+    kinetic, potential = builder.name(per_body.kinetic), builder.name(potential)
+    qdot = kinematic_relation(builder, spec)
+    return Equations(
+        name=spec.name, graph=builder.freeze(), t=TIME, q=kin.q, qd=kin.qd,
+        u=tuple(symbol(x) for x in spec.inputs),
+        p=tuple(symbol(x) for x in spec.parameter_names),
+        bodies=tuple(b.name for b in spec.bodies),
+        A=tuple(tuple(row) for row in A), h=h, tau=tau, tau_parts=tau_parts,
+        kinetic=kinetic, potential=potential, poses=tuple(per_body.poses), qdot=qdot)
+
+
+@dataclass(frozen=True)
+class _BodyTerms:
+    """Per body (spec order): what :func:`derive_equations` sums and projects."""
+    S: list           # {k: 6-tuple spatial partial}
+    M: dict           # body index -> _Spatial
+    bias: dict        # body index -> 6-tuple spatial force at O (N_O, F)
+    gravity: dict     # body index -> spatial force of the top-level gravity
+    kinetic: sympy.Expr
+    potential: sympy.Expr
+    poses: list
+
+
+def _body_terms(builder: GraphBuilder, kin: Kinematics) -> _BodyTerms:
+    """Spatial partials, inertias, bias and gravity forces, energies and poses of
+    every body."""
+    spec = kin.spec
+    S, M, bias, grav_forces, poses = [], {}, {}, {}, []
+    kinetic = ZERO
+    potential = ZERO
+    gravity = spec.gravity
+    for i, body in enumerate(spec.bodies):
+        B = kin.bases[body.base]
+        G = kin.points[body.G]
+        r = G.r
+        Si = {}
+        for k in sorted(set(B.partials) | set(G.partials)):
+            c = B.partials.get(k, ZERO3)
+            w, beta = G.partials.get(k, (ZERO3, ZERO3))
+            if w != c:
+                beta = builder.vec(add(beta, cross(sub(w, c), r)))
+            if any(x != 0 for x in c + beta):
+                Si[k] = c + tuple(beta)
+        S.append(Si)
+
+        m = body.mass
+        IE = _transform_inertia(builder, B.R, body.inertia)
+        h_vec = builder.vec(scale(m, r))
+        rr = builder.name(r[0] ** 2 + r[1] ** 2 + r[2] ** 2)
+        I_O = (builder.name(IE[0][0] + m * (rr - r[0] ** 2)),
+               builder.name(IE[1][1] + m * (rr - r[1] ** 2)),
+               builder.name(IE[2][2] + m * (rr - r[2] ** 2)),
+               builder.name(IE[0][1] - r[0] * h_vec[1]),
+               builder.name(IE[0][2] - r[0] * h_vec[2]),
+               builder.name(IE[1][2] - r[1] * h_vec[2]))
+        M[i] = _Spatial(I_O, h_vec, m)
+
+        omega, alpha = B.omega, B.alpha_bias
+        I_omega = builder.vec(matvec(IE, omega))
+        F = builder.vec(scale(m, G.a_bias))
+        N_G = add(matvec(IE, alpha), cross(omega, I_omega))
+        bias[i] = builder.vec(add(N_G, cross(r, F))) + F
+
+        kinetic += (m * (G.v[0] ** 2 + G.v[1] ** 2 + G.v[2] ** 2) + dot(omega, I_omega)) / 2
+        if gravity is not None:
+            Fg = builder.vec(scale(m, gravity))
+            grav_forces[i] = builder.vec(cross(r, Fg)) + Fg
+            potential -= dot(Fg, r)
+        R = B.R
+        poses.append(tuple(R[0]) + (r[0],) + tuple(R[1]) + (r[1],) + tuple(R[2]) + (r[2],)
+                     + (ZERO, ZERO, ZERO, sympy.S.One))
+    return _BodyTerms(S, M, bias, grav_forces, kinetic, potential, poses)
+
+
+def _mass_matrix(builder: GraphBuilder, M: dict, groups, n: int) -> list:
+    """A by composite inertias: ``A_kl`` sums ``S_k . (I_XY S_l)`` over the groups
+    X of k and Y of l, with ``I_XY`` the summed inertia of the bodies in both."""
+    inertia_sums = _SetSums(M, lambda a, b, gb: a.plus(b, gb), builder)
     _warm(inertia_sums, [X & Y for k in range(n) for l in range(k, n)
                          for _, X in groups[k] for _, Y in groups[l] if X & Y])
     forces_memo: dict = {}
@@ -270,47 +314,26 @@ def derive_equations(kin: Kinematics) -> Equations:
                         continue
                     key = (XY, Sl)
                     if key not in forces_memo:
-                        forces_memo[key] = inertia_sums(XY).times(Sl, g)
+                        forces_memo[key] = inertia_sums(XY).times(Sl, builder)
                     total += dot(Sk, forces_memo[key])
-            A[k][l] = A[l][k] = g.name(total)
+            A[k][l] = A[l][k] = builder.name(total)
+    return A
 
-    # -- velocity-product term and generalized forces: grouped force sums ------
-    def project(per_body: dict) -> tuple:
-        sums = _SetSums(per_body, _sum_vectors, g)
-        _warm(sums, [frozenset(i for i in X if i in per_body)
-                     for k in range(n) for _, X in groups[k]] and
-              [s for s in (frozenset(i for i in X if i in per_body)
-                           for k in range(n) for _, X in groups[k]) if s])
-        out = []
-        for k in range(n):
-            total = ZERO
-            for Sk, X in groups[k]:
-                X = frozenset(i for i in X if i in per_body)
-                if X:
-                    total += dot(Sk, sums(X))
-            out.append(g.name(total))
-        return tuple(out)
 
-    h = project(bias)
-    # tau projects the sum of all external forces once; the per-effect parts
-    # stay in the graph and cost nothing unless a routine outputs them.
-    total_ext: dict = {}
-    for _, forces in ext_parts:
-        for i, f in forces.items():
-            total_ext[i] = g.vec(add(total_ext[i], f)) if i in total_ext else f
-    tau = project(total_ext)
-    if direct_parts:
-        tau = tuple(g.name(tau[k] + sympy.Add(*[part[k] for _, part in direct_parts]))
-                    for k in range(n))
-    tau_parts = tuple((label, project(forces)) for label, forces in ext_parts) \
-        + tuple(direct_parts)
-
-    kinetic, potential = g.name(kinetic), g.name(potential)
-    qdot = kinematic_relation(g, spec)
-    return Equations(
-        name=spec.name, graph=g.freeze(), t=TIME, q=kin.q, qd=kin.qd,
-        u=tuple(symbol(x) for x in spec.inputs),
-        p=tuple(symbol(x) for x in spec.parameter_names),
-        bodies=tuple(b.name for b in spec.bodies),
-        A=tuple(tuple(row) for row in A), h=h, tau=tau, tau_parts=tau_parts,
-        kinetic=kinetic, potential=potential, poses=tuple(poses), qdot=qdot)
+def _project(builder: GraphBuilder, per_body: dict, groups, n: int) -> tuple:
+    """Generalized forces of the spatial forces ``per_body`` (body index ->
+    force at O): grouped force sums dotted with each group's partial."""
+    sums = _SetSums(per_body, _sum_vectors, builder)
+    _warm(sums, [frozenset(i for i in X if i in per_body)
+                 for k in range(n) for _, X in groups[k]] and
+          [s for s in (frozenset(i for i in X if i in per_body)
+                       for k in range(n) for _, X in groups[k]) if s])
+    out = []
+    for k in range(n):
+        total = ZERO
+        for Sk, X in groups[k]:
+            X = frozenset(i for i in X if i in per_body)
+            if X:
+                total += dot(Sk, sums(X))
+        out.append(builder.name(total))
+    return tuple(out)

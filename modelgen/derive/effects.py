@@ -21,7 +21,8 @@ from typing import Optional
 
 import sympy
 
-from modelgen.derive.graph import ZERO, GraphBuilder, add, cross, dot, matvec, scale, sub
+from modelgen.derive.graph import GraphBuilder
+from modelgen.derive.spatial import ZERO, add, cross, dot, matvec, scale, sub
 from modelgen.derive.kinematics import Kinematics
 from modelgen.model.spec import (CANONICAL_BASE, ActionSpec, DamperEffect, DragEffect,
                                  FrictionEffect, GravityEffect, JointDampingEffect, SpringEffect,
@@ -43,7 +44,7 @@ class EffectTerms:
     potential: sympy.Expr = ZERO
 
 
-def derive_effect(g: GraphBuilder, kin: Kinematics, effect) -> EffectTerms:
+def derive_effect(builder: GraphBuilder, kin: Kinematics, effect) -> EffectTerms:
     """The terms of one effect, by its class in :data:`DERIVATIONS`.
 
     >>> from modelgen.model import parse_model
@@ -52,59 +53,59 @@ def derive_effect(g: GraphBuilder, kin: Kinematics, effect) -> EffectTerms:
     >>> spec = parse_model("{name: m, coordinates: [q], parameters: {c: 0.5}, "
     ...     "effects: {d: {type: joint_damping, coordinates: [q], damping: c}}}")
     >>> kin = derive_kinematics(spec)
-    >>> g = GraphBuilder(kin.graph)
-    >>> terms = derive_effect(g, kin, spec.effects[0])
-    >>> [g.freeze().expand(x) for x in terms.generalized], terms.potential
+    >>> builder = GraphBuilder(kin.graph)
+    >>> terms = derive_effect(builder, kin, spec.effects[0])
+    >>> [builder.freeze().expand(x) for x in terms.generalized], terms.potential
     ([-c*q_dot], 0)
     """
-    return DERIVATIONS[type(effect)](g, kin, effect)
+    return DERIVATIONS[type(effect)](builder, kin, effect)
 
 
 def _body_index(kin: Kinematics, body: str) -> int:
     return next(i for i, b in enumerate(kin.spec.bodies) if b.name == body)
 
 
-def action_forces(g: GraphBuilder, kin: Kinematics, act) -> dict:
+def action_forces(builder: GraphBuilder, kin: Kinematics, act) -> dict:
     """The seed's Action as a spatial force at O on its body: (T + r_P x F, F)."""
     Rb = kin.bases[act.base].R
-    F = g.vec(matvec(Rb, act.force))
-    T = g.vec(matvec(Rb, act.torque))
+    F = builder.vec(matvec(Rb, act.force))
+    T = builder.vec(matvec(Rb, act.torque))
     rP = kin.points[act.point].r
-    return {_body_index(kin, act.body): g.vec(add(T, cross(rP, F))) + F}
+    return {_body_index(kin, act.body): builder.vec(add(T, cross(rP, F))) + F}
 
 
-def _action(g: GraphBuilder, kin: Kinematics, eff: ActionSpec) -> EffectTerms:
-    return EffectTerms(body_forces=action_forces(g, kin, eff))
+def _action(builder: GraphBuilder, kin: Kinematics, eff: ActionSpec) -> EffectTerms:
+    return EffectTerms(body_forces=action_forces(builder, kin, eff))
 
 
-def _gravity(g: GraphBuilder, kin: Kinematics, eff: GravityEffect) -> EffectTerms:
+def _gravity(builder: GraphBuilder, kin: Kinematics, eff: GravityEffect) -> EffectTerms:
     """m * vector at every G; potential -m vector . r_G, counted only in base E."""
-    vec = g.vec(matvec(kin.bases[eff.base].R, eff.vector))
+    vec = builder.vec(matvec(kin.bases[eff.base].R, eff.vector))
     forces = {}
     potential = ZERO
     for i, body in enumerate(kin.spec.bodies):
         r = kin.points[body.G].r
-        Fg = g.vec(scale(body.mass, vec))
-        forces[i] = g.vec(cross(r, Fg)) + Fg
+        Fg = builder.vec(scale(body.mass, vec))
+        forces[i] = builder.vec(cross(r, Fg)) + Fg
         if eff.base == CANONICAL_BASE:
             potential -= dot(Fg, r)
     return EffectTerms(body_forces=forces, potential=potential)
 
 
-def _drag(g: GraphBuilder, kin: Kinematics, eff: DragEffect) -> EffectTerms:
+def _drag(builder: GraphBuilder, kin: Kinematics, eff: DragEffect) -> EffectTerms:
     """-1/2 rho Cd A |v| v at the body-fixed point, v its velocity."""
     i = _body_index(kin, eff.body)
     body = kin.spec.bodies[i]
     B, G = kin.bases[body.base], kin.points[body.G]
     rP = kin.points[eff.point].r
-    vP = g.vec(add(G.v, cross(B.omega, sub(rP, G.r))))
-    speed = g.name(sympy.sqrt(dot(vP, vP)))
-    coef = g.name(-eff.density * eff.drag_coefficient * eff.area * speed / 2)
-    F = g.vec(scale(coef, vP))
-    return EffectTerms(body_forces={i: g.vec(cross(rP, F)) + F})
+    vP = builder.vec(add(G.v, cross(B.omega, sub(rP, G.r))))
+    speed = builder.name(sympy.sqrt(dot(vP, vP)))
+    coef = builder.name(-eff.density * eff.drag_coefficient * eff.area * speed / 2)
+    F = builder.vec(scale(coef, vP))
+    return EffectTerms(body_forces={i: builder.vec(cross(rP, F)) + F})
 
 
-def _point_force_power(g: GraphBuilder, kin: Kinematics, point: str, F, n: int) -> list:
+def _point_force_power(builder: GraphBuilder, kin: Kinematics, point: str, F, n: int) -> list:
     """Generalized force of a force F applied at a model point (its own kinematics).
 
     b_k = beta_k + w_k x r, so F . b_k = F . beta_k + w_k . (r x F).
@@ -112,73 +113,75 @@ def _point_force_power(g: GraphBuilder, kin: Kinematics, point: str, F, n: int) 
     P = kin.points[point]
     if not P.partials:
         return [ZERO] * n
-    M = g.vec(cross(P.r, F))
+    M = builder.vec(cross(P.r, F))
     out = [ZERO] * n
     for k, (w, beta) in P.partials.items():
         out[k] = dot(F, beta) + dot(w, M)
     return out
 
 
-def _between_points(g: GraphBuilder, kin: Kinematics, eff, tension_of) -> EffectTerms:
+def _between_points(builder: GraphBuilder, kin: Kinematics, eff, tension_of) -> EffectTerms:
     """A tension along the line from point_a to point_b (pulling them together if > 0).
 
     ``tension_of(length, unit, A, B)`` returns ``(tension, potential)``.
     """
     n = kin.spec.n
     A, B = kin.points[eff.point_a], kin.points[eff.point_b]
-    d = g.vec(sub(B.r, A.r))
-    length = g.name(sympy.sqrt(dot(d, d)))
-    unit = g.vec(scale(1 / length, d))
+    d = builder.vec(sub(B.r, A.r))
+    length = builder.name(sympy.sqrt(dot(d, d)))
+    unit = builder.vec(scale(1 / length, d))
     tension, potential = tension_of(length, unit, A, B)
-    F_b = g.vec(scale(-tension, unit))            # on B; -F_b on A
-    on_b = _point_force_power(g, kin, eff.point_b, F_b, n)
-    on_a = _point_force_power(g, kin, eff.point_a, F_b, n)
-    tau = [b - a for a, b in zip(on_a, on_b)]
-    return EffectTerms(generalized=tuple(g.name(x) for x in tau), potential=potential)
+    F_b = builder.vec(scale(-tension, unit))            # on B; -F_b on A
+    on_b = _point_force_power(builder, kin, eff.point_b, F_b, n)
+    on_a = _point_force_power(builder, kin, eff.point_a, F_b, n)
+    tau = [b - a for a, b in zip(on_a, on_b, strict=True)]
+    return EffectTerms(generalized=tuple(builder.name(x) for x in tau), potential=potential)
 
 
-def _spring(g: GraphBuilder, kin: Kinematics, eff: SpringEffect) -> EffectTerms:
+def _spring(builder: GraphBuilder, kin: Kinematics, eff: SpringEffect) -> EffectTerms:
     """Tension k (l - rest_length) + preload; potential k/2 (l - rest)^2 + preload l."""
     def tension_of(length, unit, A, B):
-        stretch = g.name(length - eff.rest_length)
-        tension = g.name(eff.stiffness * stretch + eff.preload)
+        stretch = builder.name(length - eff.rest_length)
+        tension = builder.name(eff.stiffness * stretch + eff.preload)
         return tension, eff.stiffness * stretch ** 2 / 2 + eff.preload * length
-    return _between_points(g, kin, eff, tension_of)
+    return _between_points(builder, kin, eff, tension_of)
 
 
-def _damper(g: GraphBuilder, kin: Kinematics, eff: DamperEffect) -> EffectTerms:
+def _damper(builder: GraphBuilder, kin: Kinematics, eff: DamperEffect) -> EffectTerms:
     """Tension c dl/dt, dl/dt the rate of change of the distance."""
     def tension_of(length, unit, A, B):
-        rate = g.name(dot(unit, sub(B.v, A.v)))
-        return g.name(eff.damping * rate), ZERO
-    return _between_points(g, kin, eff, tension_of)
+        rate = builder.name(dot(unit, sub(B.v, A.v)))
+        return builder.name(eff.damping * rate), ZERO
+    return _between_points(builder, kin, eff, tension_of)
 
 
-def _on_coordinates(g: GraphBuilder, kin: Kinematics, forces: dict,
+def _on_coordinates(builder: GraphBuilder, kin: Kinematics, forces: dict,
                     potential=ZERO) -> EffectTerms:
     """Generalized forces ``{coordinate name: force}`` (others zero) as EffectTerms."""
     coord = {name: k for k, name in enumerate(kin.spec.simple_coordinates)}
     tau = [ZERO] * kin.spec.n
     for name, force in forces.items():
         tau[coord[name]] = force
-    return EffectTerms(generalized=tuple(g.name(x) for x in tau), potential=potential)
+    return EffectTerms(generalized=tuple(builder.name(x) for x in tau), potential=potential)
 
 
-def _torsion_spring(g: GraphBuilder, kin: Kinematics, eff: TorsionSpringEffect) -> EffectTerms:
+def _torsion_spring(builder: GraphBuilder, kin: Kinematics,
+                    eff: TorsionSpringEffect) -> EffectTerms:
     """-k (q - rest_angle) on the coordinate; potential k/2 (q - rest_angle)^2."""
     q = kin.q[kin.spec.coordinates.index(eff.coordinate)]
     stretch = q - eff.rest_angle
-    return _on_coordinates(g, kin, {eff.coordinate: -eff.stiffness * stretch},
+    return _on_coordinates(builder, kin, {eff.coordinate: -eff.stiffness * stretch},
                            eff.stiffness * stretch ** 2 / 2)
 
 
-def _joint_damping(g: GraphBuilder, kin: Kinematics, eff: JointDampingEffect) -> EffectTerms:
+def _joint_damping(builder: GraphBuilder, kin: Kinematics, eff: JointDampingEffect) -> EffectTerms:
     """-c q_dot on each listed coordinate."""
     qd = {name: kin.qd[k] for k, name in enumerate(kin.spec.simple_coordinates)}
-    return _on_coordinates(g, kin, {name: -eff.damping * qd[name] for name in eff.coordinates})
+    return _on_coordinates(builder, kin,
+                           {name: -eff.damping * qd[name] for name in eff.coordinates})
 
 
-def _friction(g: GraphBuilder, kin: Kinematics, eff: FrictionEffect) -> EffectTerms:
+def _friction(builder: GraphBuilder, kin: Kinematics, eff: FrictionEffect) -> EffectTerms:
     """Regularised Coulomb + Stribeck + viscous friction (see FrictionEffect)."""
     v = kin.qd[kin.spec.coordinates.index(eff.coordinate)]
     static = eff.coulomb if eff.static is None else eff.static
@@ -186,7 +189,7 @@ def _friction(g: GraphBuilder, kin: Kinematics, eff: FrictionEffect) -> EffectTe
     if static != eff.coulomb:
         level = level + (static - eff.coulomb) * sympy.exp(-(v / eff.stribeck_speed) ** 2)
     tau = -level * sympy.tanh(v / eff.smoothing_speed) - eff.viscous * v
-    return _on_coordinates(g, kin, {eff.coordinate: tau})
+    return _on_coordinates(builder, kin, {eff.coordinate: tau})
 
 
 #: Effect class -> the function deriving its terms: the one place an effect's physics goes.

@@ -19,9 +19,6 @@ from typing import Iterable
 
 import sympy
 
-ZERO = sympy.S.Zero
-ONE = sympy.S.One
-
 #: Prefix of intermediate symbols.  User names may not start with ``mg_``.
 PREFIX = "mg_"
 
@@ -153,10 +150,10 @@ class Graph:
 class GraphBuilder:
     """Records named intermediates while a stage computes.
 
-    >>> g = GraphBuilder()
+    >>> builder = GraphBuilder()
     >>> x, y = sympy.symbols("x y")
-    >>> a = g.name(x*y + 1)
-    >>> a, g.name(x*y + 1) is a, g.name(2*x)
+    >>> a = builder.name(x*y + 1)
+    >>> a, builder.name(x*y + 1) is a, builder.name(2*x)
     (mg_0, True, 2*x)
     """
 
@@ -183,9 +180,9 @@ class GraphBuilder:
         statements of equal place keep the order they were recorded in.
 
         >>> x, y = sympy.symbols("x y")
-        >>> g = GraphBuilder(); g.place = (2,); a = g.name(x * y + 1)
-        >>> g.place = (1,); b = g.name(x + y + 1); c = g.name(a * b + 2)
-        >>> g.arrange(0); [str(e) for _, e in g.freeze().assignments]
+        >>> builder = GraphBuilder(); builder.place = (2,); a = builder.name(x * y + 1)
+        >>> builder.place = (1,); b = builder.name(x + y + 1); c = builder.name(a * b + 2)
+        >>> builder.arrange(0); [str(e) for _, e in builder.freeze().assignments]
         ['x + y + 1', 'x*y + 1', 'mg_0*mg_1 + 2']
         """
         head, tail = self._assignments[:start], self._assignments[start:]
@@ -242,113 +239,3 @@ class GraphBuilder:
 
     def freeze(self) -> Graph:
         return Graph(tuple(self._assignments))
-
-
-# -- small vector algebra on tuples of sympy expressions ---------------------
-# An exact 0 or 1 (sympy's or a Python int) is dropped before sympy sees it:
-# axis vectors, joint rotations and offsets are mostly zeros and ones, and
-# building 0*x or x + 0 through sympy (sympify, flatten) costs as much as a real
-# product.  The results are the expressions sympy's arithmetic builds
-# (tests/test_cse.py compares them); two numbers are combined by sympy itself,
-# whose number arithmetic has its own rules (0 + 0.0 is an exact 0).
-
-def _is_zero(x) -> bool:
-    return x is ZERO or (type(x) is int and x == 0)
-
-
-def _is_one(x) -> bool:
-    return x is ONE or (type(x) is int and x == 1)
-
-
-def _is_number(x) -> bool:
-    return isinstance(x, (int, float)) or x.is_Number
-
-
-def product(x, y):
-    """``x*y`` of two sympy expressions, the two commonest products of a program
-    (two different symbols; a rational and a symbol) built directly in sympy's
-    canonical form (the factors sorted by ``Basic.compare``, a number first),
-    which costs a tenth of ``Mul``'s flatten; any other pair goes through ``Mul``.
-
-    >>> x, y = sympy.symbols("x y")
-    >>> product(y, x).args == (x * y).args, product(x, sympy.Rational(1, 2)) == x / 2
-    (True, True)
-    """
-    tx, ty = type(x), type(y)
-    if tx is sympy.Symbol:
-        if ty is sympy.Symbol and x != y and x.is_commutative and y.is_commutative:
-            return sympy.Mul._from_args((x, y) if x.compare(y) < 0 else (y, x))
-        if isinstance(y, sympy.Rational) and y is not ZERO and y is not ONE \
-                and x.is_commutative:
-            return sympy.Mul._from_args((y, x))
-    elif ty is sympy.Symbol and isinstance(x, sympy.Rational) and x is not ZERO \
-            and x is not ONE and y.is_commutative:
-        return sympy.Mul._from_args((x, y))
-    return x * y
-
-
-def _times(x, y):
-    """``x*y``, without building a product when either is an exact 0 or 1."""
-    if _is_number(x) and _is_number(y):
-        return x * y
-    if _is_zero(x) or _is_zero(y):
-        return ZERO
-    if _is_one(x):
-        return y
-    if _is_one(y):
-        return x
-    return product(x, y)
-
-
-def _total(terms):
-    """``sympy.Add(*terms)``, with the exact zeros dropped first."""
-    terms = [t for t in terms if not _is_zero(t)]
-    if len(terms) == 1:
-        return terms[0] if isinstance(terms[0], sympy.Basic) else sympy.sympify(terms[0])
-    return sympy.Add(*terms) if terms else ZERO
-
-
-def _plus(x, y):
-    """``x + y``."""
-    return x + y if _is_number(x) and _is_number(y) else _total((x, y))
-
-
-def _minus(x, y):
-    """``x - y``."""
-    if _is_number(x) and _is_number(y):
-        return x - y
-    return _total((x, ZERO if _is_zero(y) else -y))
-
-
-def add(a, b):
-    return tuple(_plus(x, y) for x, y in zip(a, b))
-
-
-def sub(a, b):
-    return tuple(_minus(x, y) for x, y in zip(a, b))
-
-
-def scale(s, a):
-    return tuple(_times(s, x) for x in a)
-
-
-def dot(a, b):
-    return _total([_times(x, y) for x, y in zip(a, b)])
-
-
-def cross(a, b):
-    return (_minus(_times(a[1], b[2]), _times(a[2], b[1])),
-            _minus(_times(a[2], b[0]), _times(a[0], b[2])),
-            _minus(_times(a[0], b[1]), _times(a[1], b[0])))
-
-
-def matvec(m, v):
-    """``m @ v`` for a 3x3 tuple-of-rows ``m``."""
-    return tuple(dot(row, v) for row in m)
-
-
-def is_zero_vec(v) -> bool:
-    return all(x == 0 for x in v)
-
-
-ZERO3 = (ZERO, ZERO, ZERO)

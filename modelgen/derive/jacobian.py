@@ -49,9 +49,9 @@ def differentiate(graph: Graph, outputs, wrt) -> tuple:
 
     >>> from modelgen.derive.graph import GraphBuilder
     >>> x, y = sympy.symbols("x y")
-    >>> g = GraphBuilder(); s = g.name(sympy.sin(x) * y)
-    >>> g2, rows = differentiate(g.freeze(), [s + x], [x, y])
-    >>> [g2.expand(e) for e in rows[0]]
+    >>> builder = GraphBuilder(); s = builder.name(sympy.sin(x) * y)
+    >>> graph, rows = differentiate(builder.freeze(), [s + x], [x, y])
+    >>> [graph.expand(e) for e in rows[0]]
     [y*cos(x) + 1, sin(x)]
     """
     index = {s: j for j, s in enumerate(wrt)}
@@ -100,5 +100,5 @@ def derive_jacobian_terms(eqs: Equations, graph: Graph | None = None) -> Jacobia
     """d(tau - h - A a)/dx for the equations ``eqs`` (graph defaults to eqs.graph)."""
     a, r = residual(eqs)
     extra = eqs.qdot if eqs.has_joints else ()
-    g, rows = differentiate(graph or eqs.graph, tuple(r) + tuple(extra), eqs.q + eqs.qd)
-    return JacobianTerms(g, a, rows[:len(r)], rows[len(r):])
+    graph, rows = differentiate(graph or eqs.graph, tuple(r) + tuple(extra), eqs.q + eqs.qd)
+    return JacobianTerms(graph, a, rows[:len(r)], rows[len(r):])

@@ -41,12 +41,11 @@ from dataclasses import dataclass
 
 import sympy
 
-from modelgen.derive.graph import ZERO, ZERO3, add, matvec
+from modelgen.derive.spatial import (IDENTITY3, ONE, ZERO, ZERO3, add, matmul, matvec, rotation,
+                                     transpose)
 from modelgen.errors import ModelError
 from modelgen.model.spec import CANONICAL_BASE, CANONICAL_POINT, ModelSpec, symbol
 
-ONE = sympy.S.One
-IDENTITY3 = ((ONE, ZERO, ZERO), (ZERO, ONE, ZERO), (ZERO, ZERO, ONE))
 
 
 @dataclass(frozen=True)
@@ -106,13 +105,6 @@ class JointTree:
     inertias: tuple       # tuple[LinkInertia, ...], one per joint
     body_links: tuple     # ((body name, joint index or -1 for the ground), ...)
 
-    def joint_of(self, coordinate: int) -> int:
-        """Index in ``joints`` of the joint of coordinate number ``coordinate``."""
-        for i, joint in enumerate(self.joints):
-            if joint.coordinate == coordinate:
-                return i
-        raise KeyError(coordinate)
-
 
 def _error(spec: ModelSpec, key: str, problem: str) -> ModelError:
     return ModelError(
@@ -142,29 +134,6 @@ def _linear_in(expr, coordinates: dict):
     return slopes, rest
 
 
-def _rotation(axis: int, angle) -> tuple:
-    """E of a rotation by ``angle`` about ``axis``: parent -> child components."""
-    c, s = sympy.cos(angle), sympy.sin(angle)
-    if axis == 1:
-        return ((ONE, ZERO, ZERO), (ZERO, c, s), (ZERO, -s, c))
-    if axis == 2:
-        return ((c, ZERO, -s), (ZERO, ONE, ZERO), (s, ZERO, c))
-    return ((c, s, ZERO), (-s, c, ZERO), (ZERO, ZERO, ONE))
-
-
-def _matmul(a, b) -> tuple:
-    """a @ b for 3x3 tuples of rows, skipping constant zeros and ones."""
-    def term(x, y):
-        return y if x == 1 else x if y == 1 else x * y
-    return tuple(tuple(sympy.Add(*[term(a[i][l], b[l][j]) for l in range(3)
-                                   if a[i][l] != 0 and b[l][j] != 0]) for j in range(3))
-                 for i in range(3))
-
-
-def _transpose(a) -> tuple:
-    return tuple(tuple(a[j][i] for j in range(3)) for i in range(3))
-
-
 class _Compose:
     """A constant transform X = rot(E) xlt(r) built op by op."""
 
@@ -172,10 +141,10 @@ class _Compose:
         self.E, self.r = IDENTITY3, ZERO3
 
     def rotate(self, E_op):
-        self.E = _matmul(E_op, self.E)
+        self.E = matmul(E_op, self.E)
 
     def translate(self, c):
-        self.r = add(self.r, matvec(_transpose(self.E), c))
+        self.r = add(self.r, matvec(transpose(self.E), c))
 
     def value(self) -> tuple:
         return (self.E, self.r)
@@ -287,7 +256,7 @@ def _body_ops(spec: ModelSpec, body, bases: dict, points: dict, linear: dict) ->
 def _spatial_inertia(body, E, r) -> tuple:
     """(I about the link origin as 6 entries, h, m) of a body at (E, r) from the link."""
     m = body.mass
-    Ic = body.inertia if E == IDENTITY3 else _matmul(_transpose(E), _matmul(body.inertia, E))
+    Ic = body.inertia if E == IDENTITY3 else matmul(transpose(E), matmul(body.inertia, E))
     c = r
     cc = c[0] ** 2 + c[1] ** 2 + c[2] ** 2
     I = tuple(Ic[i][j] + m * ((cc if i == j else 0) - c[i] * c[j])
@@ -328,7 +297,14 @@ def extract_joint_tree(spec: ModelSpec) -> JointTree:
             node = children[node][key]
         ends.append(node)
 
-    # orientation base and origin (point, correction in that base) after each node
+    joints, joint_at = _joints(spec, nodes, q, *_frames(nodes, points, linear, q))
+    inertias, body_links = _link_inertias(spec, nodes, ends, joint_at, len(joints))
+    return JointTree(tuple(joints), inertias, tuple(body_links))
+
+
+def _frames(nodes, points, linear, q) -> tuple:
+    """``(orient, origin)``: the orientation base and the origin (point,
+    correction in that base) after each trie node."""
     orient = {0: CANONICAL_BASE}
     origin = {0: (CANONICAL_POINT, ZERO3)}
     for node in range(1, len(nodes)):
@@ -346,9 +322,30 @@ def extract_joint_tree(spec: ModelSpec) -> JointTree:
             later = [k for k in sorted({k for sl in slopes for k in sl}) if k > key[2]]
             origin[node] = (point.name, tuple(-sympy.Add(*[sl.get(k, ZERO) * q[k] for k in later])
                                               for sl in slopes))
+    return orient, origin
 
-    # joints: nodes whose op moves with a coordinate, parents first (node order)
-    joint_at: dict = {}                 # node -> joint index
+
+def _composed(nodes, joint_at, node) -> tuple:
+    """``(up, (E, r))``: the nearest node at or above ``node`` that is a joint
+    (or the root, 0) and the constant transform of the ops in between."""
+    ops = []
+    while node and node not in joint_at:
+        ops.append(nodes[node])
+        node = nodes[node][0]
+    composed = _Compose()
+    for _, _, okind, odata in reversed(ops):
+        if okind == "rot":
+            composed.rotate(rotation(odata.axis, sympy.cos(odata.angle), sympy.sin(odata.angle)))
+        else:
+            composed.translate(odata)
+    return node, composed.value()
+
+
+def _joints(spec, nodes, q, orient, origin) -> tuple:
+    """``(joints, joint_at)``: the trie nodes whose op moves with a coordinate,
+    parents first (node order), and {node: joint index}; a coordinate that
+    moves two places or none, or a joint that moves no body, is an error."""
+    joint_at: dict = {}
     joints = []
     seen: dict = {}                     # coordinate -> key
     for node in range(1, len(nodes)):
@@ -372,28 +369,18 @@ def extract_joint_tree(spec: ModelSpec) -> JointTree:
                          "bodies about different places: it is not one joint")
         seen[k] = source
         # walk up to the previous joint, composing the constant ops on the way
-        ops = []
-        up = parent
-        while up and up not in joint_at:
-            ops.append(nodes[up])
-            up = nodes[up][0]
-        fixed = _Compose()
-        for _, _, okind, odata in reversed(ops):
-            if okind == "rot":
-                fixed.rotate(_rotation(odata.axis, odata.angle))
-            else:
-                fixed.translate(odata)
+        up, fixed = _composed(nodes, joint_at, parent)
         if kind in ("ball", "free"):
-            joint = _quaternion_joint(spec, data, joint_at.get(up, -1), fixed.value(),
+            joint = _quaternion_joint(spec, data, joint_at.get(up, -1), fixed,
                                       orient[node], origin[node])
         elif kind == "rot":
             S = (a if data.axis == 1 else ZERO, a if data.axis == 2 else ZERO,
                  a if data.axis == 3 else ZERO, ZERO, ZERO, ZERO)
-            joint = Joint(spec.coordinates[k], k, joint_at.get(up, -1), fixed.value(),
+            joint = Joint(spec.coordinates[k], k, joint_at.get(up, -1), fixed,
                           "revolute", data.axis, data.angle, ZERO3, S, source,
                           orient[node], origin[node])
         else:
-            joint = Joint(spec.coordinates[k], k, joint_at.get(up, -1), fixed.value(),
+            joint = Joint(spec.coordinates[k], k, joint_at.get(up, -1), fixed,
                           "prismatic", 0, ZERO, tuple(d * q[k] for d in direction),
                           ZERO3 + tuple(direction), source, orient[node], origin[node])
         joint_at[node] = len(joints)
@@ -406,26 +393,19 @@ def extract_joint_tree(spec: ModelSpec) -> JointTree:
             place = _occurrences(spec, {k: q[k]})[k]
             key = place[0][0] if place else "coordinates"
             raise _error(spec, key, f"coordinate {name!r} moves no body")
+    return joints, joint_at
 
-    # bodies: merged per link
+
+def _link_inertias(spec, nodes, ends, joint_at, count) -> tuple:
+    """``(inertias, body_links)``: the bodies merged per link (one
+    :class:`LinkInertia` per joint) and each body's link (-1: the ground)."""
     merged: dict = {}
     body_links = []
-    for body, end in zip(spec.bodies, ends):
-        ops = []
-        node = end
-        while node and node not in joint_at:
-            ops.append(nodes[node])
-            node = nodes[node][0]
+    for body, end in zip(spec.bodies, ends, strict=True):
+        node, (E, r) = _composed(nodes, joint_at, end)
         body_links.append((body.name, joint_at.get(node, -1)))
         if not node:
             continue                    # fixed to the ground
-        rel = _Compose()
-        for _, _, okind, odata in reversed(ops):
-            if okind == "rot":
-                rel.rotate(_rotation(odata.axis, odata.angle))
-            else:
-                rel.translate(odata)
-        E, r = rel.value()
         I, h, m = _spatial_inertia(body, E, r)
         i = joint_at[node]
         if i in merged:
@@ -436,8 +416,8 @@ def extract_joint_tree(spec: ModelSpec) -> JointTree:
             names = (body.name,)
         merged[i] = (I, h, m, names)
     inertias = tuple(LinkInertia(*merged[i]) if i in merged else
-                     LinkInertia((ZERO,) * 6, ZERO3, ZERO, ()) for i in range(len(joints)))
-    return JointTree(tuple(joints), inertias, tuple(body_links))
+                     LinkInertia((ZERO,) * 6, ZERO3, ZERO, ()) for i in range(count))
+    return inertias, body_links
 
 
 def _quaternion_joint(spec: ModelSpec, joint, parent: int, fixed: tuple, base: str,

@@ -33,13 +33,11 @@ from dataclasses import dataclass
 import sympy
 
 from modelgen.derive.calculus import diff
-from modelgen.derive.graph import (ZERO, ZERO3, Graph, GraphBuilder, add, cross, is_zero_vec,
-                    matvec, scale, sub)
+from modelgen.derive.graph import Graph, GraphBuilder
+from modelgen.derive.spatial import (IDENTITY3, ZERO, ZERO3, add, cross, is_zero_vec, matvec,
+                                     rotation, scale, sub, transpose)
 from modelgen.errors import ModelError
 from modelgen.model.spec import CANONICAL_BASE, CANONICAL_POINT, TIME, ModelSpec, symbol
-
-IDENTITY = ((sympy.S.One, ZERO, ZERO), (ZERO, sympy.S.One, ZERO), (ZERO, ZERO, sympy.S.One))
-
 
 @dataclass(frozen=True)
 class BaseKinematics:
@@ -76,15 +74,6 @@ class Kinematics:
         return add(beta, cross(w, pk.r))
 
 
-def _rotation_columns(axis: int, c, s):
-    """Child unit vectors in parent components for a right-handed rotation."""
-    if axis == 1:
-        return ((1, 0, 0), (0, c, s), (0, -s, c))
-    if axis == 2:
-        return ((c, 0, -s), (0, 1, 0), (s, 0, c))
-    return ((c, s, 0), (-s, c, 0), (0, 0, 1))
-
-
 def quaternion_columns(quaternion):
     """Child unit vectors in parent components for a unit quaternion (w, x, y, z).
 
@@ -95,10 +84,6 @@ def quaternion_columns(quaternion):
     return ((1 - 2 * (y * y + z * z), 2 * (x * y + w * z), 2 * (x * z - w * y)),
             (2 * (x * y - w * z), 1 - 2 * (x * x + z * z), 2 * (y * z + w * x)),
             (2 * (x * z + w * y), 2 * (y * z - w * x), 1 - 2 * (x * x + y * y)))
-
-
-def _rows_from_columns(cols):
-    return tuple(tuple(cols[j][i] for j in range(3)) for i in range(3))
 
 
 def _column(R, j):
@@ -120,7 +105,7 @@ class _Deriver:
     def rate(self, expr, grad=None):
         """df/dt = sum_k df/dq_k * qd_k + df/dt (explicit)."""
         grad = self.gradient(expr) if grad is None else grad
-        total = sympy.Add(*[g * self.qd[k] for k, g in grad.items()])
+        total = sympy.Add(*[dk * self.qd[k] for k, dk in grad.items()])
         if expr.has(TIME):
             total += diff(expr, TIME)
         return total
@@ -163,61 +148,61 @@ def derive_kinematics(spec: ModelSpec, graph: Graph | None = None) -> Kinematics
     (0, 0, q1_dot)
     """
     _reject_explicit_time(spec)
-    g = GraphBuilder(graph)
+    builder = GraphBuilder(graph)
     q = tuple(symbol(c) for c in spec.coordinates)
     qd = tuple(symbol(s) for s in spec.speeds)
     simple = len(spec.simple_coordinates)
     d = _Deriver(q[:simple], qd[:simple])
     speed_index = {v: k for k, v in enumerate(qd)}
 
-    bases = {CANONICAL_BASE: BaseKinematics(IDENTITY, ZERO3, ZERO3, {})}
+    bases = {CANONICAL_BASE: BaseKinematics(IDENTITY3, ZERO3, ZERO3, {})}
     for b in spec.bases:
         parent = bases[b.parent]
         if b.quaternion:
-            bases[b.name] = _quaternion_base(g, parent, b, speed_index)
+            bases[b.name] = _quaternion_base(builder, parent, b, speed_index)
             continue
         theta = b.angle
-        c, s = g.name(sympy.cos(theta)), g.name(sympy.sin(theta))
-        local = _rotation_columns(b.axis, c, s)
-        cols = [g.vec(matvec(parent.R, col)) for col in local]
-        R = _rows_from_columns(cols)
+        c, s = builder.name(sympy.cos(theta)), builder.name(sympy.sin(theta))
+        local = rotation(b.axis, c, s)        # rows: the base's unit vectors
+        cols = [builder.vec(matvec(parent.R, col)) for col in local]
+        R = transpose(cols)
         e = _column(parent.R, b.axis - 1)
         grad = d.gradient(theta)
-        theta_dot = g.name(d.rate(theta, grad))
-        omega = g.vec(add(parent.omega, scale(theta_dot, e)))
-        theta_ddot = g.name(d.bias_rate(d.rate(theta, grad)))
-        alpha = g.vec(add(add(parent.alpha_bias, scale(theta_ddot, e)),
-                          scale(theta_dot, g.vec(cross(parent.omega, e)))))
+        theta_dot = builder.name(d.rate(theta, grad))
+        omega = builder.vec(add(parent.omega, scale(theta_dot, e)))
+        theta_ddot = builder.name(d.bias_rate(d.rate(theta, grad)))
+        alpha = builder.vec(add(add(parent.alpha_bias, scale(theta_ddot, e)),
+                                scale(theta_dot, builder.vec(cross(parent.omega, e)))))
         partials = dict(parent.partials)
         for k, dk in grad.items():
-            dk = g.name(dk)
-            partials[k] = g.vec(add(partials.get(k, ZERO3), scale(dk, e)))
+            dk = builder.name(dk)
+            partials[k] = builder.vec(add(partials.get(k, ZERO3), scale(dk, e)))
         bases[b.name] = BaseKinematics(R, omega, alpha, partials)
 
     points = {CANONICAL_POINT: PointKinematics(ZERO3, ZERO3, ZERO3, {})}
     for p in spec.points:
         Q = points[p.parent]
         B = bases[p.base]
-        dvec = g.vec(matvec(B.R, p.coordinates))
-        r = g.vec(add(Q.r, dvec))
-        w_x_d = g.vec(cross(B.omega, dvec))
+        dvec = builder.vec(matvec(B.R, p.coordinates))
+        r = builder.vec(add(Q.r, dvec))
+        w_x_d = builder.vec(cross(B.omega, dvec))
         v = add(Q.v, w_x_d)
         a = add(add(Q.a_bias, cross(B.alpha_bias, dvec)), cross(B.omega, w_x_d))
         grads = [{}, {}, {}] if p.speeds else [d.gradient(ci) for ci in p.coordinates]
         moving = any(grads) or any(ci.has(TIME) for ci in p.coordinates)
         if p.speeds:   # a free joint: d/dt (R_B c) relative to B = R_J v
             J = bases[p.speed_base]
-            rel_v = g.vec(matvec(J.R, p.speeds))
+            rel_v = builder.vec(matvec(J.R, p.speeds))
             v = add(v, rel_v)
             a = add(a, cross(add(B.omega, J.omega), rel_v))
         elif moving:   # coordinates that change in time (prismatic-like)
-            cdot = tuple(d.rate(ci, gi) for ci, gi in zip(p.coordinates, grads))
-            rel_v = g.vec(matvec(B.R, g.vec(cdot)))
-            cddot = g.vec(d.bias_rate(x) for x in cdot)
+            cdot = tuple(d.rate(ci, gi) for ci, gi in zip(p.coordinates, grads, strict=True))
+            rel_v = builder.vec(matvec(B.R, builder.vec(cdot)))
+            cddot = builder.vec(d.bias_rate(x) for x in cdot)
             v = add(v, rel_v)
             a = add(add(a, scale(2, cross(B.omega, rel_v))), matvec(B.R, cddot))
-        v = g.vec(v)
-        a = g.vec(a)
+        v = builder.vec(v)
+        a = builder.vec(a)
 
         partials = {}
         if p.speeds:
@@ -233,27 +218,27 @@ def derive_kinematics(spec: ModelSpec, graph: Graph | None = None) -> Kinematics
             dc = tuple(gi.get(k, ZERO) for gi in grads)
             if not is_zero_vec(dc):
                 beta = add(beta, matvec(B.R, dc))
-            beta = g.vec(beta)
+            beta = builder.vec(beta)
             if is_zero_vec(beta) and is_zero_vec(cB):
                 continue
             partials[k] = (cB, beta)
         points[p.name] = PointKinematics(r, v, a, partials)
 
-    return Kinematics(spec, g.freeze(), q, qd, bases, points)
+    return Kinematics(spec, builder.freeze(), q, qd, bases, points)
 
 
-def _quaternion_base(g: GraphBuilder, parent: BaseKinematics, b, speed_index: dict):
+def _quaternion_base(builder: GraphBuilder, parent: BaseKinematics, b, speed_index: dict):
     """A joint's base: turned by a unit quaternion, turning at ``b.rates`` (in itself).
 
     ``omega_B = omega_P + R_B w``; with every speed derivative zero,
     ``d/dt (R_B w) = omega_B x R_B w = omega_P x R_B w``.
     """
     local = quaternion_columns(b.quaternion)
-    cols = [g.vec(matvec(parent.R, tuple(g.name(x) for x in col))) for col in local]
-    R = _rows_from_columns(cols)
-    rel = g.vec(matvec(R, b.rates))
-    omega = g.vec(add(parent.omega, rel))
-    alpha = g.vec(add(parent.alpha_bias, cross(parent.omega, rel)))
+    cols = [builder.vec(matvec(parent.R, tuple(builder.name(x) for x in col))) for col in local]
+    R = transpose(cols)
+    rel = builder.vec(matvec(R, b.rates))
+    omega = builder.vec(add(parent.omega, rel))
+    alpha = builder.vec(add(parent.alpha_bias, cross(parent.omega, rel)))
     partials = dict(parent.partials)
     for j, rate in enumerate(b.rates):
         partials[speed_index[rate]] = cols[j]

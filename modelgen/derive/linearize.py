@@ -59,5 +59,5 @@ def derive_linearization_terms(eqs: Equations, graph: Graph, outputs=(),
         a, f = residual(eqs)
     else:
         a, f = (), tuple(qdd)
-    g, rows = differentiate(graph, list(f) + list(outputs), eqs.q + eqs.qd + eqs.u)
-    return LinearizationTerms(g, a, rows[:n], rows[n:], 2 * n)
+    builder, rows = differentiate(graph, list(f) + list(outputs), eqs.q + eqs.qd + eqs.u)
+    return LinearizationTerms(builder, a, rows[:n], rows[n:], 2 * n)

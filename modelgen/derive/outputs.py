@@ -12,7 +12,8 @@ from dataclasses import dataclass
 import sympy
 
 from modelgen.derive.dynamics import Equations
-from modelgen.derive.graph import Graph, GraphBuilder, sub
+from modelgen.derive.graph import Graph, GraphBuilder
+from modelgen.derive.spatial import sub
 from modelgen.derive.kinematics import Kinematics
 
 AXES = ("x", "y", "z")
@@ -39,7 +40,7 @@ def derive_outputs(kin: Kinematics, eqs: Equations, outputs) -> OutputColumns:
     >>> cols.columns[0]                                        # doctest: +SKIP
     ('tip.x', 'tip.y', 'tip.z')
     """
-    g = GraphBuilder(eqs.graph)
+    builder = GraphBuilder(eqs.graph)
     names, columns, exprs = [], [], []
     parts = dict(eqs.tau_parts)
     body_index = {b: i for i, b in enumerate(eqs.bodies)}
@@ -73,7 +74,7 @@ def derive_outputs(kin: Kinematics, eqs: Equations, outputs) -> OutputColumns:
             cols = [f"{out.name}.{c}" for c in kin.spec.dof_names]
         elif out.kind == "power":
             # the power of the effect's forces: its generalized force . q_dot
-            values = [sympy.Add(*[f * v for f, v in zip(parts[a["effect"]], eqs.qd)])]
+            values = [sympy.Add(*[f * v for f, v in zip(parts[a["effect"]], eqs.qd, strict=True)])]
             cols = [out.name]
         elif out.kind == "pose":
             values = list(eqs.poses[body_index[a["body"]]])
@@ -82,5 +83,5 @@ def derive_outputs(kin: Kinematics, eqs: Equations, outputs) -> OutputColumns:
             raise ValueError(f"unknown output kind {out.kind!r}")
         names.append(out.name)
         columns.append(tuple(cols))
-        exprs.extend(g.name(v) for v in values)
-    return OutputColumns(g.freeze(), tuple(names), tuple(columns), tuple(exprs))
+        exprs.extend(builder.name(v) for v in values)
+    return OutputColumns(builder.freeze(), tuple(names), tuple(columns), tuple(exprs))

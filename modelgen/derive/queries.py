@@ -22,7 +22,7 @@ import sympy
 
 from modelgen.derive.dynamics import derive_equations
 from modelgen.errors import ModelError
-from modelgen.derive.graph import add
+from modelgen.derive.spatial import add
 from modelgen.derive.kinematics import derive_kinematics
 from modelgen.model.spec import ModelSpec, symbol
 
@@ -93,12 +93,13 @@ class Mechanism:
 
     def angular_velocity(self, base_fixed: str, base_moving: str, components: str = "E"):
         """Angular velocity of ``base_moving`` relative to ``base_fixed``, in ``components``."""
-        w = [a - b for a, b in zip(self._base(base_moving).omega, self._base(base_fixed).omega)]
+        w = [a - b for a, b in zip(self._base(base_moving).omega, self._base(base_fixed).omega,
+                                   strict=True)]
         return self._column(self._in_base(w, components))
 
     def position(self, start: str, end: str, components: str = "E") -> sympy.Matrix:
         """Vector from point ``start`` to point ``end``, in ``components``."""
-        d = [b - a for a, b in zip(self._point(start).r, self._point(end).r)]
+        d = [b - a for a, b in zip(self._point(start).r, self._point(end).r, strict=True)]
         return self._column(self._in_base(d, components))
 
     def velocity(self, point: str, components: str = "E") -> sympy.Matrix:

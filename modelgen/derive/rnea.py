@@ -11,7 +11,7 @@ without gravity and external forces:
 
 This is ``h`` of ``A q_ddot + h = tau`` (:mod:`modelgen.derive.dynamics`):
 the generalized inertia forces at zero acceleration.  Pass 1 is
-:func:`modelgen.derive.aba.outward_pass`, which the ABA program uses too
+:func:`modelgen.derive.recursion.outward_pass`, which the ABA program uses too
 (its ``f`` is the ABA's bias force), so over it RNEA costs only step 2:
 about 20 operations per revolute joint, against the O(n^2) projections of
 the composite-body sums.
@@ -24,14 +24,15 @@ gravity, MuJoCo's ``mj_inverse`` without the passive forces: those are in
 """
 from __future__ import annotations
 
-from modelgen.derive.aba import (add, dot, joint_motion, joint_velocity, link_force,
-                                 link_velocities, outward_pass, to_parent_force)
-from modelgen.derive.graph import ZERO, GraphBuilder
+from modelgen.derive.recursion import (joint_motion, joint_velocity, link_force,
+                                       link_velocities, outward_pass, to_parent_force)
+from modelgen.derive.graph import GraphBuilder
+from modelgen.derive.spatial import ZERO, add, dot
 from modelgen.derive.joint_tree import JointTree
 
 
-def derive_velocity_terms(g: GraphBuilder, tree: JointTree, qd) -> tuple:
-    """h (in coordinate order) by RNEA with q_ddot = 0, built in ``g``.
+def derive_velocity_terms(builder: GraphBuilder, tree: JointTree, qd) -> tuple:
+    """h (in coordinate order) by RNEA with q_ddot = 0, built in ``builder``.
 
     >>> from modelgen.model.chains import spatial_chain
     >>> from modelgen.derive.joint_tree import extract_joint_tree
@@ -42,11 +43,11 @@ def derive_velocity_terms(g: GraphBuilder, tree: JointTree, qd) -> tuple:
     >>> len(h)
     2
     """
-    return _inward(g, tree, outward_pass(g, tree, qd).f, len(qd))
+    return _inward(builder, tree, outward_pass(builder, tree, qd).f, len(qd))
 
 
-def derive_inverse_dynamics(g: GraphBuilder, tree: JointTree, qd, qdd) -> tuple:
-    """``A qdd + h`` (in coordinate order) by RNEA, built in ``g``: the generalized
+def derive_inverse_dynamics(builder: GraphBuilder, tree: JointTree, qd, qdd) -> tuple:
+    """``A qdd + h`` (in coordinate order) by RNEA, built in ``builder``: the generalized
     forces that give the accelerations ``qdd``, less those of gravity and the
     effects (``tau``), which the caller subtracts.
 
@@ -60,17 +61,17 @@ def derive_inverse_dynamics(g: GraphBuilder, tree: JointTree, qd, qdd) -> tuple:
     >>> len(qdd)
     2
     """
-    v, c = link_velocities(g, tree, qd)
+    v, c = link_velocities(builder, tree, qd)
     a, force = [None] * len(tree.joints), []
     for i, joint in enumerate(tree.joints):
-        aJ = joint_velocity(g, joint, qdd)          # S_i qdd_i
-        a[i] = g.vec(add(add(joint_motion(g, joint, a[joint.parent]), c[i]), aJ)
-                     if joint.parent >= 0 else add(c[i], aJ))
-        force.append(link_force(g, tree.inertias[i], v[i], a[i]))
-    return _inward(g, tree, force, len(qd))
+        aJ = joint_velocity(builder, joint, qdd)          # S_i qdd_i
+        a[i] = builder.vec(add(add(joint_motion(builder, joint, a[joint.parent]), c[i]), aJ)
+                           if joint.parent >= 0 else add(c[i], aJ))
+        force.append(link_force(builder, tree.inertias[i], v[i], a[i]))
+    return _inward(builder, tree, force, len(qd))
 
 
-def _inward(g: GraphBuilder, tree: JointTree, force, n: int) -> tuple:
+def _inward(builder: GraphBuilder, tree: JointTree, force, n: int) -> tuple:
     """RNEA's pass 2: each joint's generalized force ``S_i^T f_i``, with the link
     forces summed into the parents, leaves first."""
     force = list(force)
@@ -78,10 +79,10 @@ def _inward(g: GraphBuilder, tree: JointTree, force, n: int) -> tuple:
     for i in reversed(range(len(tree.joints))):
         joint = tree.joints[i]
         for k, S in joint.dofs:
-            out[k] = g.name(dot(S, force[i]))
+            out[k] = builder.name(dot(S, force[i]))
         if joint.parent >= 0:
             p = joint.parent
-            force[p] = g.vec(add(force[p], to_parent_force(g, joint, force[i])))
+            force[p] = builder.vec(add(force[p], to_parent_force(builder, joint, force[i])))
     return tuple(out)
 
 

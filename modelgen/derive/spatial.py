@@ -1,0 +1,359 @@
+"""The vector and spatial algebra of derive/: one copy, used by every stage.
+
+Vectors are tuples of sympy expressions (3-vectors; spatial 6-vectors as
+motion ``(w, v)`` or force ``(n, f)``, angular part first), 3x3 matrices are
+tuples of rows, spatial inertias are blocks ``(A, B, C)`` of
+``[[A, B], [B^T, C]]`` (Featherstone, *Rigid Body Dynamics Algorithms*, 2008,
+ch. 2).  Transforms are Plücker ``X = rot(E) xlt(r)``.
+
+**The zero rule.**  An *exact* zero or one (sympy's ``S.Zero``/``S.One`` or a
+Python ``int``) is skipped before sympy sees it: axis vectors, motion
+subspaces, joint rotations and offsets are mostly zeros and ones, and
+building ``0*x`` or ``x + 0`` through sympy (sympify, flatten) costs as much
+as a real product.  Anything else goes through sympy's own arithmetic, and
+two numbers are combined by sympy, so every helper returns the expression
+sympy's arithmetic builds (``tests/test_cse.py`` checks it, float zeros
+included: ``Float(0.0)`` is not skipped, sympy absorbs it in ``0.0*x`` and
+``x + 0.0``).  No derive/ call site meets a float zero: every number of a
+``ModelSpec`` is exact (the expression reader makes ``0.1`` a ``Rational``)
+and derive/ writes no float literals; the articulated-body code once also
+skipped ``Float(0.0)`` (``x.is_Number and x.is_zero``), which the generated C
+of every shipped model shows made no difference.
+
+Helpers whose first argument is ``builder`` (a
+:class:`~modelgen.derive.graph.GraphBuilder`) name their results, so the
+straight-line program shares them.
+"""
+from __future__ import annotations
+
+import sympy
+
+ZERO = sympy.S.Zero
+ONE = sympy.S.One
+ZERO3 = (ZERO, ZERO, ZERO)
+IDENTITY3 = ((ONE, ZERO, ZERO), (ZERO, ONE, ZERO), (ZERO, ZERO, ONE))
+#: the (row, column) of the 6 entries (xx, yy, zz, xy, xz, yz) of a symmetric 3x3 matrix
+PAIRS = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
+
+
+# -- the zero rule and scalar arithmetic -------------------------------------------
+
+def is_zero(x) -> bool:
+    """An exact zero: sympy's ``S.Zero`` or the ``int`` 0 (not ``Float(0.0)``)."""
+    return x is ZERO or (type(x) is int and x == 0)
+
+
+def is_one(x) -> bool:
+    """An exact one: sympy's ``S.One`` or the ``int`` 1."""
+    return x is ONE or (type(x) is int and x == 1)
+
+
+def _is_number(x) -> bool:
+    return isinstance(x, (int, float)) or x.is_Number
+
+
+def product(x, y):
+    """``x*y`` of two sympy expressions, the two commonest products of a program
+    (two different symbols; a rational and a symbol) built directly in sympy's
+    canonical form (the factors sorted by ``Basic.compare``, a number first),
+    which costs a tenth of ``Mul``'s flatten; any other pair goes through ``Mul``.
+
+    >>> x, y = sympy.symbols("x y")
+    >>> product(y, x).args == (x * y).args, product(x, sympy.Rational(1, 2)) == x / 2
+    (True, True)
+    """
+    tx, ty = type(x), type(y)
+    if tx is sympy.Symbol:
+        if ty is sympy.Symbol and x != y and x.is_commutative and y.is_commutative:
+            return sympy.Mul._from_args((x, y) if x.compare(y) < 0 else (y, x))
+        if isinstance(y, sympy.Rational) and y is not ZERO and y is not ONE \
+                and x.is_commutative:
+            return sympy.Mul._from_args((y, x))
+    elif ty is sympy.Symbol and isinstance(x, sympy.Rational) and x is not ZERO \
+            and x is not ONE and y.is_commutative:
+        return sympy.Mul._from_args((x, y))
+    return x * y
+
+
+def times(x, y):
+    """``x*y``, without building a product when either is an exact 0 or 1."""
+    if _is_number(x) and _is_number(y):
+        return x * y
+    if is_zero(x) or is_zero(y):
+        return ZERO
+    if is_one(x):
+        return y
+    if is_one(y):
+        return x
+    return product(x, y)
+
+
+def total(terms):
+    """``sympy.Add(*terms)``, with the exact zeros dropped first."""
+    terms = [t for t in terms if not is_zero(t)]
+    if len(terms) == 1:
+        return terms[0] if isinstance(terms[0], sympy.Basic) else sympy.sympify(terms[0])
+    return sympy.Add(*terms) if terms else ZERO
+
+
+def neg(x):
+    """``-x``, an exact zero kept as ``ZERO``."""
+    return ZERO if is_zero(x) else -x
+
+
+def _plus(x, y):
+    """``x + y``."""
+    return x + y if _is_number(x) and _is_number(y) else total((x, y))
+
+
+def _minus(x, y):
+    """``x - y``."""
+    if _is_number(x) and _is_number(y):
+        return x - y
+    return total((x, neg(y)))
+
+
+# -- 3-vectors ---------------------------------------------------------------------
+
+def add(a, b):
+    return tuple(_plus(x, y) for x, y in zip(a, b, strict=True))
+
+
+def sub(a, b):
+    return tuple(_minus(x, y) for x, y in zip(a, b, strict=True))
+
+
+def scale(s, a):
+    return tuple(times(s, x) for x in a)
+
+
+def dot(a, b):
+    return total([times(x, y) for x, y in zip(a, b, strict=True)])
+
+
+def cross(a, b):
+    return (_minus(times(a[1], b[2]), times(a[2], b[1])),
+            _minus(times(a[2], b[0]), times(a[0], b[2])),
+            _minus(times(a[0], b[1]), times(a[1], b[0])))
+
+
+def matvec(m, v):
+    """``m @ v`` for a 3x3 tuple-of-rows ``m``."""
+    return tuple(dot(row, v) for row in m)
+
+
+def is_zero_vec(v) -> bool:
+    return all(x == 0 for x in v)
+
+
+# -- naming with the sign left outside -----------------------------------------------
+# The operation count charges a negation (``a - b*c`` is three operations), so a
+# quantity is named by its positive form and its sign stays in the expression
+# that uses it, where two signs can cancel (``(-x)*(-y)``) before they are ever
+# printed.
+
+def named(builder, e):
+    """``builder.name(e)``, with a negative numeric factor, or a sum of mostly negative
+    terms, kept outside the name."""
+    if isinstance(e, sympy.Mul) and e.args[0].is_Number and e.args[0].is_negative:
+        return -builder.name(-e)
+    if isinstance(e, sympy.Add):
+        negative = sum(1 for t in e.args if t.could_extract_minus_sign())
+        if 2 * negative > len(e.args):
+            return -builder.name(-e)
+    return builder.name(e)
+
+
+def signed(namer, e):
+    """``namer(e)`` with the sign sympy would extract kept outside, so that e
+    and -e share one name."""
+    return -namer(-e) if e.could_extract_minus_sign() else namer(e)
+
+
+def name_vec(builder, xs) -> tuple:
+    return tuple(named(builder, x) for x in xs)
+
+
+# -- 3x3 matrices: tuples of rows; symmetric ones from their 6 entries ---------------
+
+def symmetric(entries) -> tuple:
+    """Full rows from the 6 entries (xx, yy, zz, xy, xz, yz)."""
+    xx, yy, zz, xy, xz, yz = entries
+    return ((xx, xy, xz), (xy, yy, yz), (xz, yz, zz))
+
+
+def name_symmetric(builder, M) -> tuple:
+    return symmetric(name_vec(builder, [M[i][j] for i, j in PAIRS]))
+
+
+def name_matrix(builder, M) -> tuple:
+    return tuple(name_vec(builder, row) for row in M)
+
+
+def matmul(a, b) -> tuple:
+    return tuple(tuple(total(times(a[i][l], b[l][j]) for l in range(3)) for j in range(3))
+                 for i in range(3))
+
+
+def transpose(a) -> tuple:
+    return tuple(tuple(a[j][i] for j in range(3)) for i in range(3))
+
+
+def skew(r) -> tuple:
+    return ((ZERO, -r[2], r[1]), (r[2], ZERO, -r[0]), (-r[1], r[0], ZERO))
+
+
+def is_identity(E) -> bool:
+    return all(E[i][j] == (1 if i == j else 0) for i in range(3) for j in range(3))
+
+
+def rotation(axis, c, s) -> tuple:
+    """E of a rotation by (c, s) = (cos, sin) of an angle about base axis 1, 2 or 3:
+    parent -> child components.  Its rows are the child's unit vectors in parent
+    components (the columns of R = E^T)."""
+    if axis == 1:
+        return ((ONE, ZERO, ZERO), (ZERO, c, s), (ZERO, -s, c))
+    if axis == 2:
+        return ((c, ZERO, -s), (ZERO, ONE, ZERO), (s, ZERO, c))
+    return ((c, s, ZERO), (-s, c, ZERO), (ZERO, ZERO, ONE))
+
+
+# -- spatial algebra: motion (w, v), force (n, f), inertia (A, B, C) -----------------
+
+def motion_rot(builder, E, m):
+    return name_vec(builder, matvec(E, m[:3])) + name_vec(builder, matvec(E, m[3:]))
+
+
+def motion_xlt(builder, r, m):
+    return m[:3] + name_vec(builder, sub(m[3:], cross(r, m[:3])))
+
+
+def force_rot_T(builder, E, f):
+    Et = transpose(E)
+    return name_vec(builder, matvec(Et, f[:3])) + name_vec(builder, matvec(Et, f[3:]))
+
+
+def force_xlt_T(builder, r, f):
+    return name_vec(builder, add(f[:3], cross(r, f[3:]))) + f[3:]
+
+
+def inertia_rot_T(builder, E, I):
+    """X^T I X for X = rot(E): each block B -> E^T B E."""
+    Et = transpose(E)
+    A, B, C = I
+    return (name_symmetric(builder, matmul(Et, name_matrix(builder, matmul(A, E)))),
+            name_matrix(builder, matmul(Et, name_matrix(builder, matmul(B, E)))),
+            name_symmetric(builder, matmul(Et, name_matrix(builder, matmul(C, E)))))
+
+
+def inertia_xlt_T(builder, r, I):
+    """X^T I X for X = xlt(r): A + rx B^T - B rx - rx C rx, B + rx C, C."""
+    A, B, C = I
+    rx = skew(r)
+    M = name_matrix(builder, matmul(rx, C))       # rx C
+    N = name_matrix(builder, matmul(B, rx))       # B rx
+    P = matmul(M, rx)                             # rx C rx (symmetric)
+    # on the diagonal N_ii + N_ii = B (2 rx) _ii: one product by the parameter 2 r
+    # (computed once per parameter set), where 2 * (B rx)_ii would be two
+    rx2 = skew(tuple(ZERO if is_zero(x) else signed(builder.factor, 2 * x) for x in r))
+    A2 = tuple(tuple(total((A[i][j], neg(dot(B[i], (rx2[0][i], rx2[1][i], rx2[2][i]))),
+                             neg(P[i][j]))) if i == j else
+                     total((A[i][j], neg(N[i][j]), neg(N[j][i]), neg(P[i][j])))
+                     for j in range(3)) for i in range(3))
+    B2 = tuple(tuple(total((B[i][j], M[i][j])) for j in range(3)) for i in range(3))
+    return (name_symmetric(builder, A2), name_matrix(builder, B2), C)
+
+
+def inertia_times(I, m):
+    A, B, C = I
+    w, v = m[:3], m[3:]
+    return add(matvec(A, w), matvec(B, v)) + add(matvec(transpose(B), w), matvec(C, v))
+
+
+def cross_motion(a, b):
+    """a x b for motion vectors (Featherstone's crm)."""
+    return cross(a[:3], b[:3]) + add(cross(a[:3], b[3:]), cross(a[3:], b[:3]))
+
+
+# -- an inertia turned about one base axis, in closed form ----------------------------
+
+#: the plane (k1, k2) of a rotation about axis 1, 2, 3 in which E = [[c, s], [-s, c]]
+_PLANE = {1: (1, 2), 2: (2, 0), 3: (0, 1)}
+
+
+def _plane_rot_T(c, s, k1, k2, x1, x2):
+    """(E^T x)[k1], (E^T x)[k2] for the plane rotation."""
+    return (total((times(c, x1), neg(times(s, x2)))),
+            total((times(s, x1), times(c, x2))))
+
+
+def _sym_axis_rot_T(builder, M, k1, k2, c, s, trig):
+    """E^T M E for a symmetric M and a rotation about one axis.
+
+    With a, b, d the in-plane entries and ``t = s^2 (a - d) + 2cs b``:
+    ``a' = a - t``, ``d' = d + t``, ``b' = cs (a - d) + (c^2 - s^2) b``
+    (expand ``E^T M E`` and use ``c^2 + s^2 = 1``); the out-of-plane column
+    turns like a vector.
+    """
+    ss, cs, C2, S2 = trig
+    j = 3 - k1 - k2
+    a, b, d = M[k1][k1], M[k1][k2], M[k2][k2]
+    out = [[None] * 3 for _ in range(3)]
+    diff = named(builder, a - d)
+    t = named(builder, ss * diff + S2 * b)
+    out[k1][k1], out[k2][k2] = a - t, d + t
+    out[k1][k2] = cs * diff + C2 * b
+    out[j][k1], out[j][k2] = _plane_rot_T(c, s, k1, k2, M[j][k1], M[j][k2])
+    out[j][j] = M[j][j]
+    return name_symmetric(builder, _sym_rows(out))
+
+
+def _sym_rows(out):
+    return tuple(tuple(out[i][j] if out[i][j] is not None else out[j][i] for j in range(3))
+                 for i in range(3))
+
+
+def _full_axis_rot_T(builder, M, k1, k2, c, s, trig):
+    """E^T M E for a general M and a rotation about one axis.
+
+    The in-plane 2x2 block changes by its symmetric, trace-free part only:
+    with ``d = m11 - m22``, ``e = m12 + m21``, ``t = s^2 d + cs e`` and
+    ``w = cs d - s^2 e``: ``m11' = m11 - t``, ``m22' = m22 + t``,
+    ``m12' = m12 + w``, ``m21' = m21 + w`` (8 operations, not 24); the
+    out-of-plane row and column turn like vectors.
+    """
+    ss, cs = trig[0], trig[1]
+    j = 3 - k1 - k2
+    out = [[None] * 3 for _ in range(3)]
+    d = named(builder, M[k1][k1] - M[k2][k2])
+    e = named(builder, M[k1][k2] + M[k2][k1])
+    t = named(builder, total((times(ss, d), times(cs, e))))
+    w = named(builder, total((times(cs, d), neg(times(ss, e)))))
+    out[k1][k1], out[k2][k2] = total((M[k1][k1], neg(t))), total((M[k2][k2], t))
+    out[k1][k2], out[k2][k1] = total((M[k1][k2], w)), total((M[k2][k1], w))
+    out[j][k1], out[j][k2] = _plane_rot_T(c, s, k1, k2, M[j][k1], M[j][k2])
+    out[k1][j], out[k2][j] = _plane_rot_T(c, s, k1, k2, M[k1][j], M[k2][j])
+    out[j][j] = M[j][j]
+    return name_matrix(builder, out)
+
+
+def axis_rot_T(builder, I, axis, c, s):
+    """X^T I X for X = rot(E), E a rotation by (c, s) about one base axis."""
+    ss, cs = builder.name(s * s), builder.name(c * s)
+    trig = (ss, cs, builder.name(1 - 2 * ss), builder.name(2 * cs))
+    k1, k2 = _PLANE[axis]
+    A, B, C = I
+    return (_sym_axis_rot_T(builder, A, k1, k2, c, s, trig),
+            _full_axis_rot_T(builder, B, k1, k2, c, s, trig),
+            _sym_axis_rot_T(builder, C, k1, k2, c, s, trig))
+
+
+def elementary(E):
+    """(axis, c, s) if the constant E is a rotation about one base axis (as
+    :func:`rotation` writes it), else None."""
+    for axis, (k1, k2) in _PLANE.items():
+        j = axis - 1
+        if E[j][j] == 1 and all(E[j][k] == 0 and E[k][j] == 0 for k in (k1, k2)) \
+                and E[k2][k2] == E[k1][k1] and E[k2][k1] == -E[k1][k2]:
+            return axis, E[k1][k1], E[k1][k2]
+    return None
