@@ -3,15 +3,20 @@ compiled constants, struct layouts and work size equal it."""
 from __future__ import annotations
 
 import re
+import shutil
 import subprocess
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from modelgen.codegen import capi
 from modelgen.codegen.build import write_sources
-from modelgen.codegen.emit import integrator_files, integrator_sources
+from modelgen.codegen.emit import c_dir, integrator_files, integrator_sources
 from modelgen.sim import integrate
+
+
+ROOT = Path(__file__).resolve().parents[1]
 
 
 @pytest.fixture(scope="module")
@@ -48,6 +53,14 @@ def test_the_integrator_unit_includes_each_of_its_files_once_in_order():
     assert sorted(included) == [f for f in integrator_files() if f != "mg_integrate.c"]
     assert len(set(included)) == len(included)
     assert included[:2] == ["mg_integrate/numerics.c", "mg_integrate/system.c"]
+
+
+@pytest.mark.skipif(not shutil.which("clang-format"), reason="clang-format is not installed")
+def test_the_integrator_c_follows_the_repository_clang_format():
+    files = [str(c_dir() / f) for f in integrator_files()]
+    r = subprocess.run(["clang-format", "--dry-run", "--Werror", *files], cwd=ROOT,
+                       stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    assert r.returncode == 0, r.stdout
 
 
 def test_struct_fields_of_the_module_follow_the_table(sp):
