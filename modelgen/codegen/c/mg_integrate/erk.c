@@ -20,21 +20,25 @@ static int mg_erk_stage(mg_ode *o, double t, const double *x, double h, const do
 
 /* -- rk4 --------------------------------------------------------------------- */
 
-/* The classic tableau; its weights (1, 2, 2, 1) / 6 are applied in the nested form
- * h/6 (k1 + 2 (k2 + k3) + k4) of mg_step_rk4. */
+/* The classic tableau is a subdiagonal: stage s takes x + h a[s] K[s - 1] at t + c[s] h
+ * (a = c), so it is stored and run as one, not through mg_erk_stage's full rows.  The
+ * weights (1, 2, 2, 1) / 6 are applied in the nested form h/6 (k1 + 2 (k2 + k3) + k4). */
 static const double mg_rk4_c[4] = {0.0, 0.5, 0.5, 1.0};
-static const double mg_rk4_a[4][3] = {{0.0}, {0.5}, {0.0, 0.5}, {0.0, 0.0, 1.0}};
 
 /* Stages 2..4 (K[0] = f0 on entry); xn = the solution. */
 static int mg_step_rk4(mg_ode *o, double t, const double *x, double h, double *xn, double *K)
 {
     const int nx = o->nx;
     const double *k2 = K + nx, *k3 = K + 2 * nx, *k4 = K + 3 * nx;
+    double *xs = K + 4 * nx;
     int i, s, status;
-    for (s = 1; s < 4; ++s)
-        if ((status =
-                 mg_erk_stage(o, t, x, h, mg_rk4_a[s], s, K, mg_rk4_c[s], K + 4 * nx, K + s * nx)))
+    for (s = 1; s < 4; ++s) {
+        const double *k = K + (s - 1) * nx;
+        for (i = 0; i < nx; ++i)
+            xs[i] = x[i] + mg_rk4_c[s] * h * k[i];
+        if ((status = mg_ode_f(o, t + mg_rk4_c[s] * h, xs, K + s * nx)))
             return status;
+    }
     for (i = 0; i < nx; ++i)
         xn[i] = x[i] + h / 6.0 * (K[i] + 2.0 * (k2[i] + k3[i]) + k4[i]);
     return 0;
