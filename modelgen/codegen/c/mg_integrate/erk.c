@@ -1,6 +1,7 @@
 /* Part of mg_integrate.c (included there, not compiled alone): the explicit
- * Runge-Kutta methods rk4, dopri5 and dop853, each a Butcher tableau (as data)
- * run by one stage function, with its error estimate and dense output. */
+ * Runge-Kutta methods rk4, dopri5 and dop853, each a Butcher tableau (as data;
+ * dopri5's and dop853's run by one stage function), with its error estimate
+ * and dense output. */
 
 /* One explicit Runge-Kutta stage: xs = x + h sum_j a[j] K_j, ks = f(t + c h, xs). */
 static int mg_erk_stage(mg_ode *o, double t, const double *x, double h, const double *a, int s,
