@@ -3,14 +3,20 @@ compiled constants, struct layouts and work size equal it."""
 from __future__ import annotations
 
 import re
+import shutil
 import subprocess
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from modelgen.codegen import capi
-from modelgen.codegen.emit import integrator_sources
+from modelgen.codegen.build import write_sources
+from modelgen.codegen.emit import c_dir, integrator_files, integrator_sources
 from modelgen.sim import integrate
+
+
+ROOT = Path(__file__).resolve().parents[1]
 
 
 @pytest.fixture(scope="module")
@@ -32,8 +38,29 @@ def test_the_header_defines_exactly_the_table_and_nothing_by_hand():
     header = integrator_sources()["mg_integrate.h"]
     defines = dict(re.findall(r"^#define (MG_\w+) \(?(-?\d+)\)?", header, re.M))
     assert {k: int(v) for k, v in defines.items()} == capi.define_values()
-    source = integrator_sources()["mg_integrate.c"]
-    assert not re.search(r"^#define MG_(METHOD|STATUS)_", source, re.M)
+    for name in integrator_files():
+        source = integrator_sources()[name]
+        assert not re.search(r"^#define MG_(METHOD|STATUS)_", source, re.M), name
+        assert not re.search(r"\{%|\{\{ \w|\{#", source), f"{name} is plain C, not a template"
+
+
+def test_the_integrator_unit_includes_each_of_its_files_once_in_order():
+    """mg_integrate.c is the one translation unit: it includes every file of
+    mg_integrate/ exactly once (a part left out would be shipped and hashed but never
+    compiled), numerics first, since every later part uses it."""
+    unit = integrator_sources()["mg_integrate.c"]
+    included = re.findall(r'^#include "(mg_integrate/[\w.]+)"', unit, re.M)
+    assert sorted(included) == [f for f in integrator_files() if f != "mg_integrate.c"]
+    assert len(set(included)) == len(included)
+    assert included[:2] == ["mg_integrate/numerics.c", "mg_integrate/system.c"]
+
+
+@pytest.mark.skipif(not shutil.which("clang-format"), reason="clang-format is not installed")
+def test_the_integrator_c_follows_the_repository_clang_format():
+    files = [str(c_dir() / f) for f in integrator_files()]
+    r = subprocess.run(["clang-format", "--dry-run", "--Werror", *files], cwd=ROOT,
+                       stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    assert r.returncode == 0, r.stdout
 
 
 def test_struct_fields_of_the_module_follow_the_table(sp):
@@ -55,9 +82,7 @@ def test_status_and_method_codes_are_unique_and_statuses_signed_as_documented():
 
 
 def test_work_size_macro_and_function_equal_the_python_formula(sp, tmp_path):
-    sources = integrator_sources()
-    for name, text in sources.items():
-        (tmp_path / name).write_text(text)
+    write_sources(tmp_path, integrator_sources())
     (tmp_path / "main.c").write_text(
         '#include <stdio.h>\n#include "mg_integrate.h"\n'
         "int main(void)\n{\n"

@@ -29,6 +29,7 @@ from fmpy.validation import validate_fmu  # noqa: E402
 
 import modelgen  # noqa: E402
 from modelgen.codegen.build import compiler  # noqa: E402
+from modelgen.codegen.emit import integrator_files  # noqa: E402
 from modelgen.codegen.fmu import build_fmu  # noqa: E402
 from modelgen.errors import ModelgenError  # noqa: E402
 
@@ -116,6 +117,8 @@ def test_the_description_names_every_variable_by_its_model_name(fmus, compiled):
             "sources/mg_integrate.c", "sources/mg_integrate.h", "sources/cart_pole_fmi2.c",
             "sources/fmi2Functions.h", "sources/fmi2FunctionTypes.h",
             "sources/fmi2TypesPlatform.h", "sources/fmi2-headers-LICENSE.txt"} <= names
+    # and the files mg_integrate.c includes
+    assert {f"sources/{f}" for f in integrator_files()} <= names
 
 
 def test_a_scene_exports_its_outputs_initial_state_and_experiment(fmus, build_root):

@@ -42,7 +42,7 @@ import scipy.integrate
 
 import modelgen
 from modelgen.model.chains import spatial_chain
-from modelgen.codegen.emit import SINGLE_LIMIT
+from modelgen.codegen.emit import SINGLE_LIMIT, integrator_files
 
 ROOT = Path(__file__).resolve().parent.parent
 MODELS = ROOT / "models"
@@ -61,8 +61,10 @@ EXPORTED = ("abi_version", "dimensions", "default_parameters", "mass_matrix", "v
             "generalized_forces", "prepare", "rhs_prepared", "rhs", "inverse_dynamics", "energy",
             "body_poses", "project",
             "system", "jacobian_fd", "integrate", "integrate_batch")
-#: The model-independent integrator files copied next to every model's C.
+#: The model-independent integrator files copied next to every model's C (and the
+#: folder of the files mg_integrate.c includes, which are not compiled alone).
 INTEGRATOR = ("mg_integrate.c", "mg_integrate.h")
+INTEGRATOR_DIR = "mg_integrate"
 C99 = ("cc", "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic")
 CXX11 = ("c++", "-x", "c++", "-std=c++11", "-Wall", "-Wextra", "-Werror")
 JOBS = max(2, os.cpu_count() or 2)
@@ -413,6 +415,8 @@ def test_generated_c_compiles_warning_free_as_c99_and_cxx(generated, tmp_path):
         inc = f"-I{src}"
         assert sorted(p.name for p in src.iterdir() if p.suffix in (".c", ".h")) == \
             sorted([f"{name}.c", f"{name}.h", *INTEGRATOR]), "the output directory is not self-contained"
+        assert sorted(f"{INTEGRATOR_DIR}/{p.name}" for p in (src / INTEGRATOR_DIR).iterdir()) == \
+            [f for f in integrator_files() if f.startswith(f"{INTEGRATOR_DIR}/")]
         for tag, flags in (("all", []), ("1", ["-DMG_PART=1"]), ("2", ["-DMG_PART=2"])):
             compiles.append(([*C99, *flags, "-c", src / f"{name}.c", "-o", f"c_{tag}.o"], out))
             compiles.append(([*CXX11, *flags, "-c", src / f"{name}.c", "-o", f"cxx_{tag}.o"], out))
@@ -610,6 +614,11 @@ def test_a_changed_model_reuses_the_compiled_integrators(monkeypatch, tmp_path):
     assert len(list((tmp_path / "cache").glob("mg_integrate-*.o"))) == 2
     assert (tmp_path / "a" / "mg_integrate.c").read_text().endswith("/* edited */\n")
     assert build.integrator_hash(edited) != build.integrator_hash(sources)
+    # every included file is part of the key, and is copied into the output directory
+    part = "mg_integrate/rodas.c"
+    edited = dict(sources, **{part: sources[part] + "/* edited */\n"})
+    assert build.integrator_hash(edited) != build.integrator_hash(sources)
+    assert (tmp_path / "a" / part).read_text() == sources[part]
 
 
 _RACE = """
@@ -656,7 +665,7 @@ def test_concurrent_builds_both_succeed(generated, tmp_path):
     names = sorted(p.name for p in out.iterdir())
     manifest = json.loads((out / "manifest.json").read_text())
     assert names == sorted(["manifest.json", "double_pendulum.c", "double_pendulum.h",
-                            *INTEGRATOR, manifest["module_file"]]), names
+                            *INTEGRATOR, INTEGRATOR_DIR, manifest["module_file"]]), names
     assert not [n for n in names if n.startswith(".build-")]
 
     r = _run([sys.executable, "-c", _CHECK_MODULE, out])

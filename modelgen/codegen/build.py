@@ -18,12 +18,12 @@ is compiled by calling the C compiler directly (two parts in parallel for
 large models), and a failure raises :class:`BuildError` with the exact
 command and the compiler's full output (nothing is swallowed).
 
-The integrators (``mg_integrate.c``, the same for every model) are compiled
-once per compiler, flags and source into a per-user cache directory
-(:func:`cache_dir`) and every model's module links that object; a changed
-model recompiles only its own code.  ``mg_integrate.c``/``.h`` are also
-copied next to the model's ``.c``/``.h``, so a C user compiles the output
-directory and nothing else.
+The integrators (``mg_integrate.c`` and the ``mg_integrate/*.c`` it includes,
+the same for every model) are compiled once per compiler, flags and source
+into a per-user cache directory (:func:`cache_dir`) and every model's module
+links that object; a changed model recompiles only its own code.  They and
+``mg_integrate.h`` are also copied next to the model's ``.c``/``.h``, so a C
+user compiles the output directory's ``.c`` files and nothing else.
 
 Everything is written to a private temporary directory first and moved into
 place with ``os.replace`` under an exclusive lock on the output directory
@@ -226,18 +226,27 @@ def integrator_flags() -> list:
 
 
 def integrator_hash(sources: dict) -> str:
-    """Cache key of the integrators' object: their source, the compiler and its flags."""
+    """Cache key of the integrators' object: every one of their files (name and text),
+    the compiler and its flags."""
     h = hashlib.sha256()
-    for part in (sources["mg_integrate.h"], sources["mg_integrate.c"], " ".join(compiler()),
-                 " ".join(integrator_flags())):
+    for part in (*(p for name in sorted(sources) for p in (name, sources[name])),
+                 " ".join(compiler()), " ".join(integrator_flags())):
         h.update(part.encode())
         h.update(b"\0")
     return h.hexdigest()
 
 
+def write_sources(directory: Path, sources: dict) -> None:
+    """Write ``sources`` (path relative to ``directory`` -> text), making their folders."""
+    for name, text in sources.items():
+        path = Path(directory) / name
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(text)
+
+
 def integrator_object(sources: dict) -> tuple:
-    """(path, cached): the compiled ``mg_integrate.o`` for these sources, from the
-    cache or compiled now.
+    """(path, cached): the compiled ``mg_integrate.o`` for these sources
+    (:func:`modelgen.codegen.emit.integrator_sources`), from the cache or compiled now.
 
     Compiled in a private temporary directory and moved into the cache with
     ``os.replace``, so concurrent builds never see a partial object.
@@ -248,8 +257,7 @@ def integrator_object(sources: dict) -> tuple:
         return target, True
     tmp = _private_dir(directory, ".mg-")
     try:
-        for name in ("mg_integrate.h", "mg_integrate.c"):
-            (tmp / name).write_text(sources[name])
+        write_sources(tmp, sources)
         run_commands([[*compiler(), *integrator_flags(), "-c", "mg_integrate.c", "-o", "mg_integrate.o"]],
              tmp)
         os.replace(tmp / "mg_integrate.o", target)
@@ -502,8 +510,7 @@ def runtime_module(integrator: dict, runtime: dict) -> tuple:
         with _locked(directory):
             if target.is_file():                  # built by another process meanwhile
                 return module_name, target
-            for fname in ("mg_integrate.h", "mg_integrate.c"):
-                (tmp / fname).write_text(integrator[fname])
+            write_sources(tmp, integrator)
             ffi = cffi.FFI()
             ffi.cdef(runtime["cdef"])
             ffi.set_source(module_name, runtime["mg_runtime.c"],
@@ -566,7 +573,8 @@ def build_module(directory: Path, name: str, sources: dict, manifest: dict,
                  statements: dict, integrator: dict) -> BuildResult:
     """Compile ``sources`` (``<name>.c``, ``<name>.h``) into a shared library in
     ``directory``, linked with the cached object of ``integrator``
-    (``mg_integrate.h``/``.c``).
+    (``mg_integrate.h``, ``mg_integrate.c`` and ``mg_integrate/*.c``), which are
+    copied next to them.
 
     ``manifest`` must hold ``build_hash``; the library is named after it so a
     changed model never collides with an already loaded one.  ``statements`` maps
@@ -606,8 +614,9 @@ def build_module(directory: Path, name: str, sources: dict, manifest: dict,
         with _locked(directory):
             _write_if_changed(directory / f"{name}.c", sources[f"{name}.c"], tmp)
             _write_if_changed(directory / f"{name}.h", sources[f"{name}.h"], tmp)
-            for fname in ("mg_integrate.h", "mg_integrate.c"):
-                _write_if_changed(directory / fname, integrator[fname], tmp)
+            for fname, text in integrator.items():
+                (directory / fname).parent.mkdir(parents=True, exist_ok=True)
+                _write_if_changed(directory / fname, text, tmp)
             os.replace(tmp / module_file, directory / module_file)
             newest = read_manifest(directory)
             if isinstance(newest, dict) and isinstance(newest.get("build_hash"), str) \

@@ -1,9 +1,10 @@
 """The C integrator interface as data: the one table behind ``mg_integrate.h``.
 
 Method codes, statuses (with their messages), statistics slots, limits and
-the fields of the public structs live here and nowhere else.  The templates
-``mg_integrate.h.j2`` / ``mg_integrate.c.j2`` render them as prefixed
-``#define`` s and struct declarations, the runtime module's cffi ``cdef``
+the fields of the public structs live here and nowhere else.  The template
+``mg_integrate.h.j2`` renders them as prefixed ``#define`` s and struct
+declarations (the integrators themselves are plain C in ``codegen/c/``, which
+uses only those names), the runtime module's cffi ``cdef``
 declares the same ``#define`` s so Python reads them back from the compiled C,
 ``SIGNATURES`` lists the signatures of the model's exported functions (one
 trampoline each in the runtime module), and

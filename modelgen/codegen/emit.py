@@ -31,8 +31,9 @@ from modelgen.codegen.printer import ModelPrinter
 ABI_VERSION = capi.ABI_VERSION
 #: The templates of a model's own code (the model hash covers these only).
 MODEL_TEMPLATES = ("model.c.j2", "model.h.j2", "macros.j2")
-#: The model-independent integrator files, rendered from modelgen.codegen.capi alone.
-INTEGRATOR_FILES = ("mg_integrate.h", "mg_integrate.c")
+#: The integrators' header, rendered from modelgen.codegen.capi alone; their C is
+#: plain files in ``c/`` (:func:`integrator_files`).
+INTEGRATOR_HEADER = "mg_integrate.h"
 #: Statements per noinline part of a large routine.
 CHUNK = 150
 #: Routines up to this many statements stay in one function.
@@ -66,24 +67,47 @@ def templates_digest() -> str:
     return h.hexdigest()
 
 
+def c_dir() -> Path:
+    """Where the integrators' C lives (``mg_integrate.c`` and ``mg_integrate/``)."""
+    here = Path(__file__).resolve().parent / "c"
+    if not (here / "mg_integrate.c").is_file():
+        raise TemplateError(f"modelgen's integrator sources not found in {here}")
+    return here
+
+
+def integrator_files() -> tuple:
+    """The integrators' C files, as paths relative to :func:`c_dir` and to a model's
+    output directory: ``mg_integrate.c`` (the one translation unit) and the
+    ``mg_integrate/*.c`` it includes, sorted.
+
+    >>> integrator_files()[0]
+    'mg_integrate.c'
+    """
+    root = c_dir()
+    return tuple(sorted(p.relative_to(root).as_posix() for p in root.rglob("*")
+                        if p.suffix in (".c", ".h")))
+
+
 @functools.lru_cache(maxsize=None)
-def _integrator_sources(digest: str) -> tuple:
+def _integrator_header(digest: str) -> str:
     context = dict(capi.context(), capi=capi.context(), version=__version__)
-    return tuple((name, render(f"{name}.j2", dict(context, template=f"{name}.j2")))
-                 for name in INTEGRATOR_FILES)
+    template = f"{INTEGRATOR_HEADER}.j2"
+    return render(template, dict(context, template=template))
 
 
 def integrator_sources() -> dict:
-    """``mg_integrate.h`` and ``mg_integrate.c``: the same for every model.
-
-    Rendered from :mod:`modelgen.codegen.capi` and their two templates only
-    (cached while the templates are unchanged).
+    """The integrators, the same for every model: relative path -> text of
+    ``mg_integrate.h`` (rendered from :mod:`modelgen.codegen.capi` and its template,
+    cached while they are unchanged) and of the C files of :func:`integrator_files`
+    (read from the package as they are).
     """
     h = hashlib.sha256(repr(capi.context()).encode())
-    for name in INTEGRATOR_FILES + ("macros.j2",):
-        path = templates_dir() / (name if name.endswith(".j2") else f"{name}.j2")
-        h.update(path.read_bytes())
-    return dict(_integrator_sources(h.hexdigest()))
+    for name in (f"{INTEGRATOR_HEADER}.j2", "macros.j2"):
+        h.update((templates_dir() / name).read_bytes())
+    sources = {INTEGRATOR_HEADER: _integrator_header(h.hexdigest())}
+    for name in integrator_files():
+        sources[name] = (c_dir() / name).read_text()
+    return sources
 
 
 def runtime_sources() -> dict:

@@ -10,7 +10,8 @@ scene (YAML path or SceneSpec).  Output: a ``.fmu`` archive holding
   ``ModelStructure``, and the Co-Simulation integrator (method and
   tolerances, fixed at export) in ``description`` and a vendor annotation;
 - ``sources/``: the model's C (``<name>.c``/``.h`` from :func:`generate`),
-  modelgen's integrators (``mg_integrate.c``/``.h``), the FMI wrapper
+  modelgen's integrators (``mg_integrate.c``/``.h`` and the ``mg_integrate/``
+  files that ``mg_integrate.c`` includes), the FMI wrapper
   (``<name>_fmi2.c``, rendered from ``templates/fmu/fmi2.c.j2``) and the FMI
   2.0 headers with their licence, so an importer can rebuild it anywhere;
 - ``binaries/<platform>/<name>.<so|dylib>``: compiled here.
@@ -41,8 +42,8 @@ from xml.etree import ElementTree as ET
 
 from modelgen.codegen import capi
 from modelgen.codegen.build import (compile_flags, compiler, integrator_object, link_command,
-                                    run_commands)
-from modelgen.codegen.emit import render
+                                    run_commands, write_sources)
+from modelgen.codegen.emit import INTEGRATOR_HEADER, integrator_files, render
 from modelgen.codegen.pipeline import generate, model_hash
 from modelgen.errors import BuildError, ModelError, ModelgenError
 from modelgen.model import as_spec, is_scene_file, load_scene
@@ -385,7 +386,7 @@ def _model_sources(spec: ModelSpec, outputs, jacobian: bool, out_dir) -> tuple:
 
     def read(directory: Path):
         texts = {f: (directory / f).read_text() for f in
-                 (f"{spec.name}.c", f"{spec.name}.h", "mg_integrate.c", "mg_integrate.h")}
+                 (f"{spec.name}.c", f"{spec.name}.h", INTEGRATOR_HEADER, *integrator_files())}
         ok = all(f"Model hash: {hash16}" in texts[f] for f in (f"{spec.name}.c",
                                                                 f"{spec.name}.h"))
         return texts, ok
@@ -477,8 +478,8 @@ def build_fmu(source, out_path, *, method: str | None = None, rtol: float | None
     for header in FMI2_HEADERS + (FMI2_LICENSE,):
         texts[header] = (fmi2_dir() / header).read_text()
     c_files = [f"{spec.name}.c", "mg_integrate.c", wrapper]
-    integrators, _ = integrator_object({f: texts[f] for f in ("mg_integrate.c",
-                                                               "mg_integrate.h")})
+    integrators, _ = integrator_object({f: texts[f] for f in (INTEGRATOR_HEADER,
+                                                               *integrator_files())})
     description = (f"{spec.description + ' ' if spec.description else ''}(exported by modelgen "
                    f"{__version__}; Co-Simulation integrates with mg_integrate: "
                    f"{settings.describe()})")
@@ -487,8 +488,7 @@ def build_fmu(source, out_path, *, method: str | None = None, rtol: float | None
     statements = max(o["statements"] for o in manifest["ops"].values())
     with tempfile.TemporaryDirectory(prefix="modelgen-fmu-") as tmp:
         tmp = Path(tmp)
-        for fname, text in texts.items():
-            (tmp / fname).write_text(text)
+        write_sources(tmp, texts)
         library = compile_library(tmp, spec.name, [f"{spec.name}.c", wrapper], statements,
                                   suffix, [integrators])
         files = {"modelDescription.xml": xml.encode(),
