@@ -30,6 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from modelgen.codegen.capi import STATUS_BY_NAME
+from modelgen.codegen.options import BuildOptions
 from modelgen.errors import (BuildError, ModelgenError, SimulationError, TemplateError)
 from modelgen.version import __version__
 
@@ -103,11 +104,13 @@ def _generate(args) -> int:
         raise ModelgenError(f"{args.model} is a scene file, not a model; fix: run it with "
                             f"`modelgen simulate {args.model}` (which builds its reduced model), "
                             f"or generate the model file it names")
+    # --floating-base acts as the file is read; the rest says what to build
+    options = BuildOptions(jacobian=args.jacobian, formulation=args.formulation)
     spec = as_spec(args.model, floating_base=args.floating_base)
     t_load = time.perf_counter() - t0
     with _generation_progress(args, spec.name) as stages:
-        g = generate_model(spec, args.output, force=args.force, jacobian=args.jacobian,
-                           formulation=args.formulation, progress=stages)
+        g = generate_model(spec, args.output, force=args.force, options=options,
+                           progress=stages)
     b = g.build
     print(f"model      {spec.name}  ({args.model})")
     sizes = f"{spec.n} coordinates" if spec.nq == spec.n else \
@@ -350,10 +353,10 @@ def _linearize(args) -> int:
                                 f"{', '.join(model.inputs) or 'none'}")
     p = _parameter_overrides([name for name, _ in model.parameters], args.set) or None
     if spec is not None:
-        scene = Scene(spec, args.build_dir, linearize=True)
+        scene = Scene(spec, args.build_dir, options=BuildOptions(linearize=True))
         cm, u = scene.model, dict(scene.inputs_at(t), **u)
     else:
-        cm = load(model, args.build_dir, linearize=True)
+        cm = load(model, args.build_dir, options=BuildOptions(linearize=True))
     if args.equilibrium:
         q = cm.equilibrium(x0[:cm.n], u=u, p=p, t=t)
         print("equilibrium " + ", ".join(f"{c}={v:.12g}" for c, v in zip(cm.coordinates, q)))

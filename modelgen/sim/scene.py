@@ -5,8 +5,11 @@ Input: a :class:`~modelgen.model.spec.SceneSpec`.  Output: a compiled model
 """
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
+from modelgen.codegen.options import BuildOptions
 from modelgen.codegen.pipeline import generate
 from modelgen.errors import SimulationError
 from modelgen.model.spec import CANONICAL_BASE, CONSERVATIVE_KINDS, OutputSpec
@@ -30,19 +33,23 @@ class Scene:
     """
 
     def __init__(self, spec, out_dir=None, *, force: bool = False, progress=None,
-                 stages=None, linearize: bool = False):
+                 stages=None, linearize: bool | None = None,
+                 options: BuildOptions | None = None):
         """``progress(message)`` hears what is being done; ``stages(stage)`` is
-        called as each stage of a build starts (see :func:`generate`)."""
+        called as each stage of a build starts (see :func:`generate`).
+        ``options`` (:class:`~modelgen.codegen.options.BuildOptions`; ``linearize``
+        is shorthand) get the scene's outputs and, for stiff effects, the Jacobian."""
         self.spec = spec
         if progress:
             progress(f"{spec.name}: generating (or reusing) the model")
         # the power of every effect outside the energy, for the energy balance
         self.powers = _power_outputs(spec)
         extra = tuple(out for out in self.powers.values() if out not in spec.outputs)
+        options = BuildOptions.of(options, linearize=linearize)
         # stiff scenes get the symbolic Jacobian, for implicit integrators
-        generated = generate(spec.model, out_dir, force=force, outputs=spec.outputs + extra,
-                             jacobian=bool(spec.stiff_effects) and spec.model.n <= 12,
-                             progress=stages, linearize=linearize)
+        options = replace(options, outputs=spec.outputs + extra, jacobian=options.jacobian or (
+            bool(spec.stiff_effects) and spec.model.n <= 12))
+        generated = generate(spec.model, out_dir, force=force, options=options, progress=stages)
         self.generated = generated
         self.model = CompiledModel(generated.manifest, generated.build.module_path)
         check_mass_matrix(self.model)          # on every load: the cache hides nothing
