@@ -13,7 +13,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from modelgen.version import __version__
-from modelgen.codegen.build import (BuildResult, build_module, cache_dir, cache_lookup,
+from modelgen.codegen.build import (Generated, build_module, cache_dir, cache_lookup,
                                     compiler, host_flags, integrator_hash, runtime_module)
 from modelgen.codegen.capi import signature_of
 from modelgen.codegen.cse import hoist_parameters, make_routines
@@ -44,21 +44,6 @@ def default_output(name: str) -> Path:
 #: arm; there is no crossover (at n = 1 aba has nothing to solve either), so
 #: every joint tree gets aba.
 ABA_CROSSOVER = 1
-
-
-@dataclass(frozen=True)
-class Generated:
-    """What :func:`generate` did: the build and the figures of each stage."""
-    build: BuildResult
-    manifest: dict
-
-    @property
-    def seconds(self) -> dict:
-        return self.manifest["seconds"]
-
-    @property
-    def ops(self) -> dict:
-        return self.manifest["ops"]
 
 
 def model_hash(spec: ModelSpec, options: BuildOptions | None = None) -> str:
@@ -230,10 +215,6 @@ def _check_generable(spec: ModelSpec) -> None:
 
 
 
-#: the stages of a build, in order (the keys of ``Generated.seconds``)
-STAGES = ("derive", "cse", "emit", "compile")
-
-
 def generate(spec: ModelSpec, out_dir=None, *, force: bool = False,
              options: BuildOptions | None = None, progress=None, outputs=None,
              jacobian: bool | None = None, formulation: str | None = None,
@@ -253,7 +234,7 @@ def generate(spec: ModelSpec, out_dir=None, *, force: bool = False,
     outputs, C and D, symbolic; see :mod:`modelgen.derive.linearize`) and
     implies ``jacobian``.
     ``progress`` is None or a callable ``progress(stage)`` called as each of
-    :data:`STAGES` starts (not at all when the build is reused).
+    :data:`~modelgen.codegen.build.STAGES` starts (not at all when the build is reused).
 
     >>> g = generate(load_model("models/double_pendulum.yaml"))   # doctest: +SKIP
     >>> g.manifest["n"]                                             # doctest: +SKIP

@@ -2,15 +2,24 @@
 
 These are the functions ``modelgen.load``, ``modelgen.load_scene`` and
 ``modelgen.generate_model`` re-export.
+
+A model file built before is found through the build cache's fast index
+(:mod:`modelgen.codegen.index`: the file's bytes and the options), without
+importing the model reader or the symbolic pipeline; those are imported
+inside the functions below, only when the index has no verified build.
 """
 from __future__ import annotations
 
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from modelgen.codegen import index
+from modelgen.codegen.build import Generated
 from modelgen.codegen.options import BuildOptions
-from modelgen.codegen.pipeline import Generated, generate
-from modelgen.model import as_spec
-from modelgen.model.scene import load_scene as load_scene_spec
 from modelgen.sim.runtime import CompiledModel, check_mass_matrix
-from modelgen.sim.scene import Scene
+
+if TYPE_CHECKING:
+    from modelgen.sim.scene import Scene
 
 
 def generate_model(source, out_dir=None, *, force: bool = False,
@@ -27,9 +36,9 @@ def generate_model(source, out_dir=None, *, force: bool = False,
     """
     options = BuildOptions.of(options, jacobian=jacobian, formulation=formulation,
                               linearize=linearize, floating_base=floating_base)
-    generated = generate(as_spec(source, floating_base=options.floating_base), out_dir,
-                         force=force, options=options, progress=progress)
+    generated = _generate(source, out_dir, force, options, progress)
     _loaded(generated)
+    index.record(_fast_key(source, options, out_dir), generated.build, _runtime())
     return generated
 
 
@@ -71,8 +80,40 @@ def load(source, out_dir=None, *, force: bool = False, options: BuildOptions | N
     """
     options = BuildOptions.of(options, jacobian=jacobian, formulation=formulation,
                               linearize=linearize, floating_base=floating_base)
-    return _loaded(generate(as_spec(source, floating_base=options.floating_base), out_dir,
-                            force=force, options=options, progress=progress))
+    key = _fast_key(source, options, out_dir)
+    hit = None if force else index.lookup(key)
+    if hit is not None:
+        cm = CompiledModel(hit.build.manifest, hit.build.module_path, hit.runtime)
+        check_mass_matrix(cm)
+        return cm
+    generated = _generate(source, out_dir, force, options, progress)
+    cm = _loaded(generated)
+    index.record(key, generated.build, _runtime())
+    return cm
+
+
+def _fast_key(source, options: BuildOptions, out_dir) -> str | None:
+    """The fast index key of a model file (None for a spec or a Model: only a file
+    read here is known to give the spec its bytes say)."""
+    if not isinstance(source, (str, Path)):
+        return None
+    return index.fast_key([source], options, out_dir)
+
+
+def _generate(source, out_dir, force: bool, options: BuildOptions, progress) -> Generated:
+    """The full path: read the model, then generate (or find by the build key)."""
+    # imported here, not at the top: the reader and the symbolic pipeline (about a
+    # second of imports) are needed only when the fast index has no build
+    from modelgen.codegen.pipeline import generate
+    from modelgen.model import as_spec
+    return generate(as_spec(source, floating_base=options.floating_base), out_dir,
+                    force=force, options=options, progress=progress)
+
+
+def _runtime() -> tuple:
+    """(name, path) of the runtime module, for an index entry (the pipeline is loaded)."""
+    from modelgen.codegen.pipeline import runtime
+    return runtime()
 
 
 def load_scene(path, out_dir=None, *, force: bool = False, progress=None,
@@ -87,6 +128,11 @@ def load_scene(path, out_dir=None, *, force: bool = False, progress=None,
 
     >>> res = load_scene("models/scenes/dp_damped.yaml").run()   # doctest: +SKIP
     """
+    # imported here: a scene needs the model reader (sympy) and the scene module;
+    # a plain model's load needs neither
+    from modelgen.model.scene import load_scene as load_scene_spec
+    from modelgen.sim.scene import Scene
     options = BuildOptions.of(options, linearize=linearize)
-    return Scene(load_scene_spec(path), out_dir, force=force, progress=progress,
-                 options=options)
+    spec = load_scene_spec(path)
+    return Scene(spec, out_dir, force=force, progress=progress, options=options,
+                 files=(spec.source, spec.full_model.source))
