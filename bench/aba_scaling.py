@@ -12,8 +12,8 @@ Models
 
 Method
     * Each (model, formulation) is generated in a fresh subprocess with
-      ``generate(spec, dir, force=True, formulation=...)``; *derive*, *cse*,
-      *emit*, *compile* are modelgen's stage timers, *RSS* the child's peak
+      ``generate(spec, dir, force=True, options=BuildOptions(formulation=...))``;
+      *derive*, *cse*, *emit*, *compile* are modelgen's stage timers, *RSS* the child's peak
       resident set (Python side) after generating.
     * ops: modelgen's operation counts of the ``rhs`` routine
       (:func:`modelgen.codegen.cse.count_ops`: C operators as printed) before
@@ -76,10 +76,11 @@ def model_spec(kind: str):
 
 def child(kind: str, formulation: str, out_dir: str) -> None:
     """Generate one model with one formulation; print the figures as JSON."""
+    from modelgen.codegen.options import BuildOptions
     from modelgen.codegen.pipeline import generate
     spec = model_spec(kind)
     t0 = time.perf_counter()
-    g = generate(spec, out_dir, force=True, formulation=formulation)
+    g = generate(spec, out_dir, force=True, options=BuildOptions(formulation=formulation))
     wall = time.perf_counter() - t0
     rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     print(MARK + json.dumps({"seconds": g.seconds, "wall": wall, "rss_mb": rss,
@@ -97,9 +98,10 @@ def generate_in_child(kind: str, formulation: str, out_dir: Path) -> dict:
 
 def compiled(kind: str, formulation: str, out_dir: Path):
     """The CompiledModel of an existing build (the cache answers)."""
+    from modelgen.codegen.options import BuildOptions
     from modelgen.codegen.pipeline import generate
     from modelgen.sim.runtime import CompiledModel
-    g = generate(model_spec(kind), out_dir, formulation=formulation)
+    g = generate(model_spec(kind), out_dir, options=BuildOptions(formulation=formulation))
     return CompiledModel(g.manifest, g.build.module_path)
 
 

@@ -1,49 +1,44 @@
-"""How long an edited model takes to become a loaded module, stage by stage.
+"""How fast modelgen starts: import, a cached load, the CLI, and generation against PyDy.
 
 Run from the repository root::
 
-    .venv/bin/python bench/load_time.py                  # 7 rounds each
-    .venv/bin/python bench/load_time.py --rounds 3
-    .venv/bin/python bench/load_time.py --profile 30     # also cProfile, top 30 functions
+    .venv/bin/python bench/load_time.py                 # 5 rounds (PyDy: 2)
+    .venv/bin/python bench/load_time.py --quick         # 2 rounds (PyDy: 1)
 
-Measures, beside the figures of today (before the "One house" work) and the targets:
+Every figure is the wall time of a fresh Python process, interpreter start and
+imports included (what a user, a CLI call, a Dask worker or a multiprocessing
+child pays), min and median over the rounds, on a private build cache
+(``MODELGEN_CACHE_DIR`` in a temporary directory) warmed by one untimed run,
+which also writes the bytecode caches (``PYTHONDONTWRITEBYTECODE`` is unset
+for the children, as for an installed package):
 
-(a) **edit -> loaded model.**  ``models/double_pendulum.yaml`` is copied to a
-    temporary directory; every round changes the default of ``m2`` to a new
-    value (so the build cache misses, as after a real edit) and times
-    ``modelgen.load(path, out_dir)`` from the file to a loaded
-    ``CompiledModel`` (``modelgen.as_spec`` then ``modelgen.load``), in this
-    running Python with the package imported and one untimed warm-up load done
-    (the first load of a process also pays for lazy imports; it is printed
-    apart).  *load* is the YAML read into a ModelSpec; derive, cse, emit and
-    compile are modelgen's own timers (``cm.manifest["seconds"]``); *other* is
-    the rest of the total (hashing, cache look-up, import of the extension,
-    the mass-matrix check); *py cpu* and *cc cpu* are the CPU time of this
-    process and of the compilers over the round (less sensitive to a busy
-    machine than wall time; the compilers run in parallel, so on an idle
-    machine the wall time of compile is below *cc cpu*).
-    Min and median of each column over the rounds.
-(b) **generate the 6-link chain.**  ``modelgen.model.chains.spatial_chain(6)``
-    through ``modelgen.generate_model`` into a fresh directory every round;
-    the stage total is the sum of ``Generated.seconds``.  Min over the rounds.
-(c) **does a changed model recompile the integrators?**  Read from the build
-    manifest: an ``integrators`` entry if the build reports one, else the
-    compile commands (the integrators compiled as ``-DMG_PART=3`` of the
-    model's own C means yes); "n/a" when neither says.
+(a) ``python -c pass``: the interpreter alone, for reference.
+(b) cold import: ``import modelgen``.
+(c) cached load: ``modelgen.load("models/double_pendulum.yaml")``, the build
+    already in the cache (found through its fast index, see
+    ``modelgen/codegen/index.py``); the symbolic packages the process imported
+    are printed too (none is the point).
+(d) ``modelgen --help`` (the console script's ``main``).
+(e) cached ``modelgen simulate models/scenes/dp_free.yaml`` end to end (read
+    the scene, find its build, integrate, write CSV, NPZ and PNG).
+(f) the 6-link spatial chain (``modelgen.model.chains.spatial_chain(6)``,
+    written to a YAML file) generated from the command line,
+    ``modelgen generate chain.yaml -o DIR --force``, against PyDy on the same
+    model (``modelgen/bench/pydy_models.py``: sympy's ``KanesMethod`` and
+    PyDy's Cython backend, ``generate_ode_function(..., generator="cython")``),
+    each in a fresh process into a fresh directory, in the same run; the ratio
+    PyDy / modelgen.  Skipped, with the reason, when pydy or cython is missing.
 
-(d) **what the compiler spends**: each compile command of the last builds
-    (from the manifest) rerun alone, serially, min of 3, wall and CPU time.
-
-A shared machine is noisy: compare the minimum, and rerun when the load
-average (printed) is high.
+The figures of the issue (before the work) and the targets are printed beside
+the measurement.  A shared machine is noisy: compare the minimum, and rerun
+when the load average (printed) is high.
 """
 from __future__ import annotations
 
 import argparse
-import cProfile
+import importlib.util
+import json
 import os
-import pstats
-import re
 import resource
 import shutil
 import statistics
@@ -56,175 +51,144 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
-import modelgen  # noqa: E402
 from modelgen.model.chains import spatial_chain  # noqa: E402
+from modelgen.model.writer import spec_to_yaml  # noqa: E402
 
 DOUBLE_PENDULUM = REPO / "models" / "double_pendulum.yaml"
-#: the stages of Generated.seconds, in pipeline order
-STAGES = ("derive", "cse", "emit", "compile")
-#: figures of today (before the work) and the targets, in seconds
-TODAY_EDIT, TARGET_EDIT = "0.30-0.33", 0.2
-TODAY_CHAIN, TARGET_CHAIN = "1.04", 0.6
+DP_FREE = REPO / "models" / "scenes" / "dp_free.yaml"
 CHAIN_LINKS = 6
+#: (figure before the work, target) in seconds, or for the chain the ratio
+TARGETS = {"cached load": ("1.25", 0.15), "--help": ("1.4 (CPU)", 0.2),
+           "chain ratio": ("4.6", 10.0)}
+SYMBOLIC = ("sympy", "symengine")
 
 
-def edited(text: str, value: float) -> str:
-    """The double pendulum's YAML with the default of ``m2`` set to ``value``."""
-    new, count = re.subn(r"(\bm2:\s*)[-+0-9.eE]+", lambda m: f"{m.group(1)}{value!r}", text,
-                         count=1)
-    if count != 1:
-        raise SystemExit(f"{DOUBLE_PENDULUM}: no parameter default 'm2: <number>' to edit")
-    return new
+def children_cpu() -> float:
+    """CPU seconds of this process's finished children (and theirs: the compilers)."""
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return usage.ru_utime + usage.ru_stime
 
 
-def integrators_recompiled(manifest: dict) -> str:
-    """'yes', 'no' or 'n/a': did this build compile the integrators again?"""
-    entry = manifest.get("integrators")
-    if isinstance(entry, dict) and "cached" in entry:
-        return "no (reused: " + str(entry.get("path", "cached")) + ")" if entry["cached"] \
-            else "yes (built now)"
-    commands = manifest.get("compile_commands")
-    if commands:
-        part3 = any("-DMG_PART=3" in c for c in commands)
-        return ("yes: compiled again as part 3 (-DMG_PART=3) of the model's own C" if part3
-                else "no: the model's build compiles no integrator part")
-    return "n/a"
+def run(argv, env, cwd=REPO) -> tuple:
+    """(wall seconds, CPU seconds, stdout) of one fresh process (CPU: it and its
+    children, e.g. the C compiler); SystemExit with its output on failure."""
+    c0, t0 = children_cpu(), time.perf_counter()
+    proc = subprocess.run(argv, capture_output=True, text=True, env=env, cwd=cwd)
+    wall, cpu = time.perf_counter() - t0, children_cpu() - c0
+    if proc.returncode:
+        raise SystemExit(f"{' '.join(map(str, argv))} failed:\n{proc.stdout}{proc.stderr}")
+    return wall, cpu, proc.stdout
 
 
-def compiler_cpu() -> float:
-    """CPU time of this process's finished children (the compilers), s."""
-    children = resource.getrusage(resource.RUSAGE_CHILDREN)
-    return children.ru_utime + children.ru_stime
+def timed(argv, env, rounds: int, fresh=None) -> list:
+    """(wall, CPU) seconds of ``rounds`` runs; ``fresh(k)`` (if given) prepares round k."""
+    times = []
+    for k in range(rounds):
+        if fresh:
+            fresh(k)
+        times.append(run(argv, env)[:2])
+    return times
 
 
-def edit_round(path: Path, text: str, value: float, out_dir: Path) -> dict:
-    """Write the edit, load it; returns the total and the stage seconds."""
-    path.write_text(edited(text, value))
-    p0, c0, t0 = time.process_time(), compiler_cpu(), time.perf_counter()
-    spec = modelgen.as_spec(path)
-    t1 = time.perf_counter()
-    cm = modelgen.load(spec, out_dir)
-    total = time.perf_counter() - t0
-    py_cpu, cc_cpu = time.process_time() - p0, compiler_cpu() - c0
-    row = {"load": t1 - t0, **{s: cm.manifest["seconds"].get(s, 0.0) for s in STAGES}}
-    if abs(cm.parameters["m2"] - value) > 1e-12:
-        raise SystemExit(f"the loaded model has m2 = {cm.parameters['m2']}, not {value}")
-    row["other"] = total - sum(row.values())
-    row["total"] = total
-    row["py cpu"], row["cc cpu"] = py_cpu, cc_cpu
-    row["integrators"] = integrators_recompiled(cm.manifest)
-    return row
+def python(code: str) -> list:
+    return [sys.executable, "-c", code]
 
 
-def chain_round(root: Path, k: int) -> dict:
-    """``generate`` of the chain into a fresh directory; the stage seconds and their sum."""
-    g = modelgen.generate_model(spatial_chain(CHAIN_LINKS), root / f"chain{k}")
-    if g.build.cached:
-        raise SystemExit("the chain's build was cached: the output directory is not fresh")
-    row = {s: g.seconds.get(s, 0.0) for s in STAGES}
-    row["total"] = sum(row.values())
-    return row
+def modelgen_cli(*args) -> list:
+    return python("import sys; from modelgen.cli import main; sys.exit(main(sys.argv[1:]))") \
+        + [str(a) for a in args]
 
 
-def compile_breakdown(cm_or_generated, repeats: int = 3) -> list:
-    """Each of the build's compile commands run alone (serially), min of ``repeats``, s.
-
-    The commands are the manifest's ``compile_commands`` (the model's C parts),
-    rerun in the build directory with the object written to a scratch file.
-    """
-    manifest = cm_or_generated.manifest
-    directory = Path(getattr(cm_or_generated, "path", None) or
-                     cm_or_generated.build.module_path).parent
-    rows = []
-    with tempfile.TemporaryDirectory() as scratch:
-        for command in manifest.get("compile_commands", ()):
-            argv = command.split()
-            argv[argv.index("-o") + 1] = str(Path(scratch) / "part.o")
-            times, cpus = [], []
-            for _ in range(repeats):
-                c0, t0 = compiler_cpu(), time.perf_counter()
-                subprocess.run(argv, cwd=directory, check=True, capture_output=True)
-                times.append(time.perf_counter() - t0)
-                cpus.append(compiler_cpu() - c0)
-            part = next((a for a in argv if a.startswith("-DMG_PART=")), "-")
-            level = " ".join(a for a in argv if a.startswith(("-O", "-f")) and a != "-fPIC") \
-                or "-"
-            rows.append((part.removeprefix("-D"), level, min(times), min(cpus)))
-    return rows
+def row(name: str, times: list, note: str = "") -> str:
+    wall, cpu = [t[0] for t in times], [t[1] for t in times]
+    return (f"| {name} | {min(wall) * 1e3:.0f} | {statistics.median(wall) * 1e3:.0f} | "
+            f"{min(cpu) * 1e3:.0f} | {note} |")
 
 
-def table(rows, columns, how) -> list:
-    head = "| | " + " | ".join(columns) + " |"
-    lines = [head, "|---" * (len(columns) + 1) + "|"]
-    for name, pick in how:
-        lines.append(f"| {name} | " + " | ".join(f"{pick([r[c] for r in rows]) * 1e3:.0f}"
-                                                  for c in columns) + " |")
-    return lines
+def verdict(name: str, value: float, higher_is_better: bool = False) -> str:
+    before, target = TARGETS[name]
+    met = value >= target if higher_is_better else value <= target
+    return f"before {before}, target {'>=' if higher_is_better else '<='} {target:g}: " \
+           f"{'met' if met else 'NOT met'}"
 
 
-def profile(function, top: int, title: str) -> None:
-    prof = cProfile.Profile()
-    prof.enable()
-    function()
-    prof.disable()
-    print(f"\n### cProfile: {title} (top {top} by own time, then by cumulative time)\n")
-    stats = pstats.Stats(prof, stream=sys.stdout).strip_dirs()
-    stats.sort_stats("tottime").print_stats(top)
-    stats.sort_stats("cumulative").print_stats(top)
+def pydy_missing() -> str:
+    missing = [m for m in ("pydy", "Cython") if importlib.util.find_spec(m) is None]
+    return ", ".join(missing)
 
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--rounds", type=int, default=7, help="timed rounds of each (default 7)")
-    parser.add_argument("--profile", type=int, default=0, metavar="TOP",
-                        help="also profile one round of each and print the TOP functions")
+    parser.add_argument("--rounds", type=int, default=5, help="rounds of each (default 5)")
+    parser.add_argument("--pydy-rounds", type=int, default=2,
+                        help="rounds of the chain generation (default 2)")
+    parser.add_argument("--quick", action="store_true", help="2 rounds, 1 of the chain")
     args = parser.parse_args(argv)
-    text = DOUBLE_PENDULUM.read_text()
+    rounds, chain_rounds = (2, 1) if args.quick else (args.rounds, args.pydy_rounds)
     root = Path(tempfile.mkdtemp(prefix="modelgen-load-time-"))
+    env = dict(os.environ, PYTHONPATH=str(REPO), MODELGEN_CACHE_DIR=str(root / "cache"),
+               MPLBACKEND="Agg")
+    # as installed: the warm-up run writes the bytecode caches a user's later runs read
+    env.pop("PYTHONDONTWRITEBYTECODE", None)
     try:
-        path = root / "double_pendulum.yaml"
-        out_dir = root / "dp"
-        first = edit_round(path, text, 1.0, out_dir)      # the first load of this process
-        rows = [edit_round(path, text, 1.0 + 1e-3 * (k + 1), out_dir)
-                for k in range(args.rounds)]
-        chain_first = chain_round(root, 0)
-        chains = [chain_round(root, k + 1) for k in range(args.rounds)]
+        load = (f"import modelgen, sys, json; modelgen.load({str(DOUBLE_PENDULUM)!r}); "
+                f"print(json.dumps(sorted(m for m in sys.modules "
+                f"if m.split('.')[0] in {SYMBOLIC!r})))")
+        run(python(load), env)                                     # warm: build and index
+        simulate = modelgen_cli("simulate", DP_FREE, "-o", root / "out", "--quiet")
+        run(simulate, env)                                         # warm
+        rows = {"python -c pass": timed(python("pass"), env, rounds),
+                "import modelgen": timed(python("import modelgen"), env, rounds),
+                "cached load": timed(python(load), env, rounds),
+                "--help": timed(modelgen_cli("--help"), env, rounds),
+                "simulate dp_free": timed(simulate, env, rounds)}
+        imported = run(python(load), env)[2]
+        symbolic = json.loads(imported.strip().splitlines()[-1])
+
+        chain = root / f"spatial_chain_{CHAIN_LINKS}.yaml"
+        chain.write_text(spec_to_yaml(spatial_chain(CHAIN_LINKS).spec()))
+        generate = modelgen_cli("generate", chain, "-o", root / "chain", "--force")
+        gen_times = timed(generate, env, chain_rounds)
+        missing = pydy_missing()
+        pydy_times = []
+        if not missing:
+            def fresh(k):
+                shutil.rmtree(root / "pydy", ignore_errors=True)
+                (root / "pydy").mkdir()
+            pydy_times = timed([sys.executable, "-m", "modelgen.bench.pydy_models",
+                                str(CHAIN_LINKS), str(root / "pydy")], env, chain_rounds, fresh)
+
         load_avg = ", ".join(f"{v:.2f}" for v in os.getloadavg())
-        print(f"# Load time ({args.rounds} rounds; modelgen {modelgen.__version__}, Python "
-              f"{sys.version.split()[0]}, load average {load_avg})\n")
-        print(f"## (a) edited double pendulum (m2's default changed) -> loaded CompiledModel, "
-              f"in a running Python, ms\n")
-        columns = ["load", *STAGES, "other", "total", "py cpu", "cc cpu"]
-        print("\n".join(table(rows, columns, (("min", min), ("median", statistics.median)))))
-        print(f"\nfirst load of the process (lazy imports included): "
-              f"{first['total'] * 1e3:.0f} ms")
-        best = min(r["total"] for r in rows)
-        print(f"\ntotal: min {best:.3f} s, median "
-              f"{statistics.median(r['total'] for r in rows):.3f} s; today {TODAY_EDIT} s, "
-              f"target <= {TARGET_EDIT} s: {'met' if best <= TARGET_EDIT else 'NOT met'} "
-              f"(min)\n")
-        print(f"## (b) generate spatial_chain({CHAIN_LINKS}), fresh output directory, ms\n")
-        print("\n".join(table(chains, [*STAGES, "total"], (("min", min),
-                                                           ("median", statistics.median)))))
-        best = min(r["total"] for r in chains)
-        print(f"\nfirst generate of the process: {chain_first['total'] * 1e3:.0f} ms")
-        print(f"\nstage total: min {best:.3f} s; today {TODAY_CHAIN} s, target <= "
-              f"{TARGET_CHAIN} s: {'met' if best <= TARGET_CHAIN else 'NOT met'}\n")
-        print("## (c) a changed model recompiles the integrators?\n")
-        print(f"{rows[-1]['integrators']}\n")
-        print("## (d) the compile commands of the builds, each alone (serial), min of 3, ms\n")
-        print("| model | part | flags | wall ms | cpu ms |\n|---|---|---|---|---|")
-        dp = modelgen.load(path, out_dir)
-        chain = modelgen.generate_model(spatial_chain(CHAIN_LINKS), root / "chain0")
-        for name, built in (("double pendulum", dp), (f"chain {CHAIN_LINKS}", chain)):
-            for part, level, seconds, cpu in compile_breakdown(built):
-                print(f"| {name} | {part} | {level} | {seconds * 1e3:.0f} | {cpu * 1e3:.0f} |")
-        print("\n(the builds run the two parts in parallel, then link; no per-model cffi wrapper is compiled: Python calls the library through the runtime module, built once)")
-        if args.profile:
-            profile(lambda: edit_round(path, text, 2.0, out_dir), args.profile,
-                    "edited double pendulum -> loaded")
-            profile(lambda: chain_round(root, args.rounds + 1), args.profile,
-                    f"generate spatial_chain({CHAIN_LINKS})")
+        print(f"# Start-up and generation time ({rounds} rounds, chain {chain_rounds}; "
+              f"Python {sys.version.split()[0]}, load average {load_avg})\n")
+        print("| fresh process | min ms | median ms | min CPU ms | |\n|---|---|---|---|---|")
+        print(row("python -c pass", rows["python -c pass"], "the interpreter alone"))
+        print(row("import modelgen", rows["import modelgen"]))
+        print(row("cached modelgen.load (double pendulum)", rows["cached load"],
+                  verdict("cached load", min(t[0] for t in rows["cached load"]))
+                  + f"; symbolic packages imported: {', '.join(symbolic) or 'none'}"))
+        print(row("modelgen --help", rows["--help"],
+                  verdict("--help", min(t[0] for t in rows["--help"]))))
+        print(row("cached modelgen simulate dp_free.yaml", rows["simulate dp_free"],
+                  "end to end: scene read, build found, run, CSV/NPZ/PNG written"))
+        print(f"\n## spatial_chain({CHAIN_LINKS}) generated from the command line, "
+              f"fresh process and directory\n")
+        print("| generator | min wall s | median wall s | min CPU s (with compilers) |\n"
+              "|---|---|---|---|")
+        for name, times in (("modelgen generate", gen_times),
+                            ("PyDy (KanesMethod + Cython)", pydy_times)):
+            if times:
+                wall, cpu = [t[0] for t in times], [t[1] for t in times]
+                print(f"| {name} | {min(wall):.2f} | {statistics.median(wall):.2f} | "
+                      f"{min(cpu):.2f} |")
+        if pydy_times:
+            ratio = min(t[0] for t in pydy_times) / min(t[0] for t in gen_times)
+            ratio_cpu = min(t[1] for t in pydy_times) / min(t[1] for t in gen_times)
+            print(f"\nPyDy / modelgen = {ratio:.1f}x wall, {ratio_cpu:.1f}x CPU (min over min); "
+                  f"{verdict('chain ratio', ratio, higher_is_better=True)} (wall)")
+        else:
+            print(f"\nPyDy not measured: {missing} not installed "
+                  f"(pip install pydy cython)")
     finally:
         shutil.rmtree(root, ignore_errors=True)
     return 0

@@ -45,6 +45,7 @@ import numpy as np  # noqa: E402
 import codegen_scaling as cs  # noqa: E402
 import modelgen  # noqa: E402
 from modelgen.codegen.build import compiler  # noqa: E402
+from modelgen.codegen.options import BuildOptions  # noqa: E402
 from modelgen.codegen.emit import templates_dir  # noqa: E402
 from modelgen.model.chains import spatial_chain  # noqa: E402
 
@@ -157,12 +158,12 @@ def search(work: Path, millions: int) -> dict:
     return best
 
 
-def measure(name, spec, work: Path, rounds: int, **options) -> dict:
+def measure(name, spec, work: Path, rounds: int, options=None) -> dict:
     builds = {}
     for variant, flag in VARIANTS:
         os.environ["MODELGEN_CFLAGS"] = flag
         try:
-            cm = modelgen.load(spec, work / name / variant, force=True, **options)
+            cm = modelgen.load(spec, work / name / variant, force=True, options=options)
         finally:
             os.environ.pop("MODELGEN_CFLAGS", None)
         rng = np.random.default_rng(1000 + cm.n)
@@ -195,7 +196,7 @@ def main(argv=None) -> int:
             return 0
         rows = [measure("arm7", REPO / "models" / "arm7.yaml", work, args.rounds),
                 measure("spatial_chain_20", spatial_chain(20).spec(), work, args.rounds,
-                        formulation="aba")]
+                        BuildOptions(formulation="aba"))]
         loop = per_call(work)
     print("| model | instructions/rhs libm | mg | ratio | rhs us libm | mg | ratio "
           "| max rel diff of rhs |")

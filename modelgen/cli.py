@@ -27,9 +27,8 @@ import time
 import warnings
 from pathlib import Path
 
-import numpy as np
-
 from modelgen.codegen.capi import STATUS_BY_NAME
+from modelgen.codegen.options import BuildOptions
 from modelgen.errors import (BuildError, ModelgenError, SimulationError, TemplateError)
 from modelgen.version import __version__
 
@@ -71,7 +70,7 @@ def _progress_bar(args, total, desc, **options):
 def _generation_progress(args, name):
     """``stages(stage)`` for :func:`modelgen.codegen.pipeline.generate`, drawing the
     stages of a build on a progress bar (see :func:`_progress_bar`)."""
-    from modelgen.codegen.pipeline import STAGES
+    from modelgen.codegen.build import STAGES
     with _progress_bar(args, len(STAGES), f"{name}: generating",
                        bar_format="{desc} {n_fmt}/{total_fmt} stages |{bar}| "
                                   "[{elapsed}]") as bar:
@@ -103,11 +102,13 @@ def _generate(args) -> int:
         raise ModelgenError(f"{args.model} is a scene file, not a model; fix: run it with "
                             f"`modelgen simulate {args.model}` (which builds its reduced model), "
                             f"or generate the model file it names")
+    # --floating-base acts as the file is read; the rest says what to build
+    options = BuildOptions(jacobian=args.jacobian, formulation=args.formulation)
     spec = as_spec(args.model, floating_base=args.floating_base)
     t_load = time.perf_counter() - t0
     with _generation_progress(args, spec.name) as stages:
-        g = generate_model(spec, args.output, force=args.force, jacobian=args.jacobian,
-                           formulation=args.formulation, progress=stages)
+        g = generate_model(spec, args.output, force=args.force, options=options,
+                           progress=stages)
     b = g.build
     print(f"model      {spec.name}  ({args.model})")
     sizes = f"{spec.n} coordinates" if spec.nq == spec.n else \
@@ -202,6 +203,7 @@ def _report(result, out: Path, name: str, args, title: str, conservative,
     """Write CSV, NPZ and PNG of a result (and with ``--animate`` the animation and the
     HTML viewer, from ``animation`` = (model spec, compiled model, p)); print the
     energy balance; the exit status."""
+    import numpy as np
     out.mkdir(parents=True, exist_ok=True)
     print(f"wrote {result.to_csv(out / f'{name}.csv')}")
     print(f"wrote {result.to_npz(out / f'{name}.npz')}")
@@ -268,7 +270,9 @@ def _simulate_scene(args) -> int:
         raise ModelgenError(f"--t-end must be after the scene's start {spec.t_start:g} s")
     spec = replace(spec, **changes)
     with _generation_progress(args, spec.name) as stages:
-        scene = Scene(spec, args.build_dir, progress=progress, stages=stages)
+        # the run settings changed above do not change the build: the files still say it
+        scene = Scene(spec, args.build_dir, progress=progress, stages=stages,
+                      files=(spec.source, spec.full_model.source))
     x0 = scene.initial_state(init)
     print(scene.summary())
     progress(f"{spec.name}: integrating ({time.perf_counter() - t0:.2f} s so far)")
@@ -289,6 +293,7 @@ def _check_output_dir(path) -> None:
 
 
 def _simulate(args) -> int:
+    import numpy as np
     from modelgen.model import as_spec, is_scene_file
     from modelgen.sim.load import load
     _check_times(args)
@@ -320,6 +325,7 @@ def _simulate(args) -> int:
 def _linearize(args) -> int:
     """Linearize a model or scene at --at (over the scene's initial state, or zero) and
     --u (over the scene's inputs at --t, or zero); print A, B, the modes; write -o."""
+    import numpy as np
     from modelgen.model import as_spec, is_scene_file
     from modelgen.model.scene import load_scene
     from modelgen.sim.load import load
@@ -348,10 +354,10 @@ def _linearize(args) -> int:
                                 f"{', '.join(model.inputs) or 'none'}")
     p = _parameter_overrides([name for name, _ in model.parameters], args.set) or None
     if spec is not None:
-        scene = Scene(spec, args.build_dir, linearize=True)
+        scene = Scene(spec, args.build_dir, options=BuildOptions(linearize=True))
         cm, u = scene.model, dict(scene.inputs_at(t), **u)
     else:
-        cm = load(model, args.build_dir, linearize=True)
+        cm = load(model, args.build_dir, options=BuildOptions(linearize=True))
     if args.equilibrium:
         q = cm.equilibrium(x0[:cm.n], u=u, p=p, t=t)
         print("equilibrium " + ", ".join(f"{c}={v:.12g}" for c, v in zip(cm.coordinates, q)))
@@ -476,6 +482,7 @@ def _fmu_parser(sub) -> None:
 
 def _sweep(args) -> int:
     """``modelgen sweep``: a grid of parameters and initial values, in-process or on Dask."""
+    import numpy as np
     from modelgen.model import is_scene_file
     from modelgen.model.scene import load_scene
     from modelgen.sim import sweep as sw

@@ -2,8 +2,8 @@
 
 A tree's A couples a coordinate only with its ancestors and descendants
 (Featherstone, RBDA §6.5); eliminating a leaf of what is left first gives no
-fill-in.  The straight-line C that :func:`modelgen.codegen.emit.unrolled_ldlt`
-writes from :func:`~modelgen.codegen.emit.elimination` is compiled here on
+fill-in.  The straight-line C that :func:`modelgen.codegen.ldlt.unrolled_ldlt`
+writes from :func:`~modelgen.codegen.ldlt.elimination` is compiled here on
 random matrices of random trees (and on structures that are not chordal, which
 fill in) and checked against numpy's dense solve; the generated models are
 checked against the ABA program, which shares no code with it.
@@ -18,7 +18,7 @@ import pytest
 
 import modelgen
 from modelgen.codegen.build import compiler
-from modelgen.codegen.emit import elimination, solve_code, unrolled_ldlt, UNROLL_SOLVE
+from modelgen.codegen.ldlt import elimination, solve_code, unrolled_ldlt, UNROLL_SOLVE
 
 MODELS = Path(__file__).resolve().parent.parent / "models"
 
@@ -173,9 +173,9 @@ def test_solo12_crba_rhs_agrees_with_aba_through_the_sparse_solve(tmp_path, monk
     """The floating quadruped (18 speeds: four legs, then the free joint's six): the
     crba rhs, whose solve skips the legs' zero blocks, against the ABA program; once
     straight-line (its default) and once through the loop that larger trees get."""
-    from modelgen.codegen import emit
+    from modelgen.codegen import ldlt
     if not unrolled:
-        monkeypatch.setattr(emit, "SPARSE_UNROLL_SIZE", 1)
+        monkeypatch.setattr(ldlt, "SPARSE_UNROLL_SIZE", 1)
     path = MODELS / "robots" / "solo12.yaml"
     crba = modelgen.load(path, tmp_path / "crba", formulation="crba", force=True)
     aba = modelgen.load(path, tmp_path / "aba", formulation="aba")

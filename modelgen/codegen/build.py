@@ -63,8 +63,6 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-import cffi
-
 try:
     import fcntl
 except ImportError:   # not POSIX: builds are not serialised
@@ -131,6 +129,26 @@ class BuildResult:
     seconds: float
     #: why an existing build was not reused ("" if there was none or it was)
     rebuilt_because: str = ""
+
+
+#: the stages of a build, in order (the keys of ``Generated.seconds``)
+STAGES = ("derive", "cse", "emit", "compile")
+
+
+@dataclass(frozen=True)
+class Generated:
+    """What :func:`modelgen.codegen.pipeline.generate` did: the build and the
+    figures of each stage (``manifest["seconds"]``, ``manifest["ops"]``)."""
+    build: BuildResult
+    manifest: dict
+
+    @property
+    def seconds(self) -> dict:
+        return self.manifest["seconds"]
+
+    @property
+    def ops(self) -> dict:
+        return self.manifest["ops"]
 
 
 def _split_env(variable: str, default: str) -> list:
@@ -487,6 +505,7 @@ def _captured_output(path: Path):
 def runtime_hash(integrator: dict, runtime: dict) -> str:
     """Cache key of the runtime module: its sources, the integrators', the compiler,
     flags, cffi and the Python ABI it is built for."""
+    import cffi            # here, not at the top: a cached model's load never needs it
     h = hashlib.sha256()
     for part in (runtime["cdef"], runtime["mg_runtime.c"], integrator_hash(integrator),
                  cffi.__version__, sysconfig.get_config_var("EXT_SUFFIX") or "",
@@ -511,6 +530,7 @@ def runtime_module(integrator: dict, runtime: dict) -> tuple:
             if target.is_file():                  # built by another process meanwhile
                 return module_name, target
             write_sources(tmp, integrator)
+            import cffi
             ffi = cffi.FFI()
             ffi.cdef(runtime["cdef"])
             ffi.set_source(module_name, runtime["mg_runtime.c"],

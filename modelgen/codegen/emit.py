@@ -16,7 +16,6 @@ import functools
 import hashlib
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import NamedTuple
 
 import jinja2
 import sympy
@@ -24,6 +23,7 @@ import sympy
 from modelgen.version import __version__
 from modelgen.codegen import capi
 from modelgen.codegen.cse import Routine
+from modelgen.codegen.ldlt import solve_code
 from modelgen.errors import TemplateError
 from modelgen.codegen.printer import ModelPrinter
 
@@ -161,8 +161,8 @@ class CFunction:
     statements: int
 
 
-def print_routine(routine: Routine, outputs_c: dict) -> CFunction:
-    """Print a routine; ``outputs_c`` maps output array name -> C array name."""
+def print_routine(routine: Routine) -> CFunction:
+    """Print a routine; each output array keeps its name in C."""
     statements = list(routine.statements)
     inputs = tuple(a for a, _ in routine.inputs)
     params = ", ".join(_PARAM[a] for a in inputs)
@@ -206,9 +206,8 @@ def print_routine(routine: Routine, outputs_c: dict) -> CFunction:
             parts[i // size].append(f"const double {slots[sym]} = {code};")
     out_lines = []
     for array, items in routine.outputs:
-        target = outputs_c[array]
         for j, e in enumerate(items):
-            out_lines.append(f"{target}[{j}] = {printer.doprint(e)};")
+            out_lines.append(f"{array}[{j}] = {printer.doprint(e)};")
     if n_parts == 1:
         return CFunction(routine.name, params, args, inputs, work, (),
                          tuple(parts[0] + out_lines), routine.ops_before,
@@ -216,177 +215,6 @@ def print_routine(routine: Routine, outputs_c: dict) -> CFunction:
     return CFunction(routine.name, params, args, inputs, work,
                      tuple(tuple(p) for p in parts), tuple(out_lines),
                      routine.ops_before, routine.ops_after, len(statements))
-
-
-#: Up to this many coordinates the solve is emitted as straight-line LDL^T
-#: (no sqrt, independent chains the compiler can interleave); above it, a
-#: right-looking Cholesky loop (for an A with structural zeros see
-#: :data:`SPARSE_UNROLL_SIZE`).
-UNROLL_SOLVE = 12
-
-#: A mass matrix with structural zeros (a branched tree's) is unrolled while its
-#: factorization and solve take at most the products of the dense one of 30
-#: coordinates (5,830); beyond, a loop over its non-zeros.  Measured with the
-#: crba rhs, callgrind instructions and time a call:
-#:
-#: * floating solo12 (18 speeds, 690 products): unrolled sparse 13,730 and
-#:   1.29 us; the dense loop 22,322 and 1.56 us (a dense unrolled one 14,622
-#:   and 1.50 us);
-#: * floating G1 humanoid (35 speeds, 2,695 products): unrolled sparse 40,632
-#:   and 4.09 us; the sparse loop 74,379 and 5.33 us; the dense loop 91,539
-#:   and 6.08 us.
-SPARSE_UNROLL_SIZE = 30
-
-
-class Elimination(NamedTuple):
-    """The symbolic LDL^T of a mass matrix's structure: the order in which the
-    coordinates are eliminated, and for each its neighbours when eliminated
-    (the rows of its column of L, in elimination order)."""
-    order: tuple
-    below: dict         # v -> the coordinates w with L[w][v] structurally non-zero
-    fill: frozenset     # the pairs {w, v} where A is zero but L is not
-
-    def earlier(self) -> dict:
-        """v -> the pivots eliminated before ``v`` whose column of L has a row ``v``,
-        in elimination order."""
-        out = {v: [] for v in self.order}
-        for k in self.order:
-            for w in self.below[k]:
-                out[w].append(k)
-        return {v: tuple(ks) for v, ks in out.items()}
-
-    def products(self) -> int:
-        """Multiplications of the unrolled factorization and solve (the cost that
-        decides whether it is unrolled)."""
-        earlier = {v: set(ks) for v, ks in self.earlier().items()}
-        return sum(2 * len(earlier[v]) + 2 * len(self.below[v]) + 1
-                   + sum(len(earlier[v] & earlier[w]) for w in self.below[v])
-                   for v in self.order)
-
-
-def elimination(pattern) -> Elimination:
-    """The elimination of a symmetric structure ``pattern`` (n x n booleans: which
-    entries of A can be non-zero) that exploits the tree's sparsity.
-
-    The mass matrix of a tree couples a coordinate exactly with its ancestors
-    and descendants, a chordal structure, which some order eliminates without
-    fill-in: each coordinate, when eliminated, has only neighbours that are
-    all coupled with each other (a leaf of what is left; Featherstone, *Rigid
-    Body Dynamics Algorithms*, §6.5, numbers parents first and eliminates
-    from the last coordinate).  Such an order is the reverse of a maximum
-    cardinality search (Tarjan and Yannakakis, 1984), found here from the
-    structure itself, so it does not depend on how the coordinates are
-    numbered; ties go to the highest index, so a dense A is eliminated in
-    index order, the plain LDL^T.  A structure that is not chordal gets the
-    fill-in that order causes, recorded in ``fill``.  O(n^2 + the products).
-
-    >>> plan = elimination([[1, 1, 1], [1, 1, 0], [1, 0, 1]])    # a root, two leaves
-    >>> plan.order, plan.fill                                   # a leaf first: no fill-in
-    ((1, 0, 2), frozenset())
-    """
-    n = len(pattern)
-    adj = {i: {j for j in range(n) if j != i and (pattern[i][j] or pattern[j][i])}
-           for i in range(n)}
-    weight, unvisited, visited = [0] * n, set(range(n)), []
-    while unvisited:
-        v = max(unvisited, key=lambda v: (weight[v], v))
-        unvisited.remove(v)
-        visited.append(v)
-        for w in adj[v] & unvisited:
-            weight[w] += 1
-    order = visited[::-1]
-    below, fill = {}, set()
-    for v in order:                        # the symbolic factorization: L's structure
-        nbrs = adj.pop(v)
-        for a in nbrs:
-            adj[a].discard(v)
-            fill |= {frozenset((a, b)) for b in nbrs - adj[a] - {a}}
-            adj[a] |= nbrs - {a}
-        below[v] = nbrs
-    position = {v: i for i, v in enumerate(order)}
-    return Elimination(tuple(order), {v: tuple(sorted(w, key=position.get))
-                                      for v, w in below.items()}, frozenset(fill))
-
-
-def unrolled_ldlt(n: int, tol: str, plan: Elimination | None = None) -> list:
-    """Straight-line C that solves ``A y = b`` by LDL^T for a fixed ``n``.
-
-    No square roots: each pivot costs one division, which shortens the
-    dependency chain from pivot to pivot.  Reads the lower triangle of the
-    row-major ``A``; overwrites ``b`` with y.  Returns the 1-based failing
-    pivot (d_j <= tol * A_jj, or A_jj <= 0) like the loop version: A_jj / d_j
-    estimates the condition number of the diagonally scaled A, so extreme but
-    well-defined mass ratios pass (see ``modelgen.sim.conditioning``).
-    ``plan`` (:func:`elimination`) gives the order and the structural zeros
-    to skip; without it, A is dense and eliminated in index order.
-    """
-    plan = plan or elimination([[True] * n for _ in range(n)])
-    earlier = plan.earlier()
-    earlier_sets = {v: set(ks) for v, ks in earlier.items()}
-
-    def a(i, j):
-        return f"A[{max(i, j) * n + min(i, j)}]"
-
-    lines = []
-    for j in plan.order:
-        # u{j}_{k} = L{j}_{k} * d{k}: reused by every row below j
-        for k in earlier[j]:
-            lines.append(f"const double u{j}_{k} = L{j}_{k} * d{k};")
-        terms = "".join(f" - u{j}_{k} * L{j}_{k}" for k in earlier[j])
-        lines.append(f"const double d{j} = {a(j, j)}{terms};")
-        lines.append(f"if (!(d{j} > {tol} * {a(j, j)}) || !({a(j, j)} > 0.0)) return {j + 1};")
-        lines.append(f"const double inv{j} = 1.0 / d{j};")
-        for i in plan.below[j]:
-            common = [k for k in earlier[j] if k in earlier_sets[i]]
-            terms = "".join(f" - L{i}_{k} * u{j}_{k}" for k in common)
-            # a fill-in entry: A is zero there, only the updates remain
-            first = "" if frozenset((i, j)) in plan.fill else a(i, j)
-            lines.append(f"const double L{i}_{j} = ({first}{terms}) * inv{j};")
-    for i in plan.order:
-        terms = "".join(f" - L{i}_{k} * y{k}" for k in earlier[i])
-        lines.append(f"const double y{i} = b[{i}]{terms};")
-    for i in reversed(plan.order):
-        terms = "".join(f" - L{k}_{i} * b[{k}]" for k in plan.below[i])
-        lines.append(f"b[{i}] = y{i} * inv{i}{terms};")
-    return lines
-
-
-@functools.lru_cache(maxsize=None)
-def _dense_products(n: int) -> int:
-    """The products of the straight-line LDL^T of a dense n x n A."""
-    return elimination([[True] * n] * n).products()
-
-
-def solve_code(n: int, tol: str, pattern=None) -> dict:
-    """How the crba rhs solves A q_ddot = b, for the template: ``solve_lines``, a
-    straight-line LDL^T (:func:`unrolled_ldlt`), or ``solve_loop``, the tables of
-    a loop over the non-zeros of a sparse A; neither for the dense loop.
-
-    A dense A is unrolled up to :data:`UNROLL_SOLVE` coordinates; one with
-    structural zeros (``pattern``) in the order of :func:`elimination` up to
-    the products of a dense one of :data:`SPARSE_UNROLL_SIZE`, and looped beyond.
-    """
-    if pattern is None or all(map(all, pattern)):
-        return {"solve_lines": unrolled_ldlt(n, tol) if n <= UNROLL_SOLVE else [],
-                "solve_loop": None}
-    plan = elimination(pattern)
-    products = plan.products()
-    if n <= UNROLL_SOLVE or products <= _dense_products(SPARSE_UNROLL_SIZE):
-        return {"solve_lines": [f"/* eliminated in the order "
-                                f"{', '.join(str(v + 1) for v in plan.order)}, the structural "
-                                f"zeros of A skipped: {products} products, "
-                                f"{len(plan.fill)} fill-ins */"] + unrolled_ldlt(n, tol, plan),
-                "solve_loop": None}
-    below = [w for v in plan.order for w in plan.below[v]]
-    start = [0]
-    for v in plan.order:
-        start.append(start[-1] + len(plan.below[v]))
-    return {"solve_lines": [],
-            "solve_loop": {"order": ", ".join(map(str, plan.order)),
-                           "start": ", ".join(map(str, start)),
-                           "below": ", ".join(map(str, below)) or "0",
-                           "nbelow": max(len(below), 1), "products": products,
-                           "fill": len(plan.fill)}}
 
 
 def _comment_safe(text: str) -> str:
@@ -415,18 +243,21 @@ def template_context(*, name: str, description: str, model_hash: str, n: int,
                      coordinates, parameters, inputs, bodies,
                      functions: dict, output_columns=(), has_jacobian=False,
                      has_linearize=False, nq: int | None = None, speeds=None,
-                     quaternions=(), npd: int = 0, mass_pattern=None) -> dict:
+                     quaternions=(), npd: int = 0, mass_pattern=None,
+                     formulation: str = "crba", aba_inward=()) -> dict:
     """The plain dict every C template receives.
 
     ``mass_pattern`` (n x n booleans, default dense) marks the entries of the
     mass matrix that can be non-zero: the rhs's solve skips the others
-    (:func:`solve_code`).
+    (:func:`solve_code`).  ``formulation`` is the resolved one (``aba`` or
+    ``crba``); ``aba_inward`` the coordinates of the ABA's D in inward order.
 
     ``n`` is the number of speeds (the size of A), ``nq`` that of the
     coordinates (default ``n``; more with ball or free joints, whose
     ``quaternions`` are lists of the four state indices of each quaternion).
     """
     nq = n if nq is None else nq
+    solve = solve_code(n, f"{name.upper()}_PIVOT_TOL", mass_pattern)
     return {
         "name": name,
         "NAME": name.upper(),
@@ -455,19 +286,24 @@ def template_context(*, name: str, description: str, model_hash: str, n: int,
         "nc": nq + n + len(inputs),
         "output_columns": list(output_columns),
         "api": public_api(name, n, len(parameters), len(inputs), len(bodies),
-                          len(output_columns), has_jacobian, has_linearize, nq),
-        **solve_code(n, f"{name.upper()}_PIVOT_TOL", mass_pattern),
+                          len(output_columns), has_jacobian, has_linearize, nq,
+                          rhs_solve=_solve_words(formulation, solve)),
+        **solve,
+        "formulation": formulation,
+        "aba_inward": list(aba_inward),
         "capi": capi.context(),
     }
 
 
 def public_api(name: str, n: int, n_p: int, n_u: int, n_b: int, n_y: int = 0,
                has_jacobian: bool = False, has_linearize: bool = False,
-               nq: int | None = None) -> list:
+               nq: int | None = None, rhs_solve: str = "") -> list:
     """Prototypes and documentation of every exported function.
 
     The header is rendered from this one list, and the manifest records each
     function's :class:`~modelgen.codegen.capi.Signature` (how Python calls it).
+    ``rhs_solve`` (:func:`_solve_words`) says how the rhs gets qdd; empty: the
+    articulated-body algorithm.
     """
     P = f"p: {n_p} parameters (see {name}_default_parameters)"
     nq = n if nq is None else nq
@@ -530,15 +366,7 @@ def public_api(name: str, n: int, n_p: int, n_u: int, n_b: int, n_y: int = 0,
                  "bit, and the same status, without the parameter-only work."]},
         {"ret": "int", "name": f"{name}_rhs",
          "params": "double t, const double *x, const double *u, const double *p, double *xdot",
-         "doc": ([f"State derivative for x = [q, qd] (x[{nx}]): xdot = [qd, qdd] with",
-                  "A qdd = tau - h solved by Cholesky in place. u, p as above."]
-                 if nq == n else
-                 [f"State derivative for x = [q, qd] (x[{nx}]: {nq} coordinates, {n} speeds):",
-                  "xdot = [N(q) qd, qdd], N(q) the kinematic relation of the ball and free",
-                  "joints (dquat/dt = quat * (0, w) / 2, dr/dt = R v), A qdd = tau - h",
-                  "solved by Cholesky in place. u, p as above."])
-                + ["Returns 0, or k > 0 when pivot k (1-based) of A is not positive",
-                   f"(A not positive definite); xdot[{nq}..{nx}) is then NaN."]},
+         "doc": _rhs_doc(n, nq, rhs_solve)},
         {"ret": "void", "name": f"{name}_inverse_dynamics",
          "params": "double t, const double *x, const double *qdd, const double *u, "
                    "const double *p, double *Q",
@@ -561,6 +389,41 @@ def public_api(name: str, n: int, n_p: int, n_u: int, n_b: int, n_y: int = 0,
                  "[[R, r_G], [0, 0, 0, 1]]: R's columns are the body base's unit vectors",
                  "in E, r_G the centre of mass from O in E [m]."]},
     ] + _integrator_api(name, nx, n_p, n_u, n_y, has_jacobian)
+
+
+def _solve_words(formulation: str, solve: dict) -> str:
+    """How the crba rhs solves A qdd = tau - h (from :func:`solve_code`'s choice), or
+    "" for the articulated-body algorithm, which has nothing to solve."""
+    if formulation == "aba":
+        return ""
+    if solve["solve_loop"]:
+        return "by LDL^T over the non-zeros of A"
+    if solve["solve_lines"]:
+        sparse = solve["solve_lines"][0].startswith("/*")
+        return "by an unrolled LDL^T that skips the zeros of A" if sparse \
+            else "by an unrolled LDL^T"
+    return "by Cholesky (A = L L^T) in place"
+
+
+def _rhs_doc(n: int, nq: int, solve: str) -> list:
+    """The header's comment on ``<name>_rhs``: how this model's rhs computes qdd
+    (``solve``: :func:`_solve_words`) and what its status means."""
+    nx = nq + n
+    if solve:
+        how = [f"A qdd = tau - h solved {solve}.", "u, p as above."]
+        status = ["Returns 0, or k > 0 when the pivot of coordinate k (1-based) is not",
+                  f"positive (A not positive definite); xdot[{nq}..{nx}) is then NaN."]
+    else:
+        how = ["qdd by the articulated-body algorithm (O(n), without the mass matrix).",
+               "u, p as above."]
+        status = ["Returns 0, or k > 0 when the articulated inertia D of coordinate k",
+                  "(1-based) is not positive (the mass matrix is not positive definite);",
+                  f"xdot[{nq}..{nx}) is then NaN."]
+    if nq == n:
+        return [f"State derivative for x = [q, qd] (x[{nx}]): xdot = [qd, qdd];"] + how + status
+    return [f"State derivative for x = [q, qd] (x[{nx}]: {nq} coordinates, {n} speeds):",
+            "xdot = [N(q) qd, qdd], N(q) the kinematic relation of the ball and free",
+            "joints (dquat/dt = quat * (0, w) / 2, dr/dt = R v);"] + how + status
 
 
 # -- integration (mg_integrate.h, rendered from modelgen/codegen/capi.py) ----------------

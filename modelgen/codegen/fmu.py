@@ -36,7 +36,7 @@ import tempfile
 import time
 import uuid
 import zipfile
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from xml.etree import ElementTree as ET
 
@@ -44,6 +44,7 @@ from modelgen.codegen import capi
 from modelgen.codegen.build import (compile_flags, compiler, integrator_object, link_command,
                                     run_commands, write_sources)
 from modelgen.codegen.emit import INTEGRATOR_HEADER, integrator_files, render
+from modelgen.codegen.options import BuildOptions
 from modelgen.codegen.pipeline import generate, model_hash
 from modelgen.errors import BuildError, ModelError, ModelgenError
 from modelgen.model import as_spec, is_scene_file, load_scene
@@ -380,9 +381,10 @@ def _model_sources(spec: ModelSpec, outputs, jacobian: bool, out_dir) -> tuple:
     """(``<name>.c``, ``<name>.h``, mg_integrate sources, manifest, hash16) from the
     pipeline's build, regenerated in a private directory when the build directory's
     C is another variant's (one directory keeps several builds of one name)."""
-    generated = generate(spec, out_dir, outputs=outputs, jacobian=jacobian)
+    options = BuildOptions(outputs=outputs, jacobian=jacobian)
+    generated = generate(spec, out_dir, options=options)
     manifest = generated.manifest
-    hash16 = model_hash(spec, outputs, jacobian, manifest["formulation"])[:16]
+    hash16 = model_hash(spec, replace(options, formulation=manifest["formulation"]))[:16]
 
     def read(directory: Path):
         texts = {f: (directory / f).read_text() for f in
@@ -396,7 +398,7 @@ def _model_sources(spec: ModelSpec, outputs, jacobian: bool, out_dir) -> tuple:
         texts, ok = {}, False
     if not ok:
         with tempfile.TemporaryDirectory(prefix="modelgen-fmu-") as tmp:
-            again = generate(spec, Path(tmp), outputs=outputs, jacobian=jacobian, force=True)
+            again = generate(spec, Path(tmp), options=options, force=True)
             manifest = again.manifest
             texts, ok = read(Path(tmp))
     return texts, manifest, hash16

@@ -8,11 +8,12 @@ from __future__ import annotations
 import hashlib
 import os
 import time
-from dataclasses import dataclass, replace
+from contextlib import contextmanager
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from modelgen.version import __version__
-from modelgen.codegen.build import (BuildResult, build_module, cache_dir, cache_lookup,
+from modelgen.codegen.build import (Generated, build_module, cache_dir, cache_lookup,
                                     compiler, host_flags, integrator_hash, runtime_module)
 from modelgen.codegen.capi import signature_of
 from modelgen.codegen.cse import hoist_parameters, make_routines
@@ -24,6 +25,7 @@ from modelgen.derive.rnea import derive_inverse_dynamics, derive_velocity_terms
 from modelgen.errors import ModelError
 from modelgen.codegen.emit import (ABI_VERSION, emit_sources, integrator_sources, print_routine,
                                    runtime_sources, template_context, templates_digest)
+from modelgen.codegen.options import FORMULATIONS, BuildOptions
 from modelgen.derive.jacobian import accelerations, derive_jacobian_terms, residual
 from modelgen.derive.linearize import derive_linearization_terms
 from modelgen.derive.kinematics import derive_kinematics
@@ -36,12 +38,6 @@ def default_output(name: str) -> Path:
     current directory."""
     return cache_dir() / "models" / name
 
-#: how ``<name>_rhs`` computes q_ddot: ``crba`` builds A and b = tau - h and
-#: solves A q_ddot = b (Cholesky in C); ``aba`` runs the articulated-body
-#: algorithm (O(n), joint trees only); ``auto`` picks aba for joint trees with
-#: at least ABA_CROSSOVER coordinates, else crba.
-FORMULATIONS = ("auto", "aba", "crba")
-
 #: smallest n for which ``auto`` chooses aba.  Measured with bench/aba_scaling.py
 #: (rhs in C, same run, busy 2-core machine): crba/aba = 1.6 at n = 2, 1.7 at
 #: n = 7, 2.3-2.4 at n = 20, 4.2 at n = 50, 21 at n = 100, 1.4-3 on the 7-joint
@@ -50,34 +46,21 @@ FORMULATIONS = ("auto", "aba", "crba")
 ABA_CROSSOVER = 1
 
 
-@dataclass(frozen=True)
-class Generated:
-    """What :func:`generate` did: the build and the figures of each stage."""
-    build: BuildResult
-    manifest: dict
-
-    @property
-    def seconds(self) -> dict:
-        return self.manifest["seconds"]
-
-    @property
-    def ops(self) -> dict:
-        return self.manifest["ops"]
-
-
-def model_hash(spec: ModelSpec, outputs=(), jacobian: bool = False,
-               formulation: str = "crba", linearize: bool = False) -> str:
+def model_hash(spec: ModelSpec, options: BuildOptions | None = None) -> str:
     """Hash of what determines the model's generated C: the model, modelgen, the
-    model templates (not the integrators', which every model shares), the formulation.
+    model templates (not the integrators', which every model shares) and the
+    build options (:meth:`BuildOptions.key_text`; default: the defaults; ``auto``
+    resolved as :func:`generate` resolves it).
 
     The file the model came from and its line numbers are not part of it, so
     the same model gives the same C wherever it lies.
     """
+    options = options if options is not None else BuildOptions()
+    if options.formulation == "auto":
+        options = replace(options, formulation=choose_formulation(spec)[0])
     h = hashlib.sha256()
-    for part in (repr(replace(spec, source=None, lines=(), units=())),
-                 repr(tuple(outputs)) + (" jacobian" if jacobian else "")
-                 + (" linearize" if linearize else ""),
-                 formulation, __version__, str(ABI_VERSION), templates_digest()):
+    for part in (repr(replace(spec, source=None, lines=(), units=())), options.key_text(read=False),
+                 __version__, str(ABI_VERSION), templates_digest()):
         h.update(part.encode())
         h.update(b"\0")
     return h.hexdigest()
@@ -105,11 +88,10 @@ def runtime() -> tuple:
     return runtime_module(integrator_sources(), runtime_sources())
 
 
-def build_hash(spec: ModelSpec, outputs=(), jacobian: bool = False,
-               formulation: str = "crba", linearize: bool = False) -> str:
+def build_hash(spec: ModelSpec, options: BuildOptions | None = None) -> str:
     """Cache key of the compiled module: the model hash, the compiler and its flags,
     and the integrators it links (so a changed mg_integrate rebuilds every module)."""
-    return _build_key(model_hash(spec, outputs, jacobian, formulation, linearize))
+    return _build_key(model_hash(spec, options))
 
 
 def _build_key(model: str) -> str:
@@ -123,7 +105,7 @@ def _build_key(model: str) -> str:
     return h.hexdigest()
 
 
-def choose_formulation(spec: ModelSpec, formulation: str = "auto"):
+def choose_formulation(spec: ModelSpec, formulation: str = BuildOptions.formulation):
     """``(formulation, joint tree or None)``: resolve ``auto`` and check ``aba``.
 
     ``aba`` on a model that is not a joint tree raises the
@@ -232,59 +214,111 @@ def _check_generable(spec: ModelSpec) -> None:
                          fix="declare at least one body with a mass under 'bodies'")
 
 
-#: the stages of a build, in order (the keys of ``Generated.seconds``)
-STAGES = ("derive", "cse", "emit", "compile")
 
-
-def generate(spec: ModelSpec, out_dir=None, *, force: bool = False, outputs=(),
-             jacobian: bool = False, formulation: str = "auto", progress=None,
-             linearize: bool = False) -> Generated:
+def generate(spec: ModelSpec, out_dir=None, *, force: bool = False,
+             options: BuildOptions | None = None, progress=None, outputs=None,
+             jacobian: bool | None = None, formulation: str | None = None,
+             linearize: bool | None = None) -> Generated:
     """Generate, compile and cache the model; reuse an unchanged build.
 
-    ``out_dir`` defaults to :func:`default_output` (the per-user cache).  ``outputs`` (a tuple of
+    ``out_dir`` defaults to :func:`default_output` (the per-user cache).
+    ``options`` (:class:`~modelgen.codegen.options.BuildOptions`) says what to
+    build; the keywords ``outputs``, ``jacobian``, ``formulation`` and
+    ``linearize`` are shorthand that override its fields.  ``outputs`` (a tuple of
     :class:`~modelgen.model.spec.OutputSpec`, from a scene) adds a
     ``<name>_outputs`` routine computing exactly those quantities.
     ``jacobian=True`` adds ``<name>_jacobian``, the symbolic d(xdot)/dx.
     ``formulation`` (one of :data:`FORMULATIONS`) chooses how ``<name>_rhs``
     computes q_ddot; the Jacobian is derived from the same program.
-    ``progress`` is None or a callable ``progress(stage)`` called as each of
-    :data:`STAGES` starts (not at all when the build is reused).
     ``linearize=True`` adds ``<name>_linearize`` (A, B and, for the scene's
     outputs, C and D, symbolic; see :mod:`modelgen.derive.linearize`) and
     implies ``jacobian``.
+    ``progress`` is None or a callable ``progress(stage)`` called as each of
+    :data:`~modelgen.codegen.build.STAGES` starts (not at all when the build is reused).
 
     >>> g = generate(load_model("models/double_pendulum.yaml"))   # doctest: +SKIP
     >>> g.manifest["n"]                                             # doctest: +SKIP
     2
     """
-    _check_generable(spec)
-    if linearize and spec.joints:
-        raise ModelError("linearization of a model with ball or free joints is not supported: "
-                         "its state holds unit quaternions, whose four components cannot "
-                         "move independently", file=spec.source, key="linearize",
-                         fix="linearize a model whose rotations are simple ones (angles)")
-    formulation, tree = choose_formulation(spec, formulation)
-    jacobian = bool(jacobian or linearize)
+    options = BuildOptions.of(options, outputs=outputs, jacobian=jacobian,
+                              formulation=formulation, linearize=linearize)
+    _check_options(spec, options)
+    resolved, tree = choose_formulation(spec, options.formulation)
+    options = replace(options, formulation=resolved)
     directory = Path(out_dir) if out_dir is not None else default_output(spec.name)
-    # computed once: the emit stage prints it into the preamble (repr of the
-    # spec and a read of the templates, about 5 ms on the 6-link chain)
-    model_key = model_hash(spec, outputs, jacobian, formulation, linearize)
+    # computed once: the emit stage prints it into the preamble
+    model_key = model_hash(spec, options)
     key = _build_key(model_key)
     damage = ""
     if not force:
         hit, damage = cache_lookup(directory, key)
         if hit is not None:
             return Generated(hit, hit.manifest)
+    clock = _Clock(progress)
+    with clock("derive"):
+        derived = _derive(spec, options, tree)
+    with clock("cse"):
+        routines = _eliminate(derived)
+    with clock("emit"):
+        emitted = _emit(spec, options, derived, routines, model_key)
+    clock.start("compile")
+    return _compile(directory, spec, options, derived, emitted, key, clock.seconds, damage)
 
-    def stage(name):
-        if progress is not None:
-            progress(name)
-    seconds = {}
-    stage("derive")
-    t0 = time.perf_counter()
+
+# -- the stages ------------------------------------------------------------------------
+
+class _Clock:
+    """The seconds of each stage, and ``progress(stage)`` as each starts."""
+
+    def __init__(self, progress):
+        self.progress = progress
+        self.seconds = {}
+
+    def start(self, name: str) -> None:
+        if self.progress is not None:
+            self.progress(name)
+
+    @contextmanager
+    def __call__(self, name: str):
+        self.start(name)
+        t0 = time.perf_counter()
+        yield
+        self.seconds[name] = time.perf_counter() - t0
+
+
+def _check_options(spec: ModelSpec, options: BuildOptions) -> None:
+    """Refuse what cannot be generated before any work."""
+    _check_generable(spec)
+    if options.linearize and spec.joints:
+        raise ModelError("linearization of a model with ball or free joints is not supported: "
+                         "its state holds unit quaternions, whose four components cannot "
+                         "move independently", file=spec.source, key="linearize",
+                         fix="linearize a model whose rotations are simple ones (angles)")
+
+
+@dataclass(frozen=True)
+class Derived:
+    """What the derive stage gives the later ones: the equations and every program
+    derived from them, all in one expression ``graph``."""
+    eqs: Equations
+    columns: object             # the scene's outputs (derive_outputs), or None
+    forward: ForwardDynamics | None     # the ABA program (formulation aba), or None
+    inverse: tuple              # (qdd symbols, Q) of inverse_dynamics
+    linearization: object       # LinearizationTerms, or None
+    terms: object               # the Jacobian's terms, or None
+    graph: object = field(repr=False)
+
+    @property
+    def output_exprs(self) -> tuple:
+        return self.columns.exprs if self.columns else ()
+
+
+def _derive(spec: ModelSpec, options: BuildOptions, tree: JointTree | None) -> Derived:
+    """Kinematics, equations of motion, outputs, the ABA (with a joint ``tree``), the
+    inverse dynamics and the Jacobian or linearization the options ask for."""
     kin = derive_kinematics(spec)
     eqs = derive_equations(kin)
-    columns = derive_outputs(kin, eqs, outputs) if outputs else None
+    columns = derive_outputs(kin, eqs, options.outputs) if options.outputs else None
     graph = columns.graph if columns else eqs.graph
     forward = derive_aba(eqs, tree, spec, graph) if tree is not None else None
     graph = forward.graph if forward else graph
@@ -304,50 +338,70 @@ def generate(spec: ModelSpec, out_dir=None, *, force: bool = False, outputs=(),
         qdd, r = residual(eqs)
         inverse = (qdd, tuple(-e for e in r))
     linearization = None
-    if linearize:       # one pass for A, B, C, D; the Jacobian is its state columns
+    if options.linearize:       # one pass for A, B, C, D; the Jacobian is its state columns
         linearization = derive_linearization_terms(
             eqs, graph, columns.exprs if columns else (), forward.qdd if forward else None)
         terms = linearization.jacobian_terms()
-    elif jacobian:
+    elif options.jacobian:
         terms = (derive_aba_jacobian(forward, eqs) if forward else
                  derive_jacobian_terms(eqs, graph))
     else:
         terms = None
     graph = terms.graph if terms else graph
-    t1 = time.perf_counter()
-    seconds["derive"] = t1 - t0
-    stage("cse")
-    # the rhs (what an integration runs) is eliminated on its own
-    routines = make_routines(graph, routines_for(eqs, columns.exprs if columns else (), terms,
-                                                 forward, linearization, inverse),
+    return Derived(eqs, columns, forward, inverse, linearization, terms, graph)
+
+
+def _eliminate(derived: Derived) -> tuple:
+    """CSE of every routine; the rhs (what an integration runs) and the inverse
+    dynamics are eliminated on their own, and the rhs's parameter-only part hoisted."""
+    d = derived
+    routines = make_routines(d.graph, routines_for(d.eqs, d.output_exprs, d.terms, d.forward,
+                                                   d.linearization, d.inverse),
                              alone=("rhs", "inverse_dynamics"))
-    routines = _hoisted(routines)
-    t2 = time.perf_counter()
-    seconds["cse"] = t2 - t1
-    stage("emit")
-    outputs_c = {"A": "A", "h": "h", "tau": "tau", "b": "b", "out": "out", "T": "T", "y": "y",
-                 "D": "D", "qdd": "qdd", "R": "R", "Y": "Y", "qdot": "qdot", "K": "K",
-                 "pd": "pd", "Q": "Q"}
-    functions = {r.name: print_routine(r, outputs_c) for r in routines}
+    return _hoisted(routines)
+
+
+@dataclass(frozen=True)
+class Emitted:
+    """The emit stage's result: the printed routines, the template context and the
+    rendered sources (file name -> text)."""
+    functions: dict
+    context: dict
+    sources: dict
+
+
+def _emit(spec: ModelSpec, options: BuildOptions, derived: Derived, routines: tuple,
+          model_key: str) -> Emitted:
+    """Print every routine to C and render ``<name>.h`` and ``<name>.c``."""
+    eqs, columns, forward = derived.eqs, derived.columns, derived.forward
+    functions = {r.name: print_routine(r) for r in routines}
     context = template_context(
         name=spec.name, description=spec.description,
         model_hash=model_key[:16],
         n=spec.n, nq=spec.nq,
         coordinates=spec.coordinates, speeds=spec.speeds,
-        quaternions=[[spec.coordinates.index(c) for c in j.quaternion] for j in spec.joints], parameters=spec.parameters, inputs=spec.inputs,
+        quaternions=_quaternions(spec), parameters=spec.parameters, inputs=spec.inputs,
         bodies=eqs.bodies, functions=functions,
         output_columns=[c for cols in columns.columns for c in cols] if columns else (),
-        has_jacobian=bool(jacobian), has_linearize=bool(linearize),
+        has_jacobian=options.jacobian, has_linearize=options.linearize,
         npd=next(len(r.outputs[0][1]) for r in routines if r.name == "prepare"),
         # the crba rhs's solve skips the entries of A that are structurally zero
-        mass_pattern=None if forward else [[e != 0 for e in row] for row in eqs.A])
-    sources = emit_sources(dict(context, formulation=formulation,
-                                aba_inward=list(forward.inward) if forward else []))
-    t3 = time.perf_counter()
-    seconds["emit"] = t3 - t2
-    stage("compile")
-    statements = part_statements({f.name: f.statements for f in functions.values()})
-    manifest = {
+        mass_pattern=None if forward else [[e != 0 for e in row] for row in eqs.A],
+        formulation=options.formulation, aba_inward=forward.inward if forward else ())
+    return Emitted(functions, context, emit_sources(context))
+
+
+def _quaternions(spec: ModelSpec) -> list:
+    """The four state indices of each ball or free joint's quaternion."""
+    return [[spec.coordinates.index(c) for c in j.quaternion] for j in spec.joints]
+
+
+def _manifest(spec: ModelSpec, options: BuildOptions, derived: Derived, emitted: Emitted,
+              key: str) -> dict:
+    """What the cache records of a build and the loader reads (see
+    :data:`modelgen.codegen.build.MANIFEST_KEYS`)."""
+    columns = derived.columns
+    return {
         "name": spec.name,
         "description": spec.description,
         "version": __version__,
@@ -358,26 +412,32 @@ def generate(spec: ModelSpec, out_dir=None, *, force: bool = False, outputs=(),
         "coordinates": list(spec.coordinates),
         "speeds": list(spec.speeds),
         "n_simple": len(spec.simple_coordinates),
-        "quaternions": [[spec.coordinates.index(c) for c in j.quaternion]
-                        for j in spec.joints],
+        "quaternions": _quaternions(spec),
         "parameters": [[name, float(value)] for name, value in spec.parameters],
         "inputs": list(spec.inputs),
-        "jacobian": bool(jacobian),
-        "linearize": bool(linearize),
-        "formulation": formulation,
-        "bodies": list(eqs.bodies),
+        "jacobian": options.jacobian,
+        "linearize": options.linearize,
+        "formulation": options.formulation,
+        "bodies": list(derived.eqs.bodies),
         "outputs": [{"name": name, "columns": list(cols)}
                     for name, cols in zip(columns.names, columns.columns)] if columns else [],
         "sources_sha256": {fname: hashlib.sha256(text.encode()).hexdigest()
-                           for fname, text in sources.items()},
+                           for fname, text in emitted.sources.items()},
         "functions": {f["name"]: signature_of(f["ret"], f["params"]).name
-                      for f in context["api"]},
+                      for f in emitted.context["api"]},
         "ops": {f.name: {"before_cse": f.ops_before, "after_cse": f.ops_after,
-                         "statements": f.statements} for f in functions.values()},
+                         "statements": f.statements} for f in emitted.functions.values()},
     }
-    build = build_module(directory, spec.name, sources, dict(manifest, seconds=seconds),
+
+
+def _compile(directory: Path, spec: ModelSpec, options: BuildOptions, derived: Derived,
+             emitted: Emitted, key: str, seconds: dict, damage: str) -> Generated:
+    """Compile and cache the sources; ``seconds`` gets the compile time.  ``damage``
+    says why a cached build was not reused (recorded in the result)."""
+    manifest = _manifest(spec, options, derived, emitted, key)
+    statements = part_statements({f.name: f.statements for f in emitted.functions.values()})
+    build = build_module(directory, spec.name, emitted.sources, dict(manifest, seconds=seconds),
                          statements, integrator_sources())
     seconds["compile"] = build.seconds
     build = replace(build, rebuilt_because=damage)
-    manifest = dict(build.manifest, seconds=seconds)
-    return Generated(build, manifest)
+    return Generated(build, dict(build.manifest, seconds=seconds))

@@ -23,14 +23,29 @@ import importlib.util
 import sys
 from pathlib import Path
 
-from modelgen.codegen.pipeline import runtime
 from modelgen.errors import BuildError
 
 
+def runtime_module(location: tuple | None = None):
+    """The imported runtime module (``ffi``, ``lib``), built on first use.
+
+    ``location`` (module name, path), from the build cache's fast index, spares
+    rendering its sources to find it (:mod:`modelgen.codegen.index`); without
+    it the codegen stage says where it is, building it if need be.
+    """
+    return _import_runtime(*(location if location is not None else _runtime_location()))
+
+
 @functools.lru_cache(maxsize=None)
-def runtime_module():
-    """The imported runtime module (``ffi``, ``lib``), built on first use."""
-    module_name, path = runtime()
+def _runtime_location() -> tuple:
+    # imported here, not at the top: rendering the runtime's sources needs the
+    # codegen stage's emitter, which a model found through the fast index never imports
+    from modelgen.codegen.pipeline import runtime
+    return runtime()
+
+
+@functools.lru_cache(maxsize=None)
+def _import_runtime(module_name: str, path):
     if module_name in sys.modules:
         return sys.modules[module_name]
     spec = importlib.util.spec_from_file_location(module_name, str(path))
@@ -43,8 +58,9 @@ def runtime_module():
 class ModelLibrary:
     """The functions of one model's shared library, as cffi callables."""
 
-    def __init__(self, manifest: dict, path: Path):
-        module = runtime_module()
+    def __init__(self, manifest: dict, path: Path, runtime: tuple | None = None):
+        """``runtime``: where the runtime module is (see :func:`runtime_module`)."""
+        module = runtime_module(runtime)
         self.ffi, self._runtime = module.ffi, module.lib
         self.path = Path(path)
         try:

@@ -2,28 +2,43 @@
 
 These are the functions ``modelgen.load``, ``modelgen.load_scene`` and
 ``modelgen.generate_model`` re-export.
+
+A model file built before is found through the build cache's fast index
+(:mod:`modelgen.codegen.index`: the file's bytes and the options), without
+importing the model reader or the symbolic pipeline; those are imported
+inside the functions below, only when the index has no verified build.
 """
 from __future__ import annotations
 
-from modelgen.codegen.pipeline import Generated, generate
-from modelgen.model import as_spec
-from modelgen.model.scene import load_scene as load_scene_spec
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from modelgen.codegen import index
+from modelgen.codegen.build import Generated
+from modelgen.codegen.options import BuildOptions
 from modelgen.sim.runtime import CompiledModel, check_mass_matrix
-from modelgen.sim.scene import Scene
+
+if TYPE_CHECKING:
+    from modelgen.sim.scene import Scene
 
 
 def generate_model(source, out_dir=None, *, force: bool = False,
-                   jacobian: bool = False, formulation: str = "auto",
-                   progress=None, linearize: bool = False) -> Generated:
+                   options: BuildOptions | None = None, progress=None,
+                   jacobian: bool | None = None, formulation: str | None = None,
+                   linearize: bool | None = None,
+                   floating_base: bool | None = None) -> Generated:
     """Generate and compile a model (or reuse the cache); returns the report.
 
+    ``options`` and the shorthand keywords are those of :func:`load`.
     Like :func:`load`, it refuses (:class:`~modelgen.errors.DerivationError`)
     a model whose mass matrix is singular for every configuration, cached or not.
     ``progress(stage)`` is called as each stage of a build starts.
     """
-    generated = generate(as_spec(source), out_dir, force=force, jacobian=jacobian,
-                         formulation=formulation, progress=progress, linearize=linearize)
+    options = BuildOptions.of(options, jacobian=jacobian, formulation=formulation,
+                              linearize=linearize, floating_base=floating_base)
+    generated = _generate(source, out_dir, force, options, progress)
     _loaded(generated)
+    index.record(_fast_key(source, options, out_dir), generated.build, _runtime())
     return generated
 
 
@@ -38,41 +53,86 @@ def _loaded(generated: Generated) -> CompiledModel:
     return cm
 
 
-def load(source, out_dir=None, *, force: bool = False, jacobian: bool = False,
-         formulation: str = "auto", progress=None, linearize: bool = False,
-         floating_base: bool = False) -> CompiledModel:
+def load(source, out_dir=None, *, force: bool = False, options: BuildOptions | None = None,
+         progress=None, jacobian: bool | None = None, formulation: str | None = None,
+         linearize: bool | None = None, floating_base: bool | None = None) -> CompiledModel:
     """Build (on first use) and import a model; returns a :class:`CompiledModel`.
 
     ``source`` is a YAML path, a :class:`modelgen.model.Model` or a ModelSpec.
     Output goes to ``out_dir`` (default: the per-user cache,
-    :func:`modelgen.codegen.pipeline.default_output`).  With
+    :func:`modelgen.codegen.pipeline.default_output`).  ``options`` (a
+    :class:`~modelgen.codegen.options.BuildOptions`) says what to build; the
+    keywords below are shorthand for its fields and override them.  With
     ``jacobian=True`` the symbolic Jacobian ``<name>_jacobian`` is generated too
     (for stiff integrators; it costs generation and compile time).
     ``formulation`` (``auto``, ``aba`` or ``crba``) chooses how the rhs computes
-    q_ddot (see :data:`modelgen.codegen.pipeline.FORMULATIONS`).
+    q_ddot (see :data:`modelgen.codegen.options.FORMULATIONS`).
     ``progress(stage)`` is called as each stage of a build starts.
     With ``linearize=True`` the symbolic ``<name>_linearize`` is generated too, for
     :meth:`CompiledModel.linearize` and :meth:`CompiledModel.equilibrium`.
     ``floating_base=True`` (a URDF path) makes the robot's root link a free
     body (a free joint ``root_joint``: position, unit quaternion, 6 speeds).
 
-    >>> cm = load("models/double_pendulum.yaml")             # doctest: +SKIP
+    >>> cm = load("models/double_pendulum.yaml", jacobian=True)   # doctest: +SKIP
+    >>> cm = load("models/double_pendulum.yaml",                  # doctest: +SKIP
+    ...           options=BuildOptions(formulation="crba", jacobian=True))
     >>> cm.rhs(0.0, [0.1, 0.2, 0.0, 0.0])                    # doctest: +SKIP
     """
-    return _loaded(generate(as_spec(source, floating_base=floating_base), out_dir, force=force, jacobian=jacobian,
-                            formulation=formulation, progress=progress,
-                            linearize=linearize))
+    options = BuildOptions.of(options, jacobian=jacobian, formulation=formulation,
+                              linearize=linearize, floating_base=floating_base)
+    key = _fast_key(source, options, out_dir)
+    hit = None if force else index.lookup(key)
+    if hit is not None:
+        cm = CompiledModel(hit.build.manifest, hit.build.module_path, hit.runtime)
+        check_mass_matrix(cm)
+        return cm
+    generated = _generate(source, out_dir, force, options, progress)
+    cm = _loaded(generated)
+    index.record(key, generated.build, _runtime())
+    return cm
+
+
+def _fast_key(source, options: BuildOptions, out_dir) -> str | None:
+    """The fast index key of a model file (None for a spec or a Model: only a file
+    read here is known to give the spec its bytes say)."""
+    if not isinstance(source, (str, Path)):
+        return None
+    return index.fast_key([source], options, out_dir)
+
+
+def _generate(source, out_dir, force: bool, options: BuildOptions, progress) -> Generated:
+    """The full path: read the model, then generate (or find by the build key)."""
+    # imported here, not at the top: the reader and the symbolic pipeline (about a
+    # second of imports) are needed only when the fast index has no build
+    from modelgen.codegen.pipeline import generate
+    from modelgen.model import as_spec
+    return generate(as_spec(source, floating_base=options.floating_base), out_dir,
+                    force=force, options=options, progress=progress)
+
+
+def _runtime() -> tuple:
+    """(name, path) of the runtime module, for an index entry (the pipeline is loaded)."""
+    from modelgen.codegen.pipeline import runtime
+    return runtime()
 
 
 def load_scene(path, out_dir=None, *, force: bool = False, progress=None,
-               linearize: bool = False) -> Scene:
+               options: BuildOptions | None = None, linearize: bool | None = None) -> Scene:
     """Load a scene file and build its reduced model; returns a :class:`Scene`.
 
     Only the effects and outputs the scene selects are generated.  Output goes
     to ``out_dir`` (default: the per-user cache).  ``linearize=True`` adds the
     symbolic linearization, outputs included (``scene.model.linearize(...)``).
+    ``options`` (:class:`~modelgen.codegen.options.BuildOptions`) is merged with
+    what the scene asks for (its outputs; the Jacobian for stiff effects).
 
     >>> res = load_scene("models/scenes/dp_damped.yaml").run()   # doctest: +SKIP
     """
-    return Scene(load_scene_spec(path), out_dir, force=force, progress=progress,
-                 linearize=linearize)
+    # imported here: a scene needs the model reader (sympy) and the scene module;
+    # a plain model's load needs neither
+    from modelgen.model.scene import load_scene as load_scene_spec
+    from modelgen.sim.scene import Scene
+    options = BuildOptions.of(options, linearize=linearize)
+    spec = load_scene_spec(path)
+    return Scene(spec, out_dir, force=force, progress=progress, options=options,
+                 files=(spec.source, spec.full_model.source))

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from modelgen.codegen.build import manifest_problem
-from modelgen.codegen.emit import ABI_VERSION
+from modelgen.codegen.capi import ABI_VERSION
 from modelgen.errors import (ArgumentTypeError, ArgumentValueError, BuildError,
                              DerivationError, MassMatrixError, SimulationError)
 from modelgen.sim import integrate
@@ -33,7 +33,7 @@ class CompiledModel:
     (2, 2)
     """
 
-    def __init__(self, manifest: dict, module_path: Path):
+    def __init__(self, manifest: dict, module_path: Path, runtime: tuple | None = None):
         problem = manifest_problem(manifest)
         if problem:
             raise BuildError(f"{module_path}: {problem}; rebuild the model (force=True)")
@@ -64,7 +64,7 @@ class CompiledModel:
         simple = manifest.get("n_simple", self.nq)
         self.dof_names = self.coordinates[:simple] + self.speeds[simple:]
         self.path = Path(module_path)
-        self.lib = ModelLibrary(manifest, self.path)
+        self.lib = ModelLibrary(manifest, self.path, runtime)
         self.ffi = self.lib.ffi
         self._check_module()
         fn = lambda suffix: getattr(self.lib, f"{self.name}_{suffix}")   # noqa: E731

@@ -5,12 +5,15 @@ Input: a :class:`~modelgen.model.spec.SceneSpec`.  Output: a compiled model
 """
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
-from modelgen.codegen.pipeline import generate
+from modelgen.codegen import index
+from modelgen.codegen.build import Generated
+from modelgen.codegen.options import BuildOptions
 from modelgen.errors import SimulationError
 from modelgen.model.spec import CANONICAL_BASE, CONSERVATIVE_KINDS, OutputSpec
-from modelgen.sim.animate import animate
 from modelgen.sim.integrate import method_of
 from modelgen.sim.result import Result
 from modelgen.sim.runtime import STABILITY_LIMIT, CompiledModel, check_mass_matrix
@@ -30,21 +33,39 @@ class Scene:
     """
 
     def __init__(self, spec, out_dir=None, *, force: bool = False, progress=None,
-                 stages=None, linearize: bool = False):
+                 stages=None, linearize: bool | None = None,
+                 options: BuildOptions | None = None, files=()):
         """``progress(message)`` hears what is being done; ``stages(stage)`` is
-        called as each stage of a build starts (see :func:`generate`)."""
+        called as each stage of a build starts (see :func:`generate`).
+        ``options`` (:class:`~modelgen.codegen.options.BuildOptions`; ``linearize``
+        is shorthand) get the scene's outputs and, for stiff effects, the Jacobian.
+        ``files``: the files ``spec`` was read from, unchanged (the scene's, then
+        its model's), which let the build cache's fast index find a build
+        without the symbolic pipeline (:mod:`modelgen.codegen.index`)."""
         self.spec = spec
         if progress:
             progress(f"{spec.name}: generating (or reusing) the model")
         # the power of every effect outside the energy, for the energy balance
         self.powers = _power_outputs(spec)
         extra = tuple(out for out in self.powers.values() if out not in spec.outputs)
+        options = BuildOptions.of(options, linearize=linearize)
         # stiff scenes get the symbolic Jacobian, for implicit integrators
-        generated = generate(spec.model, out_dir, force=force, outputs=spec.outputs + extra,
-                             jacobian=bool(spec.stiff_effects) and spec.model.n <= 12,
-                             progress=stages, linearize=linearize)
+        options = replace(options, outputs=spec.outputs + extra, jacobian=options.jacobian or (
+            bool(spec.stiff_effects) and spec.model.n <= 12))
+        key = index.fast_key(files, options, out_dir) if files else None
+        hit = None if force else index.lookup(key)
+        if hit is not None:
+            generated, runtime = Generated(hit.build, hit.build.manifest), hit.runtime
+        else:
+            # imported here, not at the top: the symbolic pipeline (about a second
+            # of imports) is needed only when the fast index has no build
+            from modelgen.codegen.pipeline import generate, runtime as runtime_location
+            generated = generate(spec.model, out_dir, force=force, options=options,
+                                 progress=stages)
+            runtime = runtime_location()
+            index.record(key, generated.build, runtime)
         self.generated = generated
-        self.model = CompiledModel(generated.manifest, generated.build.module_path)
+        self.model = CompiledModel(generated.manifest, generated.build.module_path, runtime)
         check_mass_matrix(self.model)          # on every load: the cache hides nothing
 
     @property
@@ -212,6 +233,7 @@ class Scene:
 
         >>> scene.animate(scene.run(), "out/dp_free.html")       # doctest: +SKIP
         """
+        from modelgen.sim.animate import animate    # its drawing needs the kinematics
         return animate(res, self.spec.model, path, compiled=self.model, **options)
 
     def initial_state(self, x0=None) -> np.ndarray:

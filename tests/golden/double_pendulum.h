@@ -92,10 +92,12 @@ void double_pendulum_prepare(const double *p, double *pd);
 int double_pendulum_rhs_prepared(double t, const double *x, const double *u, const double *p, const double *pd, double *xdot);
 
 /* double_pendulum_rhs:
- *   State derivative for x = [q, qd] (x[4]): xdot = [qd, qdd] with
- *   A qdd = tau - h solved by Cholesky in place. u, p as above.
- *   Returns 0, or k > 0 when pivot k (1-based) of A is not positive
- *   (A not positive definite); xdot[2..4) is then NaN.
+ *   State derivative for x = [q, qd] (x[4]): xdot = [qd, qdd];
+ *   qdd by the articulated-body algorithm (O(n), without the mass matrix).
+ *   u, p as above.
+ *   Returns 0, or k > 0 when the articulated inertia D of coordinate k
+ *   (1-based) is not positive (the mass matrix is not positive definite);
+ *   xdot[2..4) is then NaN.
  */
 
 int double_pendulum_rhs(double t, const double *x, const double *u, const double *p, double *xdot);
