@@ -1,11 +1,14 @@
 # Two commands set everything up on a fresh machine (Python >= 3.10 and a C compiler):
 #   make demo   -- venv, install, generate the double pendulum and run its scene: out/dp_free.{csv,npz,png,gif,html}
 #   make test   -- venv, install, run the test suite
+# and the documentation:
+#   make docs   -- the docs extra; docs/ and the API reference as HTML, warnings as errors
+#                  -> docs/_build/html/index.html (readable offline)
 PYTHON ?= python3
 VENV   ?= .venv
 BIN    := $(VENV)/bin
 
-.PHONY: demo test install bench clean
+.PHONY: demo test install bench docs clean
 
 $(BIN)/activate:
 	$(PYTHON) -m venv $(VENV)
@@ -24,9 +27,16 @@ demo: install
 test: install
 	$(BIN)/python -m pytest -q
 
+# -E -a: a fresh build every time, so a warning in an unchanged page is not
+# hidden by the cache of the previous build
+docs: install
+	$(BIN)/python -c 'import sphinx, myst_parser' 2>/dev/null \
+		|| $(BIN)/python -m pip install --quiet -e '.[docs]'
+	$(BIN)/python -m sphinx -E -a -W --keep-going -q -b html docs docs/_build/html
+
 bench: install
 	$(BIN)/python -m pip install --quiet -e '.[bench]'
 	$(BIN)/python bench/codegen_scaling.py --quick
 
 clean:
-	rm -rf generated/*/ out
+	rm -rf generated/*/ out docs/_build

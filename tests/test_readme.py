@@ -1,4 +1,4 @@
-"""Every command and code block of the README runs as written.
+"""Every command and code block of the README and of the pages in docs/ runs as written.
 
 Python blocks run one by one in a fresh interpreter, shell blocks command by
 command through the real ``modelgen`` entry point, both in a scratch directory
@@ -9,6 +9,9 @@ prototypes must appear in the golden header.  A block preceded by
 A block preceded by ``<!-- readme-test: needs MODULE ... -->`` uses an optional
 extra: it runs where those modules import and is skipped, naming them, where
 they do not (``make test`` installs only the ``test`` extra; CI installs all).
+Every page of docs/ is read the same way (tests are named ``<page>:line<N>``);
+YAML blocks are not run here: those of docs/model-format.md are loaded by
+tests/test_model_format_doc.py.
 """
 from __future__ import annotations
 
@@ -23,39 +26,52 @@ import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
 README = ROOT / "README.md"
+PAGES = [README] + sorted((ROOT / "docs").glob("*.md"))
 SKIP = "<!-- readme-test: skip"
 NEEDS = re.compile(r"^<!-- readme-test: needs ([\w. ]+) -->$")
+FENCE = re.compile(r"^(`{3,})\s*([^`\s]*)[^`]*$")
 
 
-def _blocks():
-    """(language, code, line, skipped, needs) for every fenced block of the README;
-    ``needs``: the modules its ``readme-test: needs`` line names."""
-    lines = README.read_text().splitlines()
+def _blocks(path):
+    """(language, code, line, skipped, needs) for every fenced block of the page;
+    ``language`` is the first word of the fence's info string (```yaml model ->
+    yaml, ```{toctree} -> {toctree}); ``needs``: the modules its
+    ``readme-test: needs`` line names."""
+    lines = path.read_text().splitlines()
     out, i = [], 0
     while i < len(lines):
-        m = re.match(r"^```(\w*)\s*$", lines[i])
+        m = FENCE.match(lines[i])
         if not m:
             i += 1
             continue
-        start, lang = i + 1, m.group(1)
+        start, fence, lang = i + 1, m.group(1), m.group(2)
         skipped = i > 0 and lines[i - 1].startswith(SKIP)
         needs = NEEDS.match(lines[i - 1]) if i > 0 else None
         j = i + 1
-        while not lines[j].startswith("```"):
+        while j < len(lines) and lines[j].rstrip() != fence:
             j += 1
+        assert j < len(lines), f"{path.name}:{start}: the block is not closed"
         out.append((lang, "\n".join(lines[i + 1:j]), start, skipped,
                     tuple(needs.group(1).split()) if needs else ()))
         i = j + 1
     return out
 
 
-BLOCKS = _blocks()
+BLOCKS = _blocks(README)
+PAGE_BLOCKS = {path: _blocks(path) for path in PAGES}
+
+
+def _page_id(path, line):
+    """``line<N>`` for the README (the ids its tests always had), ``<page>:line<N>`` else."""
+    return f"line{line}" if path == README else f"{path.name}:line{line}"
 
 
 def _runnable(kind):
-    """pytest params (code, needs) of the blocks of ``kind`` that run, with their ids."""
-    return [pytest.param(code, needs, id=f"line{line}")
-            for lang, code, line, skipped, needs in BLOCKS if lang == kind and not skipped]
+    """pytest params (code, needs) of the blocks of ``kind`` that run, on every page,
+    with their ids."""
+    return [pytest.param(code, needs, id=_page_id(path, line))
+            for path, blocks in PAGE_BLOCKS.items()
+            for lang, code, line, skipped, needs in blocks if lang == kind and not skipped]
 
 
 def _require(needs):
@@ -76,6 +92,24 @@ def test_the_readme_has_blocks_of_every_kind_and_few_are_skipped():
     kinds = {lang for lang, *_ in BLOCKS}
     assert {"python", "sh", "c", "yaml"} <= kinds
     assert sum(skipped for *_, skipped, _ in BLOCKS) <= 3
+
+
+def test_the_docs_pages_are_read_and_few_blocks_are_skipped():
+    """The pages hold runnable blocks, every skip gives its reason, and a marker
+    sits on the line right above a fence (a marker elsewhere would skip nothing)."""
+    runnable = [b for path in PAGES[1:] for b in PAGE_BLOCKS[path]
+                if b[0] in ("python", "sh") and not b[3]]
+    assert len(runnable) >= 10
+    for path in PAGES:
+        lines = path.read_text().splitlines()
+        for i, line in enumerate(lines):
+            if line.startswith("<!-- readme-test:"):
+                assert re.match(r"^<!-- readme-test: (skip \(.+\)|needs [\w. ]+) -->$", line), \
+                    f"{path.name}:{i + 1}: {line}"
+                assert i + 1 < len(lines) and FENCE.match(lines[i + 1]), \
+                    f"{path.name}:{i + 1}: the marker is not right above a block"
+    skipped = sum(b[3] for path in PAGES[1:] for b in PAGE_BLOCKS[path])
+    assert skipped <= 4, skipped
 
 
 @pytest.mark.parametrize("code, needs", _runnable("python"))
@@ -104,7 +138,8 @@ def test_shell_block_runs(tmp_path, code, needs):
 
 def test_c_prototypes_are_those_of_the_generated_header():
     header = re.sub(r"\s+", "", (ROOT / "tests" / "golden" / "double_pendulum.h").read_text())
-    blocks = [code for lang, code, _, skipped, _ in BLOCKS if lang == "c" and not skipped]
+    blocks = [code for blocks in PAGE_BLOCKS.values()
+              for lang, code, _, skipped, _ in blocks if lang == "c" and not skipped]
     assert blocks
     for code in blocks:
         for declaration in code.split(";"):

@@ -29,8 +29,8 @@ JORDAN_ZERO = 10.0
 
 @dataclass(frozen=True)
 class Mode:
-    """One eigenvalue of A: ``frequency`` = |lambda| (natural frequency, rad/s),
-    ``damping`` = -Re(lambda) / |lambda| (NaN for a zero eigenvalue)."""
+    """One eigenvalue of A: ``frequency`` = ``|lambda|`` (natural frequency, rad/s),
+    ``damping`` = ``-Re(lambda) / |lambda|`` (NaN for a zero eigenvalue)."""
     eigenvalue: complex
     frequency: float
     damping: float
@@ -38,7 +38,7 @@ class Mode:
     @property
     def stable(self) -> bool | None:
         """True when Re(lambda) < 0, False when > 0, None when zero or purely imaginary
-        (|Re| up to ZERO_EIGENVALUE |lambda|: rounding)."""
+        (``|Re|`` up to ``ZERO_EIGENVALUE |lambda|``: rounding)."""
         if np.isnan(self.damping) or abs(self.damping) <= ZERO_EIGENVALUE:
             return None
         return bool(self.damping > 0)

@@ -476,8 +476,8 @@ class CompiledModel:
     def stability_warning(self, method, step, t0, x0, u=None, p=None) -> str | None:
         """Why a fixed ``step`` of an explicit ``method`` is unstable at (t0, x0), or None.
 
-        Explicit Runge-Kutta methods are stable only while h |lambda| stays inside
-        their stability region; with h |lambda|max beyond it (lambda the eigenvalues
+        Explicit Runge-Kutta methods are stable only while ``h |lambda|`` stays inside
+        their stability region; with ``h |lambda|max`` beyond it (lambda the eigenvalues
         of d xdot / d x at the start) the run "succeeds" with a wrong answer.
         """
         name = integrate.method_of(method).name

@@ -93,10 +93,10 @@ class Scene:
         return "\n".join(lines)
 
     def stiffness(self, x0=None, p=None) -> float:
-        """The largest |eigenvalue| of d xdot / d x at the scene's initial state, and at
+        """The largest ``|eigenvalue|`` of d xdot / d x at the scene's initial state, and at
         the same configuration at rest (where smoothed friction is steepest) [1/s].
 
-        Explicit methods need steps below about 3/|lambda|max (their stability
+        Explicit methods need steps below about ``3/|lambda|max`` (their stability
         limit); a run whose span holds many such steps is stiff.
         """
         s, cm = self.spec, self.model
