@@ -327,7 +327,7 @@ def _joint(name="j", kind="revolute", parent="a", child="b", extra=""):
     (LINKS + "\n" + _joint(extra='<axis xyz="0 0 0"/>'), 5, "joint[j].axis", "axis is zero"),
     ('<link name="a"/>\n<link name="b"><inertial><mass value="1"/>\n'
      '<inertia ixx="1" iyy="1" izz="3" ixy="0" ixz="0" iyz="0"/></inertial></link>\n'
-     + _joint(), 5, "link[b].inertial.inertia", "not positive"),
+     + _joint(), 5, "link[b].inertial.inertia", "violates the triangle inequality"),
     ('<link name="a"/>\n<link name="b"><inertial><mass value="-1"/>'
      '<inertia ixx="1" iyy="1" izz="1" ixy="0" ixz="0" iyz="0"/></inertial></link>\n'
      + _joint(), 4, "link[b].inertial.mass", "negative mass"),
@@ -380,3 +380,120 @@ def test_meshes_are_not_opened():
 def test_shipped_ur5_model_is_the_import_of_its_urdf():
     shipped = Path(__file__).parent.parent / "models" / "robots" / "ur5.yaml"
     assert load_model(shipped) == as_spec(DATA / "ur5_robot.urdf")
+
+
+# -- numbers at the limits of a double (issue 24) -----------------------------------
+
+def _one_joint(axis: str, kind: str = "revolute", inertia: str = "") -> str:
+    inertia = inertia or ('<inertial><origin xyz="0.1 0.2 0.3"/><mass value="1.5"/>'
+                          '<inertia ixx="0.02" ixy="0.001" ixz="0" iyy="0.03" iyz="0" '
+                          'izz="0.025"/></inertial>')
+    return _robot(f'<link name="a"/>\n<link name="b">{inertia}</link>\n'
+                  + _joint(kind=kind, extra=f'<axis xyz="{axis}"/>'))
+
+
+@pytest.mark.parametrize("kind", ["revolute", "prismatic"])
+@pytest.mark.parametrize("huge, unit", [("1e308 1e308 1e308", "1 1 1"),
+                                        ("0 0 -1e308", "0 0 -1"),
+                                        ("1e200 0 1e200", "1 0 1"),
+                                        ("-1.7e308 1.7e308 0", "-1 1 0"),
+                                        ("1e-300 1e-300 1e-300", "1 1 1"),
+                                        ("5e-324 0 0", "1 0 0")])
+def test_axes_whose_squares_overflow_or_underflow_keep_their_direction(kind, huge, unit):
+    """The spec of a huge or tiny axis is the spec of the same direction written small:
+    the normalisation scales by the largest component before squaring."""
+    spec = import_urdf_text(_one_joint(huge, kind), "big.urdf").model.spec()
+    assert spec == import_urdf_text(_one_joint(unit, kind), "big.urdf").model.spec()
+
+
+def test_a_truly_zero_axis_is_still_refused():
+    with pytest.raises(ModelError, match="axis is zero") as err:
+        import_urdf_text(_one_joint("0 -0 0.0", "prismatic"), "zero.urdf")
+    assert (err.value.file, err.value.line, err.value.key) == ("zero.urdf", 5, "joint[j].axis")
+
+
+def _inertia(d, rotation=None, mass="1") -> str:
+    """<inertial> of principal moments d (rotated by a fixed rotation), entries in %r."""
+    r = rotation if rotation is not None else np.eye(3)
+    m = r @ np.diag(d) @ r.T
+    e = {k: repr(float(m[i, j])) for k, i, j in (("xx", 0, 0), ("xy", 0, 1), ("xz", 0, 2),
+                                                  ("yy", 1, 1), ("yz", 1, 2), ("zz", 2, 2))}
+    return (f'<inertial><mass value="{mass}"/><inertia ixx="{e["xx"]}" ixy="{e["xy"]}" '
+            f'ixz="{e["xz"]}" iyy="{e["yy"]}" iyz="{e["yz"]}" izz="{e["zz"]}"/></inertial>')
+
+
+@pytest.mark.parametrize("scale", [1.0, 1e300, 1e-300, 1.7e308 / 3])
+def test_the_rigid_body_checks_are_the_same_at_any_scale(scale):
+    """Principal moments (1, 1, 1.9) are physical, (0.5, 1, 1.9) are not, whatever the
+    unit: the checks scale before squaring or summing (1e308 overflowed and passed)."""
+    from modelgen.model.urdf_read import rpy_matrix
+    r = rpy_matrix((0.3, -0.7, 1.1))
+    good = _one_joint("0 0 1", inertia=_inertia(np.array([1.0, 1.0, 1.9]) * scale, r))
+    import_urdf_text(good, "s.urdf").model.spec()
+    bad = _one_joint("0 0 1", inertia=_inertia(np.array([0.5, 1.0, 1.9]) * scale, r))
+    with pytest.raises(ModelError, match="violates the triangle inequality") as err:
+        import_urdf_text(bad, "s.urdf")
+    assert (err.value.line, err.value.key) == (4, "link[b].inertial.inertia")
+
+
+def _welded(mass_a: str, inertia_a: str, mass_c: str, inertia_c: str, xyz: str) -> str:
+    """Link b (moving) with link c welded to it at ``xyz``."""
+    def inertial(mass, i):
+        return (f'<inertial><mass value="{mass}"/><inertia ixx="{i}" ixy="0" ixz="0" '
+                f'iyy="{i}" iyz="0" izz="{i}"/></inertial>')
+    return _robot(f'<link name="a"/>\n<link name="b">{inertial(mass_a, inertia_a)}</link>\n'
+                  f'<link name="c">{inertial(mass_c, inertia_c)}</link>\n'
+                  + _joint(extra='<axis xyz="0 0 1"/>') + "\n"
+                  + _joint("w", kind="fixed", parent="b", child="c",
+                           extra=f'<origin xyz="{xyz}"/>'))
+
+
+@pytest.mark.parametrize("text", [
+    _welded("1", "1e308", "1", "1e308", "0 0 0"),           # inertias add to inf
+    _welded("1e308", "1", "1e308", "1", "0 0 0"),           # masses add to inf
+    _welded("1e300", "1", "1e300", "1", "1e10 0 0"),        # parallel-axis term m d^2
+    _welded("1", "1", "1", "1", "1.7e308 0 0"),            # d^2 of a finite length
+])
+def test_merged_bodies_too_large_for_a_double_are_a_model_error(text):
+    """Welding huge links gave inf and then OverflowError or ValueError ('internal error')."""
+    with pytest.raises(ModelError, match="too large for a double") as err:
+        import_urdf_text(text, "huge.urdf")
+    e = err.value
+    assert (e.file, e.line, e.key) == ("huge.urdf", 4, "link[b].inertial") and e.fix
+
+
+def test_huge_but_finite_merged_bodies_are_exact():
+    """Two welded links of mass 1e-300, 2e200 m apart: the squared distance overflows
+    if formed first, the merged inertia (2e100) does not."""
+    spec = import_urdf_text(_welded("1e-300", "0", "1e-300", "0", "2e200 0 0"), "b.urdf") \
+        .model.spec()
+    body = next(b for b in spec.bodies if b.name == "b")
+    # two equal masses m = 1e-300 at 0 and 2e200: about the middle, 2 m (1e200)^2 on y, z
+    assert float(body.mass) == 2e-300
+    assert [float(body.inertia[k][k]) for k in range(3)] == pytest.approx([0, 2e100, 2e100],
+                                                                            rel=1e-15)
+
+
+@pytest.mark.parametrize("place, key", [
+    ('<origin xyz="0 nan 0"/>', "joint[j].origin.xyz"),
+    ('<origin rpy="inf 0 0"/>', "joint[j].origin.rpy"),
+    ('<axis xyz="0 0 1e999"/>', "joint[j].axis"),
+    ('<axis xyz="0 0 1"/><limit lower="-inf" upper="1" effort="1" velocity="1"/>',
+     "joint[j].limit.lower"),
+    ('<axis xyz="0 0 1"/><dynamics damping="NaN"/>', "joint[j].dynamics.damping"),
+])
+def test_non_finite_numbers_in_joints_are_a_model_error_with_a_line(place, key):
+    with pytest.raises(ModelError, match="malformed number") as err:
+        import_urdf_text(_robot(LINKS + "\n" + _joint(extra=place)), "nan.urdf")
+    assert (err.value.file, err.value.line, err.value.key) == ("nan.urdf", 5, key)
+
+
+@pytest.mark.parametrize("mass, ixx", [("nan", "1"), ("1", "inf"), ("1e999", "1"),
+                                       ("1", "-1e999")])
+def test_non_finite_masses_and_inertias_are_a_model_error_with_a_line(mass, ixx):
+    text = _robot(f'<link name="a"/>\n<link name="b"><inertial><mass value="{mass}"/>\n'
+                  f'<inertia ixx="{ixx}" ixy="0" ixz="0" iyy="1" iyz="0" izz="1"/>'
+                  '</inertial></link>\n' + _joint())
+    with pytest.raises(ModelError, match="malformed number") as err:
+        import_urdf_text(text, "nan.urdf")
+    assert err.value.file == "nan.urdf" and err.value.line in (4, 5)

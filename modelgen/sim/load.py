@@ -14,14 +14,17 @@ from modelgen.sim.scene import Scene
 
 def generate_model(source, out_dir=None, *, force: bool = False,
                    jacobian: bool = False, formulation: str = "auto",
-                   progress=None, linearize: bool = False) -> Generated:
+                   progress=None, linearize: bool = False, floating_base: bool = False,
+                   inertia: str = "physical", min_mass: float = 0.0,
+                   min_inertia: float = 0.0) -> Generated:
     """Generate and compile a model (or reuse the cache); returns the report.
 
     Like :func:`load`, it refuses (:class:`~modelgen.errors.DerivationError`)
     a model whose mass matrix is singular for every configuration, cached or not.
     ``progress(stage)`` is called as each stage of a build starts.
     """
-    generated = generate(as_spec(source), out_dir, force=force, jacobian=jacobian,
+    generated = generate(as_spec(source, floating_base=floating_base, inertia=inertia,
+                                 min_mass=min_mass, min_inertia=min_inertia), out_dir, force=force, jacobian=jacobian,
                          formulation=formulation, progress=progress, linearize=linearize)
     _loaded(generated)
     return generated
@@ -40,7 +43,8 @@ def _loaded(generated: Generated) -> CompiledModel:
 
 def load(source, out_dir=None, *, force: bool = False, jacobian: bool = False,
          formulation: str = "auto", progress=None, linearize: bool = False,
-         floating_base: bool = False) -> CompiledModel:
+         floating_base: bool = False, inertia: str = "physical", min_mass: float = 0.0,
+         min_inertia: float = 0.0) -> CompiledModel:
     """Build (on first use) and import a model; returns a :class:`CompiledModel`.
 
     ``source`` is a YAML path, a :class:`modelgen.model.Model` or a ModelSpec.
@@ -54,12 +58,15 @@ def load(source, out_dir=None, *, force: bool = False, jacobian: bool = False,
     With ``linearize=True`` the symbolic ``<name>_linearize`` is generated too, for
     :meth:`CompiledModel.linearize` and :meth:`CompiledModel.equilibrium`.
     ``floating_base=True`` (a URDF path) makes the robot's root link a free
-    body (a free joint ``root_joint``: position, unit quaternion, 6 speeds).
+    body (a free joint ``root_joint``: position, unit quaternion, 6 speeds);
+    ``inertia``, ``min_mass`` and ``min_inertia`` (a URDF path) read bodies that no
+    rigid body matches (see :func:`modelgen.model.urdf.import_urdf_text`).
 
     >>> cm = load("models/double_pendulum.yaml")             # doctest: +SKIP
     >>> cm.rhs(0.0, [0.1, 0.2, 0.0, 0.0])                    # doctest: +SKIP
     """
-    return _loaded(generate(as_spec(source, floating_base=floating_base), out_dir, force=force, jacobian=jacobian,
+    return _loaded(generate(as_spec(source, floating_base=floating_base, inertia=inertia,
+                                    min_mass=min_mass, min_inertia=min_inertia), out_dir, force=force, jacobian=jacobian,
                             formulation=formulation, progress=progress,
                             linearize=linearize))
 
