@@ -11,6 +11,7 @@ import math
 from pathlib import Path
 
 import numpy as np
+import sympy
 import pytest
 
 from modelgen.cli import main
@@ -497,3 +498,151 @@ def test_non_finite_masses_and_inertias_are_a_model_error_with_a_line(mass, ixx)
     with pytest.raises(ModelError, match="malformed number") as err:
         import_urdf_text(text, "nan.urdf")
     assert err.value.file == "nan.urdf" and err.value.line in (4, 5)
+
+
+# -- inertias of the physical body, and the ways through for vendor files (issue 23) --
+
+def test_rounding_noise_in_an_inertia_passes_and_particles_stay_particles():
+    """icub's head: ixx = iyy = izz = 0, ixz = 2.4e-35 (principal moments -2.4e-35, 0,
+    2.4e-35) on a 1.34 kg link, noise against its m |c|^2; a particle stays zero."""
+    head = ('<inertial><origin xyz="0.0185 -0.1108 6.78454e-18"/><mass value="1.33687"/>'
+            '<inertia ixx="0" ixy="0" ixz="2.40741e-35" iyy="0" iyz="0" izz="0"/></inertial>')
+    spec = import_urdf_text(_one_joint("0 0 1", inertia=head), "icub.urdf").model.spec()
+    assert spec.bodies[0].inertia[0][2] == sympy.Rational("2.40741e-35")
+    particle = ('<inertial><origin xyz="0.1 0 0"/><mass value="2"/>'
+                '<inertia ixx="0" ixy="0" ixz="0" iyy="0" iyz="0" izz="0"/></inertial>')
+    spec = import_urdf_text(_one_joint("0 0 1", inertia=particle), "p.urdf").model.spec()
+    assert all(x == 0 for row in spec.bodies[0].inertia for x in row)
+    # the same noise relative to the body's own scale is not noise: moments (-1, 0, 1)
+    bad = head.replace("2.40741e-35", "1e-3")
+    with pytest.raises(ModelError, match="negative principal moment"):
+        import_urdf_text(_one_joint("0 0 1", inertia=bad), "icub.urdf")
+
+
+#: anymal's ``base``: a dummy link (mass 1e-6, all six entries 1e-6: principal moments
+#: 0, 0, 3e-6, no rigid body) welded to ``base_inertia``, which carries the real body
+DUMMY = ('<inertial><mass value="1e-6"/><inertia ixx="1e-6" ixy="1e-6" ixz="1e-6" '
+         'iyy="1e-6" iyz="1e-6" izz="1e-6"/></inertial>')
+REAL = ('<inertial><origin xyz="-0.002 0.0004 0.04"/><mass value="16.8"/>'
+        '<inertia ixx="0.27" ixy="0.0004" ixz="0.0013" iyy="0.5" iyz="-0.00003" '
+        'izz="0.53"/></inertial>')
+
+
+def _dummy_robot(welded: bool) -> str:
+    inner = (f'<link name="base_inertia">{REAL}</link>\n'
+             + _joint("w", kind="fixed", parent="base", child="base_inertia",
+                      extra='<origin xyz="0.01 0 0.02"/>') if welded else "")
+    return _robot(f'<link name="world"/>\n<link name="base">{DUMMY}</link>\n{inner}\n'
+                  + _joint(kind="continuous", parent="world", child="base",
+                           extra='<axis xyz="0 1 0"/>'))
+
+
+def test_a_dummy_link_is_checked_merged_with_the_links_welded_to_it(pin, tmp_path):
+    path = tmp_path / "dummy.urdf"
+    path.write_text(_dummy_robot(welded=True))
+    imp = import_urdf(path)
+    assert [b.name for b in imp.model.spec().bodies] == ["base"] and not imp.notes
+    _compare_with_pinocchio(pin, path, tmp_path / "build", samples=2)
+    with pytest.raises(ModelError, match="violates the triangle inequality") as err:
+        import_urdf_text(_dummy_robot(welded=False), "dummy.urdf")
+    assert err.value.key == "link[base].inertial.inertia"
+
+
+#: allegro's link_11.0: principal moments 2.30e-6 + 3.49e-6 < 7.27e-6
+ALLEGRO = _inertia([2.30064e-6, 3.49154e-6, 7.27306e-6],
+                   np.array([[0.36, 0.48, -0.8], [-0.8, 0.6, 0.0], [0.48, 0.64, 0.6]]),
+                   mass="0.0388")
+
+
+def test_a_non_physical_inertia_is_refused_and_the_fix_names_the_options():
+    with pytest.raises(ModelError, match="violates the triangle inequality") as err:
+        import_urdf_text(_one_joint("0 0 1", inertia=ALLEGRO), "allegro.urdf")
+    assert 'inertia="as_is"' in err.value.fix and "--inertia as-is" in err.value.fix
+    assert 'inertia="balance"' in err.value.fix and "--inertia balance" in err.value.fix
+
+
+def test_inertia_as_is_keeps_the_files_values_with_a_warning(tmp_path):
+    text = _one_joint("0 0 1", inertia=ALLEGRO)
+    with pytest.warns(UserWarning, match=r"link 'b' is not that of a rigid body.*past the "
+                                         r"triangle inequality"):
+        imp = import_urdf_text(text, "allegro.urdf", inertia="as_is")
+    spec = imp.model.spec()
+    assert not spec.physical_inertia
+    entries = {k: float(v) for k, v in zip(("ixx", "iyy", "izz"),
+                                          (spec.bodies[0].inertia[k][k] for k in range(3)))}
+    for k, v in entries.items():
+        assert f'{k}="{v!r}"' in text          # exactly the file's numbers
+    # the model file says so, and loads to the same spec
+    yaml = urdf_to_yaml(imp)
+    assert "physical_inertia: false" in yaml and '# Read with inertia="as_is"' in yaml
+    out = tmp_path / "allegro.yaml"
+    out.write_text(yaml)
+    assert load_model(out) == spec
+
+
+def test_inertia_balance_applies_mujocos_rule(tmp_path):
+    """MuJoCo's balanceinertia: all three principal moments set to their mean."""
+    with pytest.warns(UserWarning, match=r"link 'b' balanced"):
+        imp = import_urdf_text(_one_joint("0 0 1", inertia=ALLEGRO), "allegro.urdf",
+                               inertia="balance")
+    spec = imp.model.spec()
+    mean = (2.30064e-6 + 3.49154e-6 + 7.27306e-6) / 3
+    inertia = np.array([[float(x) for x in row] for row in spec.bodies[0].inertia])
+    assert np.allclose(inertia, mean * np.eye(3), rtol=1e-12, atol=0)
+    assert spec.physical_inertia and any("balanced" in n for n in imp.notes)
+    out = tmp_path / "allegro.yaml"
+    out.write_text(urdf_to_yaml(imp))
+    assert load_model(out) == spec and "physical_inertia" not in out.read_text()
+
+
+def test_massless_moving_links_are_refused_or_bounded_as_mujoco_does():
+    """romeo's LHand moves only massless links: A is singular for every q."""
+    text = _robot(LINKS + "\n" + _joint(extra='<axis xyz="0 0 1"/>'))
+    with pytest.raises(ModelError, match="moves only massless links") as err:
+        import_urdf_text(text, "hand.urdf")
+    assert "min_mass=" in err.value.fix and "--min-inertia" in err.value.fix
+    with pytest.warns(UserWarning, match="min_mass"):
+        spec = import_urdf_text(text, "hand.urdf", min_mass=1e-3,
+                                min_inertia=1e-6).model.spec()
+    body = spec.bodies[0]
+    assert float(body.mass) == 1e-3
+    assert np.allclose([[float(x) for x in row] for row in body.inertia], 1e-6 * np.eye(3),
+                       rtol=1e-15, atol=0)
+    # bounds leave heavier bodies alone
+    heavy = import_urdf_text(_one_joint("0 0 1"), "h.urdf").model.spec()
+    assert import_urdf_text(_one_joint("0 0 1"), "h.urdf", min_mass=1e-3,
+                            min_inertia=1e-6).model.spec().bodies == heavy.bodies
+    with pytest.raises(ValueError, match="min_mass"):
+        import_urdf_text(text, "hand.urdf", min_mass=float("nan"))
+    with pytest.raises(ValueError, match="inertia='heavy'"):
+        import_urdf_text(text, "hand.urdf", inertia="heavy")
+
+
+def test_a_fixed_robot_without_joints_is_refused_and_flies_with_a_floating_base(tmp_path):
+    text = _robot('<link name="frame">' + REAL + "</link>")
+    with pytest.raises(ModelError, match="no moving joint") as err:
+        import_urdf_text(text, "quad.urdf")
+    assert "floating_base=True" in err.value.fix and "--floating-base" in err.value.fix
+    spec = import_urdf_text(text, "quad.urdf", floating_base=True).model.spec()
+    assert spec.n == 6 and spec.nq == 7
+
+
+def test_reading_options_reach_as_spec_load_and_the_command_line(tmp_path, capsys):
+    path = tmp_path / "allegro.urdf"
+    path.write_text(_one_joint("0 0 1", inertia=ALLEGRO))
+    with pytest.warns(UserWarning):
+        spec = as_spec(path, inertia="balance", min_mass=1e-3)
+    with pytest.raises(TypeError, match="apply to a URDF"):
+        as_spec(DATA.parent / "models" / "x.yaml", inertia="balance")
+    with pytest.warns(UserWarning):
+        assert load(path, tmp_path / "b", inertia="balance").mass_matrix([0.3]).shape == (1, 1)
+    out = tmp_path / "allegro.yaml"
+    assert main(["import", str(path), "-o", str(out)]) != 0      # refused by default
+    assert "--inertia as-is" in capsys.readouterr().err
+    with pytest.warns(UserWarning):
+        assert main(["import", str(path), "-o", str(out), "--inertia", "balance",
+                     "--min-mass", "1e-3"]) == 0
+    assert load_model(out) == spec
+    assert '# Read with inertia="balance", min_mass=0.001' in out.read_text()
+    with pytest.raises(SystemExit):
+        main(["import", str(path), "--min-inertia", "-1"])

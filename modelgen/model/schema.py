@@ -18,9 +18,9 @@ __all__ = ["TOP_LEVEL_KEYS", "ENTRY_KEYS", "REQUIRED_KEYS", "ExpressionRule",
 #: Top-level keys of a model file, in the order they are processed and written.
 #: Any other key is an error; a stage adding a key adds it here and reads it
 #: in ``builder_from_data``.
-TOP_LEVEL_KEYS = ("name", "description", "physical_inertia", "coordinates", "parameters", "inputs",
+TOP_LEVEL_KEYS = ("name", "description", "coordinates", "parameters", "inputs",
                   "bases", "joints", "points", "frames", "bodies", "gravity", "actions", "effects",
-                  "units")
+                  "units", "physical_inertia")
 
 #: Keys of one entry of each mapping section.
 ENTRY_KEYS = {

@@ -54,6 +54,14 @@ applies.  What becomes what:
   coordinates first), where Pinocchio puts its free-flyer first.
   ``fix_floating_root=True`` welds a floating joint at the root instead and
   says so in the description.  Meshes are never opened.
+* Inertias are checked on each moving body after its welded links are merged,
+  with a tolerance of the body's own scale (rounding noise passes; a particle
+  stays a particle).  A body no rigid body matches is refused unless
+  ``inertia="as_is"`` (the file's values, as Pinocchio; a warning) or
+  ``inertia="balance"`` (MuJoCo's ``balanceinertia``: the principal moments
+  set to their mean); ``min_mass`` and ``min_inertia`` are MuJoCo's
+  ``boundmass`` and ``boundinertia``.  A joint moving only massless links, and a
+  fixed robot without joints, are refused with a fix naming the option.
 
 >>> imp = import_urdf_text('''<robot name="pend"><link name="world"/>
 ...   <link name="rod"><inertial><origin xyz="0 0 -0.5"/><mass value="1"/>
