@@ -307,6 +307,9 @@ def _robot(body: str) -> str:
 
 
 LINKS = '<link name="a"/>\n<link name="b"/>'
+#: the inertial of a link that a joint moves (a joint moving only massless links is refused)
+BODY = ('<inertial><mass value="1"/><inertia ixx="0.1" ixy="0" ixz="0" iyy="0.1" iyz="0" '
+        'izz="0.1"/></inertial>')
 
 
 def _joint(name="j", kind="revolute", parent="a", child="b", extra=""):
@@ -352,7 +355,7 @@ def test_bad_urdf_names_file_line_and_key(body, line, key, words):
 
 
 def test_floating_root_can_be_imported_fixed_with_a_note():
-    text = _robot(LINKS + '\n<link name="c"/>\n' + _joint("free", kind="floating")
+    text = _robot(LINKS + f'\n<link name="c">{BODY}</link>\n' + _joint("free", kind="floating")
                   + _joint("k", parent="b", child="c", extra='<axis xyz="0 0 1"/>'))
     imp = import_urdf_text(text, "f.urdf", fix_floating_root=True)
     assert imp.model.spec().coordinates == ("k",)
@@ -373,7 +376,7 @@ def test_malformed_xml_and_entity_expansion_are_refused_with_a_line():
 
 def test_meshes_are_not_opened():
     text = _robot('<link name="a"><visual><geometry><mesh filename="/nonexistent/x.stl"/>'
-                  '</geometry></visual></link>\n<link name="b"/>\n'
+                  f'</geometry></visual></link>\n<link name="b">{BODY}</link>\n'
                   + _joint(extra='<axis xyz="0 0 1"/>'))
     assert import_urdf_text(text).model.spec().coordinates == ("j",)
 
@@ -646,3 +649,18 @@ def test_reading_options_reach_as_spec_load_and_the_command_line(tmp_path, capsy
     assert '# Read with inertia="balance", min_mass=0.001' in out.read_text()
     with pytest.raises(SystemExit):
         main(["import", str(path), "--min-inertia", "-1"])
+
+
+def test_physical_inertia_false_in_a_model_file_takes_inertias_as_given():
+    from modelgen.model import parse_model
+    body = ("coordinates: [q]\nbases: {B: {parent: E, axis: 3, angle: q}}\n"
+            "bodies: {b: {mass: 1, G: O, base: B, inertia: [1, 1, 3]}}\n")
+    with pytest.raises(ModelError, match="triangle inequality"):
+        parse_model("name: m\n" + body, "m.yaml")
+    spec = parse_model("name: m\nphysical_inertia: false\n" + body, "m.yaml")
+    assert not spec.physical_inertia and spec.bodies[0].inertia[2][2] == 3
+    from modelgen.model import Model, spec_to_yaml
+    assert parse_model(spec_to_yaml(spec)) == spec == Model.from_spec(spec).spec()
+    with pytest.raises(ModelError, match="expected true or false") as err:
+        parse_model("name: m\nphysical_inertia: 3\n", "m.yaml")
+    assert (err.value.line, err.value.key) == (2, "physical_inertia")

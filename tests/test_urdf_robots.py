@@ -19,9 +19,9 @@ from modelgen.model.urdf import import_urdf
 
 pin = pytest.importorskip("pinocchio", reason="the reference is Pinocchio "
                                                "(pip install -e '.[robots]')")
-from modelgen.bench.robots import (FLOATING, NOT_LOADED, OPTIONS, compare,  # noqa: E402
+from modelgen.bench.robots import (FLOATING, NOT_LOADED, OPTIONS, compare,
                                    robot_files, robots_directory)
-from conftest import SUMMARY  # noqa: E402
+from conftest import SUMMARY
 
 DIRECTORY = robots_directory()
 FILES = robot_files(DIRECTORY) if DIRECTORY else []

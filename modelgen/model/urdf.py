@@ -172,9 +172,9 @@ def _num(x: float):
 class _Builder:
     def __init__(self, robot: Robot, inertial_parameters: bool, notes: tuple,
                  floating_base: bool = False, fix_floating_root: bool = False,
-                 options: ReadingOptions = ReadingOptions()):
+                 options: Optional[ReadingOptions] = None):
         self.robot = robot
-        self.options = options
+        self.options = options = options or ReadingOptions()
         self.changes: list = []       # what the reading options changed or let through
         self.fix_floating_root = fix_floating_root
         self.free_links: set = set()
@@ -359,7 +359,9 @@ class _Builder:
         for head, links in members.items():
             if head == self.robot.root and not self.floating_base:
                 continue
-            mass, com, inertia = self.physical(head, links, *_merge(links, self.placement))
+            with np.errstate(over="ignore", invalid="ignore"):   # inf is refused below
+                merged = _merge(links, self.placement)
+            mass, com, inertia = self.physical(head, links, *merged)
             name = self.unique(sanitize(head))
             body_of[head] = name
             base, point = self.base[head], self.point[head]
