@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import math
 import os
 import sys
 import threading
@@ -94,6 +95,45 @@ def _simulation_progress(args, name, t0, t1):
         yield progress
 
 
+def _reading(args) -> dict:
+    """The URDF reading options of --inertia, --min-mass and --min-inertia, as keywords
+    (only those given, so a model file without them is read as before)."""
+    out = {}
+    if args.inertia != "physical":
+        out["inertia"] = args.inertia.replace("-", "_")
+    for key in ("min_mass", "min_inertia"):
+        if getattr(args, key):
+            out[key] = getattr(args, key)
+    return out
+
+
+def _bound(text: str) -> float:
+    """A finite number >= 0 (for --min-mass and --min-inertia)."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = -1.0
+    if not (math.isfinite(value) and value >= 0):
+        raise argparse.ArgumentTypeError(f"{text!r} is not a finite number >= 0")
+    return value
+
+
+def _add_reading_options(parser) -> None:
+    parser.add_argument("--inertia", choices=("physical", "as-is", "balance"),
+                        default="physical",
+                        help="(a URDF) bodies whose inertia no rigid body has: refuse them "
+                             "(physical, default), keep the file's values as Pinocchio "
+                             "does (as-is, with a warning per body), or set the principal "
+                             "moments to their mean as MuJoCo's balanceinertia does "
+                             "(balance)")
+    parser.add_argument("--min-mass", type=_bound, default=0.0, metavar="KG",
+                        help="(a URDF) lower bound on each moving body's mass, as MuJoCo's "
+                             "boundmass (for massless moving links)")
+    parser.add_argument("--min-inertia", type=_bound, default=0.0, metavar="KG_M2",
+                        help="(a URDF) lower bound on each body's principal moments of "
+                             "inertia, as MuJoCo's boundinertia")
+
+
 def _generate(args) -> int:
     from modelgen.model import as_spec, is_scene_file
     from modelgen.sim.load import generate_model
@@ -102,9 +142,10 @@ def _generate(args) -> int:
         raise ModelgenError(f"{args.model} is a scene file, not a model; fix: run it with "
                             f"`modelgen simulate {args.model}` (which builds its reduced model), "
                             f"or generate the model file it names")
-    # --floating-base acts as the file is read; the rest says what to build
+    # --floating-base and the inertia options act as the file is read; the rest says
+    # what to build
     options = BuildOptions(jacobian=args.jacobian, formulation=args.formulation)
-    spec = as_spec(args.model, floating_base=args.floating_base)
+    spec = as_spec(args.model, floating_base=args.floating_base, **_reading(args))
     t_load = time.perf_counter() - t0
     with _generation_progress(args, spec.name) as stages:
         g = generate_model(spec, args.output, force=args.force, options=options,
@@ -136,7 +177,7 @@ def _import(args) -> int:
     from modelgen.model.urdf import import_urdf, urdf_to_yaml
     imported = import_urdf(args.urdf, fix_floating_root=args.fix_floating_root,
                            inertial_parameters=args.inertial_parameters,
-                           floating_base=args.floating_base)
+                           floating_base=args.floating_base, **_reading(args))
     spec = imported.model.spec()
     out = Path(args.output) if args.output else Path(args.urdf).with_suffix(".yaml")
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -300,7 +341,7 @@ def _simulate(args) -> int:
     _check_output_dir(args.output)
     if is_scene_file(args.model):
         return _simulate_scene(args)
-    model = as_spec(args.model, floating_base=args.floating_base)
+    model = as_spec(args.model, floating_base=args.floating_base, **_reading(args))
     with _generation_progress(args, model.name) as stages:
         cm = load(model, args.build_dir, progress=stages)
     x0 = cm.neutral_state()
@@ -581,6 +622,7 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--floating-base", action="store_true",
                    help="(a URDF) make the root link a free body: a free joint root_joint "
                         "with a position, a unit quaternion and 6 speeds")
+    _add_reading_options(g)
     g.set_defaults(func=_generate)
 
     s = sub.add_parser("simulate", help="run a scene (or a model) and write CSV, NPZ and PNG",
@@ -626,6 +668,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "of the longest branches)")
     s.add_argument("--floating-base", action="store_true",
                    help="(a URDF) make the root link a free body (a free joint root_joint)")
+    _add_reading_options(s)
     s.set_defaults(func=_simulate)
 
     i = sub.add_parser("import", help="import a URDF robot as a model file",
@@ -644,6 +687,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "Pinocchio's free-flyer)")
     i.add_argument("--inertial-parameters", action="store_true",
                    help="make masses and inertias parameters instead of numbers")
+    _add_reading_options(i)
     i.set_defaults(func=_import)
 
     b = sub.add_parser("bench", help="work-precision diagram of a scene: the C integrators "

@@ -11,6 +11,7 @@ import math
 from pathlib import Path
 
 import numpy as np
+import sympy
 import pytest
 
 from modelgen.cli import main
@@ -306,6 +307,9 @@ def _robot(body: str) -> str:
 
 
 LINKS = '<link name="a"/>\n<link name="b"/>'
+#: the inertial of a link that a joint moves (a joint moving only massless links is refused)
+BODY = ('<inertial><mass value="1"/><inertia ixx="0.1" ixy="0" ixz="0" iyy="0.1" iyz="0" '
+        'izz="0.1"/></inertial>')
 
 
 def _joint(name="j", kind="revolute", parent="a", child="b", extra=""):
@@ -327,7 +331,7 @@ def _joint(name="j", kind="revolute", parent="a", child="b", extra=""):
     (LINKS + "\n" + _joint(extra='<axis xyz="0 0 0"/>'), 5, "joint[j].axis", "axis is zero"),
     ('<link name="a"/>\n<link name="b"><inertial><mass value="1"/>\n'
      '<inertia ixx="1" iyy="1" izz="3" ixy="0" ixz="0" iyz="0"/></inertial></link>\n'
-     + _joint(), 5, "link[b].inertial.inertia", "not positive"),
+     + _joint(), 5, "link[b].inertial.inertia", "violates the triangle inequality"),
     ('<link name="a"/>\n<link name="b"><inertial><mass value="-1"/>'
      '<inertia ixx="1" iyy="1" izz="1" ixy="0" ixz="0" iyz="0"/></inertial></link>\n'
      + _joint(), 4, "link[b].inertial.mass", "negative mass"),
@@ -351,7 +355,7 @@ def test_bad_urdf_names_file_line_and_key(body, line, key, words):
 
 
 def test_floating_root_can_be_imported_fixed_with_a_note():
-    text = _robot(LINKS + '\n<link name="c"/>\n' + _joint("free", kind="floating")
+    text = _robot(LINKS + f'\n<link name="c">{BODY}</link>\n' + _joint("free", kind="floating")
                   + _joint("k", parent="b", child="c", extra='<axis xyz="0 0 1"/>'))
     imp = import_urdf_text(text, "f.urdf", fix_floating_root=True)
     assert imp.model.spec().coordinates == ("k",)
@@ -372,7 +376,7 @@ def test_malformed_xml_and_entity_expansion_are_refused_with_a_line():
 
 def test_meshes_are_not_opened():
     text = _robot('<link name="a"><visual><geometry><mesh filename="/nonexistent/x.stl"/>'
-                  '</geometry></visual></link>\n<link name="b"/>\n'
+                  f'</geometry></visual></link>\n<link name="b">{BODY}</link>\n'
                   + _joint(extra='<axis xyz="0 0 1"/>'))
     assert import_urdf_text(text).model.spec().coordinates == ("j",)
 
@@ -380,3 +384,283 @@ def test_meshes_are_not_opened():
 def test_shipped_ur5_model_is_the_import_of_its_urdf():
     shipped = Path(__file__).parent.parent / "models" / "robots" / "ur5.yaml"
     assert load_model(shipped) == as_spec(DATA / "ur5_robot.urdf")
+
+
+# -- numbers at the limits of a double (issue 24) -----------------------------------
+
+def _one_joint(axis: str, kind: str = "revolute", inertia: str = "") -> str:
+    inertia = inertia or ('<inertial><origin xyz="0.1 0.2 0.3"/><mass value="1.5"/>'
+                          '<inertia ixx="0.02" ixy="0.001" ixz="0" iyy="0.03" iyz="0" '
+                          'izz="0.025"/></inertial>')
+    return _robot(f'<link name="a"/>\n<link name="b">{inertia}</link>\n'
+                  + _joint(kind=kind, extra=f'<axis xyz="{axis}"/>'))
+
+
+@pytest.mark.parametrize("kind", ["revolute", "prismatic"])
+@pytest.mark.parametrize("huge, unit", [("1e308 1e308 1e308", "1 1 1"),
+                                        ("0 0 -1e308", "0 0 -1"),
+                                        ("1e200 0 1e200", "1 0 1"),
+                                        ("-1.7e308 1.7e308 0", "-1 1 0"),
+                                        ("1e-300 1e-300 1e-300", "1 1 1"),
+                                        ("5e-324 0 0", "1 0 0")])
+def test_axes_whose_squares_overflow_or_underflow_keep_their_direction(kind, huge, unit):
+    """The spec of a huge or tiny axis is the spec of the same direction written small:
+    the normalisation scales by the largest component before squaring."""
+    spec = import_urdf_text(_one_joint(huge, kind), "big.urdf").model.spec()
+    assert spec == import_urdf_text(_one_joint(unit, kind), "big.urdf").model.spec()
+
+
+def test_a_truly_zero_axis_is_still_refused():
+    with pytest.raises(ModelError, match="axis is zero") as err:
+        import_urdf_text(_one_joint("0 -0 0.0", "prismatic"), "zero.urdf")
+    assert (err.value.file, err.value.line, err.value.key) == ("zero.urdf", 5, "joint[j].axis")
+
+
+def _inertia(d, rotation=None, mass="1") -> str:
+    """<inertial> of principal moments d (rotated by a fixed rotation), entries in %r."""
+    r = rotation if rotation is not None else np.eye(3)
+    m = r @ np.diag(d) @ r.T
+    e = {k: repr(float(m[i, j])) for k, i, j in (("xx", 0, 0), ("xy", 0, 1), ("xz", 0, 2),
+                                                  ("yy", 1, 1), ("yz", 1, 2), ("zz", 2, 2))}
+    return (f'<inertial><mass value="{mass}"/><inertia ixx="{e["xx"]}" ixy="{e["xy"]}" '
+            f'ixz="{e["xz"]}" iyy="{e["yy"]}" iyz="{e["yz"]}" izz="{e["zz"]}"/></inertial>')
+
+
+@pytest.mark.parametrize("scale", [1.0, 1e300, 1e-300, 1.7e308 / 3])
+def test_the_rigid_body_checks_are_the_same_at_any_scale(scale):
+    """Principal moments (1, 1, 1.9) are physical, (0.5, 1, 1.9) are not, whatever the
+    unit: the checks scale before squaring or summing (1e308 overflowed and passed)."""
+    from modelgen.model.urdf_read import rpy_matrix
+    r = rpy_matrix((0.3, -0.7, 1.1))
+    good = _one_joint("0 0 1", inertia=_inertia(np.array([1.0, 1.0, 1.9]) * scale, r))
+    import_urdf_text(good, "s.urdf").model.spec()
+    bad = _one_joint("0 0 1", inertia=_inertia(np.array([0.5, 1.0, 1.9]) * scale, r))
+    with pytest.raises(ModelError, match="violates the triangle inequality") as err:
+        import_urdf_text(bad, "s.urdf")
+    assert (err.value.line, err.value.key) == (4, "link[b].inertial.inertia")
+
+
+def _welded(mass_a: str, inertia_a: str, mass_c: str, inertia_c: str, xyz: str) -> str:
+    """Link b (moving) with link c welded to it at ``xyz``."""
+    def inertial(mass, i):
+        return (f'<inertial><mass value="{mass}"/><inertia ixx="{i}" ixy="0" ixz="0" '
+                f'iyy="{i}" iyz="0" izz="{i}"/></inertial>')
+    return _robot(f'<link name="a"/>\n<link name="b">{inertial(mass_a, inertia_a)}</link>\n'
+                  f'<link name="c">{inertial(mass_c, inertia_c)}</link>\n'
+                  + _joint(extra='<axis xyz="0 0 1"/>') + "\n"
+                  + _joint("w", kind="fixed", parent="b", child="c",
+                           extra=f'<origin xyz="{xyz}"/>'))
+
+
+@pytest.mark.parametrize("text", [
+    _welded("1", "1e308", "1", "1e308", "0 0 0"),           # inertias add to inf
+    _welded("1e308", "1", "1e308", "1", "0 0 0"),           # masses add to inf
+    _welded("1e300", "1", "1e300", "1", "1e10 0 0"),        # parallel-axis term m d^2
+    _welded("1", "1", "1", "1", "1.7e308 0 0"),            # d^2 of a finite length
+])
+def test_merged_bodies_too_large_for_a_double_are_a_model_error(text):
+    """Welding huge links gave inf and then OverflowError or ValueError ('internal error')."""
+    with pytest.raises(ModelError, match="too large for a double") as err:
+        import_urdf_text(text, "huge.urdf")
+    e = err.value
+    assert (e.file, e.line, e.key) == ("huge.urdf", 4, "link[b].inertial") and e.fix
+
+
+def test_huge_but_finite_merged_bodies_are_exact():
+    """Two welded links of mass 1e-300, 2e200 m apart: the squared distance overflows
+    if formed first, the merged inertia (2e100) does not."""
+    spec = import_urdf_text(_welded("1e-300", "0", "1e-300", "0", "2e200 0 0"), "b.urdf") \
+        .model.spec()
+    body = next(b for b in spec.bodies if b.name == "b")
+    # two equal masses m = 1e-300 at 0 and 2e200: about the middle, 2 m (1e200)^2 on y, z
+    assert float(body.mass) == 2e-300
+    assert [float(body.inertia[k][k]) for k in range(3)] == pytest.approx([0, 2e100, 2e100],
+                                                                            rel=1e-15)
+
+
+@pytest.mark.parametrize("place, key", [
+    ('<origin xyz="0 nan 0"/>', "joint[j].origin.xyz"),
+    ('<origin rpy="inf 0 0"/>', "joint[j].origin.rpy"),
+    ('<axis xyz="0 0 1e999"/>', "joint[j].axis"),
+    ('<axis xyz="0 0 1"/><limit lower="-inf" upper="1" effort="1" velocity="1"/>',
+     "joint[j].limit.lower"),
+    ('<axis xyz="0 0 1"/><dynamics damping="NaN"/>', "joint[j].dynamics.damping"),
+])
+def test_non_finite_numbers_in_joints_are_a_model_error_with_a_line(place, key):
+    with pytest.raises(ModelError, match="malformed number") as err:
+        import_urdf_text(_robot(LINKS + "\n" + _joint(extra=place)), "nan.urdf")
+    assert (err.value.file, err.value.line, err.value.key) == ("nan.urdf", 5, key)
+
+
+@pytest.mark.parametrize("mass, ixx", [("nan", "1"), ("1", "inf"), ("1e999", "1"),
+                                       ("1", "-1e999")])
+def test_non_finite_masses_and_inertias_are_a_model_error_with_a_line(mass, ixx):
+    text = _robot(f'<link name="a"/>\n<link name="b"><inertial><mass value="{mass}"/>\n'
+                  f'<inertia ixx="{ixx}" ixy="0" ixz="0" iyy="1" iyz="0" izz="1"/>'
+                  '</inertial></link>\n' + _joint())
+    with pytest.raises(ModelError, match="malformed number") as err:
+        import_urdf_text(text, "nan.urdf")
+    assert err.value.file == "nan.urdf" and err.value.line in (4, 5)
+
+
+# -- inertias of the physical body, and the ways through for vendor files (issue 23) --
+
+def test_rounding_noise_in_an_inertia_passes_and_particles_stay_particles():
+    """icub's head: ixx = iyy = izz = 0, ixz = 2.4e-35 (principal moments -2.4e-35, 0,
+    2.4e-35) on a 1.34 kg link, noise against its m |c|^2; a particle stays zero."""
+    head = ('<inertial><origin xyz="0.0185 -0.1108 6.78454e-18"/><mass value="1.33687"/>'
+            '<inertia ixx="0" ixy="0" ixz="2.40741e-35" iyy="0" iyz="0" izz="0"/></inertial>')
+    spec = import_urdf_text(_one_joint("0 0 1", inertia=head), "icub.urdf").model.spec()
+    assert spec.bodies[0].inertia[0][2] == sympy.Rational("2.40741e-35")
+    particle = ('<inertial><origin xyz="0.1 0 0"/><mass value="2"/>'
+                '<inertia ixx="0" ixy="0" ixz="0" iyy="0" iyz="0" izz="0"/></inertial>')
+    spec = import_urdf_text(_one_joint("0 0 1", inertia=particle), "p.urdf").model.spec()
+    assert all(x == 0 for row in spec.bodies[0].inertia for x in row)
+    # the same noise relative to the body's own scale is not noise: moments (-1, 0, 1)
+    bad = head.replace("2.40741e-35", "1e-3")
+    with pytest.raises(ModelError, match="negative principal moment"):
+        import_urdf_text(_one_joint("0 0 1", inertia=bad), "icub.urdf")
+
+
+#: anymal's ``base``: a dummy link (mass 1e-6, all six entries 1e-6: principal moments
+#: 0, 0, 3e-6, no rigid body) welded to ``base_inertia``, which carries the real body
+DUMMY = ('<inertial><mass value="1e-6"/><inertia ixx="1e-6" ixy="1e-6" ixz="1e-6" '
+         'iyy="1e-6" iyz="1e-6" izz="1e-6"/></inertial>')
+REAL = ('<inertial><origin xyz="-0.002 0.0004 0.04"/><mass value="16.8"/>'
+        '<inertia ixx="0.27" ixy="0.0004" ixz="0.0013" iyy="0.5" iyz="-0.00003" '
+        'izz="0.53"/></inertial>')
+
+
+def _dummy_robot(welded: bool) -> str:
+    inner = (f'<link name="base_inertia">{REAL}</link>\n'
+             + _joint("w", kind="fixed", parent="base", child="base_inertia",
+                      extra='<origin xyz="0.01 0 0.02"/>') if welded else "")
+    return _robot(f'<link name="world"/>\n<link name="base">{DUMMY}</link>\n{inner}\n'
+                  + _joint(kind="continuous", parent="world", child="base",
+                           extra='<axis xyz="0 1 0"/>'))
+
+
+def test_a_dummy_link_is_checked_merged_with_the_links_welded_to_it(pin, tmp_path):
+    path = tmp_path / "dummy.urdf"
+    path.write_text(_dummy_robot(welded=True))
+    imp = import_urdf(path)
+    assert [b.name for b in imp.model.spec().bodies] == ["base"] and not imp.notes
+    _compare_with_pinocchio(pin, path, tmp_path / "build", samples=2)
+    with pytest.raises(ModelError, match="violates the triangle inequality") as err:
+        import_urdf_text(_dummy_robot(welded=False), "dummy.urdf")
+    assert err.value.key == "link[base].inertial.inertia"
+
+
+#: allegro's link_11.0: principal moments 2.30e-6 + 3.49e-6 < 7.27e-6
+ALLEGRO = _inertia([2.30064e-6, 3.49154e-6, 7.27306e-6],
+                   np.array([[0.36, 0.48, -0.8], [-0.8, 0.6, 0.0], [0.48, 0.64, 0.6]]),
+                   mass="0.0388")
+
+
+def test_a_non_physical_inertia_is_refused_and_the_fix_names_the_options():
+    with pytest.raises(ModelError, match="violates the triangle inequality") as err:
+        import_urdf_text(_one_joint("0 0 1", inertia=ALLEGRO), "allegro.urdf")
+    assert 'inertia="as_is"' in err.value.fix and "--inertia as-is" in err.value.fix
+    assert 'inertia="balance"' in err.value.fix and "--inertia balance" in err.value.fix
+
+
+def test_inertia_as_is_keeps_the_files_values_with_a_warning(tmp_path):
+    text = _one_joint("0 0 1", inertia=ALLEGRO)
+    with pytest.warns(UserWarning, match=r"link 'b' is not that of a rigid body.*past the "
+                                         r"triangle inequality"):
+        imp = import_urdf_text(text, "allegro.urdf", inertia="as_is")
+    spec = imp.model.spec()
+    assert not spec.physical_inertia
+    entries = {k: float(v) for k, v in zip(("ixx", "iyy", "izz"),
+                                          (spec.bodies[0].inertia[k][k] for k in range(3)))}
+    for k, v in entries.items():
+        assert f'{k}="{v!r}"' in text          # exactly the file's numbers
+    # the model file says so, and loads to the same spec
+    yaml = urdf_to_yaml(imp)
+    assert "physical_inertia: false" in yaml and '# Read with inertia="as_is"' in yaml
+    out = tmp_path / "allegro.yaml"
+    out.write_text(yaml)
+    assert load_model(out) == spec
+
+
+def test_inertia_balance_applies_mujocos_rule(tmp_path):
+    """MuJoCo's balanceinertia: all three principal moments set to their mean."""
+    with pytest.warns(UserWarning, match=r"link 'b' balanced"):
+        imp = import_urdf_text(_one_joint("0 0 1", inertia=ALLEGRO), "allegro.urdf",
+                               inertia="balance")
+    spec = imp.model.spec()
+    mean = (2.30064e-6 + 3.49154e-6 + 7.27306e-6) / 3
+    inertia = np.array([[float(x) for x in row] for row in spec.bodies[0].inertia])
+    assert np.allclose(inertia, mean * np.eye(3), rtol=1e-12, atol=0)
+    assert spec.physical_inertia and any("balanced" in n for n in imp.notes)
+    out = tmp_path / "allegro.yaml"
+    out.write_text(urdf_to_yaml(imp))
+    assert load_model(out) == spec and "physical_inertia" not in out.read_text()
+
+
+def test_massless_moving_links_are_refused_or_bounded_as_mujoco_does():
+    """romeo's LHand moves only massless links: A is singular for every q."""
+    text = _robot(LINKS + "\n" + _joint(extra='<axis xyz="0 0 1"/>'))
+    with pytest.raises(ModelError, match="moves only massless links") as err:
+        import_urdf_text(text, "hand.urdf")
+    assert "min_mass=" in err.value.fix and "--min-inertia" in err.value.fix
+    with pytest.warns(UserWarning, match="min_mass"):
+        spec = import_urdf_text(text, "hand.urdf", min_mass=1e-3,
+                                min_inertia=1e-6).model.spec()
+    body = spec.bodies[0]
+    assert float(body.mass) == 1e-3
+    assert np.allclose([[float(x) for x in row] for row in body.inertia], 1e-6 * np.eye(3),
+                       rtol=1e-15, atol=0)
+    # bounds leave heavier bodies alone
+    heavy = import_urdf_text(_one_joint("0 0 1"), "h.urdf").model.spec()
+    assert import_urdf_text(_one_joint("0 0 1"), "h.urdf", min_mass=1e-3,
+                            min_inertia=1e-6).model.spec().bodies == heavy.bodies
+    with pytest.raises(ValueError, match="min_mass"):
+        import_urdf_text(text, "hand.urdf", min_mass=float("nan"))
+    with pytest.raises(ValueError, match="inertia='heavy'"):
+        import_urdf_text(text, "hand.urdf", inertia="heavy")
+
+
+def test_a_fixed_robot_without_joints_is_refused_and_flies_with_a_floating_base(tmp_path):
+    text = _robot('<link name="frame">' + REAL + "</link>")
+    with pytest.raises(ModelError, match="no moving joint") as err:
+        import_urdf_text(text, "quad.urdf")
+    assert "floating_base=True" in err.value.fix and "--floating-base" in err.value.fix
+    spec = import_urdf_text(text, "quad.urdf", floating_base=True).model.spec()
+    assert spec.n == 6 and spec.nq == 7
+
+
+def test_reading_options_reach_as_spec_load_and_the_command_line(tmp_path, capsys):
+    path = tmp_path / "allegro.urdf"
+    path.write_text(_one_joint("0 0 1", inertia=ALLEGRO))
+    with pytest.warns(UserWarning):
+        spec = as_spec(path, inertia="balance", min_mass=1e-3)
+    with pytest.raises(TypeError, match="apply to a URDF"):
+        as_spec(DATA.parent / "models" / "x.yaml", inertia="balance")
+    with pytest.warns(UserWarning):
+        assert load(path, tmp_path / "b", inertia="balance").mass_matrix([0.3]).shape == (1, 1)
+    out = tmp_path / "allegro.yaml"
+    assert main(["import", str(path), "-o", str(out)]) != 0      # refused by default
+    assert "--inertia as-is" in capsys.readouterr().err
+    with pytest.warns(UserWarning):
+        assert main(["import", str(path), "-o", str(out), "--inertia", "balance",
+                     "--min-mass", "1e-3"]) == 0
+    assert load_model(out) == spec
+    assert '# Read with inertia="balance", min_mass=0.001' in out.read_text()
+    with pytest.raises(SystemExit):
+        main(["import", str(path), "--min-inertia", "-1"])
+
+
+def test_physical_inertia_false_in_a_model_file_takes_inertias_as_given():
+    from modelgen.model import parse_model
+    body = ("coordinates: [q]\nbases: {B: {parent: E, axis: 3, angle: q}}\n"
+            "bodies: {b: {mass: 1, G: O, base: B, inertia: [1, 1, 3]}}\n")
+    with pytest.raises(ModelError, match="triangle inequality"):
+        parse_model("name: m\n" + body, "m.yaml")
+    spec = parse_model("name: m\nphysical_inertia: false\n" + body, "m.yaml")
+    assert not spec.physical_inertia and spec.bodies[0].inertia[2][2] == 3
+    from modelgen.model import Model, spec_to_yaml
+    assert parse_model(spec_to_yaml(spec)) == spec == Model.from_spec(spec).spec()
+    with pytest.raises(ModelError, match="expected true or false") as err:
+        parse_model("name: m\nphysical_inertia: 3\n", "m.yaml")
+    assert (err.value.line, err.value.key) == (2, "physical_inertia")

@@ -50,6 +50,17 @@ class BuildOptions:
     #: spec, which the model hash covers, already shows it: ``key_text(read=False)``
     #: leaves it out, and a key made from the file's bytes includes it
     floating_base: bool = field(default=False, metadata={"read": True})
+    #: how a URDF's bodies that no rigid body matches are read: ``physical``
+    #: (refused), ``as_is`` (kept, with a warning) or ``balance`` (MuJoCo's
+    #: balanceinertia); see :func:`modelgen.model.urdf.import_urdf_text`
+    inertia: str = field(default="physical", metadata={"read": True})
+    #: MuJoCo's boundmass and boundinertia for a URDF's moving links
+    min_mass: float = field(default=0.0, metadata={"read": True})
+    min_inertia: float = field(default=0.0, metadata={"read": True})
+
+    def reading(self) -> dict:
+        """The fields that act when the model file is read, as ``as_spec`` keywords."""
+        return {f.name: getattr(self, f.name) for f in fields(self) if f.metadata.get("read")}
 
     def __post_init__(self):
         object.__setattr__(self, "outputs", tuple(self.outputs))

@@ -26,19 +26,26 @@ __all__ = ["Model", "ModelSpec", "SceneSpec", "load_model", "parse_model", "spec
            "CONSERVATIVE_KINDS", "load_urdf"]
 
 
-def as_spec(source, *, floating_base: bool = False) -> ModelSpec:
+def as_spec(source, *, floating_base: bool = False, inertia: str = "physical",
+            min_mass: float = 0.0, min_inertia: float = 0.0) -> ModelSpec:
     """A :class:`ModelSpec` from a path (YAML, or URDF by its ``.urdf`` suffix), a
     :class:`Model` or a spec.  ``floating_base=True`` (URDF only) makes the
-    root link a free body (see :mod:`modelgen.model.urdf`)."""
-    if floating_base and not (isinstance(source, (str, Path))
-                              and Path(source).suffix.lower() == ".urdf"):
+    root link a free body; ``inertia="as_is"`` or ``"balance"``, ``min_mass`` and
+    ``min_inertia`` (URDF only) read bodies that no rigid body matches (see
+    :mod:`modelgen.model.urdf`)."""
+    urdf = isinstance(source, (str, Path)) and Path(source).suffix.lower() == ".urdf"
+    if floating_base and not urdf:
         raise TypeError("floating_base=True applies to a URDF file (a .urdf path); in a "
                         "model file, declare a free joint under 'joints:'")
+    if (inertia != "physical" or min_mass or min_inertia) and not urdf:
+        raise TypeError("inertia=, min_mass= and min_inertia= apply to a URDF file (a .urdf "
+                        "path); a model file gives its bodies' values itself")
     if isinstance(source, ModelSpec):
         return source
     if isinstance(source, (str, Path)):
         if Path(source).suffix.lower() == ".urdf":
-            return load_urdf(source, floating_base=floating_base).spec()
+            return load_urdf(source, floating_base=floating_base, inertia=inertia,
+                             min_mass=min_mass, min_inertia=min_inertia).spec()
         return load_model(source)
     if isinstance(source, Model):
         return source.spec()

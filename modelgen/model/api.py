@@ -79,10 +79,11 @@ class Model:
     m
     """
 
-    def __init__(self, name: str, description: str = ""):
+    def __init__(self, name: str, description: str = "", *, physical_inertia: bool = True):
         ctx = ModelBuilder(API_FILE)
         ctx.set_name(name)
         ctx.set_description(description)
+        ctx.set_physical_inertia(physical_inertia)
         self._ctx = ctx
 
     def __repr__(self) -> str:
@@ -295,7 +296,7 @@ class Model:
         >>> Model.from_spec(Model("m").spec()).spec() == Model("m").spec()
         True
         """
-        m = cls(spec.name, spec.description)
+        m = cls(spec.name, spec.description, physical_inertia=spec.physical_inertia)
         return m._apply(lambda c: replay(c, spec))
 
     @classmethod

@@ -132,6 +132,7 @@ class ModelBuilder:
         self.name: Optional[str] = None
         self.description = ""
         self.units: list = []
+        self.physical_inertia = True  # False: inertias as given (see set_physical_inertia)
         self.kinds: dict = {}         # name -> (kind, key) for every declared name
         self.speeds: dict = {}        # speed name -> coordinate
         self.symbols: dict = {}       # name -> Symbol (coordinates, speeds, parameters, inputs)
@@ -298,7 +299,7 @@ class ModelBuilder:
         value = expr.xreplace(self.defaults)
         try:
             result = float(value)
-        except TypeError:
+        except (TypeError, OverflowError):
             return None
         return result if math.isfinite(result) else None
 
@@ -320,6 +321,17 @@ class ModelBuilder:
             raise self.error(f"expected a string but got {describe(text)}", key,
                              "write the description as text (quote it if needed)")
         self.description = text
+
+    def set_physical_inertia(self, value, key: str = "physical_inertia") -> None:
+        """``physical_inertia: false`` takes the bodies' inertias as given (a vendor's
+        file that no rigid body can have); declared before the bodies it applies to."""
+        if value is None:
+            value = True
+        if not isinstance(value, bool):
+            raise self.error(f"expected true or false but got {describe(value)}", key,
+                             "write 'physical_inertia: false' to take inertias as given, or "
+                             "leave the key out")
+        self.physical_inertia = value
 
     def set_units(self, value, key: str = "units") -> None:
         """``units: {name: unit, ...}`` for declared coordinates, parameters and inputs;
@@ -480,7 +492,8 @@ class ModelBuilder:
             raise self.error(f"mass of body '{name}' is negative: {format_expression(mass)} "
                              f"= {mass_value!r} with the default parameters", f"{key}.mass",
                              "give a mass >= 0")
-        self.check_physical_inertia(name, inertia, f"{key}.inertia")
+        if self.physical_inertia:
+            self.check_physical_inertia(name, inertia, f"{key}.inertia")
         self.register(name, "body", key)
         self.bodies.append(BodyDecl(name, mass, G, base, inertia, key))
 
@@ -550,14 +563,19 @@ class ModelBuilder:
         if any(v is None for row in values for v in row):
             raise self.error(f"inertia of body '{body}' is not real with the default "
                              "parameters", key, "check the inertia expressions")
-        moments = np.linalg.eigvalsh(np.array(values, dtype=float))
-        tol = 1e-9 * max(1.0, float(np.max(np.abs(moments))))
+        # scaled by the largest entry first, so that squares inside the eigen solver
+        # cannot overflow (entries near 1e308) and the test is the same at any scale
+        matrix = np.array(values, dtype=float)
+        scale = float(np.max(np.abs(matrix))) or 1.0
+        d = np.linalg.eigvalsh(matrix / scale)
+        moments = d * scale
+        tol = 1e-9 * max(1.0 / scale, float(np.max(np.abs(d))))
         shown = "[" + ", ".join(f"{m:.6g}" for m in moments) + "]"
-        if moments[0] < -tol:
+        if d[0] < -tol:
             raise self.error(f"inertia of body '{body}' has a negative principal moment "
                              f"with the default parameters: {shown}", key,
                              "give a positive semi-definite inertia tensor about G")
-        if moments[0] + moments[1] < moments[2] - tol:
+        if d[0] + d[1] < d[2] - tol:
             raise self.error(f"inertia of body '{body}' violates the triangle inequality "
                              f"with the default parameters: principal moments {shown}, "
                              f"{moments[0]:.6g} + {moments[1]:.6g} < {moments[2]:.6g}", key,

@@ -122,6 +122,7 @@ def build_spec(builder) -> ModelSpec:
                       for a in actions),
         effects=tuple(effects),
         units=tuple(builder.units),
+        physical_inertia=builder.physical_inertia,
         source=None if builder.file == API_FILE else builder.file,
         lines=tuple(builder.lines.items()),
     )

@@ -271,6 +271,7 @@ class _SceneReader:
         ctx = ModelBuilder(full.source, dict(full.lines))
         ctx.set_name(name, "scene")
         ctx.set_description(full.description if description is None else description)
+        ctx.set_physical_inertia(full.physical_inertia)
         try:
             replay(ctx, kept, parameters)
             return ctx.build()

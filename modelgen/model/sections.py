@@ -102,6 +102,7 @@ def builder_from_data(data, lines: dict, file: str) -> ModelBuilder:
                          fix="add 'name: <model name>' (a C identifier) at the top level")
     ctx.set_name(data["name"])
     ctx.set_description(data.get("description"))
+    ctx.set_physical_inertia(data.get("physical_inertia"))
 
     def names_list(section: str):
         value = data.get(section)

@@ -364,6 +364,9 @@ class ModelSpec:
     #: ((name, unit), ...): units of coordinates, parameters and inputs, for people
     #: and for exports (an FMU's variables); they never change the equations
     units: tuple = ()
+    #: False when the bodies' inertias are taken as given, without the rigid-body
+    #: checks (a URDF imported with ``inertia="as_is"``, as Pinocchio reads it)
+    physical_inertia: bool = True
     #: where the spec came from (file path or None) -- for error messages only
     source: Optional[str] = field(default=None, compare=False)
     #: (dotted key, line) pairs for error messages from later stages

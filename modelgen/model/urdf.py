@@ -54,6 +54,14 @@ applies.  What becomes what:
   coordinates first), where Pinocchio puts its free-flyer first.
   ``fix_floating_root=True`` welds a floating joint at the root instead and
   says so in the description.  Meshes are never opened.
+* Inertias are checked on each moving body after its welded links are merged,
+  with a tolerance of the body's own scale (rounding noise passes; a particle
+  stays a particle).  A body no rigid body matches is refused unless
+  ``inertia="as_is"`` (the file's values, as Pinocchio; a warning) or
+  ``inertia="balance"`` (MuJoCo's ``balanceinertia``: the principal moments
+  set to their mean); ``min_mass`` and ``min_inertia`` are MuJoCo's
+  ``boundmass`` and ``boundinertia``.  A joint moving only massless links, and a
+  fixed robot without joints, are refused with a fix naming the option.
 
 >>> imp = import_urdf_text('''<robot name="pend"><link name="world"/>
 ...   <link name="rod"><inertial><origin xyz="0 0 -0.5"/><mass value="1"/>
@@ -68,6 +76,7 @@ from __future__ import annotations
 
 import math
 import re
+import warnings
 from pathlib import Path
 from typing import NamedTuple, Optional
 
@@ -79,8 +88,8 @@ from modelgen.model.api import Model, check_name
 from modelgen.model.spec import CANONICAL_BASE, CANONICAL_POINT, JOINT_KINDS, symbol
 from modelgen.model.urdf_read import Joint, Limit, Robot, parse_robot, rpy_matrix
 
-__all__ = ["UrdfImport", "JointInfo", "load_urdf", "import_urdf", "import_urdf_text",
-           "urdf_to_yaml", "sanitize"]
+__all__ = ["UrdfImport", "JointInfo", "ReadingOptions", "INERTIA_OPTIONS", "reading_options",
+           "load_urdf", "import_urdf", "import_urdf_text", "urdf_to_yaml", "sanitize"]
 
 _MOVING = ("revolute", "continuous", "prismatic")
 
@@ -97,12 +106,51 @@ class JointInfo(NamedTuple):
     mimic: Optional[tuple] = None   # (coordinate, multiplier, offset) of a mimic joint
 
 
+#: values of the ``inertia`` option: refuse what no rigid body has (default), take the
+#: file's values as Pinocchio does, or apply MuJoCo's ``balanceinertia`` rule
+INERTIA_OPTIONS = ("physical", "as_is", "balance")
+
+
+class ReadingOptions(NamedTuple):
+    """How non-physical or massless bodies are read (MuJoCo's compiler options
+    ``balanceinertia``, ``boundmass`` and ``boundinertia``; Pinocchio's as-is)."""
+    inertia: str = "physical"   # one of INERTIA_OPTIONS
+    min_mass: float = 0.0       # lower bound on each moving body's mass [kg]
+    min_inertia: float = 0.0    # lower bound on each principal moment [kg m^2]
+
+    def text(self) -> str:
+        """The options as keyword arguments ('' for the defaults).
+
+        >>> ReadingOptions("balance", 0.0, 1e-6).text()
+        'inertia="balance", min_inertia=1e-06'
+        """
+        parts = [f'inertia="{self.inertia}"'] if self.inertia != "physical" else []
+        parts += [f"{k}={v!r}" for k, v in (("min_mass", self.min_mass),
+                                              ("min_inertia", self.min_inertia)) if v > 0]
+        return ", ".join(parts)
+
+
+def reading_options(inertia: str = "physical", min_mass: float = 0.0,
+                    min_inertia: float = 0.0) -> ReadingOptions:
+    """Checked :class:`ReadingOptions` ("as-is" is accepted for "as_is")."""
+    inertia = "as_is" if inertia == "as-is" else inertia
+    if inertia not in INERTIA_OPTIONS:
+        raise ValueError(f"inertia={inertia!r}: use one of "
+                         + ", ".join(repr(o) for o in INERTIA_OPTIONS))
+    for name, value in (("min_mass", min_mass), ("min_inertia", min_inertia)):
+        if isinstance(value, bool) or not isinstance(value, (int, float)) \
+                or not (math.isfinite(value) and value >= 0):
+            raise ValueError(f"{name}={value!r}: give a finite number >= 0")
+    return ReadingOptions(inertia, float(min_mass), float(min_inertia))
+
+
 class UrdfImport(NamedTuple):
     """The result of an import: the model, the joints' data and notes for the reader."""
     model: Model
     joints: tuple      # JointInfo in depth-first order
     source: str
     notes: tuple       # sentences (e.g. a floating root imported fixed)
+    options: ReadingOptions = ReadingOptions()
 
 
 def sanitize(name: str) -> str:
@@ -123,8 +171,11 @@ def _num(x: float):
 
 class _Builder:
     def __init__(self, robot: Robot, inertial_parameters: bool, notes: tuple,
-                 floating_base: bool = False, fix_floating_root: bool = False):
+                 floating_base: bool = False, fix_floating_root: bool = False,
+                 options: Optional[ReadingOptions] = None):
         self.robot = robot
+        self.options = options = options or ReadingOptions()
+        self.changes: list = []       # what the reading options changed or let through
         self.fix_floating_root = fix_floating_root
         self.free_links: set = set()
         self.inertial_parameters = inertial_parameters
@@ -137,8 +188,10 @@ class _Builder:
                 f"{sum(j.mimic is None for j in moving)} coordinates, "
                 f"{len(moving) + free + floating_base} moving links"
                 + (f", {free} floating joints" if free else "")
-                + (", floating base." if floating_base else ", fixed base."))
-        self.model = Model(self.model_name(), " ".join((text,) + notes))
+                + (", floating base." if floating_base else ", fixed base.")
+                + (f" Read with {options.text()}." if options.text() else ""))
+        self.model = Model(self.model_name(), " ".join((text,) + notes),
+                           physical_inertia=options.inertia != "as_is")
         self.actuation: dict = {}                     # joint -> (base, point, unit axis)
         self.taken: set = set()
         self.base = {robot.root: CANONICAL_BASE}      # link -> base name
@@ -306,7 +359,9 @@ class _Builder:
         for head, links in members.items():
             if head == self.robot.root and not self.floating_base:
                 continue
-            mass, com, inertia = _merge(links, self.placement)
+            with np.errstate(over="ignore", invalid="ignore"):   # inf is refused below
+                merged = _merge(links, self.placement)
+            mass, com, inertia = self.physical(head, links, *merged)
             name = self.unique(sanitize(head))
             body_of[head] = name
             base, point = self.base[head], self.point[head]
@@ -323,6 +378,78 @@ class _Builder:
                                                                    inertia[i][j])
             self.model.add_body(name, mass=mass, G=point, base=base, inertia=inertia)
         return body_of
+
+    def physical(self, head: str, links: list, mass: float, com: np.ndarray,
+                 inertia: np.ndarray) -> tuple:
+        """The merged body of group ``head``, checked as a rigid body, with the bounds
+        and the ``inertia`` option applied (each change recorded in ``self.changes``)."""
+        link = self.robot.links[head]
+        where = next((x for x in links if x.inertial is not None), link)
+        line = where.inertial.inertia_line if where.inertial is not None else where.line
+        key = f"link[{where.name}].inertial"
+        merged = [x.name for x in links if x.inertial is not None]
+        what = f"link '{head}'" + (f" (merged with the links welded to it: "
+                                   f"{', '.join(n for n in merged if n != head)})"
+                                   if len(merged) > 1 or merged[:1] not in ([], [head]) else "")
+        if not (math.isfinite(mass) and np.all(np.isfinite(com))
+                and np.all(np.isfinite(inertia))):
+            raise ModelError(f"the mass, centre of mass or inertia of {what} is too large "
+                             "for a double (inf or NaN after merging the welded links)",
+                             file=self.robot.file, line=line, key=key,
+                             fix="give masses in kg, lengths in m and inertias in kg m^2 of a "
+                                 "real robot (mass x length^2 must stay below 1e308)")
+        options = self.options
+        moments, axes, scale = _principal(inertia)
+        if options.min_mass > mass:
+            self.changes.append(f"mass of {what} raised from {mass:.6g} to the minimum "
+                                f"{options.min_mass:.6g} (min_mass)")
+            mass = options.min_mass
+        if options.min_inertia > 0 and np.any(moments * scale < options.min_inertia):
+            raised = np.maximum(moments * scale, options.min_inertia)
+            self.changes.append(f"principal moments of {what} raised from "
+                                f"{_shown(moments * scale)} to {_shown(raised)} (min_inertia)")
+            inertia = _rotated(axes, np.diag(raised))
+            moments, axes, scale = _principal(inertia)
+        # rounding noise relative to the body's own scale: its trace and its mass times
+        # the squared distance of its centre of mass from the joint
+        size = float(np.sum(np.maximum(moments, 0)))
+        if mass > 0 and np.any(com != 0):
+            # mass |com|^2 / scale in logarithms: neither the square nor the quotient
+            # may overflow or underflow on the way
+            log = math.log(mass) + 2 * math.log(math.hypot(*com)) - math.log(scale) \
+                if scale > 0 else math.inf
+            size += math.exp(log) if log < 700 else math.inf
+        tol = 64 * np.finfo(float).eps * size
+        negative = max(0.0, -moments[0])
+        triangle = max(0.0, moments[2] - moments[0] - moments[1])
+        if negative <= tol and triangle <= tol:
+            return mass, com, inertia
+        shown = _shown(moments * scale)
+        off = (f"{negative * scale:.3g} kg m^2 below zero" if negative > tol else
+               f"{triangle * scale:.3g} kg m^2 past the triangle inequality")
+        relative = max(negative, triangle) / max(float(np.sum(np.abs(moments))), 1e-300)
+        if options.inertia == "as_is":
+            self.changes.append(f"inertia of {what} is not that of a rigid body, kept as "
+                                f"the file gives it: principal moments {shown}, {off} "
+                                f"({relative:.2g} of its trace)")
+            return mass, com, inertia
+        if options.inertia == "balance" and negative <= tol:
+            # MuJoCo's balanceinertia: all three principal moments set to their mean
+            mean = float(np.sum(moments)) / 3 * scale
+            self.changes.append(f"inertia of {what} balanced: principal moments {shown} "
+                                f"({off}) set to their mean {mean:.6g} (balance)")
+            return mass, com, np.eye(3) * mean
+        problem = ("has a negative principal moment" if negative > tol else
+                   "violates the triangle inequality (each principal moment must be at "
+                   "most the sum of the other two)")
+        fix = ("give the inertia tensor about the centre of mass of a real body; or load "
+               "the file's values as Pinocchio does with inertia=\"as_is\" (command line: "
+               "--inertia as-is)")
+        if negative <= tol:
+            fix += (", or apply MuJoCo's balanceinertia rule (the three principal moments "
+                    "set to their mean) with inertia=\"balance\" (--inertia balance)")
+        raise ModelError(f"inertia of {what} {problem}: principal moments {shown}, {off}",
+                         file=self.robot.file, line=line, key=f"{key}.inertia", fix=fix)
 
     def parameter(self, wanted: str, value) -> sympy.Symbol:
         name = self.unique(wanted)
@@ -368,9 +495,43 @@ class _Builder:
             self.infos.append(JointInfo(joint.name, joint.type, coordinate, tau, joint.limit,
                                         joint.damping, joint.friction))
 
+    def check_motion(self) -> None:
+        """Refuse a robot that cannot move (fixed base, no joint) and a joint that moves
+        only massless links (A singular for every q); both fixes name the options."""
+        free = any(j.type == "floating" and not (self.fix_floating_root
+                                                  and j.parent == self.robot.root)
+                   for j in self.robot.order)
+        if not self.coordinate and not free and not self.floating_base:
+            root = self.robot.links[self.robot.root]
+            raise ModelError(f"robot '{self.robot.name}' has no moving joint: with a fixed "
+                             "base it has no coordinates", file=self.robot.file,
+                             line=root.line, key=f"link[{root.name}]",
+                             fix="a single body that flies (a quadrotor) needs a free root: "
+                                 "load it with floating_base=True (command line: "
+                                 "--floating-base)")
+        massive = {name: link.inertial is not None and (link.inertial.mass > 0
+                                                        or bool(link.inertial.inertia.any()))
+                   for name, link in self.robot.links.items()}
+        for joint in reversed(self.robot.order):      # children before their parents
+            massive[joint.parent] = massive[joint.parent] or massive[joint.child]
+        for joint in self.robot.order:
+            bounded = self.options.min_mass if joint.type == "prismatic" \
+                else self.options.min_inertia
+            if joint.type in _MOVING and not massive[joint.child] and not bounded > 0:
+                raise ModelError(
+                    f"joint '{joint.name}' moves only massless links (link '{joint.child}' "
+                    "and the links it carries have no mass and no inertia), so the mass "
+                    "matrix is singular for every configuration", file=self.robot.file,
+                    line=joint.line, key=f"joint[{joint.name}]",
+                    fix="give the links a mass and an inertia, or bound them from below as "
+                        "MuJoCo's boundmass and boundinertia do: min_mass=..., "
+                        "min_inertia=... (command line: --min-mass, --min-inertia), e.g. "
+                        "1e-6 kg and 1e-9 kg m^2")
+
     def build(self) -> UrdfImport:
         self.taken.update(("g",))
         self.coordinates()
+        self.check_motion()
         self.model.add_parameter("g", 9.81)
         if self.floating_base:
             self.free_joint("root_joint", CANONICAL_BASE, CANONICAL_POINT, self.robot.root,
@@ -380,11 +541,59 @@ class _Builder:
         body_of = self.bodies()
         self.inputs_and_effects(body_of)
         self.model.set_gravity([0, 0, -symbol("g")])
-        return UrdfImport(self.model, tuple(self.infos), self.robot.file, self.notes)
+        if self.changes:
+            # never silent: the changed or non-physical bodies, per link
+            warnings.warn(f"{Path(self.robot.file).name}: read with {self.options.text()}: "
+                          + "; ".join(self.changes), stacklevel=4)
+        return UrdfImport(self.model, tuple(self.infos), self.robot.file,
+                          self.notes + tuple(self.changes), self.options)
+
+
+def _shown(moments) -> str:
+    return "[" + ", ".join(f"{m:.6g}" for m in moments) + "]"
+
+
+def _principal(inertia: np.ndarray) -> tuple:
+    """(moments / scale, axes, scale): the principal moments in ascending order of the
+    inertia divided by a power of two near its largest entry (no overflow), and the
+    principal axes (columns)."""
+    largest = float(np.max(np.abs(inertia)))
+    if not largest > 0:
+        return np.zeros(3), np.eye(3), 0.0
+    scale = math.ldexp(1.0, math.frexp(largest)[1] - 1)
+    moments, axes = np.linalg.eigh(inertia / scale)
+    return moments, axes, scale
+
+
+def _rotated(r: np.ndarray, inertia: np.ndarray) -> np.ndarray:
+    """R I R^T, symmetric, scaled by a power of two near the largest entry first so
+    that no sum overflows (and the rounding is that of the unscaled product)."""
+    largest = float(np.max(np.abs(inertia)))
+    if not largest > 0:
+        return np.zeros((3, 3))
+    scale = math.ldexp(1.0, math.frexp(largest)[1] - 1)
+    out = r @ (inertia / scale) @ r.T
+    return (out / 2 + out.T / 2) * scale
+
+
+def _parallel_axis(m: float, d: np.ndarray) -> np.ndarray:
+    """m (|d|^2 1 - d d^T), with d scaled by its largest component (no overflow of the
+    squares unless the result itself is too large for a double)."""
+    length = float(np.max(np.abs(d)))
+    if not (length > 0 and m > 0):
+        return np.zeros((3, 3))
+    scale = math.ldexp(1.0, math.frexp(length)[1] - 1)
+    e = d / scale
+    return m * (e @ e * np.eye(3) - np.outer(e, e)) * scale * scale
 
 
 def _merge(links, placement) -> tuple:
-    """Total mass, centre of mass and inertia about it, in the group's frame (exact)."""
+    """Total mass, centre of mass and inertia about it, in the group's frame (exact).
+
+    Overflow-safe: masses are weighted by the largest one, vectors and tensors
+    scaled by their largest component; a sum that is too large for a double comes
+    out as inf, which the caller refuses.
+    """
     parts = []
     for link in links:
         if link.inertial is None or link.inertial.mass == 0 and not link.inertial.inertia.any():
@@ -392,31 +601,43 @@ def _merge(links, placement) -> tuple:
         r, p = placement[link.name]
         ri = r @ rpy_matrix(link.inertial.rpy)
         parts.append((link.inertial.mass, p + r @ np.array(link.inertial.xyz),
-                      ri @ link.inertial.inertia @ ri.T))
+                      _rotated(ri, link.inertial.inertia)))
     if not parts:
         return 0.0, np.zeros(3), np.zeros((3, 3))
     if len(parts) == 1:
-        mass, com, inertia = parts[0]
-        return mass, com, (inertia + inertia.T) / 2
-    mass = sum(m for m, _, _ in parts)
-    com = sum(m * c for m, c, _ in parts) / mass if mass > 0 else parts[0][1]
+        return parts[0]
+    heaviest = max(m for m, _, _ in parts)
+    if heaviest > 0:
+        scale = math.ldexp(1.0, math.frexp(heaviest)[1] - 1)
+        weights = [m / scale for m, _, _ in parts]
+        total = sum(weights)
+        com = sum(w * c for w, (_, c, _) in zip(weights, parts)) / total
+        mass = total * scale
+    else:
+        mass, com = 0.0, parts[0][1]
     inertia = np.zeros((3, 3))
     for m, c, i in parts:
-        d = c - com
-        inertia += i + m * (d @ d * np.eye(3) - np.outer(d, d))
-    return mass, com, (inertia + inertia.T) / 2
+        inertia = inertia + i + _parallel_axis(m, c - com)
+    return mass, com, inertia / 2 + inertia.T / 2
 
 
 def import_urdf_text(text, source: str = "<string>", *, fix_floating_root: bool = False,
-                     inertial_parameters: bool = False,
-                     floating_base: bool = False) -> UrdfImport:
-    """Import URDF text (str or bytes); see the module docstring."""
+                     inertial_parameters: bool = False, floating_base: bool = False,
+                     inertia: str = "physical", min_mass: float = 0.0,
+                     min_inertia: float = 0.0) -> UrdfImport:
+    """Import URDF text (str or bytes); see the module docstring.
+
+    ``inertia``, ``min_mass`` and ``min_inertia`` say how bodies that no rigid body
+    matches are read (the default refuses them; see "Inertias" in the module
+    docstring); every change they make is a warning and a note of the import.
+    """
+    options = reading_options(inertia, min_mass, min_inertia)
     robot = parse_robot(text, source, fix_floating_root=fix_floating_root)
     notes = tuple(f"The floating joint '{j.name}' at the root was imported as fixed."
                   for j in robot.order if j.type == "floating" and fix_floating_root
                   and j.parent == robot.root)
     return _Builder(robot, inertial_parameters, notes, floating_base,
-                    fix_floating_root).build()
+                    fix_floating_root, options).build()
 
 
 def import_urdf(path, **options) -> UrdfImport:
@@ -448,6 +669,9 @@ def urdf_to_yaml(imported: UrdfImport) -> str:
     """The model file of an import: a comment header (source, notes, joint limits), then YAML."""
     lines = [f"# Imported by 'modelgen import' from {Path(imported.source).name}.",
              "# Edit freely; re-importing overwrites this file."]
+    if imported.options.text():
+        lines.append(f"# Read with {imported.options.text()}: the values below are the "
+                     "adjusted ones (see the notes).")
     lines += [f"# Note: {note}" for note in imported.notes]
     limited = [j for j in imported.joints if j.limit is not None and j.coordinate]
     if limited:

@@ -27,7 +27,7 @@ import numpy as np
 from modelgen.errors import ModelError
 
 __all__ = ["JOINT_TYPES", "Inertial", "Link", "Limit", "Joint", "Robot", "parse_robot",
-           "rpy_matrix"]
+           "rpy_matrix", "unit_vector"]
 
 #: joint types the importer builds (``floating`` only as a fixed root, on request)
 JOINT_TYPES = ("revolute", "continuous", "prismatic", "fixed", "floating")
@@ -39,6 +39,7 @@ class Inertial(NamedTuple):
     rpy: tuple          # orientation of the inertia's frame in the link frame
     inertia: np.ndarray  # 3x3 about the centre of mass, in the inertia's frame
     line: int
+    inertia_line: int = 0   # the line of <inertia>
 
 
 class Link(NamedTuple):
@@ -83,6 +84,25 @@ class _Node(NamedTuple):
     attrib: dict
     line: int
     children: list
+
+
+def unit_vector(v) -> Optional[tuple]:
+    """``v`` divided by its length, or None for a zero vector.
+
+    Scaled by the largest component first, so that the squares cannot overflow
+    (1e308) or underflow (1e-200) and no direction is lost.
+
+    >>> [round(x, 12) for x in unit_vector((1e308, 1e308, 1e308))]
+    [0.57735026919, 0.57735026919, 0.57735026919]
+    >>> unit_vector((0.0, -0.0, 0.0)) is None
+    True
+    """
+    scale = max(abs(x) for x in v)
+    if not scale > 0:
+        return None
+    w = [x / scale for x in v]
+    norm = math.sqrt(sum(x * x for x in w))
+    return tuple(x / norm for x in w)
 
 
 def rpy_matrix(rpy) -> np.ndarray:
@@ -219,15 +239,10 @@ class _Reader:
              for a in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")}
         matrix = np.array([[v["ixx"], v["ixy"], v["ixz"]], [v["ixy"], v["iyy"], v["iyz"]],
                            [v["ixz"], v["iyz"], v["izz"]]])
-        moments = np.linalg.eigvalsh(matrix)
-        tol = 1e-9 * max(float(np.max(np.abs(moments))), 1e-300)
-        if moments[0] < -tol or moments[0] + moments[1] < moments[2] - tol:
-            shown = ", ".join(f"{m:.6g}" for m in moments)
-            raise self.error(f"inertia of link '{name}' is not positive (semi-)definite with "
-                             f"the triangle inequality: principal moments [{shown}]",
-                             inode.line, f"{key}.inertia",
-                             "give the inertia tensor about the centre of mass of a real body")
-        return Link(name, Inertial(mass, xyz, rpy, matrix, inertial.line), node.line)
+        # whether a rigid body can have this inertia is checked on the body it becomes
+        # part of, after the links welded to it are merged (see urdf.py)
+        return Link(name, Inertial(mass, xyz, rpy, matrix, inertial.line, inode.line),
+                    node.line)
 
     def joint(self, node: _Node, links: dict) -> Joint:
         name = self.name(node)
@@ -255,11 +270,10 @@ class _Reader:
         axis = (1.0, 0.0, 0.0)
         if kind in ("revolute", "continuous", "prismatic"):
             axis = self.numbers(axis_node, "xyz", f"{key}.axis", axis)
-            norm = math.sqrt(sum(a * a for a in axis))
-            if norm < 1e-12:
+            axis = unit_vector(axis)
+            if axis is None:
                 raise self.error("the joint axis is zero", (axis_node or node).line,
                                  f"{key}.axis", 'give a unit vector such as xyz="0 0 1"')
-            axis = tuple(a / norm for a in axis)
         lim = self.child(node, "limit")
         limit = None if lim is None else Limit(*(self.optional(lim, a, f"{key}.limit") for a in
                                                  ("lower", "upper", "velocity", "effort")))
@@ -284,6 +298,7 @@ class _Reader:
     def robot(self, data, fix_floating_root: bool) -> Robot:
         top = self.xml(data)
         robot_name = self.name(top)
+
         links: dict = {}
         for node in top.children:
             if node.tag == "link":

@@ -72,6 +72,8 @@ def spec_to_yaml(spec: ModelSpec) -> str:
     out = [f"name: {name(spec.name)}"]
     if spec.description:
         out.append(f"description: {name(spec.description)}")
+    if not spec.physical_inertia:
+        out.append("physical_inertia: false")
     if spec.simple_coordinates:
         out.append("coordinates: [" + ", ".join(name(c) for c in spec.simple_coordinates) + "]")
     if spec.parameters:

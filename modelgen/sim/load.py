@@ -25,8 +25,9 @@ if TYPE_CHECKING:
 def generate_model(source, out_dir=None, *, force: bool = False,
                    options: BuildOptions | None = None, progress=None,
                    jacobian: bool | None = None, formulation: str | None = None,
-                   linearize: bool | None = None,
-                   floating_base: bool | None = None) -> Generated:
+                   linearize: bool | None = None, floating_base: bool | None = None,
+                   inertia: str | None = None, min_mass: float | None = None,
+                   min_inertia: float | None = None) -> Generated:
     """Generate and compile a model (or reuse the cache); returns the report.
 
     ``options`` and the shorthand keywords are those of :func:`load`.
@@ -35,7 +36,8 @@ def generate_model(source, out_dir=None, *, force: bool = False,
     ``progress(stage)`` is called as each stage of a build starts.
     """
     options = BuildOptions.of(options, jacobian=jacobian, formulation=formulation,
-                              linearize=linearize, floating_base=floating_base)
+                              linearize=linearize, floating_base=floating_base,
+                              inertia=inertia, min_mass=min_mass, min_inertia=min_inertia)
     generated = _generate(source, out_dir, force, options, progress)
     _loaded(generated)
     index.record(_fast_key(source, options, out_dir), generated.build, _runtime())
@@ -55,7 +57,9 @@ def _loaded(generated: Generated) -> CompiledModel:
 
 def load(source, out_dir=None, *, force: bool = False, options: BuildOptions | None = None,
          progress=None, jacobian: bool | None = None, formulation: str | None = None,
-         linearize: bool | None = None, floating_base: bool | None = None) -> CompiledModel:
+         linearize: bool | None = None, floating_base: bool | None = None,
+         inertia: str | None = None, min_mass: float | None = None,
+         min_inertia: float | None = None) -> CompiledModel:
     """Build (on first use) and import a model; returns a :class:`CompiledModel`.
 
     ``source`` is a YAML path, a :class:`modelgen.model.Model` or a ModelSpec.
@@ -71,7 +75,9 @@ def load(source, out_dir=None, *, force: bool = False, options: BuildOptions | N
     With ``linearize=True`` the symbolic ``<name>_linearize`` is generated too, for
     :meth:`CompiledModel.linearize` and :meth:`CompiledModel.equilibrium`.
     ``floating_base=True`` (a URDF path) makes the robot's root link a free
-    body (a free joint ``root_joint``: position, unit quaternion, 6 speeds).
+    body (a free joint ``root_joint``: position, unit quaternion, 6 speeds);
+    ``inertia``, ``min_mass`` and ``min_inertia`` (a URDF path) read bodies that no
+    rigid body matches (see :func:`modelgen.model.urdf.import_urdf_text`).
 
     >>> cm = load("models/double_pendulum.yaml", jacobian=True)   # doctest: +SKIP
     >>> cm = load("models/double_pendulum.yaml",                  # doctest: +SKIP
@@ -79,7 +85,8 @@ def load(source, out_dir=None, *, force: bool = False, options: BuildOptions | N
     >>> cm.rhs(0.0, [0.1, 0.2, 0.0, 0.0])                    # doctest: +SKIP
     """
     options = BuildOptions.of(options, jacobian=jacobian, formulation=formulation,
-                              linearize=linearize, floating_base=floating_base)
+                              linearize=linearize, floating_base=floating_base,
+                              inertia=inertia, min_mass=min_mass, min_inertia=min_inertia)
     key = _fast_key(source, options, out_dir)
     hit = None if force else index.lookup(key)
     if hit is not None:
@@ -106,7 +113,7 @@ def _generate(source, out_dir, force: bool, options: BuildOptions, progress) -> 
     # second of imports) are needed only when the fast index has no build
     from modelgen.codegen.pipeline import generate
     from modelgen.model import as_spec
-    return generate(as_spec(source, floating_base=options.floating_base), out_dir,
+    return generate(as_spec(source, **options.reading()), out_dir,
                     force=force, options=options, progress=progress)
 
 
