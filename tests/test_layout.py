@@ -146,3 +146,43 @@ def test_the_import_reader_resolves_each_form(tmp_path, monkeypatch, source, exp
     monkeypatch.setitem(MODULES, "modelgen.model.probe", fake)
     assert [t for t, _, _ in _imports("modelgen.model.probe")] == [expected]
     assert _stage(expected) > _stage("modelgen.model.probe")
+
+
+#: The size limits a reader can hold in mind (issue 22): a module fits in one
+#: sitting, a function on a screen or two.
+MAX_MODULE_LINES = 800
+MAX_FUNCTION_LINES = 120
+
+
+def test_modules_and_functions_stay_readable():
+    wrong = []
+    for module, path in MODULES.items():
+        text = path.read_text()
+        lines = len(text.splitlines())
+        if lines > MAX_MODULE_LINES:
+            wrong.append(f"{path.relative_to(PACKAGE.parent)}: {lines} lines "
+                         f"(split it by job; at most {MAX_MODULE_LINES})")
+        for node in ast.walk(ast.parse(text, str(path))):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                length = node.end_lineno - node.lineno + 1
+                if length > MAX_FUNCTION_LINES:
+                    wrong.append(f"{path.relative_to(PACKAGE.parent)}:{node.lineno}: "
+                                 f"{node.name} has {length} lines (at most "
+                                 f"{MAX_FUNCTION_LINES}: name its parts)")
+    assert not wrong, "\n".join(wrong)
+
+
+def _subpackages():
+    return sorted(p.parent for p in PACKAGE.rglob("__init__.py") if p.parent != PACKAGE)
+
+
+@pytest.mark.parametrize("package", _subpackages(), ids=lambda p: p.name)
+def test_every_subpackage_readme_lists_its_modules(package):
+    """A newcomer finds each module's job in its subpackage's README."""
+    readme = package / "README.md"
+    assert readme.is_file(), f"{package.relative_to(PACKAGE.parent)}: add a README.md"
+    text = readme.read_text()
+    missing = [p.name for p in sorted(package.glob("*.py"))
+               if p.name != "__init__.py" and f"`{p.name}`" not in text]
+    assert not missing, (f"{readme.relative_to(PACKAGE.parent)} does not name "
+                         f"{', '.join(missing)}: add a row `module.py` | its job")

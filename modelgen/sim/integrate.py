@@ -27,22 +27,23 @@ its); :func:`c_constants` reads the same constants back from a compiled model.
 from __future__ import annotations
 
 import concurrent.futures
-import functools
-import numbers
 import signal
 import threading
 import warnings
 
 import numpy as np
 
-from modelgen.codegen.capi import (ALIASES, LIMITS, MAX_EVENTS, METHODS, STAT_NAMES, STATUS,
-                                   STATUS_BY_NAME, STOP_X, Method, define_values, work_size)
-from modelgen.errors import (ArgumentTypeError, ArgumentValueError, MassMatrixError,
-                             SimulationError)
+from modelgen.codegen.capi import (ALIASES, METHODS, STAT_NAMES, STATUS, STATUS_BY_NAME, STOP_X,
+                                   Method, define_values, work_size)
+from modelgen.errors import MassMatrixError, SimulationError
+from modelgen.sim.arguments import (LONG, MIN_ATOL, MIN_RTOL, Inputs, c_options,
+                                     check_step_count, crossing_direction, event_functions,
+                                     method_of, run_options, sample_times, span,
+                                     terminal_count)
 from modelgen.sim.conditioning import condition_number, failure_kind, growth_note
 from modelgen.sim.result import Result, make_result
 
-__all__ = ["METHODS", "ALIASES", "STATUS", "Method", "method_of",
+__all__ = ["METHODS", "ALIASES", "STATUS", "Method", "method_of", "MIN_RTOL", "MIN_ATOL",
            "status_message", "jacobian", "jacobian_source", "simulate", "simulate_batch",
            "c_constants"]
 
@@ -55,32 +56,6 @@ INPUT_ERROR = STATUS_BY_NAME["INPUT_ERROR"].code
 #: the step budget of a run when max_steps is not given (fixed-step runs get at
 #: least the steps they need)
 DEFAULT_MAX_STEPS = 100_000
-#: numpy's C long (the counters of the C API)
-_LONG = np.dtype("l")
-#: fixed step counts from here on do not fit the C integrator's counter (a C long)
-_MAX_FIXED_STEPS = float(np.iinfo(_LONG).max)
-#: the smallest rtol of an adaptive run; a smaller one is raised to it with a warning,
-#: as solve_ivp does with its 100 eps.  Hairer's DOP853 and RODAS, which these
-#: integrators follow, refuse rtol <= 10 uround: below it the error estimate is
-#: rounding noise and the step size collapses
-MIN_RTOL = 10.0 * np.finfo(float).eps
-#: the smallest atol of an adaptive run (0 included), raised to it with a warning: the
-#: error norm and the initial step square ratios value / (atol + rtol |x|), which
-#: overflow past 1e154 (an infinite error norm, reported as a non-finite state) or
-#: are 0 / 0 for a component that stays at zero with atol = 0; from 1e-100 on,
-#: states and derivatives up to 1e50 stay representable
-MIN_ATOL = 1e-100
-#: the largest event count the C takes (an int)
-_MAX_COUNT = int(np.iinfo(np.intc).max)
-
-
-def method_of(name: str) -> Method:
-    """The :class:`Method` called ``name`` (or an alias); a clear error otherwise."""
-    key = ALIASES.get(str(name).lower(), str(name).lower())
-    if key not in METHODS:
-        raise SimulationError(f"unknown method {name!r}; methods are "
-                              f"{', '.join(METHODS)} (aliases {', '.join(ALIASES)})")
-    return METHODS[key]
 
 
 def status_message(status: int, **context) -> str:
@@ -142,250 +117,6 @@ def _check_quaternions(cm, X, what: str) -> None:
                                   "and the others 0 for no rotation (it is normalised)")
 
 
-def _checked(check):
-    """Make an argument check raise only SimulationError: the TypeError, ValueError
-    or OverflowError of a nonsensical argument (a string, a ragged list, a complex
-    number, 1e400 as an integer) becomes one naming the check's arguments."""
-    @functools.wraps(check)
-    def wrapper(*args, **kwargs):
-        try:
-            return check(*args, **kwargs)
-        except SimulationError:         # already clear (ArgumentTypeError is a TypeError)
-            raise
-        except (TypeError, ValueError, OverflowError) as exc:
-            raise SimulationError(f"invalid argument to simulate ({check.__name__.strip('_')}): "
-                                  f"{type(exc).__name__}: {exc}") from None
-    return wrapper
-
-
-@_checked
-def _tolerance(value, nx, what):
-    a = np.array(np.broadcast_to(np.asarray(value, dtype=float), (nx,)))
-    if not np.all(np.isfinite(a)) or np.any(a < 0):
-        raise SimulationError(f"{what} must be finite and >= 0, got {value!r}")
-    return a
-
-
-def _span(t_span):
-    """``(t0, t1, sign)``: the span as floats and its direction (``sign`` -1 when
-    t1 < t0: the run goes backwards in time, integrated forward in s = -t)."""
-    try:
-        t0, t1 = (float(v) for v in t_span)
-    except (TypeError, ValueError) as exc:
-        raise SimulationError(f"t_span must be (t0, t1), got {t_span!r}") from exc
-    if not (np.isfinite(t0) and np.isfinite(t1)):
-        raise SimulationError(f"t_span must be finite, got {t_span!r}")
-    if t1 == t0:
-        raise SimulationError(f"t_span must not be empty, got {t_span!r}")
-    return t0, t1, (-1.0 if t1 < t0 else 1.0)
-
-
-@_checked
-def _times(t_eval, t0, t1, sign=1.0):
-    """``t_eval`` checked against the span (t0, t1) and mapped to s = sign * t, where
-    it must increase."""
-    t_eval = np.ascontiguousarray(t_eval, dtype=float)
-    if t_eval.ndim != 1 or t_eval.size == 0:
-        raise SimulationError("t_eval must be a non-empty 1-D array")
-    if np.any(sign * np.diff(t_eval) < 0):
-        raise SimulationError("t_eval must be sorted in " + (
-            "increasing order" if sign > 0 else "decreasing order (t_span runs backwards)"))
-    lo, hi = min(t0, t1), max(t0, t1)
-    if t_eval.min() < lo or t_eval.max() > hi or not np.all(np.isfinite(t_eval)):
-        raise SimulationError(f"t_eval must lie within t_span ({t0!r}, {t1!r})")
-    return np.ascontiguousarray(sign * t_eval)
-
-
-def _whole(value, what: str) -> int:
-    """``value`` as an int: an integer, or a float with an integral value (``1e6``);
-    never truncated (``2.5`` is an error, not 2)."""
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
-        raise ArgumentTypeError(f"{what} must be an integer, got {value!r}")
-    if not isinstance(value, numbers.Integral) and not float(value).is_integer():
-        raise ArgumentValueError(f"{what} must be a whole number, got {value!r}")
-    return int(value)
-
-
-def _floor(tol, least: float, name: str, stacklevel: int):
-    """``tol`` with every value below ``least`` raised to it, with a warning (as
-    solve_ivp raises rtol below 100 eps)."""
-    if np.all(tol >= least):
-        return tol
-    warnings.warn(f"{name} below {least:.3g} is raised to {least:.3g} "
-                  f"(the integrators cannot control errors below it)", RuntimeWarning,
-                  stacklevel=stacklevel + 1)
-    return np.maximum(tol, least)
-
-
-@_checked
-def _options(cm, method, rtol, atol, step, first_step, max_step, max_steps, stacklevel=2):
-    m = method_of(method)
-    nx = cm.nx
-    if step is None:
-        if not m.adaptive:
-            raise SimulationError(f"method {m.name!r} has a fixed step: give step=")
-        fixed = 0.0
-    else:
-        fixed = float(step)
-        if not (np.isfinite(fixed) and fixed > 0):
-            raise SimulationError(f"step must be positive, got {step!r}")
-    rtol, atol = _tolerance(rtol, nx, "rtol"), _tolerance(atol, nx, "atol")
-    if step is None and np.any(rtol + atol == 0):
-        raise SimulationError("rtol and atol must not both be zero")
-    if step is None:
-        # ``stacklevel`` is the caller's (its frame 1); this check and its _checked
-        # wrapper come between
-        rtol = _floor(rtol, MIN_RTOL, "rtol", stacklevel + 2)
-        atol = _floor(atol, MIN_ATOL, "atol", stacklevel + 2)
-    first = 0.0 if first_step is None else float(first_step)
-    hmax = 0.0 if max_step is None or max_step == np.inf else float(max_step)
-    if not (np.isfinite(first) and first >= 0 and np.isfinite(hmax) and hmax >= 0):
-        raise SimulationError("first_step and max_step must be positive")
-    max_steps = min(_whole(max_steps, "max_steps"), int(np.iinfo(_LONG).max))
-    if max_steps < 1:
-        raise SimulationError(f"max_steps must be >= 1, got {max_steps}")
-    return m, rtol, atol, fixed, first, hmax, max_steps
-
-
-class _Inputs:
-    """The ``mg_inputs`` struct of one call, and what its pointers point to.
-
-    ``u`` is None (zeros), a constant vector, dict or (one input) number,
-    samples ``(times, values, "linear" | "hold")``, or a callable ``u(t, x)``
-    called from the C through a cffi callback (feedback; works with every
-    method) that returns any constant form but None.  An exception in the
-    callable stops the integration with status INPUT_ERROR and is kept in
-    ``errors``; :func:`simulate` re-raises it.
-    """
-
-    def __init__(self, cm, u, sign=1.0):
-        ffi = cm.ffi
-        self.struct = ffi.new("mg_inputs *")
-        self.errors = []
-        self._keep = []
-        if callable(u):
-            nu, nx = len(cm.inputs), cm.nx
-
-            def call(ctx, t, x_ptr, u_ptr):
-                x = np.frombuffer(ffi.buffer(x_ptr, 8 * nx), dtype=float).copy()
-                got = u(sign * t, x)
-                if got is None:         # input_vector's "zeros": here a forgotten return
-                    raise ArgumentTypeError(
-                        f"{cm.name}: the feedback u(t, x) returned None at t={sign * t!r}; "
-                        f"it must return the inputs ({', '.join(cm.inputs) or 'none'}) as a "
-                        "sequence or a dict by name" + (", or a number" if nu == 1 else ""))
-                value = cm.input_vector(got)
-                for k in range(nu):
-                    u_ptr[k] = value[k]
-                return 0
-
-            def on_error(exc_type, exc_value, tb):
-                self.errors.append(exc_value)
-                return 1
-            callback = ffi.callback("int(void *, double, const double *, double *)", call,
-                                    onerror=on_error)
-            self._keep.append(callback)
-            self.struct.callback = callback
-            return
-        times, values, hold = cm._input_samples(u)
-        if sign < 0 and len(times):
-            # the samples in s = -t: reversed; a held value covers the interval to the
-            # *left* of its sample in s, so each takes its successor's value
-            times = np.ascontiguousarray(-times[::-1])
-            rows = values.reshape(len(times), -1)[::-1]
-            if hold:
-                rows = np.concatenate([rows[1:], rows[-1:]])
-            values = np.ascontiguousarray(rows).reshape(values.shape)
-        self._keep += [times, values]
-        self.struct.n = len(times)
-        self.struct.times = ffi.from_buffer("double[]", times)
-        self.struct.values = ffi.from_buffer("double[]", values)
-        self.struct.hold = LIMITS["INPUT_HOLD" if hold else "INPUT_LINEAR"][0]
-
-    def error(self):
-        """The first exception the callable raised, or None."""
-        return self.errors[0] if self.errors else None
-
-
-def _events(events):
-    """The event functions as a list: ``events`` is None, a callable ``g(t, x)`` or
-    a sequence of them."""
-    if events is None:
-        return []
-    if callable(events):
-        events = [events]
-    what = "events must be a callable g(t, x) or a sequence of callables"
-    if isinstance(events, (str, bytes, dict)):
-        raise ArgumentTypeError(f"{what}, got {events!r}")
-    try:
-        events = list(events)
-    except TypeError:
-        raise ArgumentTypeError(f"{what}, got {events!r}") from None
-    if len(events) > MAX_EVENTS:
-        raise SimulationError(f"at most {MAX_EVENTS} event functions, got {len(events)}")
-    for i, ev in enumerate(events):
-        if not callable(ev):
-            raise ArgumentTypeError(f"{what}; events[{i}] is {ev!r}")
-    return events
-
-
-def _event_name(ev, i: int) -> str:
-    return f"event {i} ({getattr(ev, '__name__', type(ev).__name__)})"
-
-
-def _terminal(ev, i: int) -> int:
-    """The event's ``terminal`` as solve_ivp reads it: False, None or 0 never stop;
-    True stops at the first occurrence, a whole number k >= 1 at the k-th."""
-    value = getattr(ev, "terminal", False)
-    if value is None or isinstance(value, (bool, np.bool_)):
-        return int(bool(value))
-    what = (f"{_event_name(ev, i)}: terminal must be a bool or a positive int count of "
-            f"occurrences, got {value!r}")
-    if not isinstance(value, numbers.Real):
-        raise ArgumentTypeError(what)
-    if not (float(value).is_integer() and 0 <= value <= _MAX_COUNT):
-        raise ArgumentValueError(what)
-    return int(value)
-
-
-def _direction(ev, i: int) -> int:
-    """The sign of the event's ``direction``, as solve_ivp uses it: > 0 rising zeros
-    only, < 0 falling ones, 0 (or None, or no attribute) both."""
-    value = getattr(ev, "direction", 0)
-    if value is None:
-        return 0
-    what = (f"{_event_name(ev, i)}: direction must be a real number (its sign selects the "
-            f"crossings: > 0 rising, < 0 falling, 0 both), got {value!r}")
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
-        raise ArgumentTypeError(what)
-    if np.isnan(value):
-        raise ArgumentValueError(what)
-    return 1 if value > 0 else (-1 if value < 0 else 0)
-
-
-# -- simulate ------------------------------------------------------------------------
-
-def _check_step_count(fixed, t0, t1):
-    """Refuse a fixed step so small that its step count overflows the C counter."""
-    if fixed > 0 and not (t1 - t0) / fixed < _MAX_FIXED_STEPS:
-        raise SimulationError(
-            f"step={fixed!r} over t_span ({t0!r}, {t1!r}) needs {(t1 - t0) / fixed:.3g} steps, "
-            f"more than the C integrator can count; give a larger step")
-
-
-def _c_options(cm, m, rtol, atol, fixed, first, hmax, max_steps):
-    """The ``mg_options`` struct (events and resume are set by the caller)."""
-    opt = cm.ffi.new("mg_options *")
-    opt.method = m.code
-    opt.rtol = cm._ptr(rtol)
-    opt.atol = cm._ptr(atol)
-    opt.first_step = first
-    opt.max_step = hmax
-    opt.fixed_step = fixed
-    opt.max_steps = max_steps
-    return opt
-
-
 def c_constants(cm) -> dict:
     """The constants of ``mg_integrate.h`` as compiled into ``cm``'s module, by name
     (``MG_METHOD_DOP853``, ``MG_STATUS_MAX_STEPS``...); equal to
@@ -437,14 +168,14 @@ def simulate(cm, x0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10
     >>> res = simulate(cm, [np.pi / 2, 0.0], (0.0, 3.0), rtol=1e-10, events=g)  # doctest: +SKIP
     >>> res.t_events[0], res.y.shape, res.message                             # doctest: +SKIP
     """
-    ffi, nx = cm.ffi, cm.nx
-    m, rtol, atol, fixed, first, hmax, budget = _options(
+    ffi = cm.ffi
+    m, rtol, atol, fixed, first, hmax, budget = run_options(
         cm, method, rtol, atol, step, first_step, max_step,
         DEFAULT_MAX_STEPS if max_steps is None else max_steps, stacklevel=4)
-    t0, t1, sign = _span(t_span)
-    times = None if t_eval is None else _times(t_eval, t0, t1, sign)
+    t0, t1, sign = span(t_span)
+    times = None if t_eval is None else sample_times(t_eval, t0, t1, sign)
     t0, t1 = sign * t0, sign * t1          # from here on s = sign * t, increasing
-    _check_step_count(fixed, t0, t1)
+    check_step_count(fixed, t0, t1)
     if max_steps is None and fixed > 0:      # a fixed-step run's step count is known
         budget = max(budget, int(np.ceil((t1 - t0) / fixed)) + 2)
     max_steps = budget
@@ -453,37 +184,18 @@ def simulate(cm, x0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10
         raise SimulationError(f"{cm.name}: x0 must be finite")
     _check_quaternions(cm, x[None, :], "x0")
     x_start = x.copy()
-    inputs = _Inputs(cm, u, sign)
+    inputs = Inputs(cm, u, sign)
     p_vec = cm.params(p).copy()
-    events = _events(events)
-    n_ev = len(events)
-    terminal = np.array([_terminal(ev, i) for i, ev in enumerate(events)] or [0],
+    events = event_functions(events)
+    terminal = np.array([terminal_count(ev, i) for i, ev in enumerate(events)] or [0],
                         dtype=np.intc)
-    direction = np.array([_direction(ev, i) for i, ev in enumerate(events)] or [0],
+    direction = np.array([crossing_direction(ev, i) for i, ev in enumerate(events)] or [0],
                          dtype=np.intc)
 
     errors = []
-    opt = _c_options(cm, m, rtol, atol, fixed, first, hmax, max_steps)
-    if n_ev:
-        def call_events(ctx, t, x_ptr, g_ptr):
-            xs = np.frombuffer(ffi.buffer(x_ptr, 8 * nx), dtype=float).copy()
-            for i, ev in enumerate(events):
-                value = float(ev(sign * t, xs))
-                if not np.isfinite(value):   # a NaN never changes sign: it would never fire
-                    raise ValueError(f"event function {i} ({getattr(ev, '__name__', ev)!s}) "
-                                     f"returned {value!r}")
-                g_ptr[i] = value
-            return 0
-
-        def on_error(exc_type, exc_value, tb):
-            errors.append(exc_value)
-            return 1
-        callback = ffi.callback("int(void *, double, const double *, double *)",
-                                call_events, onerror=on_error)
-        opt.n_events = n_ev
-        opt.events = callback
-        opt.direction = ffi.from_buffer("int[]", direction)
-        opt.terminal = ffi.from_buffer("int[]", terminal)
+    opt = c_options(cm, m, rtol, atol, fixed, first, hmax, max_steps)
+    # the callback must outlive the C calls that use it
+    callback = _event_callback(cm, opt, events, sign, terminal, direction, errors)  # noqa: F841
     if interrupt is not None:
         if not (isinstance(interrupt, np.ndarray) and interrupt.dtype == np.intc
                 and interrupt.size == 1 and interrupt.flags.writeable):
@@ -493,24 +205,74 @@ def simulate(cm, x0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10
     reached = np.array([t0])                  # the C writes the time reached here
     opt.progress = ffi.from_buffer("double[]", reached)
     poll = None if progress is None else (lambda: progress(sign * float(reached[0])))
+    ny = len(cm.output_columns) if outputs else 0
+    run = _drive(cm, opt, inputs, flag, poll, sign, t0, t1, x, p_vec, times, terminal,
+                 max_steps, chunk, ny)
+    return _finish(cm, m, run, errors, inputs, sign, p_vec, x_start, max_steps, t_span, ny,
+                   len(events))
 
+
+def _event_callback(cm, opt, events, sign, terminal, direction, errors):
+    """Point ``opt`` at the events: a cffi callback that evaluates every ``g(t, x)``
+    (returned: it must live as long as the C call); exceptions go to ``errors``."""
+    if not events:
+        return None
+    ffi, nx = cm.ffi, cm.nx
+
+    def call_events(ctx, t, x_ptr, g_ptr):
+        xs = np.frombuffer(ffi.buffer(x_ptr, 8 * nx), dtype=float).copy()
+        for i, ev in enumerate(events):
+            value = float(ev(sign * t, xs))
+            if not np.isfinite(value):   # a NaN never changes sign: it would never fire
+                raise ValueError(f"event function {i} ({getattr(ev, '__name__', ev)!s}) "
+                                 f"returned {value!r}")
+            g_ptr[i] = value
+        return 0
+
+    def on_error(exc_type, exc_value, tb):
+        errors.append(exc_value)
+        return 1
+    callback = ffi.callback("int(void *, double, const double *, double *)",
+                            call_events, onerror=on_error)
+    opt.n_events = len(events)
+    opt.events = callback
+    opt.direction = ffi.from_buffer("int[]", direction)
+    opt.terminal = ffi.from_buffer("int[]", terminal)
+    return callback
+
+
+class _Run:
+    """What the C calls of one run produced: the rows and events of every call, the
+    summed statistics, the last status and the stop array."""
+
+    def __init__(self):
+        self.t, self.x, self.y, self.ev_t, self.ev_x, self.ev_i = [], [], [], [], [], []
+        self.stats = dict.fromkeys(STAT_NAMES, 0)
+        self.status = 0
+        self.stop = None
+
+
+def _drive(cm, opt, inputs, flag, poll, sign, t0, t1, x, p_vec, times, terminal,
+           max_steps, chunk, ny) -> _Run:
+    """Call the C integrator until it stops for another reason than full arrays.
+
+    It returns BUFFER_FULL when the rows (every step recorded) or the events found
+    fill their arrays, and is then continued from ``stop`` exactly where it stopped
+    (step size, controller memory, grid)."""
+    ffi, nx, ptr = cm.ffi, cm.nx, cm._ptr
+    n_ev = int(opt.n_events)
     fn = cm.lib.integrate_function(cm.name, backward=sign < 0)
-    ptr = cm._ptr
     work = np.empty(work_size(nx, len(cm.inputs), n_ev))
     stats = ffi.new("mg_stats *")
-    stats_total = dict.fromkeys(STAT_NAMES, 0)
-    stop = np.zeros(STOP_X + nx)
+    run = _Run()
+    run.stop = np.zeros(STOP_X + nx)
     out = ffi.new("mg_output *")
-    out.stop = ptr(stop)
+    out.stop = ptr(run.stop)
     resume = None
-    t_parts, x_parts, y_parts, ev_t, ev_x, ev_i = [], [], [], [], [], []
-    ny = len(cm.output_columns) if outputs else 0
     capacity, ev_capacity = int(max(chunk, 2)), 64 * max(n_ev, 1)
     remaining = times
     steps_left = max_steps
     while True:
-        # one C call; it returns BUFFER_FULL when the rows (every step recorded) or
-        # the events found fill their arrays, and is then continued from `stop`
         if times is None:
             rows_max, t_eval_arg = capacity, None
         else:
@@ -528,38 +290,43 @@ def simulate(cm, x0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10
         out.which_events = ffi.from_buffer("int[]", which)
         opt.max_steps = steps_left
         opt.resume = ffi.NULL if resume is None else ptr(resume)
-        status = _interruptible(fn, (t0, t1, ptr(x), ptr(p_vec), inputs.struct, opt, out, stats,
-                                     ptr(work)), flag, poll)
+        run.status = _interruptible(fn, (t0, t1, ptr(x), ptr(p_vec), inputs.struct, opt, out,
+                                         stats, ptr(work)), flag, poll)
         if poll is not None:
             poll()
         rows, k = out.n, out.n_events
-        skip = 1 if (times is None and t_parts) else 0   # a continuation repeats its start
-        t_parts.append(t_out[skip:rows].copy())
-        x_parts.append(x_out[skip:rows].copy())
-        y_parts.append(y_out[skip:rows, :ny].copy())
-        ev_t.append(t_found[:k].copy())
-        ev_x.append(x_found[:k].copy())
-        ev_i.append(which[:k].copy())
+        skip = 1 if (times is None and run.t) else 0   # a continuation repeats its start
+        run.t.append(t_out[skip:rows].copy())
+        run.x.append(x_out[skip:rows].copy())
+        run.y.append(y_out[skip:rows, :ny].copy())
+        run.ev_t.append(t_found[:k].copy())
+        run.ev_x.append(x_found[:k].copy())
+        run.ev_i.append(which[:k].copy())
         for name in STAT_NAMES:
             if name != "pivot":
-                stats_total[name] += getattr(stats, name)
-        stats_total["pivot"] = stats.pivot or stats_total["pivot"]
-        if status != BUFFER_FULL:
-            break
-        # continue exactly where the C stopped (step size, controller memory, grid)
-        resume = stop.copy()
-        t0, x = float(stop[0]), stop[STOP_X:].copy()
-        steps_left = max(max_steps - int(stats_total["naccept"] + stats_total["nreject"]), 0)
+                run.stats[name] += getattr(stats, name)
+        run.stats["pivot"] = stats.pivot or run.stats["pivot"]
+        if run.status != BUFFER_FULL:
+            return run
+        resume = run.stop.copy()
+        t0, x = float(run.stop[0]), run.stop[STOP_X:].copy()
+        steps_left = max(max_steps - int(run.stats["naccept"] + run.stats["nreject"]), 0)
         if times is not None:
             remaining = remaining[rows:]
         else:
             capacity = min(capacity * 2, 1 << 16)
         for i in range(n_ev):
             if terminal[i]:
-                terminal[i] -= int(np.count_nonzero(ev_i[-1] == i))
+                terminal[i] -= int(np.count_nonzero(run.ev_i[-1] == i))
         ev_capacity = min(ev_capacity * 2, 1 << 16)
 
-    pivot = int(stats_total["pivot"])
+
+def _finish(cm, m, run: _Run, errors, inputs, sign, p_vec, x_start, max_steps, t_span,
+            ny, n_ev) -> Result:
+    """The :class:`Result` of a run: its rows, events, statistics and the message of
+    its status; a feedback's exception is re-raised with the result attached."""
+    nx, stop, status = cm.nx, run.stop, run.status
+    pivot = int(run.stats["pivot"])
     failure = errors[0] if errors else inputs.error()
     if isinstance(failure, KeyboardInterrupt) and status == INPUT_ERROR:
         # Ctrl-C raised inside u(t, x) (a plain call: no worker thread took the
@@ -571,27 +338,27 @@ def simulate(cm, x0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10
         x=_vector_text(stop[STOP_X:]), pivot=pivot,
         coordinate=cm.dof_names[pivot - 1] if 0 < pivot <= cm.n else "?", max_steps=max_steps,
         kind=_mass_matrix_kind(cm, status, pivot, p_vec, x_start,
-                               stats_total["naccept"] == 0))
+                               run.stats["naccept"] == 0))
     if failure is not None:
         message = f"{message.rstrip('.')}: {type(failure).__name__}: {failure}."
     if status < 0:
         message += _conditioning_note(cm, p_vec, x_start, stop[STOP_X:])
     if status == MAX_STEPS:
         message += _max_steps_note(max_steps, t_span, t_reached)
-        warnings.warn(f"{cm.name}: {message}", RuntimeWarning, stacklevel=4)
-    et, ex, ei = (np.concatenate(ev_t), np.concatenate(ev_x).reshape(-1, nx),
-                  np.concatenate(ev_i))
+        warnings.warn(f"{cm.name}: {message}", RuntimeWarning, stacklevel=5)
+    et, ex, ei = (np.concatenate(run.ev_t), np.concatenate(run.ev_x).reshape(-1, nx),
+                  np.concatenate(run.ev_i))
     res = make_result(
-        t=sign * np.concatenate(t_parts), y=np.ascontiguousarray(np.concatenate(x_parts)
-                                                          .reshape(-1, nx).T),
+        t=sign * np.concatenate(run.t), y=np.ascontiguousarray(np.concatenate(run.x)
+                                                        .reshape(-1, nx).T),
         state_names=cm.state_names, n_coordinates=cm.nq, status=int(status), message=message,
         method=m.name,
         t_events=[sign * et[ei == i] for i in range(n_ev)] if n_ev else None,
         y_events=[ex[ei == i] for i in range(n_ev)] if n_ev else None,
         t_fail=t_fail if status < 0 else None,
-        **{name: int(stats_total[name]) for name in STAT_NAMES if name != "pivot"})
+        **{name: int(run.stats[name]) for name in STAT_NAMES if name != "pivot"})
     if ny:
-        y = np.concatenate(y_parts).reshape(-1, ny)
+        y = np.concatenate(run.y).reshape(-1, ny)
         res.outputs = {name: y[:, [cm.output_columns.index(c) for c in cols]]
                        for name, cols in cm.outputs.items()}
         res.output_columns = dict(cm.outputs)
@@ -727,9 +494,9 @@ def simulate_batch(cm, X0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol
     >>> res = simulate_batch(cm, X0, (0, 5), P={"m2": np.linspace(0.5, 2, len(X0))})  # doctest: +SKIP
     """
     nx = cm.nx
-    m, rtol, atol, fixed, first, hmax, max_steps = _options(
+    m, rtol, atol, fixed, first, hmax, max_steps = run_options(
         cm, method, rtol, atol, step, first_step, max_step, max_steps, stacklevel=3)
-    t0, t1, sign = _span(t_span)
+    t0, t1, sign = span(t_span)
     if isinstance(X0, (list, tuple)) and any(isinstance(row, dict) for row in X0):
         X0 = [cm.state_vector(row, f"X0[{r}]") for r, row in enumerate(X0)]
     X0 = np.ascontiguousarray(X0, dtype=float)
@@ -739,24 +506,24 @@ def simulate_batch(cm, X0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol
         raise SimulationError(f"{cm.name}: X0 must be finite")
     _check_quaternions(cm, X0, "X0")
     n_runs = X0.shape[0]
-    times = _times([t1] if t_eval is None else t_eval, t0, t1, sign)
+    times = sample_times([t1] if t_eval is None else t_eval, t0, t1, sign)
     t0, t1 = sign * t0, sign * t1          # from here on s = sign * t, increasing
-    inputs = _Inputs(cm, u, sign)
+    inputs = Inputs(cm, u, sign)
     P_rows, p_stride = _parameter_rows(cm, P, n_runs)
     threads = max(1, min(int(threads), max(n_runs, 1)))
 
-    _check_step_count(fixed, t0, t1)
+    check_step_count(fixed, t0, t1)
     n_t = len(times)
     x_out = np.full((n_runs, n_t, nx), np.nan)
     ny = len(cm.output_columns) if outputs else 0
     y_out = np.full((n_runs, n_t, max(ny, 1)), np.nan)
-    n_out = np.zeros(n_runs, dtype=_LONG)
+    n_out = np.zeros(n_runs, dtype=LONG)
     status = np.zeros(n_runs, dtype=np.intc)
     stats = cm.ffi.new("mg_stats[]", max(n_runs, 1))
     stop = np.zeros((n_runs, STOP_X + nx))
     fn = cm.lib.integrate_function(cm.name, batch=True, backward=sign < 0)
     ffi, ptr = cm.ffi, cm._ptr
-    opt = _c_options(cm, m, rtol, atol, fixed, first, hmax, max_steps)
+    opt = c_options(cm, m, rtol, atol, fixed, first, hmax, max_steps)
 
     def run(lo, hi):
         if hi <= lo:
@@ -796,7 +563,7 @@ def simulate_batch(cm, X0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol
         t=sign * times, y=np.ascontiguousarray(x_out.transpose(0, 2, 1)), state_names=cm.state_names,
         n_coordinates=cm.nq,
         status=status.astype(int), message=messages, method=m.name,
-        **{name: np.array([getattr(stats[r], name) for r in range(n_runs)], dtype=_LONG)
+        **{name: np.array([getattr(stats[r], name) for r in range(n_runs)], dtype=LONG)
            for name in STAT_NAMES if name != "pivot"})
     if ny:
         res.outputs = {name: y_out[:, :, [cm.output_columns.index(c) for c in cols]]
