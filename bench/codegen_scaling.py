@@ -71,7 +71,7 @@ Method
 
     * Pinocchio (``pin`` and ``cmeel-eigen`` from the package index, the
       ``bench`` extra).  The chain is built in C++ from the same definition
-      (:func:`modelgen.bench.hardcase_models.chain_pinocchio_cpp`) and a
+      (:func:`modelgen.bench.hard_case_models.chain_pinocchio_cpp`) and a
       harness compiled with ``-O3 -march=native`` against the wheels'
       headers times ``pinocchio::aba`` and the CRBA path
       (``crba`` + ``nonLinearEffects`` + Pinocchio's tree-sparse
@@ -714,8 +714,8 @@ def build_pinocchio_harness(work: Path, count: bool = False):
 
 def pinocchio_chain_file(n: int, params: dict, x0, path: Path) -> Path:
     """The input of the Pinocchio harness: ``spatial_chain(n)`` from its written
-    definition (:func:`modelgen.bench.hardcase_models.chain_links`) and the state x0."""
-    from modelgen.bench.hardcase_models import chain_links
+    definition (:func:`modelgen.bench.hard_case_models.chain_links`) and the state x0."""
+    from modelgen.bench.hard_case_models import chain_links
     links = [(i, axis, ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0)), (offset, 0.0, 0.0),
               m, (c, 0.0, 0.0), tuple(diag) + (0.0, 0.0, 0.0))
              for i, (offset, axis, m, c, diag) in enumerate(chain_links(n, params))]
@@ -832,8 +832,8 @@ def run_pinocchio_harness(exe: Path, chain_file: Path) -> tuple:
 
 def chain_mjcf(n: int, params: dict) -> str:
     """MJCF of ``spatial_chain(n)`` with the given parameter values (one definition,
-    in :func:`modelgen.bench.hardcase_models.chain_mjcf`)."""
-    from modelgen.bench.hardcase_models import chain_mjcf as mjcf
+    in :func:`modelgen.bench.hard_case_models.chain_mjcf`)."""
+    from modelgen.bench.hard_case_models import chain_mjcf as mjcf
     return mjcf(n, params)
 
 

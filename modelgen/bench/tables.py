@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from modelgen.bench.problem import Problem
-from modelgen.bench.sweep import Point
+from modelgen.bench.precision_sweep import Point
 
 CSV_COLUMNS = ("problem", "method", "family", "kind", "setting", "final_error", "l2_error",
                "seconds", "repeats", "nfev", "njev", "status", "resolved", "message")
