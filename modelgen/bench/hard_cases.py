@@ -25,6 +25,7 @@ from matplotlib.figure import Figure
 from scipy.linalg import expm
 
 from modelgen.bench import hard_case_models as hm
+from modelgen.bench.peers import chain_mjcf
 from modelgen.codegen.pipeline import default_output
 from modelgen.errors import DerivationError, ModelgenError
 from modelgen.model.api import parse_model
@@ -350,7 +351,7 @@ def chain_conditioning(ctx: Context) -> CaseResult:
         for n in ns:
             cm = load(spatial_chain(n), ctx.build_root / f"spatial_chain_{n}")
             xml = Path(tmp) / f"chain{n}.xml"
-            xml.write_text(hm.chain_mjcf(n, cm.parameters))
+            xml.write_text(chain_mjcf(n, cm.parameters))
             model = mujoco.MjModel.from_xml_path(str(xml))
             data = mujoco.MjData(model)
             worst, cond = 0.0, 0.0
