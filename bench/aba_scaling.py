@@ -14,7 +14,7 @@ Method
     * Each (model, formulation) is generated in a fresh subprocess with
       ``generate(spec, dir, force=True, formulation=...)``; *derive*, *cse*,
       *emit*, *compile* are modelgen's stage timers, *RSS* the child's peak
-      resident set (Python side) after generating.
+      resident set (Python side, its own VmHWM) after generating.
     * ops: modelgen's operation counts of the ``rhs`` routine
       (:func:`modelgen.codegen.cse.count_ops`: C operators as printed) before
       and after CSE, per coordinate; after CSE without the parameter-only
@@ -71,6 +71,16 @@ def model_spec(kind: str):
     return spatial_chain(int(kind)).spec()
 
 
+def peak_rss_mb() -> float:
+    """This process's own peak RSS in MB (VmHWM).  Not ru_maxrss: exec carries the
+    parent's peak into it, and the parent has imported modelgen.bench."""
+    status = Path("/proc/self/status")
+    if status.is_file():
+        return next(int(line.split()[1]) for line in status.read_text().splitlines()
+                    if line.startswith("VmHWM:")) / 1024
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+
+
 def child(kind: str, formulation: str, out_dir: str) -> None:
     """Generate one model with one formulation; print the figures as JSON."""
     from modelgen.codegen.pipeline import generate
@@ -78,7 +88,7 @@ def child(kind: str, formulation: str, out_dir: str) -> None:
     t0 = time.perf_counter()
     g = generate(spec, out_dir, force=True, formulation=formulation)
     wall = time.perf_counter() - t0
-    rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    rss = peak_rss_mb()
     print(MARK + json.dumps({"seconds": g.seconds, "wall": wall, "rss_mb": rss,
                              "ops": g.ops["rhs"], "n": spec.n}))
 

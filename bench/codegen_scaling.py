@@ -16,34 +16,30 @@ Model
     written for them by :mod:`modelgen.bench.peers` from modelgen's joint tree.
 
 Method
-    * Generation.  Every model is generated in a fresh subprocess (so memory is
-      measured per model) into a temporary directory, with ``modelgen.load(spec,
-      out_dir, force=True)``: derive, CSE, emit and compile are modelgen's own stage
-      timers (``manifest["seconds"]``); *total* is the wall time from the ModelSpec in
-      hand to a loaded ``CompiledModel`` (it also covers hashing, import of the
-      extension and the mass-matrix sanity check; the difference is the column
-      *other*). The child's import of modelgen (with sympy and numpy; column *import*)
-      and the building of the spec (JSON only) are not in *total*.  Peak RSS is
-      ``getrusage(RUSAGE_SELF).ru_maxrss`` of the child just after loading (the Python
-      side, including the interpreter and sympy) and ``RUSAGE_CHILDREN`` (the largest
-      compiler process).
+    * Generation.  Every model is generated in a fresh subprocess (memory per model)
+      into a temporary directory, with ``modelgen.load(spec, out_dir, force=True)``:
+      derive, CSE, emit and compile are modelgen's own stage timers
+      (``manifest["seconds"]``); *total* is the wall time from the ModelSpec to a
+      loaded ``CompiledModel`` (also hashing, import of the extension and the
+      mass-matrix check; the difference is *other*).  The child's import of modelgen
+      (with sympy and numpy; *import*) and the building of the spec are not in
+      *total*.  Peak RSS: the child's own VmHWM just after loading (:func:`peak_rss_mb`;
+      the Python side) and ``RUSAGE_CHILDREN`` (the largest compiler process).
     * Operation counts are modelgen's counts for the ``rhs`` routine (the mass matrix
       A and b = tau - h, or the ABA program) before and after CSE, as C operators
       (:func:`modelgen.codegen.printer.c_operations`); after CSE without the
       parameter-only statements ``<name>_prepare`` computes.  They do not include the
       Cholesky solve that ``<name>_rhs`` runs on A in a C loop (about n^3/6
-      multiply-adds).  The exponent is a least-squares fit of log(ops) against log(n)
-      over the chains run; the *local* exponent is the slope between the two largest n
-      (closer to the asymptotic one).
+      multiply-adds).  Exponent: least squares of log(ops) on log(n) over the chains
+      run; *local*: the slope between the two largest n (closer to the asymptotic).
     * rhs in C: ``modelgen/bench/harness/model_bench.c`` (-O2), linked with
-      ``<name>.c`` compiled by the exact command modelgen's build used for the rhs
-      part (the manifest's ``compile_commands``).  It calls ``<name>_prepare`` once
-      and ``<name>_rhs_prepared`` in a loop (what an integration runs; the peers too
-      keep their inertias precomputed), perturbing one entry of x from the previous
-      output every iteration (no hoisting; the calls form a dependency chain); minimum
-      per-call time over 5 repeats of at least 0.2 s.  The harnesses of the three
-      engines run alternately ``--rounds`` times (default 3), minimum of each kept, so
-      a busy spell of a shared machine hits every side.
+      ``<name>.c`` compiled by the exact command of modelgen's build (the manifest's
+      ``compile_commands``), calls ``<name>_prepare`` once and ``<name>_rhs_prepared``
+      in a loop (as an integration does; the peers too keep their inertias
+      precomputed), perturbing one entry of x from the previous output (no hoisting; a
+      dependency chain); min per-call time over 5 repeats of >= 0.2 s.  The three
+      engines' harnesses run alternately ``--rounds`` times (default 3), minimum of
+      each kept, so a busy spell of a shared machine hits every side.
     * rhs from Python: ``f.inplace(t)`` (state in ``f.x``), ``f(t, x, out)`` (``f =
       cm.rhs_function()``) and ``cm.rhs(t, x)``; ``timeit``, the same 5 x 0.2 s rule.
     * MuJoCo: the identical model in MJCF (:func:`modelgen.bench.peers.chain_mjcf`).
@@ -52,34 +48,28 @@ Method
       ``harness/mujoco_bench.c`` against the wheel's libmujoco times ``mj_forward``
       (one rhs call) by the same rule, and ``mj_step`` with RK4 divided by 4 (four
       force evaluations per step; restart from x0 every 1000 steps).  *mj_forward py*
-      is the call from a Python loop (binding overhead), timed instead (marked ``py``)
-      if the wheel's headers or library are not usable; without mujoco its columns are
-      skipped.
+      is the call from a Python loop (binding overhead), timed instead (``py``) if the
+      wheel's headers or library are not usable; without mujoco its columns are empty.
     * Pinocchio (``pin`` and ``cmeel-eigen``, the ``bench`` extra):
-      ``harness/pinocchio_bench.cpp`` (``-O3 -march=native``) builds the same model
-      from its written definition and times ``pinocchio::aba`` and the CRBA path
-      (``crba`` + ``nonLinearEffects`` + the tree-sparse
-      ``cholesky::decompose/solve``) by the same rule.  *agree (4 engines)*: q_ddot at
-      x0 by modelgen, MuJoCo, Pinocchio ABA and CRBA, the largest pairwise max-norm
-      difference over max |q_ddot|.
-    * Instructions (unless ``--no-count``; needs valgrind).  The same three loops, run
-      untimed K = 200 times and not at all under callgrind: the difference over K is
-      the instructions per call, the same on every run whatever the load.  Each call
-      carries the harness loop's few instructions, alike for the three engines.
-      Pinocchio is counted in a build with ``-mno-avx512f`` added (valgrind does not
-      decode AVX-512).
+      ``harness/pinocchio_bench.cpp`` (``-O3 -march=native``) builds the same model and
+      times ``pinocchio::aba`` and the CRBA path (``crba`` + ``nonLinearEffects`` +
+      the tree-sparse ``cholesky::decompose/solve``) by the same rule.  *agree (4
+      engines)*: q_ddot at x0 by modelgen, MuJoCo, Pinocchio ABA and CRBA, the largest
+      pairwise max-norm difference over max |q_ddot|.
+    * Instructions (unless ``--no-count``; valgrind): the same loops, run K = 200 times
+      and not at all under callgrind; the difference over K is the instructions per
+      call, whatever the load, harness loop included (alike for the three engines).
+      Pinocchio is counted in a build with ``-mno-avx512f`` (valgrind lacks AVX-512).
 
 Reading the tables
     Times in seconds (generation) or microseconds (per call); RSS in MB. The header
-    gives the 1-minute load average before the run: on a 2-core machine anything above
-    ~0.5 means something else is running and the per-call times (and ratios near 1)
-    are noisy; run it again when quiet. Column *-O* gives the optimisation levels
-    modelgen's build chose for the two compiled parts of ``<name>.c`` (it drops to -O1
-    for big routines). ``mj/mg`` is MuJoCo's mj_forward time over modelgen's rhs time,
-    both in C: above 1 means modelgen is faster.  ``rel diff`` should be around 1e-9
-    or below (it grows with cond(A), roughly n^4 for these chains).  The goal list at
-    the end states each goal, the measured value and whether it is met (``not run``
-    when the n it needs was not in this run).
+    gives the 1-minute load average before the run: on a 2-core machine above ~0.5 the
+    per-call times (and ratios near 1) are noisy; run it again when quiet.  *-O*: the
+    optimisation levels of the two compiled parts of ``<name>.c`` (-O1 for big
+    routines).  ``mj/mg``: mj_forward time over modelgen's rhs time, both in C (above
+    1: modelgen is faster).  ``rel diff`` should be around 1e-9 or below (it grows
+    with cond(A), roughly n^4 for these chains).  The goals state the measured value
+    and whether it is met (``not run`` when the n it needs was not in this run).
 """
 from __future__ import annotations
 
@@ -103,6 +93,16 @@ DEFAULT_NS = (2, 4, 7, 10, 15, 20, 30, 50)
 QUICK_NS = (2, 4, 7, 10)
 RESULT_MARK = "@@codegen_scaling@@ "
 N_CHECK_STATES = 5       # random states for the MuJoCo agreement check
+
+
+def peak_rss_mb() -> float:
+    """This process's own peak RSS in MB (VmHWM).  Not ru_maxrss: exec carries the
+    parent's peak into it, and the parent has imported modelgen.bench."""
+    status = Path("/proc/self/status")
+    if status.is_file():
+        return next(int(line.split()[1]) for line in status.read_text().splitlines()
+                    if line.startswith("VmHWM:")) / 1024
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 
 
 # -- the child: one model, one fresh process ----------------------------------------
@@ -129,7 +129,7 @@ def child(kind: str, arg: str, work: str, rounds: int, count: bool, mujoco=None,
     t = time.perf_counter()
     cm = modelgen.load(spec, work / "model", force=True)
     total = time.perf_counter() - t
-    rss_self = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024      # kB -> MB
+    rss_self = peak_rss_mb()
     rss_cc = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024
     from modelgen.bench import harnesses as hn
     from modelgen.bench import peers
