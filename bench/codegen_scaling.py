@@ -162,11 +162,11 @@ def child(kind: str, arg: str, work: str, rounds: int, count: bool, mujoco=None,
     files = peers.write_peer_models(spec, cm, x0, work, kind == "chain")
     xml_path = files[0] if files and peers.have_mujoco() else None
     if xml_path is not None:
-        import mujoco
+        from mujoco import __version__ as mujoco_version, mj_forward
         worst, qacc_x0, model, data = peers.mujoco_agreement(cm, states, xml_path)
-        row.update(mujoco_version=mujoco.__version__, mj_rel_diff=worst, mj_qacc_x0=qacc_x0,
+        row.update(mujoco_version=mujoco_version, mj_rel_diff=worst, mj_qacc_x0=qacc_x0,
                    mj_forward_py_us=hn.per_call_python("mj_forward(m, d)", {
-                       "mj_forward": mujoco.mj_forward, "m": model, "d": data}))
+                       "mj_forward": mj_forward, "m": model, "d": data}))
     pinocchio, pin_file = (pinocchio, files[1]) if files else (None, None)
 
     # The C timings, alternating modelgen, MuJoCo and Pinocchio
