@@ -14,20 +14,20 @@ Method
     * Each (model, formulation) is generated in a fresh subprocess with
       ``generate(spec, dir, force=True, options=BuildOptions(formulation=...))``;
       *derive*, *cse*, *emit*, *compile* are modelgen's stage timers, *RSS* the child's peak
-      resident set (Python side) after generating.
+      resident set (Python side, its own VmHWM) after generating.
     * ops: modelgen's operation counts of the ``rhs`` routine
       (:func:`modelgen.codegen.cse.count_ops`: C operators as printed) before
       and after CSE, per coordinate; after CSE without the parameter-only
       statements (``<name>_prepare``, run once per parameter set).  For crba
       they do not include the Cholesky solve run in C on A (about n^3/6
       multiply-adds).
-    * rhs in C: bench/codegen_scaling.py's harness (``<name>_prepare`` once,
+    * rhs in C: modelgen/bench/harness/model_bench.c (``<name>_prepare`` once,
       ``<name>_rhs_prepared`` in a loop,
       each call perturbed by the previous output, min over 5 repeats of
       >= 0.2 s, the rhs part of ``<name>.c`` compiled with the build's own
       command); MuJoCo's ``mj_forward`` on the identical chain with its
       harness (the arm rebuilt in MJCF from its joint tree by
-      ``codegen_scaling.tree_mjcf``), alternated ``--rounds`` times, minimum
+      ``modelgen.bench.peers.tree_mjcf``), alternated ``--rounds`` times, minimum
       kept.
     * plans: the ABA rhs derived in-process with each ``velocity_products``
       (inward, outward, auto), operations per coordinate before and after
@@ -55,11 +55,8 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
-sys.path.insert(0, str(REPO / "bench"))
 
 import numpy as np  # noqa: E402
-
-import codegen_scaling as cs  # noqa: E402
 
 DEFAULT_NS = (2, 7, 20, 50, 100)
 MARK = "@@aba_scaling@@ "
@@ -74,6 +71,16 @@ def model_spec(kind: str):
     return spatial_chain(int(kind)).spec()
 
 
+def peak_rss_mb() -> float:
+    """This process's own peak RSS in MB (VmHWM).  Not ru_maxrss: exec carries the
+    parent's peak into it, and the parent has imported modelgen.bench."""
+    status = Path("/proc/self/status")
+    if status.is_file():
+        return next(int(line.split()[1]) for line in status.read_text().splitlines()
+                    if line.startswith("VmHWM:")) / 1024
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+
+
 def child(kind: str, formulation: str, out_dir: str) -> None:
     """Generate one model with one formulation; print the figures as JSON."""
     from modelgen.codegen.options import BuildOptions
@@ -82,7 +89,7 @@ def child(kind: str, formulation: str, out_dir: str) -> None:
     t0 = time.perf_counter()
     g = generate(spec, out_dir, force=True, options=BuildOptions(formulation=formulation))
     wall = time.perf_counter() - t0
-    rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    rss = peak_rss_mb()
     print(MARK + json.dumps({"seconds": g.seconds, "wall": wall, "rss_mb": rss,
                              "ops": g.ops["rhs"], "n": spec.n}))
 
@@ -212,10 +219,14 @@ def main(argv=None) -> int:
         child(*args.child)
         return 0
 
+    # here, not at the top: the children (--child) measure their memory without them
+    from modelgen.bench import harnesses, peers
+    from modelgen.bench.tables import markdown
     kinds = ([] if args.no_arm else ["arm7"]) + [str(n) for n in args.n]
     mj_harness = None
-    if not args.agreement_only and cs.have_mujoco():
-        mj_harness, why = cs.build_mujoco_harness(Path(tempfile.mkdtemp(prefix="aba_mj_")))
+    if not args.agreement_only and peers.have_mujoco():
+        mj_harness, why = harnesses.build_mujoco_harness(
+            Path(tempfile.mkdtemp(prefix="aba_mj_")))
         if mj_harness is None:
             print("MuJoCo:", why)
     print(f"load average {os.getloadavg()[0]:.2f} (2 cores shared: > 0.5 means noisy times)\n")
@@ -245,23 +256,23 @@ def main(argv=None) -> int:
             if not args.agreement_only:
                 rng = np.random.default_rng(1)
                 x0 = rng.uniform(-0.5, 0.5, 2 * n)
-                exes = {f: cs.build_rhs_harness(cms[f], x0, tmp / f"h_{kind}_{f}")[0]
+                exes = {f: harnesses.build_rhs_harness(cms[f], x0, tmp / f"h_{kind}_{f}")[0]
                         for f in FORMULATIONS}
                 xml = None
                 if mj_harness is not None:
                     params = cms["aba"].parameters
                     xml = tmp / f"chain_{kind}.xml"
                     if kind == "arm7":
-                        links = cs.tree_links(model_spec(kind), params)
-                        xml.write_text(cs.tree_mjcf("arm7", links, float(params["g"])))
+                        links = peers.tree_links(model_spec(kind), params)
+                        xml.write_text(peers.tree_mjcf("arm7", links, float(params["g"])))
                     else:
-                        xml.write_text(cs.chain_mjcf(n, params))
+                        xml.write_text(peers.chain_mjcf(n, params))
                 for _ in range(args.rounds):
                     for f in FORMULATIONS:
-                        t = cs.run_rhs_harness(exes[f])
+                        t = harnesses.run_model_harness(exes[f])
                         times[f] = t if times[f] is None else min(times[f], t)
                     if xml is not None:
-                        t = cs.run_mj_harness(mj_harness, xml, x0)[0]
+                        t = harnesses.run_mj_harness(mj_harness, xml, x0)[0]
                         mj = t if mj is None else min(mj, t)
             run_rows.append([kind, fmt(times["crba"]), fmt(times["aba"]),
                              fmt(times["crba"] / times["aba"] if times["aba"] else None),
@@ -271,18 +282,18 @@ def main(argv=None) -> int:
             plan_rows.append(plan_row(kind))
             print(f"done {kind}", flush=True)
     print()
-    print(cs.markdown(["model", "formulation", "derive s", "cse s", "emit s", "compile s",
-                       "total s", "RSS MB", "ops before", "ops after", "before/n",
-                       "after/n"], gen_rows, left=2))
+    print(markdown(["model", "formulation", "derive s", "cse s", "emit s", "compile s",
+                    "total s", "RSS MB", "ops before", "ops after", "before/n",
+                    "after/n"], gen_rows, left=2))
     print()
-    print(cs.markdown(["model", "crba rhs µs", "aba rhs µs", "crba/aba", "mj_forward µs",
-                       "mj/aba", "aba-crba rel", "aba backward err", "crba err (mp)",
-                       "aba err (mp)"], run_rows))
+    print(markdown(["model", "crba rhs µs", "aba rhs µs", "crba/aba", "mj_forward µs",
+                    "mj/aba", "aba-crba rel", "aba backward err", "crba err (mp)",
+                    "aba err (mp)"], run_rows))
     print()
     print("ABA rhs operations per coordinate, before / after CSE, by where the "
           "velocity-product accelerations go (o: outwards, in auto's plan)\n")
-    print(cs.markdown(["model", "inward (Table 7.1)", "outward (a_vp)", "auto",
-                       "auto's plan"], plan_rows))
+    print(markdown(["model", "inward (Table 7.1)", "outward (a_vp)", "auto",
+                    "auto's plan"], plan_rows))
     return 0
 
 

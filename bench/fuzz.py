@@ -6,7 +6,7 @@ Run from the repository root::
     .venv/bin/python bench/fuzz.py --cases 500 --compile 0 --seed 1
 
 Method
-    The cases come from the generators of ``tests/test_fuzz_expressions.py``
+    The cases come from the generators of ``modelgen/bench/fuzz_cases.py``
     (grammar-shaped texts, random characters with Unicode digits and controls,
     deep nesting, huge constants, YAML numbers), each put into one slot (a base
     angle, a point coordinate or a mass) of a small pendulum model.  The parent
@@ -37,6 +37,9 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+
+from modelgen.bench.fuzz_cases import draw_cases  # noqa: E402
 
 WORKER = r"""
 import json, sys, tempfile, time, traceback
@@ -101,30 +104,6 @@ class Worker:
         if self.proc.poll() is None:
             self.proc.stdin.close()
             self.proc.wait()
-
-
-def draw_cases(n: int, seed: int) -> list:
-    """``n`` model texts from the test generators, reproducibly."""
-    sys.path.insert(0, str(ROOT / "tests"))
-    from hypothesis import HealthCheck, given, seed as hseed, settings
-    from hypothesis import strategies as st
-
-    import test_fuzz_expressions as fz
-
-    cases = []
-    any_case = st.one_of(
-        st.tuples(st.sampled_from(sorted(fz.SLOTS)), fz.expressions()),
-        st.tuples(st.sampled_from(sorted(fz.SLOTS)), fz.yaml_numbers()))
-
-    @hseed(seed)
-    @settings(max_examples=n, deadline=None, database=None,
-              suppress_health_check=list(HealthCheck))
-    @given(any_case)
-    def collect(case):
-        cases.append(fz.model_text(*case))
-
-    collect()
-    return cases
 
 
 def main(argv=None) -> int:

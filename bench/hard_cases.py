@@ -6,7 +6,7 @@ Run from the repository root::
     .venv/bin/python bench/hard_cases.py --quick      # the short versions (under a minute)
     .venv/bin/python bench/hard_cases.py --cases pendulum_near_top tennis_racket
 
-Each case (``modelgen/bench/hardcases.py``) simulates through
+Each case (``modelgen/bench/hard_cases.py``) simulates through
 ``CompiledModel.simulate`` and compares against a reference modelgen does not
 compute: a closed form (pendulum period, Lagrange top separatrix, sleeping top
 threshold, tennis racket flip period, Coulomb stop time), a 30-digit mpmath
@@ -31,7 +31,7 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
-from modelgen.bench.hardcases import CASES, figure, markdown, run_cases  # noqa: E402
+from modelgen.bench.hard_cases import CASES, figure, markdown, run_cases  # noqa: E402
 
 HEADER = """# Hard cases: what was tried, against what, to what figure
 

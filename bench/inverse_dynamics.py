@@ -7,26 +7,27 @@ Run from the repository root (needs the ``bench`` extra: ``pin`` and ``cmeel-eig
     .venv/bin/python bench/inverse_dynamics.py --n 7 20 --rounds 5
 
 Method
-    The models and the Pinocchio harness are those of ``bench/codegen_scaling.py``
-    (the spatial chain of ``spatial_chain(n)`` and ``models/arm7.yaml``, built
-    in C++ from the same definition, compiled ``-O3 -march=native``).  The
+    The models and the harnesses are those of ``bench/codegen_scaling.py``
+    (the spatial chain of ``spatial_chain(n)`` and ``models/arm7.yaml``, written
+    for the peers by ``modelgen.bench.peers``; ``modelgen/bench/harness/``, the
+    Pinocchio one compiled ``-O3 -march=native``).  The
     state x0 is the one that script uses; the accelerations are
     ``0.3 (i mod 3) - 0.2``.  All compute the generalized forces that give
     those accelerations: Pinocchio's ``rnea(q, v, a)`` = M a + C v + g,
-    MuJoCo's ``mj_inverse`` (``qfrc_inverse``; the MJCF of codegen_scaling, no
+    MuJoCo's ``mj_inverse`` (``qfrc_inverse``; the MJCF of ``peers``, no
     contacts, damping or armature) and modelgen's Q = A a + h - tau, the same
     thing for a model whose only effect is gravity (*agree*: the largest
     difference to modelgen over the largest |Q| at x0, of either peer).
     Time: each harness calls its function in a loop, perturbing one entry of x
     from the previous output (a dependency chain), minimum over 5 repeats of >= 0.2 s,
     run alternately ``--rounds`` times, minimum kept.  Instructions: callgrind,
-    K = 200 calls minus none (``codegen_scaling.instructions_per_call``);
+    K = 200 calls minus none (``modelgen.bench.harnesses.instructions_per_call``);
     Pinocchio counted in its build without AVX-512.
 """
 from __future__ import annotations
 
 import argparse
-import importlib.util
+import shutil
 import sys
 import tempfile
 from pathlib import Path
@@ -35,17 +36,17 @@ import numpy as np
 
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
-_spec = importlib.util.spec_from_file_location("codegen_scaling", REPO / "bench" / "codegen_scaling.py")
-cs = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(cs)
 
 import modelgen  # noqa: E402
+from modelgen.bench import harnesses  # noqa: E402
+from modelgen.bench.peers import write_peer_models  # noqa: E402
+from modelgen.bench.tables import fmt, markdown  # noqa: E402
 from modelgen.model.api import load_model  # noqa: E402
 from modelgen.model.chains import spatial_chain  # noqa: E402
 
 
 def accelerations(n: int) -> np.ndarray:
-    """The accelerations every harness uses (codegen_scaling's C harnesses too)."""
+    """The accelerations every harness uses (``modelgen/bench/harness/``)."""
     return np.array([0.3 * (i % 3) - 0.2 for i in range(n)])
 
 
@@ -55,27 +56,19 @@ def measure(kind, arg, work: Path, pin, pin_count, mj, rounds: int) -> dict:
     rng = np.random.default_rng(1000 + cm.n)           # codegen_scaling's state
     x0 = np.concatenate([rng.uniform(-np.pi, np.pi, cm.n), rng.uniform(-2, 2, cm.n)])
     a = accelerations(cm.n)
-    exe, _ = cs.build_model_harness(cm, x0, work / "harness", "inverse_dynamics")
-    g = float(cm.parameters["g"])
-    if kind == "chain":
-        tree = cs.pinocchio_chain_file(cm.n, cm.parameters, x0, work / "pin.txt")
-        xml = cs.chain_mjcf(cm.n, cm.parameters)
-    else:
-        links = cs.tree_links(spec, cm.parameters)
-        tree = cs.pinocchio_tree_file(links, g, x0, work / "pin.txt")
-        xml = cs.tree_mjcf(cm.name, links, g)
-    xml_path, state = work / "model.xml", work / "model.state"
-    xml_path.write_text(xml)
+    exe, _ = harnesses.build_model_harness(cm, x0, work / "harness", "inverse_dynamics")
+    xml_path, tree = write_peer_models(spec, cm, x0, work, kind == "chain")
+    state = work / "model.state"
     state.write_text(" ".join(repr(float(v)) for v in x0) + "\n")
     mj_cmd = [str(mj), str(xml_path), str(state), "inverse"] if mj else None
     mg_t, pin_t, mj_t = [], [], []
     for _ in range(rounds):
-        mg_t.append(cs.run_rhs_harness(exe))
-        pin_t.append(float(cs._run_checked([str(pin), str(tree), "2"]).split()[0]) * 1e6)
+        mg_t.append(harnesses.run_model_harness(exe))
+        pin_t.append(float(harnesses.run_checked([str(pin), str(tree), "2"]).split()[0]) * 1e6)
         if mj_cmd:
-            mj_t.append(float(cs._run_checked(mj_cmd).split()[0]) * 1e6)
+            mj_t.append(float(harnesses.run_checked(mj_cmd).split()[0]) * 1e6)
     Q = cm.inverse_dynamics(0.0, x0, a)
-    peers = [np.array(cs._run_checked([str(pin), str(tree)]).splitlines()[3].split(), float)]
+    peers = [np.array(harnesses.run_checked([str(pin), str(tree)]).splitlines()[3].split(), float)]
     if mj_cmd:
         import mujoco
         model = mujoco.MjModel.from_xml_path(str(xml_path))
@@ -87,10 +80,10 @@ def measure(kind, arg, work: Path, pin, pin_count, mj, rounds: int) -> dict:
            "ops": cm.manifest["ops"]["inverse_dynamics"]["after_cse"],
            "mg_us": min(mg_t), "pin_us": min(pin_t), "mj_us": min(mj_t) if mj_t else None,
            "agree": max(float(np.max(np.abs(Q - tau)) / np.max(np.abs(Q))) for tau in peers)}
-    row["mg_instr"] = cs.instructions_per_call([str(exe)])
-    row["pin_instr"] = (cs.instructions_per_call([str(pin_count), str(tree), "2"])
+    row["mg_instr"] = harnesses.instructions_per_call([str(exe)])
+    row["pin_instr"] = (harnesses.instructions_per_call([str(pin_count), str(tree), "2"])
                         if pin_count else None)
-    row["mj_instr"] = cs.instructions_per_call(mj_cmd) if mj_cmd else None
+    row["mj_instr"] = harnesses.instructions_per_call(mj_cmd) if mj_cmd else None
     return row
 
 
@@ -101,13 +94,11 @@ def main(argv=None) -> int:
     parser.add_argument("--rounds", type=int, default=3)
     args = parser.parse_args(argv)
     root = Path(tempfile.mkdtemp(prefix="modelgen-inverse-"))
-    pin, why = cs.build_pinocchio_harness(root / "pin")
+    peer = harnesses.build_peer_harnesses(root, count=True)
+    pin, pin_count, mj = peer.pinocchio, peer.pinocchio_count, peer.mujoco
     if pin is None:
-        print(f"Pinocchio not available: {why}", file=sys.stderr)
+        print("Pinocchio not available: " + "; ".join(peer.notes), file=sys.stderr)
         return 1
-    pin_count = cs.build_pinocchio_harness(root / "pin", count=True)[0] \
-        if cs.shutil.which("valgrind") else None
-    mj = cs.build_mujoco_harness(root / "mujoco")[0] if cs.have_mujoco() else None
     if mj is None:
         print("MuJoCo not available: its columns stay empty", file=sys.stderr)
     jobs = [("chain", n) for n in args.n] + ([("file", args.arm)] if args.arm else [])
@@ -119,18 +110,18 @@ def main(argv=None) -> int:
     print("# Inverse dynamics in C: modelgen against Pinocchio's rnea and MuJoCo's mj_inverse\n")
 
     def ratio(peer, mine):
-        return f"**{cs.fmt(peer / mine if peer else None)}**"
-    body = [[r["model"], r["n"], f"{r['ops'] / r['n']:.1f}", cs.fmt(r["mg_us"]),
-             cs.fmt(r["pin_us"]), cs.fmt(r["mj_us"]), ratio(r["pin_us"], r["mg_us"]),
-             ratio(r["mj_us"], r["mg_us"]), cs.fmt(r["mg_instr"], ",.0f"),
-             cs.fmt(r["pin_instr"], ",.0f"), cs.fmt(r["mj_instr"], ",.0f"),
+        return f"**{fmt(peer / mine if peer else None)}**"
+    body = [[r["model"], r["n"], f"{r['ops'] / r['n']:.1f}", fmt(r["mg_us"]),
+             fmt(r["pin_us"]), fmt(r["mj_us"]), ratio(r["pin_us"], r["mg_us"]),
+             ratio(r["mj_us"], r["mg_us"]), fmt(r["mg_instr"], ",.0f"),
+             fmt(r["pin_instr"], ",.0f"), fmt(r["mj_instr"], ",.0f"),
              ratio(r["pin_instr"], r["mg_instr"]), ratio(r["mj_instr"], r["mg_instr"]),
              f"{r['agree']:.1e}"] for r in rows]
-    print(cs.markdown(["model", "n", "ops / coordinate", "modelgen µs", "rnea µs",
-                       "mj_inverse µs", "rnea / mg", "mj_inverse / mg", "modelgen instr",
-                       "rnea instr", "mj_inverse instr", "instr: rnea / mg",
-                       "instr: mj_inverse / mg", "agree"], body))
-    cs.shutil.rmtree(root, ignore_errors=True)
+    print(markdown(["model", "n", "ops / coordinate", "modelgen µs", "rnea µs",
+                    "mj_inverse µs", "rnea / mg", "mj_inverse / mg", "modelgen instr",
+                    "rnea instr", "mj_inverse instr", "instr: rnea / mg",
+                    "instr: mj_inverse / mg", "agree"], body))
+    shutil.rmtree(root, ignore_errors=True)
     return 0
 
 

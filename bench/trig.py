@@ -11,9 +11,9 @@ Method
       (libm's sin and cos): the same C text, compiled by the build's own
       command, so only the trig functions differ.
     * instructions per rhs call: callgrind, ``<name>_rhs`` inclusive of the
-      trig functions (bench/codegen_scaling.py's ``rhs_instructions``, 200
+      trig functions (``modelgen.bench.harnesses.rhs_instructions``, 200
       calls minus none from a seeded random state); noise-free.
-    * rhs time: bench/codegen_scaling.py's harness (min over 5 repeats of
+    * rhs time: ``modelgen/bench/harness/model_bench.c`` (min over 5 repeats of
       >= 0.2 s), the two builds alternated ``--rounds`` times, minimum kept:
       on a shared machine only the minimum means something.
     * per call: the block of templates/model.c.j2 compiled on its own at
@@ -38,12 +38,11 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
-sys.path.insert(0, str(REPO / "bench"))
 
 import numpy as np  # noqa: E402
 
-import codegen_scaling as cs  # noqa: E402
 import modelgen  # noqa: E402
+from modelgen.bench import harnesses  # noqa: E402
 from modelgen.codegen.build import compiler  # noqa: E402
 from modelgen.codegen.options import BuildOptions  # noqa: E402
 from modelgen.codegen.emit import templates_dir  # noqa: E402
@@ -168,14 +167,14 @@ def measure(name, spec, work: Path, rounds: int, options=None) -> dict:
             os.environ.pop("MODELGEN_CFLAGS", None)
         rng = np.random.default_rng(1000 + cm.n)
         x0 = np.concatenate([rng.uniform(-np.pi, np.pi, cm.n), rng.uniform(-2, 2, cm.n)])
-        instructions = cs.rhs_instructions(cm, x0, work / name / f"{variant}-count")
-        exe, _ = cs.build_rhs_harness(cm, x0, work / name / f"{variant}-time")
+        instructions = harnesses.rhs_instructions(cm, x0, work / name / f"{variant}-count")
+        exe, _ = harnesses.build_rhs_harness(cm, x0, work / name / f"{variant}-time")
         builds[variant] = {"instructions": instructions, "exe": exe, "us": float("inf"),
                            "rhs": cm.rhs(0.0, x0)}
     for _ in range(rounds):
         for variant, _flag in VARIANTS:
             b = builds[variant]
-            b["us"] = min(b["us"], cs.run_rhs_harness(b["exe"]))
+            b["us"] = min(b["us"], harnesses.run_model_harness(b["exe"]))
     a, b = builds["libm"]["rhs"], builds["mg"]["rhs"]
     return {"model": name, **{f"{v}_{k}": builds[v][k] for v, _ in VARIANTS
                               for k in ("instructions", "us")},

@@ -447,7 +447,7 @@ def _bench(args) -> int:
 
 
 def _hard_cases(args) -> int:
-    import modelgen.bench.hardcases as hc
+    import modelgen.bench.hard_cases as hc
 
     def progress(name):
         print(f"... {name}", file=sys.stderr, flush=True)

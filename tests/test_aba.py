@@ -310,7 +310,7 @@ def _chain_against_pinocchio(n, seed, mass_matrix=False):
     """(modelgen, Pinocchio) pairs of q_ddot (ABA), h (RNEA) and A at seeded random
     states and random parameters of ``spatial_chain(n)``."""
     pin = pytest.importorskip("pinocchio")
-    from modelgen.bench.hardcase_models import chain_pinocchio
+    from modelgen.bench.peers import chain_pinocchio
     from modelgen.derive.graph import GraphBuilder
     from modelgen.derive.rnea import derive_velocity_terms
     spec = spatial_chain(n).spec()

@@ -1,4 +1,4 @@
-"""The hard-case suite (modelgen/bench/hardcases.py): a fast subset in CI, and the defects it found.
+"""The hard-case suite (modelgen/bench/hard_cases.py): a fast subset in CI, and the defects it found.
 
 The full suite is the benchmark script ``bench/hard_cases.py``; here every
 case runs in its quick form except the slow ones (the 1e6-step singular run,
@@ -11,8 +11,8 @@ import math
 import numpy as np
 import pytest
 
-from modelgen.bench import hardcase_models as hm
-from modelgen.bench.hardcases import CASES, Context, markdown, run_cases
+from modelgen.bench import hard_case_models as hm
+from modelgen.bench.hard_cases import CASES, Context, markdown, run_cases
 from modelgen.errors import MassMatrixError
 
 

@@ -3,7 +3,7 @@
 One module per job (see ``modelgen/bench/README.md``): ``problem`` (the data
 of a problem and its reference), ``methods`` (the C integrators and
 solve_ivp behind one call), ``references`` (closed forms, two-method and
-extended-precision references), ``sweep`` (the runner, errors, costs),
+extended-precision references), ``precision_sweep`` (the runner, errors, costs),
 ``tables``, ``plots``, and ``standard`` (the standard problems, whose scenes
 ship in ``problems/``).  The names the CLI and ``bench/work_precision.py``
 use are re-exported here.
@@ -25,7 +25,8 @@ from modelgen.bench.references import (dop853_extended, extended_reference, exte
                                        reference_from_methods)
 from modelgen.bench.standard import (STANDARD, arm_problem, double_pendulum_problem,
                                      pendulum_problem, scene_problem, stiff_chain_problem)
-from modelgen.bench.sweep import Point, cost_at_error, error_measures, point_at, run_sweep
+from modelgen.bench.precision_sweep import (Point, cost_at_error, error_measures, point_at,
+                                            run_sweep)
 from modelgen.bench.tables import describe, markdown_table, write_tables
 
 __all__ = ["C_METHODS", "SCIPY_METHODS", "Budget", "Method", "Outcome", "c_method",

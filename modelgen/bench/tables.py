@@ -1,6 +1,12 @@
-"""A sweep as text: a markdown table, a CSV file and a paragraph on the problem.
+"""A sweep as text: a markdown table, a CSV file and a paragraph on the problem;
+and the plain markdown table and number format the benchmark scripts print with.
 
 >>> md, csv_path = write_tables(points, "out/pendulum", problem)     # doctest: +SKIP
+>>> print(markdown(["model", "µs"], [["arm7", fmt(0.2468)], ["chain", fmt(None)]]))
+| model | µs |
+|:---|---:|
+| arm7 | 0.247 |
+| chain | – |
 """
 from __future__ import annotations
 
@@ -10,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from modelgen.bench.problem import Problem
-from modelgen.bench.sweep import Point
+from modelgen.bench.precision_sweep import Point
 
 CSV_COLUMNS = ("problem", "method", "family", "kind", "setting", "final_error", "l2_error",
                "seconds", "repeats", "nfev", "njev", "status", "resolved", "message")
@@ -21,6 +27,19 @@ def _csv_row(p: Point) -> list:
             repr(p.setting), repr(p.final_error), repr(p.l2_error), repr(p.seconds), p.repeats,
             p.nfev, p.njev, p.status, int(p.ok and p.resolved("final") and p.resolved("l2")),
             p.message]
+
+
+def fmt(value, spec=".3g", missing="–") -> str:
+    """``value`` formatted with ``spec``, or ``missing`` for None."""
+    return missing if value is None else format(value, spec)
+
+
+def markdown(headers, rows, left=1) -> str:
+    """A markdown table; the first ``left`` columns are left-aligned, the rest right."""
+    lines = ["| " + " | ".join(headers) + " |",
+             "|" + "|".join(":---" if i < left else "---:" for i in range(len(headers))) + "|"]
+    lines += ["| " + " | ".join(str(c) for c in row) + " |" for row in rows]
+    return "\n".join(lines)
 
 
 def _fmt(value, spec=".2e"):

@@ -6,7 +6,7 @@ mpmath, scipy's ``expm``, MuJoCo), the tolerance, the measured figure, and a
 verdict (``passed`` True / False, or None when a peer is not installed), plus
 the curves worth plotting.  ``bench/hard_cases.py`` runs them all and writes
 ``docs/hard_cases.md`` and its figure; ``modelgen hard-cases`` does the same.
-The models and closed forms are in :mod:`modelgen.bench.hardcase_models`.
+The models and closed forms are in :mod:`modelgen.bench.hard_case_models`.
 
 >>> sorted(CASES)[:3]
 ['chain_conditioning', 'energy_long_run', 'fixed_step_implicit']
@@ -24,7 +24,8 @@ import numpy as np
 from matplotlib.figure import Figure
 from scipy.linalg import expm
 
-from modelgen.bench import hardcase_models as hm
+from modelgen.bench import hard_case_models as hm
+from modelgen.bench.peers import chain_mjcf
 from modelgen.codegen.pipeline import default_output
 from modelgen.errors import DerivationError, ModelgenError
 from modelgen.model.api import parse_model
@@ -350,7 +351,7 @@ def chain_conditioning(ctx: Context) -> CaseResult:
         for n in ns:
             cm = load(spatial_chain(n), ctx.build_root / f"spatial_chain_{n}")
             xml = Path(tmp) / f"chain{n}.xml"
-            xml.write_text(hm.chain_mjcf(n, cm.parameters))
+            xml.write_text(chain_mjcf(n, cm.parameters))
             model = mujoco.MjModel.from_xml_path(str(xml))
             data = mujoco.MjData(model)
             worst, cond = 0.0, 0.0

@@ -6,7 +6,7 @@ references are written out from the mechanics, independently of modelgen's
 derivation: closed forms (pendulum period, Lagrange top separatrix, tennis
 racket flip period, Coulomb stop time), the double pendulum's A and h by hand
 for the 30-digit mpmath solve, a linear model's state matrix for the matrix
-exponential, and the MJCF of ``spatial_chain(n)`` for MuJoCo.
+exponential (the chain's MJCF for MuJoCo is in :mod:`modelgen.bench.peers`).
 
 >>> round(pendulum_period(math.pi / 2), 12)
 2.367841947576
@@ -214,63 +214,3 @@ def stiff_pair_matrix(m1, m2, k1, k, c) -> np.ndarray:
     K = np.array([[k1 + k, -k], [-k, k]])
     D = np.array([[c, -c], [-c, c]])
     return np.block([[np.zeros((2, 2)), np.eye(2)], [-M_inv @ K, -M_inv @ D]])
-
-
-def chain_mjcf(n: int, params: dict) -> str:
-    """MJCF of ``spatial_chain(n)`` with the given parameter values (as in
-    ``bench/codegen_scaling.py``, built from the chain's written definition)."""
-    r, g = params["r"], params["g"]
-    lines = [f'<mujoco model="spatial_chain_{n}">',
-             '  <compiler inertiafromgeom="false"/>',
-             f'  <option timestep="0.001" integrator="RK4" gravity="0 0 {-g!r}">',
-             '    <flag contact="disable"/>', '  </option>', '  <worldbody>']
-    for i in range(1, n + 1):
-        m, l = params[f"m{i}"], params[f"l{i}"]
-        pos = "0 0 0" if i == 1 else f"{params[f'l{i - 1}']!r} 0 0"
-        axis = "0 0 1" if i % 2 else "0 1 0"
-        axial, transverse = m * r ** 2 / 2, m * l ** 2 / 12 + m * r ** 2 / 4
-        pad = "  " * (i + 1)
-        lines += [f'{pad}<body name="rod{i}" pos="{pos}">',
-                  f'{pad}  <joint name="q{i}" type="hinge" axis="{axis}" damping="0" '
-                  f'armature="0"/>',
-                  f'{pad}  <inertial pos="{l / 2!r} 0 0" mass="{m!r}" '
-                  f'diaginertia="{axial!r} {transverse!r} {transverse!r}"/>']
-    lines += ["  " * (i + 1) + "</body>" for i in range(n, 0, -1)]
-    lines += ['  </worldbody>', '</mujoco>', '']
-    return "\n".join(lines)
-
-
-def chain_links(n: int, params: dict):
-    """Per link of ``spatial_chain(n)``: (joint offset from the previous joint along
-    x, axis 'z' | 'y', mass, centre of mass along x, (Ixx, Iyy, Izz) about it)."""
-    r = params["r"]
-    for i in range(1, n + 1):
-        m, l = params[f"m{i}"], params[f"l{i}"]
-        offset = 0.0 if i == 1 else params[f"l{i - 1}"]
-        transverse = m * l ** 2 / 12 + m * r ** 2 / 4
-        yield offset, "z" if i % 2 else "y", m, l / 2, (m * r ** 2 / 2, transverse, transverse)
-
-
-def chain_pinocchio(n: int, params: dict):
-    """Pinocchio model of ``spatial_chain(n)`` (needs the ``pin`` package), built
-    from the chain's written definition like :func:`chain_mjcf`: revolute
-    joints about z / y of the previous link frame, placed ``l(i-1)`` along its
-    x axis; each rod's inertia at ``(l/2, 0, 0)``; gravity ``(0, 0, -g)``.
-
-    >>> model = chain_pinocchio(3, {"m1": 1, "m2": 1, "m3": 1, "l1": .5, "l2": .5,
-    ...                             "l3": .5, "r": .02, "g": 9.81})   # doctest: +SKIP
-    >>> model.nq                                                     # doctest: +SKIP
-    3
-    """
-    import pinocchio as pin
-    model = pin.Model()
-    parent = 0
-    for i, (offset, axis, m, c, diag) in enumerate(chain_links(n, params), start=1):
-        joint = pin.JointModelRZ() if axis == "z" else pin.JointModelRY()
-        placement = pin.SE3(np.eye(3), np.array([offset, 0.0, 0.0]))
-        parent = model.addJoint(parent, joint, placement, f"q{i}")
-        inertia = pin.Inertia(m, np.array([c, 0.0, 0.0]), np.diag(diag))
-        model.appendBodyToJoint(parent, inertia, pin.SE3.Identity())
-    model.gravity.linear = np.array([0.0, 0.0, -params["g"]])
-    return model
-

@@ -1,0 +1,328 @@
+"""Build, run and count the C/C++ harnesses of ``harness/``: modelgen's rhs or
+inverse dynamics, MuJoCo's mj_forward / mj_step / mj_inverse, Pinocchio's ABA,
+CRBA + Cholesky and rnea.
+
+Every harness calls its function in a loop, perturbing one entry of the state
+from the previous output (so consecutive calls form a dependency chain), and
+prints the minimum per-call time over :data:`REPEATS` runs of at least
+:data:`MIN_SECONDS`; with a count K as its last argument it makes K calls
+untimed instead, for :func:`instructions_per_call` under callgrind.  The
+timing rule and the model reach the harnesses as ``-D`` macros and files, so
+the sources are plain C/C++ that ship with the package.
+
+>>> sorted(p.name for p in HARNESS_DIR.iterdir())
+['model_bench.c', 'mujoco_bench.c', 'pinocchio_bench.cpp']
+"""
+from __future__ import annotations
+
+import importlib.util
+import os
+import platform
+import shlex
+import shutil
+import subprocess
+import tempfile
+import timeit
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from modelgen.codegen.build import compile_flags, compiler
+
+#: the harnesses' sources (package data)
+HARNESS_DIR = Path(__file__).resolve().with_name("harness")
+MIN_SECONDS = 0.2        # each timing repeat runs at least this long
+REPEATS = 5              # minimum over this many repeats
+STEP_RESET = 1000        # mj_step harness: restart from x0 every this many steps
+COUNT_CALLS = 200        # calls per callgrind count (instructions_per_call)
+
+
+def run_checked(cmd, cwd=None) -> str:
+    """Run a command; raise RuntimeError with its full output if it fails."""
+    proc = subprocess.run(cmd, cwd=cwd, capture_output=True, text=True)
+    if proc.returncode != 0:
+        raise RuntimeError(f"command failed (exit {proc.returncode}): {shlex.join(cmd)}\n"
+                           f"{proc.stdout}{proc.stderr}")
+    return proc.stdout
+
+
+def alternate(rounds: int, runs: dict) -> dict:
+    """Call each of ``runs`` (name -> function) in turn, ``rounds`` times; returns
+    name -> the list of results.  A busy spell of a shared machine then hits every
+    side, and the minimum of each list is comparable with the others.
+
+    >>> alternate(2, {"a": lambda: 1, "b": lambda: 2})
+    {'a': [1, 1], 'b': [2, 2]}
+    """
+    out = {name: [] for name in runs}
+    for _ in range(rounds):
+        for name, run in runs.items():
+            out[name].append(run())
+    return out
+
+
+def per_call_python(stmt: str, namespace: dict) -> float:
+    """Per-call time of the Python statement ``stmt`` in µs, by the harnesses' rule:
+    min over REPEATS runs of >= MIN_SECONDS."""
+    timer = timeit.Timer(stmt, globals=namespace)
+    loops, elapsed = 1, 0.0
+    while elapsed < MIN_SECONDS:
+        loops *= 2
+        elapsed = timer.timeit(loops)
+    return min(timer.repeat(REPEATS, loops)) / loops * 1e6
+
+
+def environment() -> dict:
+    """The machine, the C compiler (``$CC``), Python and the load average: the header
+    of a benchmark's tables."""
+    cpu = platform.processor()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    cc = shlex.split(os.environ.get("CC", "cc"))
+    try:
+        cc_version = run_checked([*cc, "--version"]).splitlines()[0]
+    except (RuntimeError, OSError):
+        cc_version = "unknown"
+    return {"cpu": cpu, "cores": os.cpu_count(), "python": platform.python_version(),
+            "loadavg_at_start": os.getloadavg()[0],
+            "compiler": cc_version, "MODELGEN_CFLAGS": os.environ.get("MODELGEN_CFLAGS", "")}
+
+
+def _c_array(values) -> str:
+    return ",".join(repr(float(v)) for v in values)
+
+
+# -- modelgen -----------------------------------------------------------------------
+
+def compile_model(cm, work: Path):
+    """``<name>.c``'s integration path (part 2: the rhs, inverse dynamics...) compiled
+    by the exact command modelgen's build used (from the manifest) into
+    ``work/model_rhs.o``; returns that command."""
+    name, manifest = cm.name, cm.manifest
+    src_dir = Path(cm.path).parent
+    work.mkdir(parents=True, exist_ok=True)
+    commands = [shlex.split(c) for c in manifest.get("compile_commands", [])]
+    part2 = [c for c in commands if "-DMG_PART=2" in c]
+    if part2:
+        cmd = list(part2[0])
+        cmd[cmd.index("-o") + 1] = str(work / "model_rhs.o")
+        cmd[cmd.index(f"{name}.c")] = str(src_dir / f"{name}.c")
+    else:   # no compile_commands in the manifest: rebuild them from compile_flags
+        statements = max(r["statements"] for r in manifest["ops"].values())
+        cmd = [*compiler(), *compile_flags(statements, 2), "-DMG_PART=2", "-c",
+               str(src_dir / f"{name}.c"), "-o", str(work / "model_rhs.o")]
+    run_checked(cmd)
+    return shlex.join(cmd)
+
+
+def build_model_harness(cm, x0, work: Path, function: str = "rhs_prepared"):
+    """Compile ``harness/model_bench.c`` for ``<name>_rhs_prepared`` or for
+    ``<name>_inverse_dynamics`` (at the accelerations 0.3 (i mod 3) - 0.2); returns
+    (executable, the command that compiled the model's C).  The harness itself is
+    compiled at -O2.  It times the function, or with an argument K calls it K times
+    for :func:`instructions_per_call`.
+    """
+    if function not in ("rhs_prepared", "inverse_dynamics"):
+        raise ValueError(f"no harness for {function!r}")
+    name = cm.name
+    src_dir = Path(cm.path).parent
+    command = compile_model(cm, work)
+    inverse = function == "inverse_dynamics"
+    defines = [f'-DMG_HEADER="{name}.h"', f"-DMG_MODEL={name}",
+               f"-DMG_NPD_ALLOC={name.upper()}_NPD_ALLOC", f"-DMG_NX={cm.nx}",
+               f"-DMG_NOUT={cm.n if inverse else cm.nx}",
+               f"-DMG_NP={max(len(cm.parameters), 1)}", f"-DMG_NU={max(len(cm.inputs), 1)}",
+               f"-DMG_X0={_c_array(x0)}", f"-DMG_P={_c_array(cm.params()) or '0.0'}",
+               f"-DMIN_SECONDS={MIN_SECONDS}", f"-DREPEATS={REPEATS}",
+               *(["-DMG_INVERSE"] if inverse else [])]
+    exe = work / f"{function}_bench"
+    # the model's integrate wrappers call the shared integrators, copied beside it
+    run_checked([*compiler(), "-O2", "-std=c99", *defines, f"-I{src_dir}",
+                 str(HARNESS_DIR / "model_bench.c"), str(work / "model_rhs.o"),
+                 str(src_dir / "mg_integrate.c"), "-o", str(exe), "-lm"])
+    return exe, command
+
+
+def build_rhs_harness(cm, x0, work: Path):
+    """The harness of ``<name>_rhs_prepared`` (:func:`build_model_harness`)."""
+    return build_model_harness(cm, x0, work)
+
+
+def run_model_harness(exe: Path) -> float:
+    """One run of a harness of :func:`build_model_harness`: per-call time in µs (min
+    over REPEATS)."""
+    best, _loops, status, _sink = run_checked([str(exe)]).split()
+    if int(status):
+        raise RuntimeError(f"{exe}: the model's function returned status {status}")
+    return float(best) * 1e6
+
+
+# -- callgrind ----------------------------------------------------------------------
+
+def callgrind_total(cmd) -> int:
+    """Instructions that ``cmd`` executes, by valgrind's callgrind (no load dependence)."""
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "callgrind.out"
+        run_checked(["valgrind", "--tool=callgrind", f"--callgrind-out-file={out}", *cmd])
+        for line in out.read_text().splitlines():
+            if line.startswith(("summary:", "totals:")):
+                return int(line.split()[1])
+    raise RuntimeError(f"no instruction total in callgrind's output of {shlex.join(cmd)}")
+
+
+def instructions_per_call(cmd, calls: int = COUNT_CALLS):
+    """Instructions per call of the loop a harness runs with ``cmd + [str(K)]``: the
+    difference between K = ``calls`` and K = 0, so loading and setting up cancel.  Each
+    call carries the harness loop's few instructions (the perturbation of x and the
+    sum), the same in every engine's harness.  None without valgrind."""
+    if shutil.which("valgrind") is None:
+        return None
+    return (callgrind_total([*cmd, str(calls)]) - callgrind_total([*cmd, "0"])) / calls
+
+
+def rhs_instructions(cm, x0, work: Path, calls: int = COUNT_CALLS):
+    """Instructions per ``<name>_rhs_prepared`` call (callgrind, inclusive of sin/cos and
+    of the harness loop; :func:`instructions_per_call`), or None without valgrind."""
+    if shutil.which("valgrind") is None:
+        return None
+    exe, _ = build_rhs_harness(cm, x0, work)
+    return instructions_per_call([str(exe)], calls)
+
+
+# -- MuJoCo -------------------------------------------------------------------------
+
+def mujoco_paths():
+    """(include dir, library file) of the installed mujoco wheel, or None."""
+    spec = importlib.util.find_spec("mujoco")
+    if spec is None or not spec.submodule_search_locations:
+        return None
+    root = Path(list(spec.submodule_search_locations)[0])
+    include = root / "include"
+    libs = sorted(root.glob("libmujoco.so*")) or sorted(root.glob("libmujoco*.dylib"))
+    if not (include / "mujoco" / "mujoco.h").is_file() or not libs:
+        return None
+    return include, libs[0]
+
+
+def build_mujoco_harness(work: Path):
+    """Compile ``harness/mujoco_bench.c``; returns (its path, None), or (None, reason)."""
+    paths = mujoco_paths()
+    if paths is None:
+        return None, "mujoco headers or library not found in the wheel"
+    include, lib = paths
+    work.mkdir(parents=True, exist_ok=True)
+    exe = work / "mj_bench"
+    cmd = [*shlex.split(os.environ.get("CC", "cc")), "-O2", "-std=c99",
+           f"-DMIN_SECONDS={MIN_SECONDS}", f"-DREPEATS={REPEATS}", f"-DSTEP_RESET={STEP_RESET}",
+           f"-I{include}", str(HARNESS_DIR / "mujoco_bench.c"), "-o", str(exe), str(lib),
+           f"-Wl,-rpath,{lib.parent}", "-lm"]
+    try:
+        run_checked(cmd)
+    except RuntimeError as exc:
+        return None, f"MuJoCo harness did not build: {exc}"
+    return exe, None
+
+
+def run_mj_harness(harness: Path, xml_path: Path, x0) -> tuple:
+    """One run of the MuJoCo harness: (mj_forward µs, mj_step µs / 4, bad-qacc warnings).
+    The state goes to ``xml_path`` with the suffix ``.state``."""
+    state_path = xml_path.with_suffix(".state")
+    state_path.write_text(" ".join(repr(float(v)) for v in x0) + "\n")
+    forward, step, bad, _sink = run_checked([str(harness), str(xml_path),
+                                             str(state_path)]).split()
+    return float(forward) * 1e6, float(step) * 1e6 / 4, int(bad)
+
+
+# -- Pinocchio ----------------------------------------------------------------------
+
+def pinocchio_paths():
+    """(include dir, library dir) of the ``pin`` and ``cmeel-eigen`` wheels, or None."""
+    try:
+        import pinocchio
+    except ImportError:
+        return None
+    root = Path(pinocchio.__file__).resolve()
+    for parent in root.parents:
+        prefix = parent / "cmeel.prefix"
+        if (prefix / "include" / "pinocchio").is_dir():
+            if not (prefix / "include" / "eigen3" / "Eigen").is_dir():
+                return None
+            return prefix / "include", prefix / "lib"
+    return None
+
+
+def build_pinocchio_harness(work: Path, count: bool = False):
+    """Compile ``harness/pinocchio_bench.cpp`` (-O3 -march=native); it reads the model
+    from a file (:func:`modelgen.bench.peers.pinocchio_tree_file`).  Returns
+    (path, None) or (None, reason).
+
+    ``count``: the build that callgrind runs, ``pin_count``, with ``-mno-avx512f``
+    added, because valgrind does not decode AVX-512 (on a CPU without AVX-512 it is
+    the timed build's code)."""
+    paths = pinocchio_paths()
+    if paths is None:
+        return None, "pin or cmeel-eigen not installed (pip install '.[bench]')"
+    include, lib = paths
+    work.mkdir(parents=True, exist_ok=True)
+    exe = work / ("pin_count" if count else "pin_bench")
+    # the definitions are those of Pinocchio's exported CMake target
+    arch = ["-march=native", "-mno-avx512f"] if count else ["-march=native"]
+    cmd = [*shlex.split(os.environ.get("CXX", "c++")), "-O3", *arch, "-DNDEBUG",
+           "-std=c++17", "-DBOOST_MPL_LIMIT_LIST_SIZE=30", "-DBOOST_MPL_LIMIT_VECTOR_SIZE=30",
+           "-DBOOST_MPL_CFG_NO_PREPROCESSED_HEADERS", "-DBOOST_FUSION_INVOKE_MAX_ARITY=12",
+           f"-DMIN_SECONDS={MIN_SECONDS}", f"-DREPEATS={REPEATS}",
+           f"-I{include}", f"-I{include / 'eigen3'}", str(HARNESS_DIR / "pinocchio_bench.cpp"),
+           "-o", str(exe), f"-L{lib}", "-lpinocchio_default", f"-Wl,-rpath,{lib}"]
+    try:
+        run_checked(cmd)
+    except RuntimeError as exc:
+        return None, f"Pinocchio harness did not build: {exc}"
+    return exe, None
+
+
+def run_pinocchio_harness(exe: Path, tree_file: Path) -> tuple:
+    """One run: (ABA µs, CRBA + Cholesky µs, q_ddot by ABA, q_ddot by CRBA) at x0."""
+    lines = run_checked([str(exe), str(tree_file)]).splitlines()
+    aba, crba, _ = lines[0].split()
+    return (float(aba) * 1e6, float(crba) * 1e6, np.array(lines[1].split(), float),
+            np.array(lines[2].split(), float))
+
+
+# -- the peers of one run -----------------------------------------------------------
+
+@dataclass(frozen=True)
+class PeerHarnesses:
+    """The peers' harnesses of one run, None where a peer is missing (``notes`` say why)."""
+    mujoco: Path | None
+    pinocchio: Path | None
+    pinocchio_count: Path | None        # Pinocchio's build for callgrind
+    notes: tuple
+
+
+def build_peer_harnesses(work: Path, count: bool) -> PeerHarnesses:
+    """Build MuJoCo's and Pinocchio's harnesses under ``work``, and with ``count``
+    (and valgrind installed) Pinocchio's build for callgrind."""
+    notes, mujoco = [], None
+    if importlib.util.find_spec("mujoco") is None:
+        notes.append("mujoco is not installed: MuJoCo columns skipped")
+    else:
+        mujoco, why = build_mujoco_harness(work / "mujoco")
+        if mujoco is None:
+            notes.append(f"MuJoCo timed through Python (py): {why}")
+    pinocchio, why = build_pinocchio_harness(work / "pinocchio")
+    if pinocchio is None:
+        notes.append(f"Pinocchio not timed: {why}")
+    if count and shutil.which("valgrind") is None:
+        notes.append("valgrind not found: no instruction counts")
+    pinocchio_count = None
+    if count and shutil.which("valgrind") and pinocchio is not None:
+        pinocchio_count, why = build_pinocchio_harness(work / "pinocchio", count=True)
+        if pinocchio_count is None:
+            notes.append(f"Pinocchio's instructions not counted: {why}")
+    return PeerHarnesses(mujoco, pinocchio, pinocchio_count, tuple(notes))
