@@ -297,7 +297,7 @@ def _checker(model_dir: Path, name: str) -> str:
                 f"        {name}_prepare(p, pd);",
                 f"        if ({fn}(0.25, x, u, p, pd, a) != 0 || {name}_rhs(0.25, x, u, p, b) != 0)"
                 " ++failures;",
-                f"        if (memcmp(a, b, sizeof a) != 0) ++failures;",
+                "        if (memcmp(a, b, sizeof a) != 0) ++failures;",
                 "    }",
                 f'    printf("called {fn}\\n");']
             continue

@@ -505,7 +505,7 @@ def test_the_interrupt_flag_stops_every_method_with_the_trajectory_so_far(sp):
     for method in ALL_METHODS:
         flag = np.zeros(1, dtype=np.intc)
 
-        def u(t, x):
+        def u(t, x, flag=flag):
             if t >= 0.5:
                 flag[0] = 1
             return []

@@ -104,8 +104,8 @@ def test_A_and_B_match_central_differences_of_the_rhs(build):
         lin = cm.linearize(x, u)
         assert lin.A.shape == (4, 4) and lin.B.shape == (4, 1)
         assert lin.C.shape == (0, 4) and lin.states == cm.state_names and lin.inputs == ("T1",)
-        fd_A = central(lambda z: cm.rhs(0.0, z, u), x)
-        fd_B = central(lambda v: cm.rhs(0.0, x, v), u)
+        fd_A = central(lambda z, u=u: cm.rhs(0.0, z, u), x)
+        fd_B = central(lambda v, x=x: cm.rhs(0.0, x, v), u)
         worst = max(worst, relative(lin.A, fd_A), relative(lin.B, fd_B))
         # the same A as the generated Jacobian the integrators use
         np.testing.assert_allclose(lin.A, cm.jac(0.0, x, u), rtol=0, atol=1e-13)

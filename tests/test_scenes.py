@@ -287,7 +287,6 @@ def test_rk4_beyond_its_stability_limit_is_warned_not_silent(scene, tmp_path):
     assert "WARNING: the step" in bad.message and "stability limit" in bad.message
     good = block.model.simulate(x0, (0.0, 0.5), method="rk4", step=0.5 * 2.785 / lam)
     assert "WARNING" not in good.message and good.success
-    from modelgen.cli import main
     import subprocess
     import sys
     proc = subprocess.run([sys.executable, "-m", "modelgen", "simulate",

@@ -90,6 +90,23 @@ class ModelPrinter(C99CodePrinter):
         parentheses, so nothing is lost and strictness is kept."""
         if e.is_Symbol:
             return self._print_Symbol(e), _ATOM
+        if e.is_Number or e is sympy.pi or e is sympy.E:
+            printed = self._fast_number(e)
+            if printed is not None:
+                return printed
+        if e.is_Add:
+            return self._fast_add(e)
+        if e.is_Mul:
+            return self._fast_mul(e)
+        if e.is_Pow:
+            return self._fast_pow(e)
+        if e.func in _C_FUNCTIONS:
+            return f"{_C_FUNCTIONS[e.func]}({', '.join(self._fast(a)[0] for a in e.args)})", _ATOM
+        return f"({self._slow(e)})", _ATOM
+
+    def _fast_number(self, e):
+        """``(text, precedence)`` of a number or constant, None for one that is not
+        finite (printed by sympy's printer, which refuses it)."""
         if e.is_Integer:
             if abs(e.p) >= EXACT_INTEGER_LIMIT:
                 text = self._double(e)
@@ -108,65 +125,66 @@ class ModelPrinter(C99CodePrinter):
             return "3.1415926535897931", _ATOM
         if e is sympy.E:
             return "2.7182818284590451", _ATOM
-        if e.is_Add:
-            printed = [self._fast(term) for term in e.args]
-            if len(printed) > 1 and printed[0][1] == _NEG and printed[1][1] != _NEG:
-                # -a + b is printed b - a: the same rounding (a sum of two is
-                # commutative), one operation fewer
-                printed[0], printed[1] = printed[1], printed[0]
-            parts = []
-            for i, (text, prec) in enumerate(printed):
-                if i and prec == _NEG:
-                    parts.append(" - " + text[1:])
-                else:
-                    parts.append((" + " if i else "") + text)
-            return "".join(parts), _ADD
-        if e.is_Mul:
-            # numbers are compared by their fields or by identity (S.One, S.NegativeOne
-            # and S.Half are singletons): sympy's rich comparisons sympify their
-            # other operand, which took a fifth of the printing
-            coeff, rest = e.as_coeff_Mul()
-            negative = coeff.is_negative
-            sign = "-" if negative else ""
-            coeff = -coeff if negative else coeff
-            num, den = [], []
-            for factor in sympy.Mul.make_args(rest):
-                exp = factor.exp if factor.is_Pow else None
-                if exp is not None and exp.is_Rational and exp.p < 0:
-                    den.append(factor.base if exp is _MINUS_ONE else
-                               sympy.Pow(factor.base, -exp, evaluate=False))
-                else:
-                    num.append(factor)
-            texts = [] if coeff is _ONE else [self._fast(coeff)[0]]
-            for factor in num:
-                text, prec = self._fast(factor)
-                texts.append(text if prec >= _MUL and not (prec == _MUL and factor.is_Rational)
-                             else f"({text})")
-            text = "*".join(texts) or "1.0"
-            if den:
-                printed = [self._fast(d) for d in den]
-                if len(printed) == 1:
-                    d, prec = printed[0]
-                    text += "/" + (d if prec == _ATOM else f"({d})")
-                else:
-                    text += "/(" + "*".join(d if prec >= _MUL else f"({d})"
-                                            for d, prec in printed) + ")"
-            return sign + text, (_NEG if sign else _MUL)
-        if e.is_Pow:
-            base, exp = e.args
-            b, prec = self._fast(base)
-            group = b if prec == _ATOM else f"({b})"
-            if exp.is_Integer and 1 < abs(exp.p) <= 4:
-                prod = "(" + "*".join([group] * abs(exp.p)) + ")"
-                return (prod, _ATOM) if exp.p > 0 else (f"1.0/{prod}", _MUL)
-            if exp is _MINUS_ONE:
-                return f"1.0/{group}", _MUL
-            if exp.is_Rational and exp.q == 2 and abs(exp.p) == 1:
-                return (f"sqrt({b})", _ATOM) if exp.p > 0 else (f"1.0/sqrt({b})", _MUL)
-            return f"pow({b}, {self._fast(exp)[0]})", _ATOM
-        if e.func in _C_FUNCTIONS:
-            return f"{_C_FUNCTIONS[e.func]}({', '.join(self._fast(a)[0] for a in e.args)})", _ATOM
-        return f"({self._slow(e)})", _ATOM
+        return None
+
+    def _fast_add(self, e) -> tuple:
+        printed = [self._fast(term) for term in e.args]
+        if len(printed) > 1 and printed[0][1] == _NEG and printed[1][1] != _NEG:
+            # -a + b is printed b - a: the same rounding (a sum of two is
+            # commutative), one operation fewer
+            printed[0], printed[1] = printed[1], printed[0]
+        parts = []
+        for i, (text, prec) in enumerate(printed):
+            if i and prec == _NEG:
+                parts.append(" - " + text[1:])
+            else:
+                parts.append((" + " if i else "") + text)
+        return "".join(parts), _ADD
+
+    def _fast_mul(self, e) -> tuple:
+        # numbers are compared by their fields or by identity (S.One, S.NegativeOne
+        # and S.Half are singletons): sympy's rich comparisons sympify their
+        # other operand, which took a fifth of the printing
+        coeff, rest = e.as_coeff_Mul()
+        negative = coeff.is_negative
+        sign = "-" if negative else ""
+        coeff = -coeff if negative else coeff
+        num, den = [], []
+        for factor in sympy.Mul.make_args(rest):
+            exp = factor.exp if factor.is_Pow else None
+            if exp is not None and exp.is_Rational and exp.p < 0:
+                den.append(factor.base if exp is _MINUS_ONE else
+                           sympy.Pow(factor.base, -exp, evaluate=False))
+            else:
+                num.append(factor)
+        texts = [] if coeff is _ONE else [self._fast(coeff)[0]]
+        for factor in num:
+            text, prec = self._fast(factor)
+            texts.append(text if prec >= _MUL and not (prec == _MUL and factor.is_Rational)
+                         else f"({text})")
+        text = "*".join(texts) or "1.0"
+        if den:
+            printed = [self._fast(d) for d in den]
+            if len(printed) == 1:
+                d, prec = printed[0]
+                text += "/" + (d if prec == _ATOM else f"({d})")
+            else:
+                text += "/(" + "*".join(d if prec >= _MUL else f"({d})"
+                                        for d, prec in printed) + ")"
+        return sign + text, (_NEG if sign else _MUL)
+
+    def _fast_pow(self, e) -> tuple:
+        base, exp = e.args
+        b, prec = self._fast(base)
+        group = b if prec == _ATOM else f"({b})"
+        if exp.is_Integer and 1 < abs(exp.p) <= 4:
+            prod = "(" + "*".join([group] * abs(exp.p)) + ")"
+            return (prod, _ATOM) if exp.p > 0 else (f"1.0/{prod}", _MUL)
+        if exp is _MINUS_ONE:
+            return f"1.0/{group}", _MUL
+        if exp.is_Rational and exp.q == 2 and abs(exp.p) == 1:
+            return (f"sqrt({b})", _ATOM) if exp.p > 0 else (f"1.0/sqrt({b})", _MUL)
+        return f"pow({b}, {self._fast(exp)[0]})", _ATOM
 
     def _print_Integer(self, expr):
         if abs(expr.p) >= EXACT_INTEGER_LIMIT:
