@@ -1,6 +1,9 @@
 # Two commands set everything up on a fresh machine (Python >= 3.10 and a C compiler):
 #   make demo   -- venv, install, generate the double pendulum and run its scene: out/dp_free.{csv,npz,png,gif,html}
-#   make test   -- venv, install, run the test suite
+#   make test   -- venv, install, run the everyday subset of the tests (not those marked slow)
+# and what CI runs:
+#   make test-all -- every test, the slow ones too (bash .ci/run: lint, docs, then this)
+#   make lint     -- ruff (configured in pyproject.toml)
 # and the documentation:
 #   make docs   -- the docs extra; docs/ and the API reference as HTML, warnings as errors
 #                  -> docs/_build/html/index.html (readable offline)
@@ -8,7 +11,7 @@ PYTHON ?= python3
 VENV   ?= .venv
 BIN    := $(VENV)/bin
 
-.PHONY: demo test install bench docs clean
+.PHONY: demo test test-all lint install bench docs clean
 
 $(BIN)/activate:
 	$(PYTHON) -m venv $(VENV)
@@ -24,8 +27,17 @@ demo: install
 	$(BIN)/modelgen generate models/double_pendulum.yaml
 	$(BIN)/modelgen simulate models/scenes/dp_free.yaml -o out --animate
 
+# the everyday subset: the tests marked slow (minutes of builds: every robot of
+# example-robot-data, the largest cross-checks) are left to test-all
 test: install
+	$(BIN)/python -m pytest -q -m 'not slow'
+
+test-all: install
 	$(BIN)/python -m pytest -q
+
+lint: install
+	$(BIN)/python -c 'import ruff' 2>/dev/null || $(BIN)/python -m pip install --quiet -e '.[lint]'
+	$(BIN)/python -m ruff check .
 
 # -E -a: a fresh build every time, so a warning in an unchanged page is not
 # hidden by the cache of the previous build
