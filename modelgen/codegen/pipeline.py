@@ -74,7 +74,8 @@ def model_hash(spec: ModelSpec, outputs=(), jacobian: bool = False,
     the same model gives the same C wherever it lies.
     """
     h = hashlib.sha256()
-    for part in (repr(replace(spec, source=None, lines=(), units=())),
+    for part in (repr(replace(spec, source=None, lines=(), units=()))
+                 + (f" armature={spec.armature!r}" if spec.armature else ""),
                  repr(tuple(outputs)) + (" jacobian" if jacobian else "")
                  + (" linearize" if linearize else ""),
                  formulation, __version__, str(ABI_VERSION), templates_digest()):
