@@ -191,3 +191,99 @@ def test_suite_model_matches_mujoco(label, make):
             import_mjmodel(make(), label + ".xml")
         return
     check(make(), label)
+
+
+# -- every joint kind and frame on one synthetic model ----------------------------
+
+#: hinge about a tilted axis with an anchor and a ref, several joints on one body
+#: (slide then hinge), a ball joint with armature, a free body, springs with
+#: springref, damping, a rotated body and rotated inertial frames
+SYNTHETIC = """
+<mujoco model="every joint">
+  <option gravity="0.3 -0.2 -9.81"/>
+  <worldbody>
+    <body name="arm" pos="0.1 0.2 0.3" euler="10 20 30">
+      <joint name="tilted" type="hinge" axis="1 2 3" pos="0.05 0 -0.1" ref="0.3"
+             armature="0.02" damping="0.1" stiffness="2" springref="0.5"/>
+      <geom type="box" size="0.1 0.2 0.3" pos="0 0 -0.2" euler="5 0 7" mass="1.3"/>
+      <body name="carriage" pos="0 0 -0.5" quat="0.9 0.1 -0.3 0.2">
+        <joint name="rail" type="slide" axis="0 1 0" ref="-0.1" stiffness="5"
+               springref="0.2" armature="0.5"/>
+        <joint name="wrist" type="hinge" axis="0 0 -1" pos="0.1 0 0" damping="0.3"/>
+        <geom type="capsule" fromto="0 0 0 0.3 0.1 -0.2" size="0.04" mass="0.7"/>
+        <body name="hand" pos="0.3 0.1 -0.2">
+          <joint name="shoulder" type="ball" pos="0 0.05 0" armature="0.01"/>
+          <geom type="ellipsoid" size="0.1 0.05 0.08" pos="0.1 0 0" euler="0 30 60"
+                mass="0.4"/>
+        </body>
+      </body>
+    </body>
+    <body name="puck" pos="1 0 0.5">
+      <freejoint name="puck"/>
+      <geom type="box" size="0.2 0.1 0.05" euler="0 0 20" pos="0.1 0.05 0" mass="2"/>
+    </body>
+  </worldbody>
+</mujoco>
+"""
+
+
+@pytest.mark.parametrize("formulation", ["aba", "crba"])
+def test_every_joint_kind_matches_mujoco(formulation):
+    imp = import_mjcf_text(SYNTHETIC, "synthetic.xml")
+    spec = imp.model.spec()
+    assert [j.kind for j in spec.joints] == ["ball", "free"]
+    assert {k: float(v) for k, v in spec.armature} == {"tilted": 0.02, "rail": 0.5, "shoulder_wx": 0.01,
+                                   "shoulder_wy": 0.01, "shoulder_wz": 0.01}
+    check(mujoco.MjModel.from_xml_string(SYNTHETIC), "synthetic", formulation)
+
+
+def test_state_conversions_round_trip():
+    imp = import_mjcf_text(SYNTHETIC, "synthetic.xml")
+    mjmodel = mujoco.MjModel.from_xml_string(SYNTHETIC)
+    rng = np.random.default_rng(3)
+    qpos = rng.normal(size=mjmodel.nq)
+    for j in range(mjmodel.njnt):
+        if mjmodel.jnt_type[j] in (0, 1):
+            a = mjmodel.jnt_qposadr[j] + (3 if mjmodel.jnt_type[j] == 0 else 0)
+            qpos[a:a + 4] /= np.linalg.norm(qpos[a:a + 4])
+    qvel = rng.normal(size=mjmodel.nv)
+    q = qpos_from_mujoco(imp, qpos)
+    assert np.array_equal(qpos_to_mujoco(imp, q), qpos)
+    v = qvel_from_mujoco(imp, qpos, qvel)
+    assert np.allclose(qvel_to_mujoco(imp, q, v), qvel, rtol=0, atol=1e-14)
+    # the free joint's linear velocity: world frame in MuJoCo, body frame in modelgen
+    data = mujoco.MjData(mjmodel)
+    data.qpos[:], data.qvel[:] = qpos, qvel
+    mujoco.mj_forward(mjmodel, data)
+    puck = mujoco.mj_name2id(mjmodel, mujoco.mjtObj.mjOBJ_BODY, "puck")
+    spec = imp.model.spec()
+    k = spec.dof_names.index("puck_vx")
+    R = data.xmat[puck].reshape(3, 3)
+    assert np.allclose(R @ v[k:k + 3], qvel[mjmodel.jnt_dofadr[-1]:][:3], atol=1e-14)
+
+
+def test_equality_constraints_are_refused():
+    text = SYNTHETIC.replace("</worldbody>", "</worldbody><equality><joint joint1='rail' "
+                                             "joint2='wrist'/></equality>")
+    with pytest.raises(ModelError, match="equality constraints") as info:
+        import_mjcf_text(text, "eq.xml")
+    assert info.value.key == "equality" and info.value.file == "eq.xml"
+    assert "replace the constraint by a joint" in info.value.fix
+
+
+def test_mujoco_compile_errors_are_model_errors():
+    with pytest.raises(ModelError, match="MuJoCo cannot compile"):
+        import_mjcf_text("<mujoco><worldbody><body><joint type='bogus'/></body>"
+                         "</worldbody></mujoco>", "bad.xml")
+
+
+def test_load_and_import_dispatch_on_xml(tmp_path, capsys):
+    from modelgen.cli import main
+    path = tmp_path / "robot.xml"
+    path.write_text(SYNTHETIC)
+    assert modelgen.as_spec(path) == import_mjcf_text(SYNTHETIC, str(path)).model.spec()
+    assert main(["import", str(path), "-o", str(tmp_path / "robot.yaml")]) == 0
+    text = (tmp_path / "robot.yaml").read_text()
+    assert "# Note: Ignored: 4 geoms (contacts)" in text
+    assert parse_model(text) == modelgen.as_spec(path)
+    assert "wrote" in capsys.readouterr().out

@@ -17,17 +17,19 @@ from modelgen.model.names import check_name
 from modelgen.model.scene import load_scene, parse_scene
 from modelgen.model.spec import (CONSERVATIVE_KINDS, EFFECT_FIELD_ROLES, EFFECT_KINDS,
                                  EFFECT_TYPES, STIFF_KINDS, ModelSpec, SceneSpec)
+from modelgen.model.mjcf import load_mjcf
 from modelgen.model.urdf import load_urdf
 from modelgen.model.writer import spec_to_yaml
 
 __all__ = ["Model", "ModelSpec", "SceneSpec", "load_model", "parse_model", "spec_to_yaml",
            "check_name", "load_scene", "parse_scene", "as_spec", "is_scene_file", "API_FILE",
            "EFFECT_TYPES", "EFFECT_KINDS", "EFFECT_FIELD_ROLES", "STIFF_KINDS",
-           "CONSERVATIVE_KINDS", "load_urdf"]
+           "CONSERVATIVE_KINDS", "load_urdf", "load_mjcf"]
 
 
 def as_spec(source, *, floating_base: bool = False) -> ModelSpec:
-    """A :class:`ModelSpec` from a path (YAML, or URDF by its ``.urdf`` suffix), a
+    """A :class:`ModelSpec` from a path (YAML, URDF by its ``.urdf`` suffix, MJCF by
+    ``.xml``: compiled by MuJoCo, see :mod:`modelgen.model.mjcf`), a
     :class:`Model` or a spec.  ``floating_base=True`` (URDF only) makes the
     root link a free body (see :mod:`modelgen.model.urdf`)."""
     if floating_base and not (isinstance(source, (str, Path))
@@ -39,6 +41,8 @@ def as_spec(source, *, floating_base: bool = False) -> ModelSpec:
     if isinstance(source, (str, Path)):
         if Path(source).suffix.lower() == ".urdf":
             return load_urdf(source, floating_base=floating_base).spec()
+        if Path(source).suffix.lower() == ".xml":
+            return load_mjcf(source).spec()
         return load_model(source)
     if isinstance(source, Model):
         return source.spec()
