@@ -31,7 +31,7 @@ applies.  What becomes what (``docs/mjcf.md`` has the table and the checks):
   Bodies welded to the world do not move and are left out.
 * ``dof_armature`` is the model's ``armature:``; ``dof_damping`` of a hinge
   or slide an effect ``damping_<joint>`` (``joint_damping``),
-  ``jnt_stiffness`` a ``torsion_spring`` ``spring_<joint>`` about
+  (a ball or free joint's on its speeds), ``jnt_stiffness`` a ``torsion_spring`` ``spring_<joint>`` about
   ``qpos_spring`` (MuJoCo's ``springref``), ``dof_frictionloss`` a smoothed
   Coulomb ``friction_<joint>`` (MuJoCo's is a constraint; see
   ``frictionloss=``).  MuJoCo's ``disableflag`` for gravity, springs and
@@ -344,7 +344,7 @@ class _Builder:
         flags = m.opt.disableflags
         springs = not flags & mujoco.mjtDisableBit.mjDSBL_SPRING
         dampers = not flags & mujoco.mjtDisableBit.mjDSBL_DAMPER
-        armature, skipped = {}, set()
+        armature, skipped = {}, {}
         for joint in self.coordinates + self.quaternion_joints:
             j = joint.id
             for k, speed in enumerate(joint.speeds):
@@ -354,31 +354,38 @@ class _Builder:
             simple = joint.type in ("hinge", "slide")
             q = joint.coordinates[0]
             dof = joint.dofadr
-            if dampers and np.any(m.dof_damping[dof:dof + len(joint.speeds)] > 0):
-                if simple:
-                    self.model.add_effect(self.unique(f"damping_{q}"), "joint_damping",
-                                          coordinates=[q], damping=_num(m.dof_damping[dof]))
+            damping = m.dof_damping[dof:dof + len(joint.speeds)]
+            if dampers and np.any(damping > 0):
+                # MuJoCo damps the world-frame linear velocity of a free joint: the
+                # same generalized force on the body-frame speeds when the three
+                # linear dampings are equal (R is orthogonal), as a joint's damping makes
+                if np.all(damping == damping[0]):
+                    self.model.add_effect(self.unique(f"damping_{self.joint_name(j)}"),
+                                          "joint_damping", coordinates=list(joint.speeds),
+                                          damping=_num(damping[0]))
                 else:
-                    skipped.add(f"damping of the {joint.type} joint '{joint.name}'")
+                    skipped.setdefault("unequal damping of", []).append(joint.name)
             if springs and m.jnt_stiffness[j] > 0:
                 if simple:
                     self.model.add_effect(self.unique(f"spring_{q}"), "torsion_spring",
                                           coordinate=q, stiffness=_num(m.jnt_stiffness[j]),
                                           rest_angle=_num(m.qpos_spring[joint.qposadr]))
                 else:
-                    skipped.add(f"stiffness of the {joint.type} joint '{joint.name}'")
+                    skipped.setdefault(f"stiffness of {joint.type} joint", []).append(joint.name)
             if np.any(m.dof_frictionloss[dof:dof + len(joint.speeds)] > 0):
                 if simple and self.frictionloss == "smooth":
                     self.model.add_effect(self.unique(f"friction_{q}"), "friction",
                                           coordinate=q,
                                           coulomb=_num(m.dof_frictionloss[dof]))
                 else:
-                    skipped.add(f"frictionloss of the {joint.type} joint '{joint.name}'")
+                    what = "frictionloss (left out as asked) of" if simple else \
+                        f"frictionloss of {joint.type} joint"
+                    skipped.setdefault(what, []).append(joint.name)
         if armature:
             self.model.set_armature(armature)
         if skipped:
-            self.notes.append("Ignored (no modelgen effect for it): " +
-                              "; ".join(sorted(skipped)) + ".")
+            self.notes.append("Ignored: " + "; ".join(
+                f"{what} {', '.join(names)}" for what, names in skipped.items()) + ".")
 
     def gravity(self) -> None:
         mujoco, m = _mujoco(), self.m
@@ -415,8 +422,10 @@ class _Builder:
     def build(self) -> MjcfImport:
         m = self.m
         if m.neq:
-            raise self.error(f"the model has {m.neq} equality constraints, which modelgen "
-                             "cannot import yet (it has no constrained mechanisms)",
+            kinds = sorted({_mujoco().mjtEq(int(t)).name[4:].lower() for t in m.eq_type})
+            raise self.error(f"the model has {m.neq} equality constraints "
+                             f"({', '.join(kinds)}), which modelgen cannot import yet (it "
+                             "has no constrained mechanisms)",
                              "equality", "remove the <equality> section, or replace the "
                              "constraint by a joint (a weld by no joint)")
         self.gravity()

@@ -165,7 +165,8 @@ def resolve_effect(builder, e, frames: dict):
             resolve(builder, value, role, where)
         elif role == "coordinates":
             for i, item in enumerate(value):
-                resolve(builder, item, "coordinate", f"{where}[{i}]")
+                if builder.kind_of(item) != "joint speed":   # a ball/free joint's dof
+                    resolve(builder, item, "coordinate", f"{where}[{i}]")
     return EFFECT_KINDS[e.kind](name=e.name, **values)
 
 def _declared(items, name):

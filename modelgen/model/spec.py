@@ -260,7 +260,8 @@ class DamperEffect:
 
 @dataclass(frozen=True)
 class JointDampingEffect:
-    """Viscous damping -c q_dot on each listed coordinate."""
+    """Viscous damping -c q_dot on each listed coordinate (or -c v on a listed
+    ball/free joint speed)."""
     name: str
     coordinates: tuple
     damping: Expr
