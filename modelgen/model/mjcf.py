@@ -422,7 +422,8 @@ class _Builder:
     def build(self) -> MjcfImport:
         m = self.m
         if m.neq:
-            kinds = sorted({_mujoco().mjtEq(int(t)).name[4:].lower() for t in m.eq_type})
+            kinds = sorted({_mujoco().mjtEq(int(t)).name.removeprefix("mjEQ_").lower()
+                            for t in m.eq_type})
             raise self.error(f"the model has {m.neq} equality constraints "
                              f"({', '.join(kinds)}), which modelgen cannot import yet (it "
                              "has no constrained mechanisms)",
