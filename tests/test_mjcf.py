@@ -26,12 +26,19 @@ import pytest
 
 mujoco = pytest.importorskip("mujoco", reason="MJCF import needs the mujoco package")
 
-import modelgen                                                   # noqa: E402
-from modelgen.errors import ModelError                            # noqa: E402
-from modelgen.model import Model, parse_model, spec_to_yaml       # noqa: E402
-from modelgen.model.mjcf import (import_mjcf_text, import_mjmodel, qacc_to_mujoco,  # noqa: E402
-                                 qpos_to_mujoco, qvel_from_mujoco, qvel_to_mujoco,
-                                 qpos_from_mujoco, velocity_map)
+import modelgen
+from modelgen.errors import ModelError
+from modelgen.model import parse_model
+from modelgen.model.mjcf import (
+    import_mjcf_text,
+    import_mjmodel,
+    qacc_to_mujoco,
+    qpos_from_mujoco,
+    qpos_to_mujoco,
+    qvel_from_mujoco,
+    qvel_to_mujoco,
+    velocity_map,
+)
 
 TOL = 1e-10
 
@@ -310,3 +317,13 @@ def test_load_and_import_dispatch_on_xml(tmp_path, capsys):
     assert "# Note: Ignored: 4 geoms (contacts)" in text
     assert parse_model(text) == modelgen.as_spec(path)
     assert "wrote" in capsys.readouterr().out
+
+
+def test_frictionloss_is_a_smoothed_friction_effect_or_left_out_with_a_note():
+    text = SYNTHETIC.replace('damping="0.3"/>', 'damping="0.3" frictionloss="0.25"/>')
+    smooth = import_mjcf_text(text, "f.xml").model.spec()
+    (friction,) = [e for e in smooth.effects if e.kind == "friction"]
+    assert (friction.coordinate, float(friction.coulomb)) == ("wrist", 0.25)
+    left_out = import_mjcf_text(text, "f.xml", frictionloss="ignore")
+    assert not [e for e in left_out.model.spec().effects if e.kind == "friction"]
+    assert any("frictionloss (left out as asked) of wrist" in n for n in left_out.notes)

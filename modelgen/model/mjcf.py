@@ -110,7 +110,7 @@ class MjcfImport(NamedTuple):
 
 def _mujoco():
     try:
-        import mujoco   # optional: only MJCF import needs it
+        import mujoco  # optional: only MJCF import needs it
     except ImportError:
         raise ModelError("MJCF import needs the 'mujoco' package, which is not installed",
                          fix="pip install mujoco (or modelgen's 'mjcf' extra)") from None
