@@ -174,6 +174,8 @@ def _generate(args) -> int:
 
 
 def _import(args) -> int:
+    if Path(args.urdf).suffix.lower() == ".xml":
+        return _import_mjcf(args)
     from modelgen.model.urdf import import_urdf, urdf_to_yaml
     imported = import_urdf(args.urdf, fix_floating_root=args.fix_floating_root,
                            inertial_parameters=args.inertial_parameters,
@@ -187,6 +189,28 @@ def _import(args) -> int:
         f"{spec.nq} coordinates, {spec.n} speeds"
     print(f"n          {sizes}, {len(spec.bodies)} bodies, "
           f"{len(spec.inputs)} inputs, {len(spec.effects)} joint effects")
+    for note in imported.notes:
+        print(f"note       {note}")
+    print(f"wrote      {out}")
+    return 0
+
+
+def _import_mjcf(args) -> int:
+    """``modelgen import robot.xml``: an MJCF file compiled by MuJoCo (docs/mjcf.md)."""
+    from modelgen.model.mjcf import import_mjcf, mjcf_to_yaml
+    if args.fix_floating_root or args.floating_base or args.inertial_parameters:
+        print("error: --fix-floating-root, --floating-base and --inertial-parameters apply "
+              "to a URDF file; an MJCF model declares its free joints itself", file=sys.stderr)
+        return 2
+    imported = import_mjcf(args.urdf)
+    spec = imported.model.spec()
+    out = Path(args.output) if args.output else Path(args.urdf).with_suffix(".yaml")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(mjcf_to_yaml(imported))
+    print(f"model      {spec.name}  ({args.urdf})")
+    sizes = f"{spec.n} coordinates" if spec.nq == spec.n else \
+        f"{spec.nq} coordinates, {spec.n} speeds"
+    print(f"n          {sizes}, {len(spec.bodies)} bodies, {len(spec.effects)} joint effects")
     for note in imported.notes:
         print(f"note       {note}")
     print(f"wrote      {out}")
@@ -676,7 +700,7 @@ def build_parser() -> argparse.ArgumentParser:
                                    "YAML: bases, points, bodies, gravity, one input "
                                    "tau_<joint> per joint and the joints' damping and "
                                    "friction as effects. Meshes are not read.")
-    i.add_argument("urdf", help="URDF file")
+    i.add_argument("urdf", help="URDF file, or an MJCF file (.xml, compiled by MuJoCo)")
     i.add_argument("-o", "--output", default=None,
                    help="model file to write (default: the URDF path with .yaml)")
     i.add_argument("--fix-floating-root", action="store_true",

@@ -59,8 +59,10 @@ def model_hash(spec: ModelSpec, options: BuildOptions | None = None) -> str:
     if options.formulation == "auto":
         options = replace(options, formulation=choose_formulation(spec)[0])
     h = hashlib.sha256()
-    for part in (repr(replace(spec, source=None, lines=(), units=())), options.key_text(read=False),
-                 __version__, str(ABI_VERSION), templates_digest()):
+    for part in (repr(replace(spec, source=None, lines=(), units=()))
+                 + (f" armature={spec.armature!r}" if spec.armature else "")
+                 + ("" if spec.physical_inertia else " physical_inertia=False"),
+                 options.key_text(read=False), __version__, str(ABI_VERSION), templates_digest()):
         h.update(part.encode())
         h.update(b"\0")
     return h.hexdigest()

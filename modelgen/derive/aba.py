@@ -41,6 +41,12 @@ fold away as the expressions are formed: a projection ``S^T f`` is a single
 entry, ``U`` a column of ``IA``.  Articulated inertias are symmetric 6x6
 matrices ``[[A, B], [B^T, C]]`` carried as 21 entries.
 
+A dof's armature (reflected rotor inertia, MuJoCo's ``dof_armature``) adds to
+its joint's ``D_i = S_i^T U_i + armature_i`` (the diagonal of D for a ball or
+free joint) and nothing else: the rotor's inertia turns with the joint's
+coordinate only, so ``U_i``, ``u_i`` and the formulas above stand, but the
+shortcuts that rest on ``S^T U = D`` are skipped for that joint.
+
 ``D_i`` is returned with ``qdd``: it must be checked > 0 at run time (a
 non-positive ``D_i`` is a singular configuration at joint i).
 """
@@ -97,6 +103,11 @@ def _drop_subspace(I, S):
         C = _zero_row_col(C, j - 3)
         B = tuple(tuple(ZERO if s == j - 3 else B[r][s] for s in range(3)) for r in range(3))
     return (A, B, C)
+
+
+def _armature(tree, k: int):
+    """The armature of dof ``k`` (0 when the model gives none)."""
+    return tree.armature[k] if tree.armature else ZERO
 
 
 def _single(S):
@@ -378,13 +389,17 @@ def _backward_inertias(builder, tree) -> _Inertias:
         joint = joints[i]
         builder.place = inward_place(count, i)
         if len(joint.dofs) > 1:
-            multi[i] = _multi_dof_inertia(builder, joint, IA[i])
+            multi[i] = _multi_dof_inertia(builder, joint, IA[i],
+                                          [_armature(tree, k) for k, _ in joint.dofs])
             Ia[i] = multi[i].Ia
         else:
             S = joint.S
-            j = _single(S)
+            # with an armature (rotor inertia) D = S^T U + armature, and the exact
+            # shortcuts below (S^T U = D, so Ia S = 0) no longer hold
+            armature = _armature(tree, joint.coordinate)
+            j = _single(S) if armature == 0 else None
             U[i] = name_vec(builder, inertia_times(IA[i], S))
-            D[i] = builder.name(dot(S, U[i]))
+            D[i] = builder.name(dot(S, U[i]) + armature)
             invD = builder.name(1 / D[i])
             # -U/D is named with its sign, so that Ia, pa and qdd are sums of
             # products; for a one-entry S its entry j is exactly -1/S_j (U_j = D / S_j)
@@ -393,9 +408,9 @@ def _backward_inertias(builder, tree) -> _Inertias:
                            for r, x in enumerate(U[i]))
             if joint.parent >= 0:
                 A, B, C = IA[i]
-                A, B, C = _drop_subspace((_rank_one(A, U[i], nUd[i], 0, 0),
-                                          _rank_one(B, U[i], nUd[i], 0, 3),
-                                          _rank_one(C, U[i], nUd[i], 3, 3)), S)
+                blocks = (_rank_one(A, U[i], nUd[i], 0, 0), _rank_one(B, U[i], nUd[i], 0, 3),
+                          _rank_one(C, U[i], nUd[i], 3, 3))
+                A, B, C = _drop_subspace(blocks, S) if armature == 0 else blocks
                 Ia[i] = (name_symmetric(builder, A), name_matrix(builder, B),
                          name_symmetric(builder, C))
         if joint.parent >= 0:
@@ -443,7 +458,7 @@ def _backward_forces(builder, tree, inertias, pA, c, tau) -> list:
             pa = inertias.multi[i].forces(builder, joint, pA[i], c[i], tau)
         else:
             S = joint.S
-            j = _single(S)
+            j = _single(S) if _armature(tree, joint.coordinate) == 0 else None
             tau_i = tau[joint.coordinate]
             uD[i] = named(builder, (tau_i - dot(S, pA[i])) * builder.name(1 / inertias.D[i]))
             if joint.parent < 0:
@@ -473,7 +488,7 @@ def _forward_accelerations(builder, tree, inertias, uD, c, a0, n) -> list:
             continue
         k = joint.coordinate
         nUd = inertias.nUd[i]
-        j = _single(joint.S)
+        j = _single(joint.S) if _armature(tree, k) == 0 else None
         if j is not None and joint.S[j] == 1:
             # entry j of -U/D is -1: a_j = a'_j + qdd = u/D + the other terms, named
             # once, and qdd = a_j - a'_j
@@ -566,12 +581,14 @@ def _ldlt_inverse(builder, D) -> tuple:
     return inverse, tuple(d)
 
 
-def _multi_dof_inertia(builder, joint, IA) -> _MultiDofInertia:
-    """U, D^-1 and the inertia the parent receives, for a joint with k columns."""
+def _multi_dof_inertia(builder, joint, IA, armature) -> _MultiDofInertia:
+    """U, D^-1 and the inertia the parent receives, for a joint with k columns
+    (``armature``: one per column, added to D's diagonal)."""
     S = [col for _, col in joint.dofs]
     k = len(S)
     U = [builder.vec(inertia_times(IA, col)) for col in S]
-    D = [[builder.name(dot(S[a], U[b])) for b in range(k)] for a in range(k)]
+    D = [[builder.name(dot(S[a], U[b]) + (armature[a] if a == b else ZERO))
+          for b in range(k)] for a in range(k)]
     Dinv, pivots = _ldlt_inverse(builder, D)
     # U D^-1 (6 x k)
     UD = [builder.vec(total(times(U[b][r], Dinv[b][a]) for b in range(k)) for r in range(6))

@@ -208,6 +208,10 @@ def derive_equations(kin: Kinematics) -> Equations:
         groups.append([(motion, frozenset(members)) for motion, members in by_motion.items()])
 
     A = _mass_matrix(builder, per_body.M, groups, n)
+    # armature: a rotor's reflected inertia, on its own dof's diagonal only
+    for k, armature in enumerate(spec.armature_by_dof):
+        if armature != 0:
+            A[k][k] = builder.name(A[k][k] + armature)
     h = _project(builder, per_body.bias, groups, n)
     # tau projects the sum of all external forces once; the per-effect parts
     # stay in the graph and cost nothing unless a routine outputs them.

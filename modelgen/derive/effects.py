@@ -157,8 +157,9 @@ def _damper(builder: GraphBuilder, kin: Kinematics, eff: DamperEffect) -> Effect
 
 def _on_coordinates(builder: GraphBuilder, kin: Kinematics, forces: dict,
                     potential=ZERO) -> EffectTerms:
-    """Generalized forces ``{coordinate name: force}`` (others zero) as EffectTerms."""
-    coord = {name: k for k, name in enumerate(kin.spec.simple_coordinates)}
+    """Generalized forces ``{dof name: force}`` (others zero) as EffectTerms; a dof is a
+    simple coordinate or a ball/free joint's speed."""
+    coord = {name: k for k, name in enumerate(kin.spec.dof_names)}
     tau = [ZERO] * kin.spec.n
     for name, force in forces.items():
         tau[coord[name]] = force
@@ -175,8 +176,8 @@ def _torsion_spring(builder: GraphBuilder, kin: Kinematics,
 
 
 def _joint_damping(builder: GraphBuilder, kin: Kinematics, eff: JointDampingEffect) -> EffectTerms:
-    """-c q_dot on each listed coordinate."""
-    qd = {name: kin.qd[k] for k, name in enumerate(kin.spec.simple_coordinates)}
+    """-c q_dot on each listed coordinate, -c v on each listed ball/free joint speed."""
+    qd = {name: kin.qd[k] for k, name in enumerate(kin.spec.dof_names)}
     return _on_coordinates(builder, kin,
                            {name: -eff.damping * qd[name] for name in eff.coordinates})
 

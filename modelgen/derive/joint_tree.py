@@ -104,6 +104,9 @@ class JointTree:
     joints: tuple         # tuple[Joint, ...], a parent before its children
     inertias: tuple       # tuple[LinkInertia, ...], one per joint
     body_links: tuple     # ((body name, joint index or -1 for the ground), ...)
+    #: per dof (coordinate order): reflected rotor inertia on the diagonal of A
+    #: (``D_i`` of the ABA, ``armature * qdd`` of the RNEA); empty when none is given
+    armature: tuple = ()
 
 
 def _error(spec: ModelSpec, key: str, problem: str) -> ModelError:
@@ -299,7 +302,8 @@ def extract_joint_tree(spec: ModelSpec) -> JointTree:
 
     joints, joint_at = _joints(spec, nodes, q, *_frames(nodes, points, linear, q))
     inertias, body_links = _link_inertias(spec, nodes, ends, joint_at, len(joints))
-    return JointTree(tuple(joints), inertias, tuple(body_links))
+    return JointTree(tuple(joints), inertias, tuple(body_links),
+                     spec.armature_by_dof if spec.armature else ())
 
 
 def _frames(nodes, points, linear, q) -> tuple:

@@ -20,7 +20,8 @@ With accelerations (:func:`derive_inverse_dynamics`), pass 1 carries
 ``a_i = X_i a_p + c_i + S_i qdd_i`` instead and the result is ``A qdd + h``,
 the generalized inertia forces, in O(n) (Pinocchio's ``rnea`` without
 gravity, MuJoCo's ``mj_inverse`` without the passive forces: those are in
-``tau``).
+``tau``).  A dof's armature (reflected rotor inertia) adds ``armature_k qdd_k``
+to its own generalized force, as in MuJoCo's ``mj_rne`` plus ``dof_armature``.
 """
 from __future__ import annotations
 
@@ -68,7 +69,11 @@ def derive_inverse_dynamics(builder: GraphBuilder, tree: JointTree, qd, qdd) -> 
         a[i] = builder.vec(add(add(joint_motion(builder, joint, a[joint.parent]), c[i]), aJ)
                            if joint.parent >= 0 else add(c[i], aJ))
         force.append(link_force(builder, tree.inertias[i], v[i], a[i]))
-    return _inward(builder, tree, force, len(qd))
+    out = _inward(builder, tree, force, len(qd))
+    # a rotor's reflected inertia acts on its own dof only: armature_k qdd_k
+    return tuple(builder.name(f + armature * qdd[k]) if armature != 0 else f
+                 for k, (f, armature) in enumerate(zip(out, tree.armature or (0,) * len(out),
+                                                       strict=True)))
 
 
 def _inward(builder: GraphBuilder, tree: JointTree, force, n: int) -> tuple:

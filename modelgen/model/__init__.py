@@ -17,18 +17,20 @@ from modelgen.model.names import check_name
 from modelgen.model.scene import load_scene, parse_scene
 from modelgen.model.spec import (CONSERVATIVE_KINDS, EFFECT_FIELD_ROLES, EFFECT_KINDS,
                                  EFFECT_TYPES, STIFF_KINDS, ModelSpec, SceneSpec)
+from modelgen.model.mjcf import load_mjcf
 from modelgen.model.urdf import load_urdf
 from modelgen.model.writer import spec_to_yaml
 
 __all__ = ["Model", "ModelSpec", "SceneSpec", "load_model", "parse_model", "spec_to_yaml",
            "check_name", "load_scene", "parse_scene", "as_spec", "is_scene_file", "API_FILE",
            "EFFECT_TYPES", "EFFECT_KINDS", "EFFECT_FIELD_ROLES", "STIFF_KINDS",
-           "CONSERVATIVE_KINDS", "load_urdf"]
+           "CONSERVATIVE_KINDS", "load_urdf", "load_mjcf"]
 
 
 def as_spec(source, *, floating_base: bool = False, inertia: str = "physical",
             min_mass: float = 0.0, min_inertia: float = 0.0) -> ModelSpec:
-    """A :class:`ModelSpec` from a path (YAML, or URDF by its ``.urdf`` suffix), a
+    """A :class:`ModelSpec` from a path (YAML, URDF by its ``.urdf`` suffix, MJCF by
+    ``.xml``: compiled by MuJoCo, see :mod:`modelgen.model.mjcf`), a
     :class:`Model` or a spec.  ``floating_base=True`` (URDF only) makes the
     root link a free body; ``inertia="as_is"`` or ``"balance"``, ``min_mass`` and
     ``min_inertia`` (URDF only) read bodies that no rigid body matches (see
@@ -46,6 +48,8 @@ def as_spec(source, *, floating_base: bool = False, inertia: str = "physical",
         if Path(source).suffix.lower() == ".urdf":
             return load_urdf(source, floating_base=floating_base, inertia=inertia,
                              min_mass=min_mass, min_inertia=min_inertia).spec()
+        if Path(source).suffix.lower() == ".xml":
+            return load_mjcf(source).spec()
         return load_model(source)
     if isinstance(source, Model):
         return source.spec()

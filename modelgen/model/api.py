@@ -263,6 +263,18 @@ class Model:
         """
         return self._apply(lambda c: c.add_effect(name, type, fields, f"effects.{name}"))
 
+    def set_armature(self, armature: Optional[Mapping[str, object]]) -> "Model":
+        """Set the armature (reflected rotor inertia, added to the dof's diagonal entry
+        of A) of simple coordinates or ball/free joint speeds, replacing any set
+        before; None removes it.  Values are parameters-only expressions >= 0.
+
+        >>> m = Model("m").add_coordinate("q").add_parameter("Ir", 0.01)
+        >>> m.set_armature({"q": "Ir"}).spec().armature
+        (('q', Ir),)
+        """
+        return self._apply(lambda c: c.set_armature(None if armature is None
+                                                     else dict(armature)))
+
     def set_units(self, units: Mapping[str, str]) -> "Model":
         """Set the units of declared coordinates, parameters and inputs (replacing any
         set before); for people and exports, never in the equations.

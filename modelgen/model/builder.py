@@ -148,6 +148,7 @@ class ModelBuilder:
         self.actions: list = []
         self.effects: list = []
         self.gravity: Optional[tuple] = None
+        self.armature: list = []      # (dof name, expression, key), checked by build()
         self.sources: list = []       # (key prefix, file, lines) of keys from other files
         self._allowed: dict = {}
 
@@ -589,6 +590,35 @@ class ModelBuilder:
         self.gravity = self.vector(vector, key, "gravity",
                                    example="[gx, gy, gz] (components in base E)")
 
+    def set_armature(self, value, key: str = "armature") -> None:
+        """``armature: {dof: expression, ...}``: reflected rotor inertia on the diagonal
+        of A, per simple coordinate or ball/free joint speed (the names are
+        checked by :meth:`build`, so they may be declared later)."""
+        entries = []
+        if value is not None:
+            if not isinstance(value, dict):
+                raise self.error(f"expected a mapping of coordinate names to armatures but "
+                                 f"got {describe(value)}", key,
+                                 "write e.g. 'armature: {q1: 0.01, J_wx: Ir}'")
+            for name, amount in value.items():
+                entry = f"{key}.{name}"
+                if not isinstance(name, str):
+                    raise self.error(f"expected a coordinate or joint speed name but got "
+                                     f"{describe(name)}", entry,
+                                     "write e.g. 'armature: {q1: 0.01}'")
+                expr = self.expression(amount, entry, "coefficient")
+                at = self.at_defaults(expr)
+                if at is None or at < 0:
+                    shown = format_expression(expr)
+                    problem = ("is not a real number with the default parameters"
+                               if at is None else f"is negative: {shown} = {at!r} with the "
+                               "default parameters")
+                    raise self.error(f"armature of '{name}' {problem}", entry,
+                                     "give an armature >= 0 (a rotor inertia times the "
+                                     "gear ratio squared)")
+                entries.append((name, expr, entry))
+        self.armature = entries
+
     def add_action(self, name, body, point, base, frame, torque, force, vector,
                    key: str) -> None:
         self.check_new_name(name, "action", key)
@@ -755,6 +785,7 @@ def replay(ctx: ModelBuilder, spec: ModelSpec, parameters=None) -> ModelBuilder:
                        f"actions.{a.name}")
     for e in spec.effects:
         ctx.add_effect(e.name, e.kind, effect_fields(e), f"effects.{e.name}")
+    ctx.set_armature(dict(spec.armature) or None)
     # a reduced model (a scene's) may have dropped some names: their units go too
     ctx.set_units({name: unit for name, unit in spec.units
                    if ctx.kind_of(name) in ("coordinate", "parameter", "input")} or None)

@@ -101,6 +101,7 @@ def build_spec(builder) -> ModelSpec:
         raise builder.error(f"{article(kind)} is named 'gravity', the name of the top-level "
                             "gravity", key, f"rename the {kind}, or remove the top-level "
                             "'gravity:' and declare it as an effect of type gravity")
+    armature = _armature(builder)
     return ModelSpec(
         name=builder.name,
         description=builder.description,
@@ -123,9 +124,28 @@ def build_spec(builder) -> ModelSpec:
         effects=tuple(effects),
         units=tuple(builder.units),
         physical_inertia=builder.physical_inertia,
+        armature=armature,
         source=None if builder.file == API_FILE else builder.file,
         lines=tuple(builder.lines.items()),
     )
+
+
+def _armature(builder) -> tuple:
+    """``((dof, expression), ...)`` in dof order, zeros dropped: each name must be a
+    simple coordinate or a ball/free joint's speed, given once."""
+    dofs = list(builder.coordinates) + [v for j in builder.joints for v in j.speeds]
+    given = {}
+    for name, expr, key in builder.armature:
+        if name not in dofs:
+            kind = builder.kind_of(name)
+            problem = (f"'{name}' is {article(kind)}, not a degree of freedom" if kind
+                       else f"unknown degree of freedom '{name}'")
+            close = closest(name, dofs)
+            fix = f"did you mean '{close}'? " if close else ""
+            raise builder.error(problem, key, fix + "name a coordinate or a ball/free "
+                                f"joint's speed (known: {listing(dofs)})")
+        given[name] = expr
+    return tuple((name, given[name]) for name in dofs if name in given and given[name] != 0)
 
 
 def resolve_effect(builder, e, frames: dict):
@@ -146,7 +166,8 @@ def resolve_effect(builder, e, frames: dict):
             resolve(builder, value, role, where)
         elif role == "coordinates":
             for i, item in enumerate(value):
-                resolve(builder, item, "coordinate", f"{where}[{i}]")
+                if builder.kind_of(item) != "joint speed":   # a ball/free joint's dof
+                    resolve(builder, item, "coordinate", f"{where}[{i}]")
     return EFFECT_KINDS[e.kind](name=e.name, **values)
 
 def _declared(items, name):

@@ -20,7 +20,7 @@ __all__ = ["TOP_LEVEL_KEYS", "ENTRY_KEYS", "REQUIRED_KEYS", "ExpressionRule",
 #: in ``builder_from_data``.
 TOP_LEVEL_KEYS = ("name", "description", "coordinates", "parameters", "inputs",
                   "bases", "joints", "points", "frames", "bodies", "gravity", "actions", "effects",
-                  "units", "physical_inertia")
+                  "armature", "units", "physical_inertia")
 
 #: Keys of one entry of each mapping section.
 ENTRY_KEYS = {

@@ -147,6 +147,7 @@ def builder_from_data(data, lines: dict, file: str) -> ModelBuilder:
         ctx.add_action(name, e["body"], e.get("point"), e.get("base"), e.get("frame"),
                        e.get("torque"), e.get("force"), e.get("vector"), key)
     load_effects(ctx, data.get("effects"))
+    ctx.set_armature(data.get("armature"))
     return ctx
 
 

@@ -260,7 +260,8 @@ class DamperEffect:
 
 @dataclass(frozen=True)
 class JointDampingEffect:
-    """Viscous damping -c q_dot on each listed coordinate."""
+    """Viscous damping -c q_dot on each listed coordinate (or -c v on a listed
+    ball/free joint speed)."""
     name: str
     coordinates: tuple
     damping: Expr
@@ -364,9 +365,16 @@ class ModelSpec:
     #: ((name, unit), ...): units of coordinates, parameters and inputs, for people
     #: and for exports (an FMU's variables); they never change the equations
     units: tuple = ()
+    #: ((degree of freedom, expression), ...) in dof order, non-zero entries only:
+    #: reflected rotor inertia added to that dof's diagonal entry of A (MuJoCo's
+    #: ``dof_armature``); a dof is a simple coordinate or a ball/free joint's speed.
+    #: Left out of the repr (the C's hash) while empty, so models without it keep
+    #: their hash; :func:`modelgen.codegen.pipeline.model_hash` adds it when given
+    armature: tuple = field(default=(), repr=False)
     #: False when the bodies' inertias are taken as given, without the rigid-body
     #: checks (a URDF imported with ``inertia="as_is"``, as Pinocchio reads it)
-    physical_inertia: bool = True
+    #: (left out of the repr like ``armature``: the model hash adds it when False)
+    physical_inertia: bool = field(default=True, repr=False)
     #: where the spec came from (file path or None) -- for error messages only
     source: Optional[str] = field(default=None, compare=False)
     #: (dotted key, line) pairs for error messages from later stages
@@ -430,6 +438,14 @@ class ModelSpec:
                     yield from (v for v in value if not isinstance(v, str))
                 elif value is not None and not isinstance(value, str):
                     yield value
+        for _, value in self.armature:
+            yield value
+
+    @property
+    def armature_by_dof(self) -> tuple:
+        """The armature of each degree of freedom (row of A), 0 where none is given."""
+        given = dict(self.armature)
+        return tuple(given.get(name, sympy.S.Zero) for name in self.dof_names)
 
     def free_symbols(self) -> set:
         """The symbols the model's expressions use."""

@@ -128,6 +128,9 @@ def spec_to_yaml(spec: ModelSpec) -> str:
     if spec.effects:
         out.append("effects:")
         out += [f"  {name(e.name)}: {{{_yaml_effect(e)}}}" for e in spec.effects]
+    if spec.armature:
+        out.append("armature: {" + ", ".join(f"{name(n)}: {_yaml_expr(v)}"
+                                             for n, v in spec.armature) + "}")
     if spec.units:
         out.append("units: {" + ", ".join(f"{name(n)}: {name(u)}" for n, u in spec.units) + "}")
     return "\n".join(out) + "\n"

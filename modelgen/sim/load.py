@@ -62,7 +62,9 @@ def load(source, out_dir=None, *, force: bool = False, options: BuildOptions | N
          min_inertia: float | None = None) -> CompiledModel:
     """Build (on first use) and import a model; returns a :class:`CompiledModel`.
 
-    ``source`` is a YAML path, a :class:`modelgen.model.Model` or a ModelSpec.
+    ``source`` is a YAML path, a URDF (``.urdf``) or MJCF (``.xml``, compiled by
+    MuJoCo: :mod:`modelgen.model.mjcf`) file, a :class:`modelgen.model.Model` or a
+    ModelSpec.
     Output goes to ``out_dir`` (default: the per-user cache,
     :func:`modelgen.codegen.pipeline.default_output`).  ``options`` (a
     :class:`~modelgen.codegen.options.BuildOptions`) says what to build; the

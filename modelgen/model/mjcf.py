@@ -1,0 +1,572 @@
+"""MJCF import: a MuJoCo model -> a :class:`~modelgen.model.Model`.
+
+:func:`import_mjcf` compiles an MJCF file with the official ``mujoco`` package
+(``mujoco.MjModel.from_xml_path``: includes, defaults, ``<compiler>`` options,
+inertias from geoms are MuJoCo's own) and reads the *compiled* model, so what
+modelgen sees is exactly what MuJoCo simulates.  ``modelgen.load("robot.xml")``
+and ``modelgen import robot.xml -o robot.yaml`` use it; the model is built
+through the public :class:`Model` API, so every check of the model loader
+applies.  What becomes what (``docs/mjcf.md`` has the table and the checks):
+
+* The world body is the ground (base ``E``, point ``O``); ``opt.gravity`` is
+  the gravity vector (``[0, 0, -g]`` with parameter ``g`` when it points down
+  the z axis).
+* A body's frame is its parent's moved by ``body_pos`` (point ``P_<body>``)
+  and turned by ``body_quat`` (constant rotations ``B_<body>_rz``, ``_ry``,
+  ``_rx``: R = Rz Ry Rx, zero angles left out), then by each of its joints in
+  order, as ``mj_kinematics`` does.  A ``hinge`` turns about its axis through
+  the anchor ``jnt_pos`` by ``q - ref`` (MuJoCo's ``qpos - qpos0``: the
+  coordinate is MuJoCo's ``qpos``); an axis along +-x, +-y or +-z is one simple
+  rotation, any other the URDF importer's five (``_az``, ``_ay``, the joint,
+  both undone).  A ``slide`` moves the origin by ``(q - ref) axis``.  A
+  ``ball`` is a ball joint about its anchor, a ``free`` joint a free joint from
+  ``E``/``O`` (MuJoCo ignores a free body's ``pos``, ``quat`` and joint
+  ``pos``: ``qpos`` is the body's pose).
+* Coordinates are the joint names with every character outside
+  ``[A-Za-z0-9_]`` replaced by ``_`` (``joint<id>`` for an unnamed joint), in
+  MuJoCo's order, the ball and free joints' after them (modelgen's order).
+* A body on a moving chain with mass or inertia is a body of the model
+  (``body_mass``; centre of mass ``G_<body>`` at ``body_ipos``; the principal
+  inertia ``body_inertia`` turned by ``body_iquat`` into the body's frame).
+  Bodies welded to the world do not move and are left out.
+* ``dof_armature`` is the model's ``armature:``; ``dof_damping`` of a hinge
+  or slide an effect ``damping_<joint>`` (``joint_damping``),
+  (a ball or free joint's on its speeds), ``jnt_stiffness`` a ``torsion_spring`` ``spring_<joint>`` about
+  ``qpos_spring`` (MuJoCo's ``springref``), ``dof_frictionloss`` a smoothed
+  Coulomb ``friction_<joint>`` (MuJoCo's is a constraint; see
+  ``frictionloss=``).  MuJoCo's ``disableflag`` for gravity, springs and
+  dampers is honoured.
+* Contacts, geoms, tendons, actuators, sensors, joint limits, fluid forces
+  and everything else that is not rigid-body dynamics are ignored and listed
+  in :attr:`MjcfImport.notes`; equality constraints are refused until modelgen
+  has constrained mechanisms.
+
+Conventions against MuJoCo's: ``qpos`` maps one to one (quaternions are
+``(w, x, y, z)`` in both), only the order differs (modelgen lists the hinge
+and slide coordinates first); a free joint's linear velocity is in the
+*world* frame in MuJoCo's ``qvel`` and in the *body* frame in modelgen's
+speeds (Pinocchio's free-flyer).  :func:`qpos_from_mujoco`,
+:func:`qvel_from_mujoco`, :func:`qpos_to_mujoco`, :func:`qvel_to_mujoco`,
+:func:`qacc_to_mujoco` and :func:`velocity_map` convert.
+
+>>> imp = import_mjcf_text('''<mujoco><worldbody><body name="rod">
+...   <joint name="hinge" type="hinge" axis="0 1 0" armature="0.1"/>
+...   <geom type="capsule" fromto="0 0 0 0 0 -1" size="0.05" mass="1"/>
+... </body></worldbody></mujoco>''')                                # doctest: +SKIP
+>>> imp.model.spec().coordinates, imp.model.spec().armature         # doctest: +SKIP
+(('hinge',), (('hinge', 1/10),))
+"""
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import replace
+from pathlib import Path
+from typing import NamedTuple, Optional
+
+import numpy as np
+import sympy
+
+from modelgen.errors import ModelError
+from modelgen.model.api import Model, check_name
+from modelgen.model.spec import CANONICAL_BASE, CANONICAL_POINT, JOINT_KINDS, symbol
+
+__all__ = ["MjcfImport", "MjcfJoint", "import_mjcf", "import_mjcf_text", "import_mjmodel",
+           "load_mjcf", "mjcf_to_yaml", "qpos_from_mujoco", "qpos_to_mujoco",
+           "qvel_from_mujoco", "qvel_to_mujoco", "qacc_to_mujoco", "velocity_map",
+           "FRICTIONLOSS"]
+
+#: MuJoCo's joint types (``mjtJoint``), by their numbers in ``jnt_type``.
+_FREE, _BALL, _SLIDE, _HINGE = 0, 1, 2, 3
+_TYPE_NAMES = {_FREE: "free", _BALL: "ball", _SLIDE: "slide", _HINGE: "hinge"}
+
+#: What ``frictionloss=`` may ask for: a smoothed Coulomb ``friction`` effect, or nothing.
+FRICTIONLOSS = ("smooth", "ignore")
+
+
+class MjcfJoint(NamedTuple):
+    """One MuJoCo joint and where its values go in modelgen's state."""
+    name: str            # the MuJoCo name ("" if unnamed)
+    id: int              # the MuJoCo joint id
+    type: str            # hinge | slide | ball | free
+    coordinates: tuple   # modelgen coordinate names, MuJoCo's qpos order
+    speeds: tuple        # modelgen speed (dof) names, MuJoCo's qvel order
+    qposadr: int
+    dofadr: int
+
+
+class MjcfImport(NamedTuple):
+    """The result of an import: the model, the joints (MuJoCo order) and notes."""
+    model: Model
+    joints: tuple        # MjcfJoint, MuJoCo's joint order
+    source: str
+    notes: tuple         # sentences: what was ignored
+    #: modelgen coordinate k -> MuJoCo qpos index; modelgen dof k -> MuJoCo dof index
+    qpos_index: tuple
+    dof_index: tuple
+    #: per free joint: (modelgen index of its qw, modelgen dof index of its vx)
+    free: tuple
+
+
+def _mujoco():
+    try:
+        import mujoco  # optional: only MJCF import needs it
+    except ImportError:
+        raise ModelError("MJCF import needs the 'mujoco' package, which is not installed",
+                         fix="pip install mujoco (or modelgen's 'mjcf' extra)") from None
+    return mujoco
+
+
+def sanitize(name: str) -> str:
+    """The name with every character outside ``[A-Za-z0-9_]`` replaced by ``_``.
+
+    >>> sanitize("r-arm.joint 1")
+    'r_arm_joint_1'
+    """
+    return re.sub(r"[^A-Za-z0-9_]", "_", name)
+
+
+def _num(x: float):
+    """A float as an exact sympy number of its shortest decimal (ints stay ints)."""
+    x = float(x)
+    if x == int(x) and abs(x) < 2 ** 53:
+        return sympy.Integer(int(x))
+    return sympy.Rational(repr(x))
+
+
+def _quat_matrix(q) -> np.ndarray:
+    """Rotation matrix of a unit quaternion (w, x, y, z)."""
+    w, x, y, z = np.asarray(q, dtype=float) / np.linalg.norm(q)
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                     [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                     [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+
+
+def _euler_zyx(R) -> tuple:
+    """(yaw, pitch, roll) with R = Rz(yaw) Ry(pitch) Rx(roll); pitch by atan2, so a
+    quarter turn about y is exact to rounding."""
+    pitch = math.atan2(-R[2, 0], math.hypot(R[0, 0], R[1, 0]))
+    if math.hypot(R[0, 0], R[1, 0]) < 1e-12:       # gimbal lock: roll folded into yaw
+        return math.atan2(-R[0, 1], R[1, 1]), pitch, 0.0
+    return math.atan2(R[1, 0], R[0, 0]), pitch, math.atan2(R[2, 1], R[2, 2])
+
+
+class _Builder:
+    def __init__(self, m, name: str, source: str, frictionloss: str):
+        self.m = m
+        self.source = source
+        self.frictionloss = frictionloss
+        self.model = Model(name)
+        self.taken: set = {"g"}
+        self.notes: list = []
+        self.joints: list = []
+        self.coordinates: list = []       # simple coordinates, MuJoCo order
+        self.quaternion_joints: list = [] # (MjcfJoint) ball and free, MuJoCo order
+
+    def error(self, problem: str, key: str, fix: str) -> ModelError:
+        return ModelError(problem, file=self.source, key=key, fix=fix)
+
+    def name_of(self, kind, index: int) -> str:
+        mujoco = _mujoco()
+        return mujoco.mj_id2name(self.m, kind, index) or ""
+
+    def unique(self, wanted: str) -> str:
+        """A fresh valid name close to ``wanted`` (suffix _2, _3... on a clash)."""
+        stem = sanitize(wanted)[:56]
+        if not re.match(r"[A-Za-z]", stem):
+            stem = "L_" + stem
+        name, k = stem, 1
+        while True:
+            try:
+                check_name(name)
+                ok = (name not in self.taken and not name.endswith("_dot")
+                      and f"{name}_dot" not in self.taken)
+            except ModelError:
+                ok = False
+            if ok:
+                self.taken.add(name)
+                return name
+            k += 1
+            name = f"{stem}_{k}"
+
+    # -- frames ----------------------------------------------------------------
+    def rotate(self, base: str, R, tag: str) -> str:
+        """Constant rotations Rz Ry Rx from ``base`` (none for the identity)."""
+        yaw, pitch, roll = _euler_zyx(R)
+        for axis, angle, suffix in ((3, yaw, "rz"), (2, pitch, "ry"), (1, roll, "rx")):
+            if angle != 0.0:
+                name = self.unique(f"{tag}_{suffix}")
+                self.model.add_base(name, parent=base, axis=axis, angle=_num(angle))
+                base = name
+        return base
+
+    def offset(self, point: str, base: str, xyz, wanted: str) -> str:
+        if not np.any(xyz):
+            return point
+        name = self.unique(wanted)
+        self.model.add_point(name, parent=point, base=base, coordinates=[_num(x) for x in xyz])
+        return name
+
+    def turn(self, base: str, axis, angle, tag: str) -> str:
+        """A base turned from ``base`` by ``angle`` about the unit ``axis``."""
+        aligned = [k for k in range(3) if abs(axis[k]) == 1.0]
+        if aligned:
+            k = aligned[0]
+            name = self.unique(tag)
+            self.model.add_base(name, parent=base, axis=k + 1,
+                                angle=angle if axis[k] > 0 else -angle)
+            return name
+        phi = math.atan2(axis[1], axis[0])
+        theta = math.acos(max(-1.0, min(1.0, axis[2])))
+        steps = ([(3, _num(phi), "az")] if phi != 0 else []) + [(2, _num(theta), "ay"),
+                                                                 (3, angle, "q"),
+                                                                 (2, _num(-theta), "ay_back")]
+        steps += [(3, _num(-phi), "az_back")] if phi != 0 else []
+        for i, (k, value, suffix) in enumerate(steps):
+            name = self.unique(tag if i == len(steps) - 1 else f"{tag}_{suffix}")
+            self.model.add_base(name, parent=base, axis=k, angle=value)
+            base = name
+        return base
+
+    # -- joints ----------------------------------------------------------------
+    def joint_name(self, j: int) -> str:
+        return sanitize(self.name_of(_mujoco().mjtObj.mjOBJ_JOINT, j)) or f"joint{j}"
+
+    def simple_coordinate(self, j: int) -> str:
+        name = self.joint_name(j)
+        key = f"joint[{j}]"
+        check_name(name, file=self.source, key=key, what="coordinate (the sanitized joint name)")
+        if name in self.taken or f"{name}_dot" in self.taken or \
+                (name.endswith("_dot") and name[:-4] in self.taken):
+            raise self.error(f"joint {j} gives coordinate '{name}', which clashes with "
+                             "another name of the model", key, "rename one of the joints")
+        self.taken.add(name)
+        self.model.add_coordinate(name)
+        return name
+
+    def quaternion_joint(self, j: int, kind: str, parent_base: str, point: str,
+                         body: str) -> tuple:
+        """A ball or free joint named after the MuJoCo joint; returns (base, point)."""
+        name = self.joint_name(j)
+        made = [name] + [f"{name}_{s}" for part in JOINT_KINDS[kind] for s in part]
+        clash = [t for t in made if t in self.taken]
+        if clash:
+            raise self.error(f"{kind} joint {j} gives the name '{clash[0]}', which is "
+                             "already taken", f"joint[{j}]", "rename the joint or the body")
+        self.taken.update(made)
+        base = self.unique(f"B_{body}")
+        if kind == "free":
+            new_point = self.unique(f"P_{body}")
+            self.model.add_joint(name, "free", parent=CANONICAL_BASE, base=base,
+                                 origin=CANONICAL_POINT, point=new_point)
+            point = new_point
+        else:
+            self.model.add_joint(name, "ball", parent=parent_base, base=base)
+        q, v = JOINT_KINDS[kind]
+        self.quaternion_joints.append(MjcfJoint(self.name_of(_mujoco().mjtObj.mjOBJ_JOINT, j),
+                                                j, kind, tuple(f"{name}_{s}" for s in q),
+                                                tuple(f"{name}_{s}" for s in v),
+                                                int(self.m.jnt_qposadr[j]),
+                                                int(self.m.jnt_dofadr[j])))
+        return base, point
+
+    def body_frames(self) -> tuple:
+        """(base, point, moving) of every MuJoCo body, joints applied."""
+        m = self.m
+        frames = [(CANONICAL_BASE, CANONICAL_POINT, False)]
+        for b in range(1, m.nbody):
+            parent_base, parent_point, moving = frames[m.body_parentid[b]]
+            body = sanitize(self.name_of(_mujoco().mjtObj.mjOBJ_BODY, b)) or f"body{b}"
+            joints = range(m.body_jntadr[b], m.body_jntadr[b] + m.body_jntnum[b])
+            if any(m.jnt_type[j] == _FREE for j in joints):
+                base, point = self.quaternion_joint(joints[0], "free", CANONICAL_BASE,
+                                                    CANONICAL_POINT, body)
+                frames.append((base, point, True))
+                continue
+            point = self.offset(parent_point, parent_base, m.body_pos[b], f"P_{body}")
+            base = self.rotate(parent_base, _quat_matrix(m.body_quat[b]), f"B_{body}")
+            for j in joints:
+                base, point = self.apply_joint(j, base, point, body)
+                moving = True
+            frames.append((base, point, moving))
+        return tuple(frames)
+
+    def apply_joint(self, j: int, base: str, point: str, body: str) -> tuple:
+        """The frame after joint ``j`` (``mj_kinematics``: about the anchor ``jnt_pos``)."""
+        m = self.m
+        kind = int(m.jnt_type[j])
+        axis, anchor = [float(a) for a in m.jnt_axis[j]], m.jnt_pos[j]
+        if kind == _SLIDE:
+            q = self.simple_coordinate(j)
+            self.record(j, "slide", (q,), (q,))
+            shift = symbol(q) - _num(m.qpos0[m.jnt_qposadr[j]])
+            name = self.unique(f"P_{body}_{q}")
+            self.model.add_point(name, parent=point, base=base,
+                                 coordinates=[_num(a) * shift for a in axis])
+            return base, name
+        at = self.offset(point, base, anchor, f"A_{body}_{self.joint_name(j)}")
+        if kind == _HINGE:
+            q = self.simple_coordinate(j)
+            self.record(j, "hinge", (q,), (q,))
+            base = self.turn(base, axis, symbol(q) - _num(m.qpos0[m.jnt_qposadr[j]]),
+                             f"B_{body}_{q}")
+        else:
+            base, _ = self.quaternion_joint(j, "ball", base, point, body)
+        return base, self.offset(at, base, -anchor, f"P_{body}_{self.joint_name(j)}")
+
+    def record(self, j: int, kind: str, coordinates: tuple, speeds: tuple) -> None:
+        self.coordinates.append(MjcfJoint(self.name_of(_mujoco().mjtObj.mjOBJ_JOINT, j), j, kind,
+                                          coordinates, speeds, int(self.m.jnt_qposadr[j]),
+                                          int(self.m.jnt_dofadr[j])))
+
+    # -- bodies and effects ----------------------------------------------------
+    def bodies(self, frames) -> None:
+        m = self.m
+        for b in range(1, m.nbody):
+            base, point, moving = frames[b]
+            mass, principal = float(m.body_mass[b]), m.body_inertia[b]
+            if not moving or (mass == 0 and not np.any(principal)):
+                continue
+            body = self.unique(sanitize(self.name_of(_mujoco().mjtObj.mjOBJ_BODY, b))
+                               or f"body{b}")
+            G = self.offset(point, base, m.body_ipos[b], f"G_{body}")
+            R = _quat_matrix(m.body_iquat[b])
+            inertia = R @ np.diag(principal) @ R.T
+            inertia = (inertia + inertia.T) / 2
+            # rounding of the turn, not data: off-diagonals at 1e-14 of the largest moment
+            inertia[np.abs(inertia) <= 1e-14 * max(principal)] = 0.0
+            self.model.add_body(body, mass=_num(mass), G=G, base=base,
+                                inertia=[[_num(inertia[r][c]) for c in range(3)]
+                                         for r in range(3)])
+
+    def effects(self) -> None:
+        mujoco, m = _mujoco(), self.m
+        flags = m.opt.disableflags
+        springs = not flags & mujoco.mjtDisableBit.mjDSBL_SPRING
+        dampers = not flags & mujoco.mjtDisableBit.mjDSBL_DAMPER
+        armature, skipped = {}, {}
+        for joint in self.coordinates + self.quaternion_joints:
+            j = joint.id
+            for k, speed in enumerate(joint.speeds):
+                dof = joint.dofadr + k
+                if m.dof_armature[dof] > 0:
+                    armature[speed] = _num(m.dof_armature[dof])
+            simple = joint.type in ("hinge", "slide")
+            q = joint.coordinates[0]
+            dof = joint.dofadr
+            damping = m.dof_damping[dof:dof + len(joint.speeds)]
+            if dampers and np.any(damping > 0):
+                # MuJoCo damps the world-frame linear velocity of a free joint: the
+                # same generalized force on the body-frame speeds when the three
+                # linear dampings are equal (R is orthogonal), as a joint's damping makes
+                if np.all(damping == damping[0]):
+                    self.model.add_effect(self.unique(f"damping_{self.joint_name(j)}"),
+                                          "joint_damping", coordinates=list(joint.speeds),
+                                          damping=_num(damping[0]))
+                else:
+                    skipped.setdefault("unequal damping of", []).append(joint.name)
+            if springs and m.jnt_stiffness[j] > 0:
+                if simple:
+                    self.model.add_effect(self.unique(f"spring_{q}"), "torsion_spring",
+                                          coordinate=q, stiffness=_num(m.jnt_stiffness[j]),
+                                          rest_angle=_num(m.qpos_spring[joint.qposadr]))
+                else:
+                    skipped.setdefault(f"stiffness of {joint.type} joint", []).append(joint.name)
+            if np.any(m.dof_frictionloss[dof:dof + len(joint.speeds)] > 0):
+                if simple and self.frictionloss == "smooth":
+                    self.model.add_effect(self.unique(f"friction_{q}"), "friction",
+                                          coordinate=q,
+                                          coulomb=_num(m.dof_frictionloss[dof]))
+                else:
+                    what = "frictionloss (left out as asked) of" if simple else \
+                        f"frictionloss of {joint.type} joint"
+                    skipped.setdefault(what, []).append(joint.name)
+        if armature:
+            self.model.set_armature(armature)
+        if skipped:
+            self.notes.append("Ignored: " + "; ".join(
+                f"{what} {', '.join(names)}" for what, names in skipped.items()) + ".")
+
+    def gravity(self) -> None:
+        mujoco, m = _mujoco(), self.m
+        if m.opt.disableflags & mujoco.mjtDisableBit.mjDSBL_GRAVITY or not np.any(m.opt.gravity):
+            return
+        gx, gy, gz = (float(x) for x in m.opt.gravity)
+        if gx == 0 and gy == 0 and gz < 0:
+            self.model.add_parameter("g", -gz)
+            self.model.set_gravity([0, 0, -symbol("g")])
+        else:
+            self.model.set_gravity([_num(x) for x in (gx, gy, gz)])
+
+    def ignored(self) -> None:
+        """Notes for what MuJoCo simulates and the model leaves out."""
+        m = self.m
+        counts = (("geoms (contacts)", m.ngeom), ("tendons", m.ntendon),
+                  ("actuators", m.nu), ("sensors", m.nsensor), ("sites", m.nsite),
+                  ("flexes", m.nflex))
+        listed = [f"{n} {what}" for what, n in counts if n]
+        if listed:
+            self.notes.append("Ignored: " + ", ".join(listed) + " (the model is the rigid "
+                              "bodies, joints and joint effects only; no inputs).")
+        if np.any(m.jnt_limited):
+            self.notes.append(f"Joint limits of {int(np.sum(m.jnt_limited))} joints are not "
+                              "enforced.")
+        if m.opt.density > 0 or m.opt.viscosity > 0 or np.any(m.opt.wind):
+            self.notes.append("Fluid forces (density, viscosity, wind) are ignored.")
+        if np.any(m.body_gravcomp):
+            self.notes.append("Gravity compensation (gravcomp) is ignored.")
+        if m.ntendon and (np.any(m.tendon_stiffness) or np.any(m.tendon_damping)
+                          or np.any(m.tendon_armature)):
+            self.notes.append("Tendon stiffness, damping and armature are ignored.")
+
+    def build(self) -> MjcfImport:
+        m = self.m
+        if m.neq:
+            kinds = sorted({_mujoco().mjtEq(int(t)).name.removeprefix("mjEQ_").lower()
+                            for t in m.eq_type})
+            raise self.error(f"the model has {m.neq} equality constraints "
+                             f"({', '.join(kinds)}), which modelgen cannot import yet (it "
+                             "has no constrained mechanisms)",
+                             "equality", "remove the <equality> section, or replace the "
+                             "constraint by a joint (a weld by no joint)")
+        self.gravity()
+        frames = self.body_frames()
+        self.bodies(frames)
+        self.ignored()
+        self.effects()
+        # the notes are known only now; the description goes first in the file
+        spec = replace(self.model.spec(),
+                       description=" ".join(self.description() + tuple(self.notes)))
+        model = Model.from_spec(spec)
+        joints = sorted(self.coordinates + self.quaternion_joints, key=lambda j: j.id)
+        qpos_index, dof_index = [], []
+        by_coordinate = {c: jt.qposadr + i for jt in joints for i, c in enumerate(jt.coordinates)}
+        by_speed = {v: jt.dofadr + i for jt in joints for i, v in enumerate(jt.speeds)}
+        qpos_index = tuple(by_coordinate[c] for c in spec.coordinates)
+        dof_index = tuple(by_speed[v] for v in spec.dof_names)
+        free = tuple((spec.coordinates.index(jt.coordinates[3]), spec.dof_names.index(jt.speeds[0]))
+                     for jt in self.quaternion_joints if jt.type == "free")
+        return MjcfImport(model, tuple(joints), self.source, tuple(self.notes),
+                          qpos_index, dof_index, free)
+
+    def description(self) -> tuple:
+        m = self.m
+        return (f"Imported from {Path(self.source).name} (MJCF, compiled by MuJoCo "
+                f"{_mujoco().__version__}): {m.nq} qpos, {m.nv} dofs, {m.nbody - 1} bodies.",)
+
+
+def import_mjmodel(mjmodel, source: str = "<mjmodel>", *, name: Optional[str] = None,
+                   frictionloss: str = "smooth") -> MjcfImport:
+    """Import a compiled ``mujoco.MjModel`` (see the module docstring).
+
+    ``name`` defaults to the model's ``<mujoco model="...">`` (sanitized);
+    ``frictionloss="ignore"`` leaves MuJoCo's ``frictionloss`` out instead of
+    importing it as a smoothed Coulomb ``friction`` effect.
+    """
+    if frictionloss not in FRICTIONLOSS:
+        raise ValueError(f"frictionloss must be one of {FRICTIONLOSS}, not {frictionloss!r}")
+    if name is None:
+        name = sanitize(_mujoco().mj_id2name(mjmodel, _mujoco().mjtObj.mjOBJ_MODEL, 0) or "") \
+            or sanitize(Path(source).stem)
+    if not re.match(r"[A-Za-z]", name):
+        name = "robot_" + name
+    return _Builder(mjmodel, name[:63], source, frictionloss).build()
+
+
+def import_mjcf(path, *, name: Optional[str] = None, frictionloss: str = "smooth") -> MjcfImport:
+    """Compile an MJCF file with MuJoCo and import it; options as :func:`import_mjmodel`.
+
+    >>> imp = import_mjcf("acrobot.xml")                        # doctest: +SKIP
+    >>> imp.model.spec().coordinates                            # doctest: +SKIP
+    ('shoulder', 'elbow')
+    """
+    mujoco = _mujoco()
+    path = Path(path)
+    if not path.is_file():
+        raise ModelError("cannot read the MJCF file: no such file", file=str(path),
+                         fix="check the path")
+    try:
+        mjmodel = mujoco.MjModel.from_xml_path(str(path))
+    except ValueError as exc:       # MuJoCo's compiler reports errors as ValueError
+        raise ModelError(f"MuJoCo cannot compile the file: {exc}", file=str(path),
+                         fix="fix the MJCF as MuJoCo's message says") from None
+    return import_mjmodel(mjmodel, str(path), name=name, frictionloss=frictionloss)
+
+
+def import_mjcf_text(text: str, source: str = "<string>", **options) -> MjcfImport:
+    """Import MJCF text (no file includes or assets); options as :func:`import_mjmodel`."""
+    mujoco = _mujoco()
+    try:
+        mjmodel = mujoco.MjModel.from_xml_string(text)
+    except ValueError as exc:
+        raise ModelError(f"MuJoCo cannot compile the text: {exc}", file=source,
+                         fix="fix the MJCF as MuJoCo's message says") from None
+    return import_mjmodel(mjmodel, source, **options)
+
+
+def load_mjcf(path, **options) -> Model:
+    """The :class:`Model` of an MJCF file (see :func:`import_mjcf`)."""
+    return import_mjcf(path, **options).model
+
+
+def mjcf_to_yaml(imported: MjcfImport) -> str:
+    """The model file of an import: a comment header (source, notes), then YAML."""
+    lines = [f"# Imported by 'modelgen import' from {Path(imported.source).name} (MJCF).",
+             "# Edit freely; re-importing overwrites this file."]
+    lines += [f"# Note: {note}" for note in imported.notes]
+    return "\n".join(lines) + "\n" + imported.model.to_yaml()
+
+
+# -- state conversions: MuJoCo's qpos/qvel/qacc <-> modelgen's q/v/qdd -----------
+
+def qpos_from_mujoco(imported: MjcfImport, qpos) -> np.ndarray:
+    """modelgen's q from MuJoCo's ``qpos`` (a reordering: the values are the same)."""
+    return np.asarray(qpos, dtype=float)[list(imported.qpos_index)]
+
+
+def qpos_to_mujoco(imported: MjcfImport, q) -> np.ndarray:
+    """MuJoCo's ``qpos`` from modelgen's q."""
+    out = np.empty(len(imported.qpos_index))
+    out[list(imported.qpos_index)] = np.asarray(q, dtype=float)
+    return out
+
+
+def _free_rotations(imported: MjcfImport, q) -> list:
+    """(dof index of vx, R) of each free joint, R its body's rotation in E."""
+    q = np.asarray(q, dtype=float)
+    return [(dof, _quat_matrix(q[k:k + 4])) for k, dof in imported.free]
+
+
+def velocity_map(imported: MjcfImport, q) -> np.ndarray:
+    """T with MuJoCo's ``qvel = T v`` at modelgen's configuration q: a permutation,
+    with each free joint's linear velocity turned from its body frame to the world.
+    ``T^T M T`` is modelgen's A (M: MuJoCo's ``mj_fullM``)."""
+    n = len(imported.dof_index)
+    T = np.zeros((n, n))
+    T[list(imported.dof_index), range(n)] = 1.0
+    for dof, R in _free_rotations(imported, q):
+        rows = [imported.dof_index[dof + i] for i in range(3)]
+        T[np.ix_(rows, range(dof, dof + 3))] = R
+    return T
+
+
+def qvel_to_mujoco(imported: MjcfImport, q, v) -> np.ndarray:
+    """MuJoCo's ``qvel`` from modelgen's q and v."""
+    return velocity_map(imported, q) @ np.asarray(v, dtype=float)
+
+
+def qvel_from_mujoco(imported: MjcfImport, qpos, qvel) -> np.ndarray:
+    """modelgen's v from MuJoCo's ``qpos`` and ``qvel``."""
+    q = qpos_from_mujoco(imported, qpos)
+    return velocity_map(imported, q).T @ np.asarray(qvel, dtype=float)
+
+
+def qacc_to_mujoco(imported: MjcfImport, q, v, qdd) -> np.ndarray:
+    """MuJoCo's ``qacc`` from modelgen's q, v and qdd: ``T qdd + dT/dt v``; a free
+    joint's world-frame linear acceleration is ``R (dv/dt + w x v)``."""
+    v = np.asarray(v, dtype=float)
+    out = velocity_map(imported, q) @ np.asarray(qdd, dtype=float)
+    for dof, R in _free_rotations(imported, q):
+        rows = [imported.dof_index[dof + i] for i in range(3)]
+        out[rows] += R @ np.cross(v[dof + 3:dof + 6], v[dof:dof + 3])
+    return out

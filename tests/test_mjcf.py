@@ -1,0 +1,329 @@
+"""MJCF import (modelgen.model.mjcf) against MuJoCo itself, and armature.
+
+MuJoCo compiles each model; contacts, constraints, limits, frictionloss,
+actuation, tendon passive forces, fluid forces and gravity compensation are
+switched off in MuJoCo (modelgen ignores them, see docs/mjcf.md), and at 3
+seeded random states (random unit quaternions) modelgen's
+
+* A against ``T^T M T`` (M: ``mj_fullM`` after ``mj_forward``, armature in;
+  T: :func:`velocity_map`, MuJoCo's qvel = T v),
+* ``h - tau`` (tau: gravity, joint springs and dampers) against
+  ``T^T (qfrc_bias - qfrc_passive + M dT/dt v)``,
+* q_ddot, mapped by :func:`qacc_to_mujoco`, against MuJoCo's ``qacc``,
+
+agree to 1e-10 relative (max-norm).  The models are dm_control's suite and
+gymnasium's MuJoCo assets; the whole suite is marked slow, dm_control's
+cartpole and acrobot are the fast check.
+"""
+from __future__ import annotations
+
+import glob
+import importlib
+import os
+
+import numpy as np
+import pytest
+
+mujoco = pytest.importorskip("mujoco", reason="MJCF import needs the mujoco package")
+
+import modelgen
+from modelgen.errors import ModelError
+from modelgen.model import parse_model
+from modelgen.model.mjcf import (
+    import_mjcf_text,
+    import_mjmodel,
+    qacc_to_mujoco,
+    qpos_from_mujoco,
+    qpos_to_mujoco,
+    qvel_from_mujoco,
+    qvel_to_mujoco,
+    velocity_map,
+)
+
+TOL = 1e-10
+
+
+# -- the models --------------------------------------------------------------------
+
+#: dm_control suite domains whose model needs arguments: domain -> (function, kwargs)
+_DMC_ARGS = {"swimmer": ("get_model_and_assets", {"n_joints": 6}),
+             "lqr": ("get_model_and_assets", {"n_bodies": 6, "n_actuators": 2,
+                                              "random": np.random.RandomState(0)}),
+             "manipulator": ("make_model", {"use_peg": False, "insert": False}),
+             "stacker": ("make_model", {"n_boxes": 2}),
+             "quadruped": ("make_model", {"floor_size": 10})}
+DMC_DOMAINS = ("acrobot", "ball_in_cup", "cartpole", "cheetah", "dog", "finger", "fish",
+               "hopper", "humanoid", "humanoid_CMU", "lqr", "manipulator", "pendulum",
+               "point_mass", "quadruped", "reacher", "stacker", "swimmer", "walker")
+
+
+def dmc_model(domain: str):
+    """(MjModel, label) of a dm_control suite domain."""
+    suite = pytest.importorskip("dm_control.suite", reason="dm-control is not installed")
+    mod = importlib.import_module(f"{suite.__name__}.{domain}")
+    function, kwargs = _DMC_ARGS.get(domain, ("get_model_and_assets", {}))
+    made = getattr(mod, function)(**kwargs)
+    xml, assets = made if isinstance(made, tuple) else (made, None)
+    if assets is None:
+        from dm_control.suite import common
+        assets = common.ASSETS
+    return mujoco.MjModel.from_xml_string(xml, assets), f"dm_control/{domain}"
+
+
+def gym_files() -> list:
+    """gymnasium's MuJoCo asset files (empty when gymnasium is missing)."""
+    try:
+        import gymnasium
+    except ImportError:
+        return []
+    folder = os.path.join(os.path.dirname(gymnasium.__file__), "envs", "mujoco", "assets")
+    return sorted(glob.glob(os.path.join(folder, "*.xml")))
+
+
+# -- the comparison ----------------------------------------------------------------
+
+
+
+def comparable(mjmodel):
+    """MuJoCo model with contacts, constraints, actuation, tendon passive forces,
+    fluid forces and gravity compensation off (changed in place)."""
+    bits = mujoco.mjtDisableBit
+    mjmodel.opt.disableflags |= (bits.mjDSBL_CONTACT | bits.mjDSBL_CONSTRAINT
+                                 | bits.mjDSBL_EQUALITY | bits.mjDSBL_LIMIT
+                                 | bits.mjDSBL_FRICTIONLOSS | bits.mjDSBL_ACTUATION)
+    mjmodel.tendon_stiffness[:] = 0
+    mjmodel.tendon_damping[:] = 0
+    mjmodel.tendon_armature[:] = 0
+    mjmodel.opt.density = 0
+    mjmodel.opt.viscosity = 0
+    mjmodel.opt.wind[:] = 0
+    mjmodel.body_gravcomp[:] = 0
+    return mjmodel
+
+
+def random_state(imp, cm, rng):
+    """(q, v): hinge and slide coordinates in [-1, 1], unit quaternions, speeds N(0, 1)."""
+    spec = imp.model.spec()
+    q = rng.uniform(-1, 1, spec.nq)
+    for j in spec.joints:
+        k = spec.coordinates.index(j.quaternion[0])
+        quat = rng.normal(size=4)
+        q[k:k + 4] = quat / np.linalg.norm(quat)
+    return q, rng.normal(size=spec.n)
+
+
+def relative(a, b) -> float:
+    return float(np.max(np.abs(a - b)) / max(np.max(np.abs(b)), 1e-300))
+
+
+def compare(mjmodel, label: str, formulation: str = "auto", states: int = 3) -> dict:
+    """Import, build and compare at seeded random states; returns the figures."""
+    imp = import_mjmodel(mjmodel, label + ".xml", frictionloss="ignore")
+    mjmodel = comparable(mjmodel)
+    generated = modelgen.generate_model(imp.model, formulation=formulation)
+    cm = modelgen.load(imp.model, formulation=formulation)     # the same build, cached
+    data = mujoco.MjData(mjmodel)
+    rng = np.random.default_rng(1)
+    worst = {"A": 0.0, "h - tau": 0.0, "qdd": 0.0}
+    for _ in range(states):
+        q, v = random_state(imp, cm, rng)
+        data.qpos[:] = qpos_to_mujoco(imp, q)
+        data.qvel[:] = qvel_to_mujoco(imp, q, v)
+        data.ctrl[:] = 0
+        mujoco.mj_forward(mjmodel, data)
+        M = np.zeros((mjmodel.nv, mjmodel.nv))
+        mujoco.mj_fullM(mjmodel, data, M)
+        T = velocity_map(imp, q)
+        x = np.concatenate([q, v])
+        A = cm.mass_matrix(q)
+        bias = cm.velocity_terms(q, v) - cm.generalized_forces(0.0, q, v)
+        rate = qacc_to_mujoco(imp, q, v, np.zeros(len(v)))
+        expected = T.T @ (data.qfrc_bias - data.qfrc_passive + M @ rate)
+        qdd = cm.rhs(0.0, x)[len(q):]
+        worst["A"] = max(worst["A"], relative(A, T.T @ M @ T))
+        worst["h - tau"] = max(worst["h - tau"], relative(bias, expected))
+        worst["qdd"] = max(worst["qdd"], relative(qacc_to_mujoco(imp, q, v, qdd), data.qacc))
+    return {"dof": mjmodel.nv, "seconds": sum(generated.seconds.values()), "worst": worst,
+            "notes": imp.notes, "ops": generated.ops}
+
+
+def check(mjmodel, label, formulation="auto"):
+    result = compare(mjmodel, label, formulation)
+    assert max(result["worst"].values()) <= TOL, (label, result["worst"])
+    return result
+
+
+# -- fast checks -------------------------------------------------------------------
+
+@pytest.mark.parametrize("formulation", ["aba", "crba"])
+def test_cartpole_matches_mujoco(formulation):
+    pytest.importorskip("dm_control", reason="dm-control is not installed")
+    check(*dmc_model("cartpole"), formulation)
+
+
+def test_acrobot_matches_mujoco():
+    pytest.importorskip("dm_control", reason="dm-control is not installed")
+    check(*dmc_model("acrobot"))
+
+
+# -- the whole suites (slow) -----------------------------------------------------
+
+#: gymnasium-robotics' environment models (the other files there are their includes)
+ROBOTICS_FILES = ("adroit_hand/adroit_door.xml", "adroit_hand/adroit_hammer.xml",
+                  "adroit_hand/adroit_pen.xml", "adroit_hand/adroit_relocate.xml",
+                  "fetch/pick_and_place.xml", "fetch/push.xml", "fetch/reach.xml",
+                  "fetch/slide.xml", "hand/manipulate_block.xml", "hand/manipulate_egg.xml",
+                  "hand/manipulate_pen.xml", "hand/reach.xml",
+                  "kitchen_franka/kitchen_assets/kitchen_env_model.xml", "point/point.xml")
+
+
+def robotics_files() -> list:
+    """(label, path) of gymnasium-robotics' models (empty when it is missing)."""
+    try:
+        import gymnasium_robotics
+    except ImportError:
+        return []
+    folder = os.path.join(os.path.dirname(gymnasium_robotics.__file__), "envs", "assets")
+    return [(f"gymnasium_robotics/{f[:-4]}", os.path.join(folder, f)) for f in ROBOTICS_FILES]
+
+
+def suite_models():
+    """(label, thunk giving the MjModel) of every model of both suites."""
+    out = []
+    try:
+        importlib.import_module("dm_control.suite")
+        out += [(f"dm_control/{d}", lambda d=d: dmc_model(d)[0]) for d in DMC_DOMAINS]
+    except ImportError:
+        pass
+    out += [(f"gymnasium/{os.path.basename(f)[:-4]}",
+             lambda f=f: mujoco.MjModel.from_xml_path(f)) for f in gym_files()]
+    out += [(label, lambda f=f: mujoco.MjModel.from_xml_path(f))
+            for label, f in robotics_files()]
+    return out
+
+
+#: models refused for a real reason: label -> the reason (the ModelError must say so)
+REFUSED = {label: "equality constraints" for label in (
+    "dm_control/manipulator", "dm_control/quadruped", "dm_control/stacker",
+    "gymnasium_robotics/fetch/pick_and_place", "gymnasium_robotics/fetch/push",
+    "gymnasium_robotics/fetch/reach", "gymnasium_robotics/fetch/slide",
+    "gymnasium_robotics/kitchen_franka/kitchen_assets/kitchen_env_model")}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("label, make", suite_models() or [("none", None)],
+                         ids=lambda x: x if isinstance(x, str) else "")
+def test_suite_model_matches_mujoco(label, make):
+    if make is None:
+        pytest.skip("neither dm-control nor gymnasium is installed")
+    if label in REFUSED:
+        with pytest.raises(ModelError, match=REFUSED[label]):
+            import_mjmodel(make(), label + ".xml")
+        return
+    check(make(), label)
+
+
+# -- every joint kind and frame on one synthetic model ----------------------------
+
+#: hinge about a tilted axis with an anchor and a ref, several joints on one body
+#: (slide then hinge), a ball joint with armature, a free body, springs with
+#: springref, damping, a rotated body and rotated inertial frames
+SYNTHETIC = """
+<mujoco model="every joint">
+  <option gravity="0.3 -0.2 -9.81"/>
+  <worldbody>
+    <body name="arm" pos="0.1 0.2 0.3" euler="10 20 30">
+      <joint name="tilted" type="hinge" axis="1 2 3" pos="0.05 0 -0.1" ref="0.3"
+             armature="0.02" damping="0.1" stiffness="2" springref="0.5"/>
+      <geom type="box" size="0.1 0.2 0.3" pos="0 0 -0.2" euler="5 0 7" mass="1.3"/>
+      <body name="carriage" pos="0 0 -0.5" quat="0.9 0.1 -0.3 0.2">
+        <joint name="rail" type="slide" axis="0 1 0" ref="-0.1" stiffness="5"
+               springref="0.2" armature="0.5"/>
+        <joint name="wrist" type="hinge" axis="0 0 -1" pos="0.1 0 0" damping="0.3"/>
+        <geom type="capsule" fromto="0 0 0 0.3 0.1 -0.2" size="0.04" mass="0.7"/>
+        <body name="hand" pos="0.3 0.1 -0.2">
+          <joint name="shoulder" type="ball" pos="0 0.05 0" armature="0.01" damping="0.2"/>
+          <geom type="ellipsoid" size="0.1 0.05 0.08" pos="0.1 0 0" euler="0 30 60"
+                mass="0.4"/>
+        </body>
+      </body>
+    </body>
+    <body name="puck" pos="1 0 0.5">
+      <joint name="puck" type="free" damping="0.4"/>
+      <geom type="box" size="0.2 0.1 0.05" euler="0 0 20" pos="0.1 0.05 0" mass="2"/>
+    </body>
+  </worldbody>
+</mujoco>
+"""
+
+
+@pytest.mark.parametrize("formulation", ["aba", "crba"])
+def test_every_joint_kind_matches_mujoco(formulation):
+    imp = import_mjcf_text(SYNTHETIC, "synthetic.xml")
+    spec = imp.model.spec()
+    assert [j.kind for j in spec.joints] == ["ball", "free"]
+    assert {k: float(v) for k, v in spec.armature} == {"tilted": 0.02, "rail": 0.5, "shoulder_wx": 0.01,
+                                   "shoulder_wy": 0.01, "shoulder_wz": 0.01}
+    check(mujoco.MjModel.from_xml_string(SYNTHETIC), "synthetic", formulation)
+
+
+def test_state_conversions_round_trip():
+    imp = import_mjcf_text(SYNTHETIC, "synthetic.xml")
+    mjmodel = mujoco.MjModel.from_xml_string(SYNTHETIC)
+    rng = np.random.default_rng(3)
+    qpos = rng.normal(size=mjmodel.nq)
+    for j in range(mjmodel.njnt):
+        if mjmodel.jnt_type[j] in (0, 1):
+            a = mjmodel.jnt_qposadr[j] + (3 if mjmodel.jnt_type[j] == 0 else 0)
+            qpos[a:a + 4] /= np.linalg.norm(qpos[a:a + 4])
+    qvel = rng.normal(size=mjmodel.nv)
+    q = qpos_from_mujoco(imp, qpos)
+    assert np.array_equal(qpos_to_mujoco(imp, q), qpos)
+    v = qvel_from_mujoco(imp, qpos, qvel)
+    assert np.allclose(qvel_to_mujoco(imp, q, v), qvel, rtol=0, atol=1e-14)
+    # the free joint's linear velocity: world frame in MuJoCo, body frame in modelgen
+    data = mujoco.MjData(mjmodel)
+    data.qpos[:], data.qvel[:] = qpos, qvel
+    mujoco.mj_forward(mjmodel, data)
+    puck = mujoco.mj_name2id(mjmodel, mujoco.mjtObj.mjOBJ_BODY, "puck")
+    spec = imp.model.spec()
+    k = spec.dof_names.index("puck_vx")
+    R = data.xmat[puck].reshape(3, 3)
+    assert np.allclose(R @ v[k:k + 3], qvel[mjmodel.jnt_dofadr[-1]:][:3], atol=1e-14)
+
+
+def test_equality_constraints_are_refused():
+    text = SYNTHETIC.replace("</worldbody>", "</worldbody><equality><joint joint1='rail' "
+                                             "joint2='wrist'/></equality>")
+    with pytest.raises(ModelError, match="equality constraints") as info:
+        import_mjcf_text(text, "eq.xml")
+    assert info.value.key == "equality" and info.value.file == "eq.xml"
+    assert "replace the constraint by a joint" in info.value.fix
+
+
+def test_mujoco_compile_errors_are_model_errors():
+    with pytest.raises(ModelError, match="MuJoCo cannot compile"):
+        import_mjcf_text("<mujoco><worldbody><body><joint type='bogus'/></body>"
+                         "</worldbody></mujoco>", "bad.xml")
+
+
+def test_load_and_import_dispatch_on_xml(tmp_path, capsys):
+    from modelgen.cli import main
+    path = tmp_path / "robot.xml"
+    path.write_text(SYNTHETIC)
+    assert modelgen.as_spec(path) == import_mjcf_text(SYNTHETIC, str(path)).model.spec()
+    assert main(["import", str(path), "-o", str(tmp_path / "robot.yaml")]) == 0
+    text = (tmp_path / "robot.yaml").read_text()
+    assert "# Note: Ignored: 4 geoms (contacts)" in text
+    assert parse_model(text) == modelgen.as_spec(path)
+    assert "wrote" in capsys.readouterr().out
+
+
+def test_frictionloss_is_a_smoothed_friction_effect_or_left_out_with_a_note():
+    text = SYNTHETIC.replace('damping="0.3"/>', 'damping="0.3" frictionloss="0.25"/>')
+    smooth = import_mjcf_text(text, "f.xml").model.spec()
+    (friction,) = [e for e in smooth.effects if e.kind == "friction"]
+    assert (friction.coordinate, float(friction.coulomb)) == ("wrist", 0.25)
+    left_out = import_mjcf_text(text, "f.xml", frictionloss="ignore")
+    assert not [e for e in left_out.model.spec().effects if e.kind == "friction"]
+    assert any("frictionloss (left out as asked) of wrist" in n for n in left_out.notes)
