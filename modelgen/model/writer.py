@@ -68,6 +68,11 @@ def spec_to_yaml(spec: ModelSpec) -> str:
     bases:
       B: {parent: E, axis: 3, angle: q}
     """
+    return "\n".join(_header(spec) + _geometry(spec) + _physics(spec)) + "\n"
+
+
+def _header(spec: ModelSpec) -> list:
+    """The lines of the name, description, coordinates, parameters and inputs."""
     name = _yaml_scalar
     out = [f"name: {name(spec.name)}"]
     if spec.description:
@@ -81,6 +86,13 @@ def spec_to_yaml(spec: ModelSpec) -> str:
         out += [f"  {name(p)}: {yaml_float(v)}" for p, v in spec.parameters]
     if spec.inputs:
         out.append("inputs: [" + ", ".join(name(i) for i in spec.inputs) + "]")
+    return out
+
+
+def _geometry(spec: ModelSpec) -> list:
+    """The lines of the bases, joints, points and frames."""
+    name = _yaml_scalar
+    out = []
     made = {j.base for j in spec.joints} | {j.point for j in spec.joints}
     bases = [b for b in spec.bases if b.name not in made]
     if bases:
@@ -107,6 +119,13 @@ def spec_to_yaml(spec: ModelSpec) -> str:
         out.append("frames:")
         out += [f"  {name(f.name)}: {{point: {name(f.point)}, base: {name(f.base)}}}"
                 for f in spec.frames]
+    return out
+
+
+def _physics(spec: ModelSpec) -> list:
+    """The lines of the bodies, gravity, actions, effects, armature and units."""
+    name = _yaml_scalar
+    out = []
     if spec.bodies:
         out.append("bodies:")
         for b in spec.bodies:
@@ -133,7 +152,7 @@ def spec_to_yaml(spec: ModelSpec) -> str:
                                              for n, v in spec.armature) + "}")
     if spec.units:
         out.append("units: {" + ", ".join(f"{name(n)}: {name(u)}" for n, u in spec.units) + "}")
-    return "\n".join(out) + "\n"
+    return out
 
 
 def _yaml_effect(effect) -> str:
