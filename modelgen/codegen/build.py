@@ -72,12 +72,8 @@ from modelgen.errors import BuildError
 
 #: -O2 without gcc's basic-block (SLP) vectorizer, which gcc 12 enables at -O2:
 #: on the straight-line code of a rhs it packs pairs of scalar operations into
-#: vector ones and costs time at run time as well as at compile time.  Measured
-#: (gcc 12.2, this 2-core machine, min of 7 interleaved rounds of a C loop over
-#: the rhs): chain 6 rhs 310 ns at -O2, 264 ns without SLP, 256 ns at -O1;
-#: chain 20 1.66 / 1.48 / 1.45 us; chain 30 2.60 / 2.37 / 2.31 us; arm7 516 /
-#: 460 / 530 ns; double pendulum 39 ns at all three.  Compiling the chain 6's
-#: part 2 takes 237 ms of compiler CPU at -O2, 195 ms without SLP, 148 at -O1.
+#: vector ones, which costs time at run time as well as at compile time (the
+#: figures: docs/generated-c.md, "Compiler flags").
 O2 = ("-O2", "-fno-tree-slp-vectorize")
 #: Optimisation flags by the statement count of a part's largest routine: per
 #: part, (flags, above this many statements) rows, first match wins, else
@@ -88,17 +84,12 @@ O2 = ("-O2", "-fno-tree-slp-vectorize")
 #: only from Python through the runtime, where a call costs about a
 #: microsecond anyway, or from a user's C, compiled by the user) is at -O0 at
 #: every size, so it compiles beside part 2 without becoming the critical path.
-#: Chain 6 (largest part-1 routine 365 statements): part 1 compiles in 134 ms
-#: of compiler CPU at -O0 against 419 ms at -O1 (part 2: 195 ms), and A takes
-#: 390 ns instead of 231 ns, h 308 instead of 137 ns, the energies 322
-#: instead of 163 ns; n = 50 links: 3.2 s against 10.7 s, A 17.6 us against
-#: 7.6 us (h 4.5 against 2.4 us).  Part 0 is the whole file in one process
-#: (one core, and the FMU): -O1 above 400 statements, else :data:`O2`.
+#: Part 0 is the whole file in one process (one core, and the FMU): -O1 above
+#: 400 statements, else :data:`O2`.
 OPT_LEVELS = {0: ((("-O1",), 400),), 1: ((("-O0",), -1),), 2: ((("-O1",), 4000),)}
 #: A model's C is compiled as two parts in parallel (MG_PART 1: the model
 #: functions no integrator calls, 2: the integration path) when the machine has
-#: two cores, at every size: even the double pendulum gains (its file takes
-#: 0.09-0.10 s of compiler CPU at -O2, each part 0.05-0.06 s); on one core, as
+#: two cores, at every size (even the double pendulum gains); on one core, as
 #: one part (0: the whole file).
 BASE_FLAGS = ("-std=c99", "-fPIC", "-Wall", "-Wextra")
 #: Flags of mg_integrate.c (compiled once, on the integration hot path).
@@ -192,9 +183,8 @@ def compile_flags(statements: int, part: int = 2, *, host: bool = False) -> list
 #: gcc and clang never contract ``a*b + c`` into a fused multiply-add, so the
 #: same operations are rounded the same way; what changes is the encoding.
 #: With VEX's three-operand forms the straight-line rhs needs no register
-#: copies: arm7's rhs (ABA) takes 3,205 instead of 3,869 instructions per call
-#: (callgrind) and 0.35-0.45 instead of 0.51-0.55 us (alternating runs, gcc
-#: 12.2, AMD EPYC), with bit-identical output.  ``MODELGEN_AVX=0`` turns it off.
+#: copies, so it runs fewer instructions with bit-identical output
+#: (docs/generated-c.md, "Compiler flags").  ``MODELGEN_AVX=0`` turns it off.
 HOST_ISA = ("-mavx",)
 
 

@@ -26,9 +26,9 @@ EXACT_INTEGER_LIMIT = 2**53
 _ADD, _MUL, _NEG, _ATOM = 1, 2, 3, 4
 _ONE, _MINUS_ONE = sympy.S.One, sympy.S.NegativeOne
 #: sympy functions printed as a C call of the same arity.  sin and cos are the
-#: model C's inline ``mg_sin``/``mg_cos`` (templates/model.c.j2; error < 0.82 ulp,
-#: a sin and cos of one angle 102 instructions against 135 for glibc's sincos
-#: call; ``-DMG_LIBM_TRIG`` makes them libm's).
+#: model C's inline ``mg_sin``/``mg_cos`` (templates/model.c.j2: inline, so that
+#: gcc shares one argument reduction between a sin and a cos of one angle;
+#: ``-DMG_LIBM_TRIG`` makes them libm's).
 _C_FUNCTIONS = {sympy.sin: "mg_sin", sympy.cos: "mg_cos", sympy.tan: "tan", sympy.asin: "asin",
                 sympy.acos: "acos", sympy.atan: "atan", sympy.atan2: "atan2",
                 sympy.sinh: "sinh", sympy.cosh: "cosh", sympy.tanh: "tanh",
