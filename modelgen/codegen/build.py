@@ -367,11 +367,6 @@ def cache_lookup(directory: Path, build_hash: str) -> tuple:
     return BuildResult(directory, manifest["module_name"], module_path, manifest, True, 0.0), ""
 
 
-def cached_build(directory: Path, build_hash: str) -> BuildResult | None:
-    """The existing, verified build in ``directory`` if it matches ``build_hash``."""
-    return cache_lookup(directory, build_hash)[0]
-
-
 def _private_dir(directory: Path, prefix: str) -> Path:
     """A new private temporary directory in ``directory`` (created with its parents);
     BuildError naming the path if it cannot be written."""

@@ -292,14 +292,6 @@ def signature_of(ret: str, params: str) -> Signature:
                    f"ABI_VERSION")
 
 
-def struct_fields(name: str) -> tuple:
-    """The (declaration, field, comment) rows of one struct of ``STRUCTS``."""
-    for struct, _, fields in STRUCTS:
-        if struct == name:
-            return fields
-    raise KeyError(name)
-
-
 def defines() -> list:
     """Every ``#define`` of the interface as (name, value, comment), in header order."""
     rows = [(f"{PREFIX}_ABI_VERSION", ABI_VERSION, "version of this interface")]

@@ -315,8 +315,3 @@ def _negative_text(e) -> bool:
 
 def _shorten(text: str) -> str:
     return text if len(text) <= 80 else text[:60] + "..." + text[-15:]
-
-
-def print_expression(expr, slots: dict, routine: str = "") -> str:
-    """Print one expression with the given symbol mapping."""
-    return ModelPrinter(slots, routine).doprint(expr)

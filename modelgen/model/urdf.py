@@ -632,7 +632,7 @@ def import_urdf_text(text, source: str = "<string>", *, fix_floating_root: bool 
     docstring); every change they make is a warning and a note of the import.
     """
     options = reading_options(inertia, min_mass, min_inertia)
-    robot = parse_robot(text, source, fix_floating_root=fix_floating_root)
+    robot = parse_robot(text, source)
     notes = tuple(f"The floating joint '{j.name}' at the root was imported as fixed."
                   for j in robot.order if j.type == "floating" and fix_floating_root
                   and j.parent == robot.root)

@@ -295,7 +295,7 @@ class _Reader:
                      friction, node.line)
 
     # -- the tree -------------------------------------------------------------
-    def robot(self, data, fix_floating_root: bool) -> Robot:
+    def robot(self, data) -> Robot:
         top = self.xml(data)
         robot_name = self.name(top)
 
@@ -353,10 +353,10 @@ class _Reader:
                              f"root link '{root}'", lost.line, f"joint[{lost.name}]",
                              "a URDF is a tree: remove the joint that closes the loop")
         for joint in order:
-            self.check_joint_use(joint, joints, root, fix_floating_root)
+            self.check_joint_use(joint, joints, root)
         return Robot(robot_name, self.file, links, joints, root, tuple(order))
 
-    def check_joint_use(self, joint: Joint, joints: dict, root: str, fix_floating: bool):
+    def check_joint_use(self, joint: Joint, joints: dict, root: str):
         key = f"joint[{joint.name}]"
         if joint.type == "floating" and joint.mimic is not None:
             raise self.error("a floating joint cannot mimic another joint", joint.line,
@@ -376,10 +376,7 @@ class _Reader:
                              "itself a mimic")
 
 
-def parse_robot(data, source: str = "<string>", *, fix_floating_root: bool = False) -> Robot:
-    """Read URDF text (str or bytes) into a checked :class:`Robot`.
-
-    ``fix_floating_root`` welds a ``floating`` joint whose parent is the root
-    link to it, as a fixed joint; any other floating joint is an error.
-    """
-    return _Reader(source).robot(data, fix_floating_root)
+def parse_robot(data, source: str = "<string>") -> Robot:
+    """Read URDF text (str or bytes) into a checked :class:`Robot` (what becomes of a
+    ``floating`` joint is the importer's choice: :mod:`modelgen.model.urdf`)."""
+    return _Reader(source).robot(data)
