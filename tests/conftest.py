@@ -41,3 +41,31 @@ def pytest_terminal_summary(terminalreporter):
         terminalreporter.section("figures measured by the tests")
         for line in SUMMARY:
             terminalreporter.write_line(line)
+
+
+#: Tests left out of the everyday ``make test`` (``-m 'not slow'``) besides those
+#: decorated ``@pytest.mark.slow``: each builds large models or runs a symbolic
+#: reference for a minute or more, and a faster test covers the same code
+#: (``make test-all`` and CI run them).  Node id prefixes.
+SLOW = (
+    # KanesMethod's closed form of the 7-joint arm and the 5- and 6-link chains
+    # (the smaller chains and every other model stay in)
+    "tests/test_against_mechanics.py::test_mass_matrix_matches_kanes_method[arm7]",
+    "tests/test_against_mechanics.py::test_mass_matrix_matches_kanes_method[spatial_chain_5]",
+    "tests/test_against_mechanics.py::test_mass_matrix_matches_kanes_method[spatial_chain_6]",
+    # every shipped model's output directory through gcc and g++ -pedantic (the
+    # golden model's compile is checked by the fast tests)
+    "tests/test_generated_c.py::test_generated_c_compiles_warning_free_as_c99_and_cxx",
+    # chains up to 40 links to fit a line through the operation counts
+    "tests/test_inverse_dynamics.py::test_inverse_dynamics_of_a_chain_costs_linear_operations",
+    # solo12 (18 speeds) built with crba twice
+    "tests/test_sparse_solve.py::test_solo12_crba_rhs_agrees_with_aba_through_the_sparse_solve",
+    "tests/test_inverse_dynamics.py::test_inverse_dynamics_is_a_qdd_plus_h_minus_tau_and_zero_at_the_rhs[robots/solo12",
+)
+
+
+def pytest_collection_modifyitems(config, items):
+    slow = pytest.mark.slow
+    for item in items:
+        if item.nodeid.startswith(SLOW):
+            item.add_marker(slow)
