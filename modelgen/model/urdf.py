@@ -54,6 +54,8 @@ applies.  What becomes what:
   coordinates first), where Pinocchio puts its free-flyer first.
   ``fix_floating_root=True`` welds a floating joint at the root instead and
   says so in the description.  Meshes are never opened.
+* Every link is a frame (its origin point and base, Pinocchio's BODY frame) named
+  after the link, or ``<link>_frame`` when a body (a moving link's) has the name.
 
 >>> imp = import_urdf_text('''<robot name="pend"><link name="world"/>
 ...   <link name="rod"><inertial><origin xyz="0 0 -0.5"/><mass value="1"/>
@@ -324,6 +326,22 @@ class _Builder:
             self.model.add_body(name, mass=mass, G=point, base=base, inertia=inertia)
         return body_of
 
+    def link_frames(self) -> None:
+        """A frame per link (its origin point and base), named after the link, or
+        ``<link>_frame`` when the name is taken (a moving link's body has it)."""
+        for link in self.robot.links:
+            name = sanitize(link)
+            try:
+                check_name(name)
+                free = name not in self.taken and not name.endswith("_dot")
+            except ModelError:
+                free = False
+            if free:
+                self.taken.add(name)
+            else:
+                name = self.unique(f"{name}_frame")
+            self.model.add_frame(name, point=self.point[link], base=self.base[link])
+
     def parameter(self, wanted: str, value) -> sympy.Symbol:
         name = self.unique(wanted)
         self.model.add_parameter(name, float(value))
@@ -379,6 +397,7 @@ class _Builder:
             self.joint(joint)
         body_of = self.bodies()
         self.inputs_and_effects(body_of)
+        self.link_frames()
         self.model.set_gravity([0, 0, -symbol("g")])
         return UrdfImport(self.model, tuple(self.infos), self.robot.file, self.notes)
 

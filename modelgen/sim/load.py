@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING
 
 from modelgen.codegen import index
 from modelgen.codegen.build import Generated
-from modelgen.codegen.options import BuildOptions
+from modelgen.codegen.options import BuildOptions, KinematicsOptions
 from modelgen.sim.runtime import CompiledModel, check_mass_matrix
 
 if TYPE_CHECKING:
@@ -55,7 +55,8 @@ def _loaded(generated: Generated) -> CompiledModel:
 
 def load(source, out_dir=None, *, force: bool = False, options: BuildOptions | None = None,
          progress=None, jacobian: bool | None = None, formulation: str | None = None,
-         linearize: bool | None = None, floating_base: bool | None = None) -> CompiledModel:
+         linearize: bool | None = None, floating_base: bool | None = None,
+         kinematics=None, frames=None) -> CompiledModel:
     """Build (on first use) and import a model; returns a :class:`CompiledModel`.
 
     ``source`` is a YAML path, a :class:`modelgen.model.Model` or a ModelSpec.
@@ -72,6 +73,11 @@ def load(source, out_dir=None, *, force: bool = False, options: BuildOptions | N
     :meth:`CompiledModel.linearize` and :meth:`CompiledModel.equilibrium`.
     ``floating_base=True`` (a URDF path) makes the robot's root link a free
     body (a free joint ``root_joint``: position, unit quaternion, 6 speeds).
+    ``kinematics`` (a :class:`~modelgen.codegen.options.KinematicsOptions` or a dict
+    of its fields) generates frame poses, velocities, Jacobians and bias
+    accelerations, the centre of mass and the centroidal map
+    (:mod:`modelgen.sim.kinematics`); ``frames=[...]`` is short for
+    ``kinematics={"frames": [...]}``.
 
     >>> cm = load("models/double_pendulum.yaml", jacobian=True)   # doctest: +SKIP
     >>> cm = load("models/double_pendulum.yaml",                  # doctest: +SKIP
@@ -79,7 +85,8 @@ def load(source, out_dir=None, *, force: bool = False, options: BuildOptions | N
     >>> cm.rhs(0.0, [0.1, 0.2, 0.0, 0.0])                    # doctest: +SKIP
     """
     options = BuildOptions.of(options, jacobian=jacobian, formulation=formulation,
-                              linearize=linearize, floating_base=floating_base)
+                              linearize=linearize, floating_base=floating_base,
+                              kinematics=_kinematics(kinematics, frames))
     key = _fast_key(source, options, out_dir)
     hit = None if force else index.lookup(key)
     if hit is not None:
@@ -90,6 +97,18 @@ def load(source, out_dir=None, *, force: bool = False, options: BuildOptions | N
     cm = _loaded(generated)
     index.record(key, generated.build, _runtime())
     return cm
+
+
+def _kinematics(kinematics, frames):
+    """The ``kinematics`` option of :func:`load`'s keywords (None: not given)."""
+    if frames is None:
+        return kinematics
+    if isinstance(frames, str):
+        frames = [frames]
+    merged = dict(kinematics) if isinstance(kinematics, dict) else \
+        {} if kinematics is None else dict(vars(KinematicsOptions.of(kinematics)))
+    merged["frames"] = tuple(frames)
+    return KinematicsOptions.of(merged)
 
 
 def _fast_key(source, options: BuildOptions, out_dir) -> str | None:
