@@ -206,3 +206,48 @@ def test_only_what_is_asked_is_generated(tmp_path):
     with pytest.raises(SimulationError, match="'com': True"):
         cm.com(np.zeros(cm.nq))
 
+
+
+SCENE = """scene: dp_kin
+model: ../double_pendulum.yaml
+effects: [gravity]
+initial: {q1: 1.0, q2: 0.5, q1_dot: 0.0, q2_dot: 0.0}
+time: {start: 0.0, end: 1.0, sample: 0.1}
+kinematics: {frames: [F2], reference: local, com: true}
+"""
+
+
+def test_scene_kinematics_key_builds_the_frames(tmp_path):
+    """F2 (point P1, base B2) of the double pendulum, in closed form: its origin is
+    l1 (cos q1, sin q1, 0), its z axis E's, turned by q1 + q2."""
+    from modelgen.model.scene import parse_scene
+    from modelgen.sim.scene import Scene
+    spec = parse_scene(SCENE, "dp_kin.yaml", base_dir=Path("models/scenes"))
+    assert dict(spec.kinematics) == {"frames": ("F2",), "reference": "local", "com": True}
+    cm = Scene(spec, tmp_path).model
+    l1 = cm.parameters["l1"]
+    q1, q2, w1, w2 = 0.3, -0.7, 1.1, 0.4
+    c, s = np.cos(q1 + q2), np.sin(q1 + q2)
+    T = cm.frame_pose([q1, q2], "F2")
+    _close(T[:3, 3], [l1 * np.cos(q1), l1 * np.sin(q1), 0])
+    _close(T[:3, :2], [[c, -s], [s, c], [0, 0]])
+    dP = l1 * np.array([-np.sin(q1), np.cos(q1), 0])
+    _close(cm.frame_jacobian([q1, q2], "F2", "local_world_aligned"),
+           np.array([[*dP, 0, 0, 1], [0, 0, 0, 0, 0, 1]]).T)
+    _close(cm.frame_bias_acceleration([q1, q2], [w1, w2], "F2", "local_world_aligned"),
+           [-l1 * w1**2 * np.cos(q1), -l1 * w1**2 * np.sin(q1), 0, 0, 0, 0])
+    assert f"{cm.name}_centroidal_momentum_matrix" not in cm.manifest["functions"]
+
+
+@pytest.mark.parametrize("entry, words", [
+    ("{frames: [F3]}", "no frame named 'F3'.*frames: F2"),
+    ("{frame: [F2]}", "unknown key 'frame' in kinematics.*did you mean 'frames'"),
+    ("{frames: F2}", "expected a list of frame names"),
+    ("{frames: [F2], com: 1}", "expected true or false"),
+])
+def test_scene_kinematics_errors_name_the_key(entry, words):
+    from modelgen.model.scene import parse_scene
+    text = SCENE.replace("{frames: [F2], reference: local, com: true}", entry)
+    with pytest.raises(ModelError, match=words) as info:
+        parse_scene(text, "dp_kin.yaml", base_dir=Path("models/scenes"))
+    assert info.value.key.startswith("kinematics")

@@ -27,10 +27,10 @@ SKIP = "<!-- readme-test: skip"
 NEEDS = re.compile(r"^<!-- readme-test: needs ([\w. ]+) -->$")
 
 
-def _blocks():
-    """(language, code, line, skipped, needs) for every fenced block of the README;
-    ``needs``: the modules its ``readme-test: needs`` line names."""
-    lines = README.read_text().splitlines()
+def _blocks(page=README):
+    """(language, code, line, skipped, needs) for every fenced block of the README
+    (or ``page``); ``needs``: the modules its ``readme-test: needs`` line names."""
+    lines = page.read_text().splitlines()
     out, i = [], 0
     while i < len(lines):
         m = re.match(r"^```(\w*)\s*$", lines[i])
@@ -82,6 +82,31 @@ def test_the_readme_has_blocks_of_every_kind_and_few_are_skipped():
 def test_python_block_runs(tmp_path, code, needs):
     _require(needs)
     env = _scratch(tmp_path)
+    proc = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, env=env,
+                          capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+
+
+#: pages of docs/ whose python blocks run too; a page's blocks share one build cache
+#: (they build the same model, as a reader running them in turn would)
+DOC_PAGES = ("kinematics.md",)
+
+
+def _doc_blocks():
+    return [pytest.param(page, code, needs, id=f"{page}:line{line}") for page in DOC_PAGES
+            for lang, code, line, skipped, needs in _blocks(ROOT / "docs" / page)
+            if lang == "python" and not skipped]
+
+
+@pytest.fixture(scope="module")
+def doc_caches(tmp_path_factory):
+    return {page: tmp_path_factory.mktemp("doc-cache") for page in DOC_PAGES}
+
+
+@pytest.mark.parametrize("page, code, needs", _doc_blocks())
+def test_doc_python_block_runs(tmp_path, doc_caches, page, code, needs):
+    _require(needs)
+    env = dict(_scratch(tmp_path), MODELGEN_CACHE_DIR=str(doc_caches[page]))
     proc = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, env=env,
                           capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr[-3000:]
