@@ -185,7 +185,7 @@ def test_unknown_frame_is_refused_with_the_available_ones(tmp_path):
 
 
 def test_methods_say_how_to_build_what_is_missing(robot, tmp_path):
-    q, v = _states(robot, 1)[0]
+    q, _ = _states(robot, 1)[0]
     with pytest.raises(SimulationError, match="no frame 'nowhere'"):
         robot.cm.frame_pose(q, "nowhere")
     with pytest.raises(SimulationError, match="reference must be one of"):
@@ -251,3 +251,12 @@ def test_scene_kinematics_errors_name_the_key(entry, words):
     with pytest.raises(ModelError, match=words) as info:
         parse_scene(text, "dp_kin.yaml", base_dir=Path("models/scenes"))
     assert info.value.key.startswith("kinematics")
+
+
+def test_kinematics_options_refuse_unknown_fields_and_mean_nothing_when_empty():
+    from modelgen.codegen.options import BuildOptions, KinematicsOptions
+    with pytest.raises(TypeError, match="unknown kinematics option 'frame'.*frames"):
+        KinematicsOptions.of({"frame": ["tool0"]})
+    assert BuildOptions(kinematics={"frames": []}).kinematics is None
+    assert BuildOptions(kinematics=[]).key_text() == BuildOptions().key_text()
+    assert "kinematics" in BuildOptions(kinematics=["tool0"]).key_text()

@@ -439,7 +439,7 @@ def kinematics_api(name: str, frames, n: int, nq: int, n_p: int) -> list:
           f"per frame with V = J qd: rows linear then angular, {ref};",
           "columns: the speeds (ball and free joints in the tangent space)."]),
         ("frame_bias_accelerations", frames.bias, "a", True,
-         [f"Classical acceleration of every frame's origin with zero speed derivatives",
+         ["Classical acceleration of every frame's origin with zero speed derivatives",
           f"(Pinocchio's getFrameClassicalAcceleration, a = 0): a[{NAME}_NFRAMES*6],",
           f"linear [m/s^2] then angular [rad/s^2], {ref};",
           "J_dot qd exactly for LOCAL_WORLD_ALIGNED."]),

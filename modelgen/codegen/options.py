@@ -56,12 +56,17 @@ class KinematicsOptions:
         object.__setattr__(self, "frames", tuple(self.frames))
 
     @classmethod
-    def of(cls, value) -> "KinematicsOptions | None":
+    def of(cls, value) -> KinematicsOptions | None:
         """A KinematicsOptions from itself, a mapping of its fields, or a list of frame
         names; None for None or nothing asked."""
         if value is None or isinstance(value, cls):
             made = value
         elif isinstance(value, dict):
+            known = [f.name for f in fields(cls)]
+            unknown = [k for k in value if k not in known]
+            if unknown:
+                raise TypeError(f"unknown kinematics option {unknown[0]!r}; the options are "
+                                + ", ".join(known))
             made = cls(**value)
         elif isinstance(value, (list, tuple)):
             made = cls(frames=tuple(value))

@@ -37,8 +37,19 @@ import sympy
 
 from modelgen.derive.graph import Graph, GraphBuilder
 from modelgen.derive.kinematics import Kinematics
-from modelgen.derive.spatial import (ZERO, ZERO3, add, cross, matmul, matvec, scale, sub,
-                                     total, transpose)
+from modelgen.derive.spatial import (
+    ZERO,
+    ZERO3,
+    add,
+    cross,
+    matmul,
+    matvec,
+    scale,
+    sub,
+    total,
+    transpose,
+)
+
 
 @dataclass(frozen=True)
 class FrameTerms:
