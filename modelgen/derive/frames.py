@@ -103,33 +103,101 @@ def _frame(builder, kin: Kinematics, frame, reference: str, n: int, bias: bool):
     return pose, (*velocity[0], *velocity[1]), jacobian, accel
 
 
+class _Composite:
+    """Sums of the bodies' (mass, first moment m r_G, inertia about O in E) over
+    sets of bodies, memoised: a set is built from the largest known subsets, so
+    the nested subtrees of a chain cost one addition each (CRBA's composites)."""
+
+    def __init__(self, builder, items: dict):
+        self.builder = builder
+        self.items = items          # body index -> (m, h, I_O rows)
+        self.memo: dict = {}
+
+    def plus(self, a, b):
+        name, vec = self.builder.name, self.builder.vec
+        return (name(a[0] + b[0]), vec(add(a[1], b[1])),
+                tuple(vec(add(ra, rb)) for ra, rb in zip(a[2], b[2], strict=True)))
+
+    def __call__(self, bodies: frozenset):
+        if bodies not in self.memo:
+            remaining, out = set(bodies), None
+            for known in sorted((s for s in self.memo if s < bodies),
+                                key=lambda s: (-len(s), sorted(s))):
+                if known <= remaining:
+                    out = self.memo[known] if out is None else self.plus(out, self.memo[known])
+                    remaining -= known
+            for i in sorted(remaining):
+                out = self.items[i] if out is None else self.plus(out, self.items[i])
+            self.memo[bodies] = out
+        return self.memo[bodies]
+
+
+def _about_O(builder, kin: Kinematics, body):
+    """(m, m r_G, I_O): the body's inertia about O in E's axes,
+    ``R I R^T + m (|r|^2 1 - r r^T)``."""
+    R, r, m = kin.bases[body.base].R, kin.points[body.G].r, body.mass
+    I_E = matmul(matmul(R, body.inertia), transpose(R))
+    rr = [[r[i] * r[j] for j in range(3)] for i in range(3)]
+    r2 = rr[0][0] + rr[1][1] + rr[2][2]
+    rows = tuple(builder.vec(I_E[i][j] + m * ((r2 if i == j else 0) - rr[i][j])
+                             for j in range(3)) for i in range(3))
+    return builder.name(m), builder.vec(scale(m, r)), rows
+
+
 def _mass_terms(builder, kin: Kinematics, n: int, centroidal: bool):
-    """(M, c, columns of sum m_i b_k^Gi, columns of the angular momentum about O)."""
+    """(M, c, columns of sum m_i b_k^Gi, columns of the angular momentum about O).
+
+    Column k groups the bodies that column k moves as one rigid body: those with
+    the same twist (c_k, beta_k) at O (angular partial velocity and the partial
+    velocity of the body-fixed point at O; the kinematics names them once along a
+    chain).  A group with composite (M, h, I_O) has the momentum ``(M beta + c x
+    h, h x beta + I_O c)``; a body whose centre's partial has another angular part
+    (its G given in another base) is summed alone."""
     spec = kin.spec
-    bodies = [b for b in spec.bodies if b.mass != 0]
-    mass = builder.name(total([b.mass for b in bodies]))
-    first = builder.vec(total([scale(b.mass, kin.points[b.G].r)[i] for b in bodies])
-                        for i in range(3))
+    massive = [i for i, b in enumerate(spec.bodies) if b.mass != 0]
+    mass = builder.name(total([spec.bodies[i].mass for i in massive]))
+    first = builder.vec(total([scale(spec.bodies[i].mass, kin.points[spec.bodies[i].G].r)[j]
+                               for i in massive]) for j in range(3))
     c = builder.vec(scale(1 / mass, first))
-    linear, angular = [], []
-    inertia_E = {}
+    items = {}
+    composite = _Composite(builder, items)
+    groups = []
     for k in range(n):
-        lin = ZERO3
-        ang = ZERO3
-        for b in spec.bodies:
-            bk = kin.point_partial(b.G, k)
+        by_twist, alone = {}, []
+        for i, b in enumerate(spec.bodies):
+            if b.mass == 0 and not any(x != 0 for row in b.inertia for x in row):
+                continue
             ck = kin.bases[b.base].partials.get(k, ZERO3)
-            if b.mass != 0 and bk != ZERO3:
-                mb = builder.vec(scale(b.mass, bk))
-                lin = add(lin, mb)
-                if centroidal:
-                    ang = add(ang, cross(kin.points[b.G].r, mb))
-            if centroidal and ck != ZERO3 and any(x != 0 for row in b.inertia for x in row):
-                if b.name not in inertia_E:
-                    R = kin.bases[b.base].R
-                    inertia_E[b.name] = tuple(builder.vec(row) for row in
-                                              matmul(matmul(R, b.inertia), transpose(R)))
-                ang = add(ang, matvec(inertia_E[b.name], ck))
+            w, beta = kin.points[b.G].partials.get(k, (ZERO3, ZERO3))
+            if w == ck:
+                if ck != ZERO3 or beta != ZERO3:
+                    by_twist.setdefault((ck, beta), []).append(i)
+            else:
+                alone.append(i)
+        groups.append((sorted(by_twist.items(), key=lambda g: g[1]), alone))
+    for i in sorted({i for g, alone in groups for _, members in g for i in members}
+                    | {i for _, alone in groups for i in alone}):
+        items[i] = _about_O(builder, kin, spec.bodies[i])
+    sets = {frozenset(members) for g, _ in groups for _, members in g}
+    for s in sorted(sets, key=lambda s: (len(s), sorted(s))):
+        composite(s)          # smallest first, so the larger reuse them
+    linear, angular = [], []
+    for k, (by_twist, alone) in enumerate(groups):
+        lin = ang = ZERO3
+        for (ck, beta), members in by_twist:
+            M, h, I_O = composite(frozenset(members))
+            lin = add(lin, add(scale(M, beta), cross(ck, h)))
+            if centroidal:
+                ang = add(ang, add(cross(h, beta), matvec(I_O, ck)))
+        for i in alone:
+            b = spec.bodies[i]
+            mb = builder.vec(scale(b.mass, kin.point_partial(b.G, k)))
+            lin = add(lin, mb)
+            if centroidal:
+                R = kin.bases[b.base].R
+                I_E = matmul(matmul(R, b.inertia), transpose(R))
+                ang = add(ang, add(cross(kin.points[b.G].r, mb),
+                                   matvec(I_E, kin.bases[b.base].partials.get(k, ZERO3))))
         linear.append(builder.vec(lin))
         angular.append(builder.vec(ang))
     return mass, c, linear, angular
