@@ -260,3 +260,11 @@ def test_kinematics_options_refuse_unknown_fields_and_mean_nothing_when_empty():
     assert BuildOptions(kinematics={"frames": []}).kinematics is None
     assert BuildOptions(kinematics=[]).key_text() == BuildOptions().key_text()
     assert "kinematics" in BuildOptions(kinematics=["tool0"]).key_text()
+
+
+def test_frames_keyword_joins_the_kinematics_keyword(tmp_path):
+    g = modelgen.generate_model("models/double_pendulum.yaml", tmp_path, frames="F2",
+                                kinematics={"com": True, "bias_acceleration": False})
+    assert g.manifest["kinematics"] == {"frames": ["F2"], "reference": "local_world_aligned",
+                                        "bias_acceleration": False, "com": True,
+                                        "centroidal": False}

@@ -26,7 +26,8 @@ def generate_model(source, out_dir=None, *, force: bool = False,
                    options: BuildOptions | None = None, progress=None,
                    jacobian: bool | None = None, formulation: str | None = None,
                    linearize: bool | None = None,
-                   floating_base: bool | None = None) -> Generated:
+                   floating_base: bool | None = None, kinematics=None,
+                   frames=None) -> Generated:
     """Generate and compile a model (or reuse the cache); returns the report.
 
     ``options`` and the shorthand keywords are those of :func:`load`.
@@ -35,7 +36,8 @@ def generate_model(source, out_dir=None, *, force: bool = False,
     ``progress(stage)`` is called as each stage of a build starts.
     """
     options = BuildOptions.of(options, jacobian=jacobian, formulation=formulation,
-                              linearize=linearize, floating_base=floating_base)
+                              linearize=linearize, floating_base=floating_base,
+                              kinematics=_kinematics(kinematics, frames))
     generated = _generate(source, out_dir, force, options, progress)
     _loaded(generated)
     index.record(_fast_key(source, options, out_dir), generated.build, _runtime())
