@@ -79,11 +79,18 @@ def _require(needs):
         pytest.importorskip(module, reason=f"the block needs {module} (an optional extra)")
 
 
-def _scratch(tmp_path):
-    """A directory with models/ and tests/ of the checkout, and its own build cache."""
+@pytest.fixture(scope="module")
+def cache(tmp_path_factory):
+    """One build cache for every block: a reader runs the pages' blocks in turn, and
+    the cache is keyed by what is built, so a block never sees another's output."""
+    return tmp_path_factory.mktemp("cache")
+
+
+def _scratch(tmp_path, cache):
+    """A directory with models/ and tests/ of the checkout, and the blocks' build cache."""
     for name in ("models", "tests"):
         (tmp_path / name).symlink_to(ROOT / name)
-    env = dict(os.environ, MODELGEN_CACHE_DIR=str(tmp_path / "cache"), MPLBACKEND="Agg",
+    env = dict(os.environ, MODELGEN_CACHE_DIR=str(cache), MPLBACKEND="Agg",
                PATH=f"{Path(sys.executable).parent}{os.pathsep}{os.environ.get('PATH', '')}")
     return env
 
@@ -113,18 +120,18 @@ def test_the_docs_pages_are_read_and_few_blocks_are_skipped():
 
 
 @pytest.mark.parametrize("code, needs", _runnable("python"))
-def test_python_block_runs(tmp_path, code, needs):
+def test_python_block_runs(tmp_path, cache, code, needs):
     _require(needs)
-    env = _scratch(tmp_path)
+    env = _scratch(tmp_path, cache)
     proc = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, env=env,
                           capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr[-3000:]
 
 
 @pytest.mark.parametrize("code, needs", _runnable("sh"))
-def test_shell_block_runs(tmp_path, code, needs):
+def test_shell_block_runs(tmp_path, cache, code, needs):
     _require(needs)
-    env = _scratch(tmp_path)
+    env = _scratch(tmp_path, cache)
     for line in code.splitlines():
         command = line.split("#", 1)[0].strip()
         if not command:

@@ -377,7 +377,7 @@ def test_scene_level_errors():
     assert error(scen="x") == (
         "s.yaml:12: scen: unknown key 'scen'; fix: did you mean 'scene'? valid keys: scene, "
         "description, model, add_parameters, add_effects, effects, parameters, initial, time, "
-        "integrator, inputs, outputs")
+        "integrator, inputs, outputs, kinematics")
     assert error(scene="dp-1") == (
         "s.yaml:1: scene: 'dp-1' is not a valid scene name; fix: use ASCII letters, digits and "
         "'_', starting with a letter")

@@ -31,6 +31,9 @@ from modelgen.codegen.printer import ModelPrinter
 ABI_VERSION = capi.ABI_VERSION
 #: The templates of a model's own code (the model hash covers these only).
 MODEL_TEMPLATES = ("model.c.j2", "model.h.j2", "macros.j2")
+#: The templates of the frame kinematics, rendered only into builds that ask for them
+#: (so they enter the model hash of those builds only).
+KINEMATICS_TEMPLATES = ("kinematics.c.j2", "kinematics.h.j2")
 #: The integrators' header, rendered from modelgen.codegen.capi alone; their C is
 #: plain files in ``c/`` (:func:`integrator_files`).
 INTEGRATOR_HEADER = "mg_integrate.h"
@@ -58,10 +61,11 @@ def environment() -> jinja2.Environment:
         undefined=jinja2.StrictUndefined, autoescape=False)
 
 
-def templates_digest() -> str:
-    """Hash of the model templates (not the integrators'), part of the model hash."""
+def templates_digest(kinematics: bool = False) -> str:
+    """Hash of the model templates (not the integrators'), part of the model hash;
+    with ``kinematics``, of the frame kinematics' too."""
     h = hashlib.sha256()
-    for name in MODEL_TEMPLATES:
+    for name in MODEL_TEMPLATES + (KINEMATICS_TEMPLATES if kinematics else ()):
         h.update(name.encode())
         h.update((templates_dir() / name).read_bytes())
     return h.hexdigest()
@@ -244,7 +248,7 @@ def template_context(*, name: str, description: str, model_hash: str, n: int,
                      functions: dict, output_columns=(), has_jacobian=False,
                      has_linearize=False, nq: int | None = None, speeds=None,
                      quaternions=(), npd: int = 0, mass_pattern=None,
-                     formulation: str = "crba", aba_inward=()) -> dict:
+                     formulation: str = "crba", aba_inward=(), frames=None) -> dict:
     """The plain dict every C template receives.
 
     ``mass_pattern`` (n x n booleans, default dense) marks the entries of the
@@ -255,8 +259,12 @@ def template_context(*, name: str, description: str, model_hash: str, n: int,
     ``n`` is the number of speeds (the size of A), ``nq`` that of the
     coordinates (default ``n``; more with ball or free joints, whose
     ``quaternions`` are lists of the four state indices of each quaternion).
+
+    ``frames`` (:class:`~modelgen.derive.frames.FrameTerms`, or None) adds the
+    frame kinematics' functions (``kinematics``, ``frames``, ``reference``).
     """
     nq = n if nq is None else nq
+    kinematics = kinematics_api(name, frames, n, nq, len(parameters))
     solve = solve_code(n, f"{name.upper()}_PIVOT_TOL", mass_pattern)
     return {
         "name": name,
@@ -285,9 +293,15 @@ def template_context(*, name: str, description: str, model_hash: str, n: int,
         "has_linearize": bool(has_linearize),
         "nc": nq + n + len(inputs),
         "output_columns": list(output_columns),
-        "api": public_api(name, n, len(parameters), len(inputs), len(bodies),
-                          len(output_columns), has_jacobian, has_linearize, nq,
-                          rhs_solve=_solve_words(formulation, solve)),
+        "api": _before_integration(
+            public_api(name, n, len(parameters), len(inputs), len(bodies),
+                       len(output_columns), has_jacobian, has_linearize, nq,
+                       rhs_solve=_solve_words(formulation, solve)), kinematics, name),
+        "kinematics": kinematics,
+        "frames": list(frames.frames) if frames else [],
+        "nframes": len(frames.frames) if frames else 0,
+        "reference": frames.reference if frames else "",
+        "REFERENCE": frames.reference.upper() if frames else "",
         **solve,
         "formulation": formulation,
         "aba_inward": list(aba_inward),
@@ -391,6 +405,64 @@ def public_api(name: str, n: int, n_p: int, n_u: int, n_b: int, n_y: int = 0,
     ] + _integrator_api(name, nx, n_p, n_u, n_y, has_jacobian)
 
 
+def _before_integration(api: list, extra: list, name: str) -> list:
+    """``api`` with ``extra`` put after the model functions, before the integrators'."""
+    if not extra:
+        return api
+    at = next(i for i, f in enumerate(api) if f["name"] == f"{name}_system")
+    return api[:at] + extra + api[at:]
+
+
+def kinematics_api(name: str, frames, n: int, nq: int, n_p: int) -> list:
+    """Prototypes and documentation of the frame kinematics asked for (``frames``:
+    :class:`~modelgen.derive.frames.FrameTerms`, or None: none); each entry also
+    names its ``routine`` and output array ``out`` for the C template."""
+    if frames is None:
+        return []
+    nf = len(frames.frames)
+    NAME = name.upper()
+    where = {"local": "in the frame's own axes, at its origin",
+             "world": "in E's axes, of the body-fixed point at O",
+             "local_world_aligned": "in E's axes, at the frame's origin"}[frames.reference]
+    ref = f"{frames.reference.upper()} ({where})"
+    qp = f"q[{nq}] coordinates; p: {n_p} parameters"
+    table = [
+        ("frame_poses", frames.poses, "T", False,
+         [f"Pose of every frame: T[{NAME}_NFRAMES*16], one row-major 4x4 matrix per",
+          "frame [[R, r], [0, 0, 0, 1]]: R's columns are the frame's unit vectors in E,",
+          f"r its origin from O in E [m]; {qp}."]),
+        ("frame_velocities", frames.velocities, "V", True,
+         [f"Spatial velocity of every frame: V[{NAME}_NFRAMES*6], linear [m/s] then",
+          f"angular [rad/s], {ref}; q[{nq}], qd[{n}] speeds."]),
+        ("frame_jacobians", frames.jacobians, "J", False,
+         [f"Jacobian of every frame: J[{NAME}_NFRAMES*6*{n}], one row-major 6 x {n} matrix",
+          f"per frame with V = J qd: rows linear then angular, {ref};",
+          "columns: the speeds (ball and free joints in the tangent space)."]),
+        ("frame_bias_accelerations", frames.bias, "a", True,
+         ["Classical acceleration of every frame's origin with zero speed derivatives",
+          f"(Pinocchio's getFrameClassicalAcceleration, a = 0): a[{NAME}_NFRAMES*6],",
+          f"linear [m/s^2] then angular [rad/s^2], {ref};",
+          "J_dot qd exactly for LOCAL_WORLD_ALIGNED."]),
+        ("com", frames.com, "c", False,
+         [f"Centre of mass c[3] from O in E [m]; {qp}."]),
+        ("com_jacobian", frames.com_jacobian, "Jc", False,
+         [f"Jacobian of the centre of mass Jc[3*{n}], row-major, in E: dc/dt = Jc qd."]),
+        ("centroidal_momentum_matrix", frames.centroidal, "Ag", False,
+         [f"Centroidal momentum matrix Ag[6*{n}], row-major (Pinocchio's computeCentroidalMap):",
+          "the momentum about the centre of mass in E's axes is Ag qd, linear rows",
+          "[kg m/s] first, then angular [kg m^2/s]."]),
+    ]
+    out = []
+    for routine, exprs, array, with_qd, doc in table:
+        if not exprs or (routine.startswith("frame") and not nf):
+            continue
+        params = "const double *q, " + ("const double *qd, " if with_qd else "") + \
+            f"const double *p, double *{array}"
+        out.append({"ret": "void", "name": f"{name}_{routine}", "params": params, "doc": doc,
+                    "routine": routine, "out": array})
+    return out
+
+
 def _solve_words(formulation: str, solve: dict) -> str:
     """How the crba rhs solves A qdd = tau - h (from :func:`solve_code`'s choice), or
     "" for the articulated-body algorithm, which has nothing to solve."""
@@ -464,9 +536,18 @@ def _integrator_api(name: str, nx: int, n_p: int, n_u: int, n_y: int,
 
 
 def emit_sources(context: dict) -> dict:
-    """Render ``<name>.h`` and ``<name>.c``."""
+    """Render ``<name>.h`` and ``<name>.c``; the frame kinematics, when asked, go at the
+    end of the C and before the header's closing ``extern "C"`` (so a build that
+    asks for none is byte for byte what it was)."""
     name = context["name"]
-    return {
-        f"{name}.h": render("model.h.j2", dict(context, template="model.h.j2")),
-        f"{name}.c": render("model.c.j2", dict(context, template="model.c.j2")),
-    }
+    header = render("model.h.j2", dict(context, template="model.h.j2"))
+    source = render("model.c.j2", dict(context, template="model.c.j2"))
+    if context["kinematics"]:
+        source += render("kinematics.c.j2", context)
+        head, mark, tail = header.rpartition(_HEADER_END)
+        header = head + render("kinematics.h.j2", context) + mark + tail
+    return {f"{name}.h": header, f"{name}.c": source}
+
+
+#: where the header's declarations end (the kinematics' defines go before it)
+_HEADER_END = "#ifdef __cplusplus\n}\n#endif"

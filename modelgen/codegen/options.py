@@ -24,6 +24,59 @@ from dataclasses import dataclass, field, fields, replace
 #: (see :func:`modelgen.codegen.pipeline.choose_formulation`), else crba.
 FORMULATIONS = ("auto", "aba", "crba")
 
+#: the conventions of frame velocities and Jacobians (Pinocchio's ``ReferenceFrame``,
+#: see :mod:`modelgen.derive.frames`)
+REFERENCES = ("local", "world", "local_world_aligned")
+
+
+@dataclass(frozen=True)
+class KinematicsOptions:
+    """Which kinematic quantities to generate (``BuildOptions.kinematics``).
+
+    >>> KinematicsOptions.of({"frames": ["tool0"], "com": True}).frames
+    ('tool0',)
+    """
+    #: frame names (the model's ``frames:``): ``<name>_frame_poses``,
+    #: ``_frame_velocities`` and ``_frame_jacobians`` compute exactly these
+    frames: tuple = ()
+    #: the convention of the generated velocities, Jacobians and bias accelerations,
+    #: one of :data:`REFERENCES`, Pinocchio's: ``local`` (the frame's axes, at its origin), ``world`` (E's axes,
+    #: at O) or ``local_world_aligned`` (E's axes, at the frame's origin); Python
+    #: converts to the others (see :mod:`modelgen.derive.frames`)
+    reference: str = "local_world_aligned"
+    #: also ``<name>_frame_bias_accelerations`` (the classical acceleration of
+    #: each frame with q_ddot = 0, Pinocchio's getFrameClassicalAcceleration)
+    bias_acceleration: bool = True
+    #: also ``<name>_com`` and ``<name>_com_jacobian``
+    com: bool = False
+    #: also ``<name>_centroidal_momentum_matrix`` (Pinocchio's computeCentroidalMap)
+    centroidal: bool = False
+
+    def __post_init__(self):
+        object.__setattr__(self, "frames", tuple(self.frames))
+
+    @classmethod
+    def of(cls, value) -> KinematicsOptions | None:
+        """A KinematicsOptions from itself, a mapping of its fields, or a list of frame
+        names; None for None or nothing asked."""
+        if value is None or isinstance(value, cls):
+            made = value
+        elif isinstance(value, dict):
+            known = [f.name for f in fields(cls)]
+            unknown = [k for k in value if k not in known]
+            if unknown:
+                raise TypeError(f"unknown kinematics option {unknown[0]!r}; the options are "
+                                + ", ".join(known))
+            made = cls(**value)
+        elif isinstance(value, (list, tuple)):
+            made = cls(frames=tuple(value))
+        else:
+            raise TypeError(f"kinematics must be a KinematicsOptions, a dict or a list of "
+                            f"frame names, not {type(value).__name__}")
+        if made is not None and not (made.frames or made.com or made.centroidal):
+            return None
+        return made
+
 
 @dataclass(frozen=True)
 class BuildOptions:
@@ -50,6 +103,9 @@ class BuildOptions:
     #: spec, which the model hash covers, already shows it: ``key_text(read=False)``
     #: leaves it out, and a key made from the file's bytes includes it
     floating_base: bool = field(default=False, metadata={"read": True})
+    #: the frame kinematics, centre of mass and centroidal map to generate
+    #: (:class:`KinematicsOptions`, or None: none)
+    kinematics: KinematicsOptions | None = None
     #: how a URDF's bodies that no rigid body matches are read: ``physical``
     #: (refused), ``as_is`` (kept, with a warning) or ``balance`` (MuJoCo's
     #: balanceinertia); see :func:`modelgen.model.urdf.import_urdf_text`
@@ -64,6 +120,7 @@ class BuildOptions:
 
     def __post_init__(self):
         object.__setattr__(self, "outputs", tuple(self.outputs))
+        object.__setattr__(self, "kinematics", KinematicsOptions.of(self.kinematics))
         for f in fields(self):
             if isinstance(f.default, bool):
                 object.__setattr__(self, f.name, bool(getattr(self, f.name)))

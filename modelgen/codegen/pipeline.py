@@ -17,6 +17,7 @@ from modelgen.codegen.build import (Generated, build_module, cache_dir, cache_lo
                                     compiler, host_flags, integrator_hash, runtime_module)
 from modelgen.codegen.capi import signature_of
 from modelgen.codegen.cse import hoist_parameters, make_routines
+from modelgen.derive.frames import FrameTerms, derive_frames
 from modelgen.derive.aba import ForwardDynamics, derive_aba, derive_aba_jacobian
 from modelgen.derive.dynamics import Equations, derive_equations
 from modelgen.derive.graph import GraphBuilder
@@ -25,7 +26,7 @@ from modelgen.derive.rnea import derive_inverse_dynamics, derive_velocity_terms
 from modelgen.errors import ModelError
 from modelgen.codegen.emit import (ABI_VERSION, emit_sources, integrator_sources, print_routine,
                                    runtime_sources, template_context, templates_digest)
-from modelgen.codegen.options import FORMULATIONS, BuildOptions
+from modelgen.codegen.options import FORMULATIONS, REFERENCES, BuildOptions
 from modelgen.derive.jacobian import accelerations, derive_jacobian_terms, residual
 from modelgen.derive.linearize import derive_linearization_terms
 from modelgen.derive.kinematics import derive_kinematics
@@ -62,7 +63,8 @@ def model_hash(spec: ModelSpec, options: BuildOptions | None = None) -> str:
     for part in (repr(replace(spec, source=None, lines=(), units=()))
                  + (f" armature={spec.armature!r}" if spec.armature else "")
                  + ("" if spec.physical_inertia else " physical_inertia=False"),
-                 options.key_text(read=False), __version__, str(ABI_VERSION), templates_digest()):
+                 options.key_text(read=False), __version__, str(ABI_VERSION),
+                 templates_digest(kinematics=options.kinematics is not None)):
         h.update(part.encode())
         h.update(b"\0")
     return h.hexdigest()
@@ -70,7 +72,11 @@ def model_hash(spec: ModelSpec, options: BuildOptions | None = None) -> str:
 
 #: The routines on the integration path (compiled as MG_PART 2, see model.c.j2).
 INTEGRATION_PATH = ("prepare", "rhs", "outputs", "jacobian_terms", "linearize_terms",
-                    "inverse_dynamics")
+                    "inverse_dynamics",
+                    # what controllers call at every step (kinematics.c.j2 puts them in part 2)
+                    "frame_poses", "frame_velocities", "frame_jacobians",
+                    "frame_bias_accelerations", "com", "com_jacobian",
+                    "centroidal_momentum_matrix")
 
 def part_statements(statements: dict) -> dict:
     """Routine name -> statements, to part -> its largest routine's statements (what
@@ -184,6 +190,21 @@ def routines_for(eqs: Equations, output_exprs=(), jacobian=None,
       + lin
 
 
+def frame_routines(terms: FrameTerms | None, eqs: Equations) -> list:
+    """The routines of the frame kinematics asked for (:mod:`modelgen.derive.frames`)."""
+    if terms is None:
+        return []
+    q, qd, p = ("q", eqs.q), ("qd", eqs.qd), ("p", eqs.p)
+    table = (("frame_poses", (q, p), "T", terms.poses),
+             ("frame_velocities", (q, qd, p), "V", terms.velocities),
+             ("frame_jacobians", (q, p), "J", terms.jacobians),
+             ("frame_bias_accelerations", (q, qd, p), "a", terms.bias),
+             ("com", (q, p), "c", terms.com),
+             ("com_jacobian", (q, p), "Jc", terms.com_jacobian),
+             ("centroidal_momentum_matrix", (q, p), "Ag", terms.centroidal))
+    return [(name, inputs, ((out, exprs),)) for name, inputs, out, exprs in table if exprs]
+
+
 def _hoisted(routines) -> tuple:
     """``routines`` with ``rhs`` split into ``prepare`` (its parameter-only
     statements, written into ``pd``) and the ``rhs`` that reads ``pd``
@@ -291,11 +312,32 @@ class _Clock:
 def _check_options(spec: ModelSpec, options: BuildOptions) -> None:
     """Refuse what cannot be generated before any work."""
     _check_generable(spec)
+    k = options.kinematics
+    if k is not None:
+        _check_kinematics(spec, k)
     if options.linearize and spec.joints:
         raise ModelError("linearization of a model with ball or free joints is not supported: "
                          "its state holds unit quaternions, whose four components cannot "
                          "move independently", file=spec.source, key="linearize",
                          fix="linearize a model whose rotations are simple ones (angles)")
+
+
+def _check_kinematics(spec: ModelSpec, k) -> None:
+    """Every frame asked for is the model's, the reference is known."""
+    if k.reference not in REFERENCES:
+        raise ModelError(f"unknown frame reference {k.reference!r}", file=spec.source,
+                         key="kinematics.reference", fix="use one of " + ", ".join(REFERENCES))
+    names = [f.name for f in spec.frames]
+    for frame in k.frames:
+        if frame not in names:
+            raise ModelError(f"no frame named {frame!r} in the model", file=spec.source,
+                             key="kinematics.frames",
+                             fix=("declare it under 'frames:' or use one of: "
+                                  + ", ".join(names)) if names
+                             else "declare it under 'frames:' (a point and a base)")
+    if len(set(k.frames)) != len(k.frames):
+        raise ModelError("a frame is listed twice", file=spec.source, key="kinematics.frames",
+                         fix="list each frame once")
 
 
 @dataclass(frozen=True)
@@ -309,6 +351,7 @@ class Derived:
     linearization: object       # LinearizationTerms, or None
     terms: object               # the Jacobian's terms, or None
     graph: object = field(repr=False)
+    frames: FrameTerms | None = None    # the frame kinematics asked for, or None
 
     @property
     def output_exprs(self) -> tuple:
@@ -350,7 +393,19 @@ def _derive(spec: ModelSpec, options: BuildOptions, tree: JointTree | None) -> D
     else:
         terms = None
     graph = terms.graph if terms else graph
-    return Derived(eqs, columns, forward, inverse, linearization, terms, graph)
+    frames = _derive_frames(spec, options, kin, graph)
+    graph = frames.graph if frames else graph
+    return Derived(eqs, columns, forward, inverse, linearization, terms, graph, frames)
+
+
+def _derive_frames(spec: ModelSpec, options: BuildOptions, kin, graph) -> FrameTerms | None:
+    """The frame kinematics of ``options.kinematics`` (None: none asked)."""
+    k = options.kinematics
+    if k is None:
+        return None
+    by_name = {f.name: f for f in spec.frames}
+    return derive_frames(kin, graph, tuple(by_name[f] for f in k.frames), k.reference,
+                         k.bias_acceleration and bool(k.frames), k.com, k.centroidal)
 
 
 def _eliminate(derived: Derived) -> tuple:
@@ -358,7 +413,8 @@ def _eliminate(derived: Derived) -> tuple:
     dynamics are eliminated on their own, and the rhs's parameter-only part hoisted."""
     d = derived
     routines = make_routines(d.graph, routines_for(d.eqs, d.output_exprs, d.terms, d.forward,
-                                                   d.linearization, d.inverse),
+                                                   d.linearization, d.inverse)
+                             + frame_routines(d.frames, d.eqs),
                              alone=("rhs", "inverse_dynamics"))
     return _hoisted(routines)
 
@@ -389,7 +445,8 @@ def _emit(spec: ModelSpec, options: BuildOptions, derived: Derived, routines: tu
         npd=next(len(r.outputs[0][1]) for r in routines if r.name == "prepare"),
         # the crba rhs's solve skips the entries of A that are structurally zero
         mass_pattern=None if forward else [[e != 0 for e in row] for row in eqs.A],
-        formulation=options.formulation, aba_inward=forward.inward if forward else ())
+        formulation=options.formulation, aba_inward=forward.inward if forward else (),
+        frames=derived.frames)
     return Emitted(functions, context, emit_sources(context))
 
 
@@ -421,6 +478,7 @@ def _manifest(spec: ModelSpec, options: BuildOptions, derived: Derived, emitted:
         "linearize": options.linearize,
         "formulation": options.formulation,
         "bodies": list(derived.eqs.bodies),
+        **_kinematics_manifest(derived.frames),
         "outputs": [{"name": name, "columns": list(cols)}
                     for name, cols in zip(columns.names, columns.columns)] if columns else [],
         "sources_sha256": {fname: hashlib.sha256(text.encode()).hexdigest()
@@ -430,6 +488,16 @@ def _manifest(spec: ModelSpec, options: BuildOptions, derived: Derived, emitted:
         "ops": {f.name: {"before_cse": f.ops_before, "after_cse": f.ops_after,
                          "statements": f.statements} for f in emitted.functions.values()},
     }
+
+
+def _kinematics_manifest(frames: FrameTerms | None) -> dict:
+    """The manifest's record of the frame kinematics (nothing when none was asked, so
+    the manifests of other builds stay as they were)."""
+    if frames is None:
+        return {}
+    return {"kinematics": {"frames": list(frames.frames), "reference": frames.reference,
+                           "bias_acceleration": bool(frames.bias), "com": bool(frames.com),
+                           "centroidal": bool(frames.centroidal)}}
 
 
 def _compile(directory: Path, spec: ModelSpec, options: BuildOptions, derived: Derived,

@@ -49,7 +49,10 @@ DEFAULT_METHOD, DEFAULT_STEP = "rk4", 1e-3
 DEFAULT_RTOL, DEFAULT_ATOL = 1e-8, 1e-10
 #: Top-level keys of a scene file, in processing order.
 TOP_LEVEL_KEYS = ("scene", "description", "model", "add_parameters", "add_effects", "effects",
-                  "parameters", "initial", "time", "integrator", "inputs", "outputs")
+                  "parameters", "initial", "time", "integrator", "inputs", "outputs",
+                  "kinematics")
+#: Keys of a scene's ``kinematics:`` (the fields of the build's KinematicsOptions).
+KINEMATICS_KEYS = ("frames", "reference", "bias_acceleration", "com", "centroidal")
 TIME_KEYS = ("start", "end", "sample")
 INTEGRATOR_KEYS = ("method", "step", "rtol", "atol")
 SIGNAL_KEYS = ("times", "values", "interpolation")
@@ -178,11 +181,12 @@ class _SceneReader:
         method, step, rtol, atol = self.integrator(sample)
         inputs = self.inputs(reduced, selected)
         outputs = self.outputs(reduced, selected, kinds)
+        kinematics = self.kinematics(reduced)
         return SceneSpec(
             name=name, model=reduced, full_model=full, effects=selected, initial=initial,
             t_start=t_start, t_end=t_end, sample_dt=sample, method=method, step=step,
             rtol=rtol, atol=atol,
-            inputs=inputs, outputs=outputs,
+            inputs=inputs, outputs=outputs, kinematics=kinematics,
             stiff_effects=tuple(e for e in selected if EFFECT_KINDS[kinds[e]].stiff),
             source=self.file, lines=tuple(self.lines.items()))
 
@@ -495,6 +499,42 @@ class _SceneReader:
                 self.check_potential(name, f"{key}.{kind}", reduced)
             result.append(OutputSpec(name, kind, values))
         return tuple(result)
+
+    def kinematics(self, reduced: ModelSpec) -> tuple:
+        """``kinematics: {frames: [tool0], reference: local, com: true, ...}`` as
+        ((key, value), ...) in :data:`KINEMATICS_KEYS` order; the reference is
+        checked where it is generated."""
+        if self.data.get("kinematics") is None:
+            return ()
+        example = "{frames: [tool0], reference: local_world_aligned, com: true}"
+        entry = self.mapping("kinematics", example)
+        self.check_keys(entry, KINEMATICS_KEYS, "kinematics", "kinematics")
+        out = []
+        names = [f.name for f in reduced.frames]
+        for field in KINEMATICS_KEYS:
+            if field not in entry:
+                continue
+            value, key = entry[field], f"kinematics.{field}"
+            if field == "frames":
+                if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
+                    raise self.error(f"expected a list of frame names but got "
+                                     f"{describe(value)}", key, f"write it like '{example}'")
+                for frame in value:
+                    if frame not in names:
+                        close = closest(frame, names)
+                        raise self.error(f"no frame named '{frame}' in the model", key,
+                                         (f"did you mean '{close}'? " if close else "")
+                                         + "frames: " + (", ".join(names) or "none"))
+                value = tuple(value)
+            elif field == "reference":
+                if not isinstance(value, str):
+                    raise self.error(f"expected a name but got {describe(value)}", key,
+                                     "write local, world or local_world_aligned")
+            elif not isinstance(value, bool):
+                raise self.error(f"expected true or false but got {describe(value)}", key,
+                                 f"write '{field}: true'")
+            out.append((field, value))
+        return tuple(out)
 
     def output_arg(self, arg: str, value, key, model: ModelSpec, selected: tuple,
                    kinds: dict):

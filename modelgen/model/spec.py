@@ -530,3 +530,4 @@ class SceneSpec:
     stiff_effects: tuple = ()       # names of selected effects in STIFF_KINDS
     source: Optional[str] = field(default=None, compare=False)
     lines: tuple = field(default=(), compare=False)
+    kinematics: tuple = ()          # ((key, value), ...) of the scene's ``kinematics:``

@@ -62,6 +62,8 @@ applies.  What becomes what:
   set to their mean); ``min_mass`` and ``min_inertia`` are MuJoCo's
   ``boundmass`` and ``boundinertia``.  A joint moving only massless links, and a
   fixed robot without joints, are refused with a fix naming the option.
+* Every link is a frame (its origin point and base, Pinocchio's BODY frame) named
+  after the link, or ``<link>_frame`` when a body (a moving link's) has the name.
 
 >>> imp = import_urdf_text('''<robot name="pend"><link name="world"/>
 ...   <link name="rod"><inertial><origin xyz="0 0 -0.5"/><mass value="1"/>
@@ -540,6 +542,7 @@ class _Builder:
             self.joint(joint)
         body_of = self.bodies()
         self.inputs_and_effects(body_of)
+        self.link_frames()
         self.model.set_gravity([0, 0, -symbol("g")])
         if self.changes:
             # never silent: the changed or non-physical bodies, per link

@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING
 
 from modelgen.codegen import index
 from modelgen.codegen.build import Generated
-from modelgen.codegen.options import BuildOptions
+from modelgen.codegen.options import BuildOptions, KinematicsOptions
 from modelgen.sim.runtime import CompiledModel, check_mass_matrix
 
 if TYPE_CHECKING:
@@ -27,7 +27,8 @@ def generate_model(source, out_dir=None, *, force: bool = False,
                    jacobian: bool | None = None, formulation: str | None = None,
                    linearize: bool | None = None, floating_base: bool | None = None,
                    inertia: str | None = None, min_mass: float | None = None,
-                   min_inertia: float | None = None) -> Generated:
+                   min_inertia: float | None = None, kinematics=None,
+                   frames=None) -> Generated:
     """Generate and compile a model (or reuse the cache); returns the report.
 
     ``options`` and the shorthand keywords are those of :func:`load`.
@@ -37,7 +38,8 @@ def generate_model(source, out_dir=None, *, force: bool = False,
     """
     options = BuildOptions.of(options, jacobian=jacobian, formulation=formulation,
                               linearize=linearize, floating_base=floating_base,
-                              inertia=inertia, min_mass=min_mass, min_inertia=min_inertia)
+                              inertia=inertia, min_mass=min_mass, min_inertia=min_inertia,
+                              kinematics=_kinematics(kinematics, frames))
     generated = _generate(source, out_dir, force, options, progress)
     _loaded(generated)
     index.record(_fast_key(source, options, out_dir), generated.build, _runtime())
@@ -59,7 +61,7 @@ def load(source, out_dir=None, *, force: bool = False, options: BuildOptions | N
          progress=None, jacobian: bool | None = None, formulation: str | None = None,
          linearize: bool | None = None, floating_base: bool | None = None,
          inertia: str | None = None, min_mass: float | None = None,
-         min_inertia: float | None = None) -> CompiledModel:
+         min_inertia: float | None = None, kinematics=None, frames=None) -> CompiledModel:
     """Build (on first use) and import a model; returns a :class:`CompiledModel`.
 
     ``source`` is a YAML path, a URDF (``.urdf``) or MJCF (``.xml``, compiled by
@@ -80,6 +82,11 @@ def load(source, out_dir=None, *, force: bool = False, options: BuildOptions | N
     body (a free joint ``root_joint``: position, unit quaternion, 6 speeds);
     ``inertia``, ``min_mass`` and ``min_inertia`` (a URDF path) read bodies that no
     rigid body matches (see :func:`modelgen.model.urdf.import_urdf_text`).
+    ``kinematics`` (a :class:`~modelgen.codegen.options.KinematicsOptions` or a dict
+    of its fields) generates frame poses, velocities, Jacobians and bias
+    accelerations, the centre of mass and the centroidal map
+    (:mod:`modelgen.sim.kinematics`); ``frames=[...]`` is short for
+    ``kinematics={"frames": [...]}``.
 
     >>> cm = load("models/double_pendulum.yaml", jacobian=True)   # doctest: +SKIP
     >>> cm = load("models/double_pendulum.yaml",                  # doctest: +SKIP
@@ -88,7 +95,8 @@ def load(source, out_dir=None, *, force: bool = False, options: BuildOptions | N
     """
     options = BuildOptions.of(options, jacobian=jacobian, formulation=formulation,
                               linearize=linearize, floating_base=floating_base,
-                              inertia=inertia, min_mass=min_mass, min_inertia=min_inertia)
+                              inertia=inertia, min_mass=min_mass, min_inertia=min_inertia,
+                              kinematics=_kinematics(kinematics, frames))
     key = _fast_key(source, options, out_dir)
     hit = None if force else index.lookup(key)
     if hit is not None:
@@ -99,6 +107,18 @@ def load(source, out_dir=None, *, force: bool = False, options: BuildOptions | N
     cm = _loaded(generated)
     index.record(key, generated.build, _runtime())
     return cm
+
+
+def _kinematics(kinematics, frames):
+    """The ``kinematics`` option of :func:`load`'s keywords (None: not given)."""
+    if frames is None:
+        return kinematics
+    if isinstance(frames, str):
+        frames = [frames]
+    merged = dict(kinematics) if isinstance(kinematics, dict) else \
+        {} if kinematics is None else dict(vars(KinematicsOptions.of(kinematics)))
+    merged["frames"] = tuple(frames)
+    return KinematicsOptions.of(merged)
 
 
 def _fast_key(source, options: BuildOptions, out_dir) -> str | None:

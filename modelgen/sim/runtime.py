@@ -18,6 +18,7 @@ from modelgen.codegen.capi import ABI_VERSION
 from modelgen.errors import (ArgumentTypeError, ArgumentValueError, BuildError,
                              DerivationError, MassMatrixError, SimulationError)
 from modelgen.sim import integrate
+from modelgen.sim.kinematics import FrameKinematics
 from modelgen.sim.library import ModelLibrary
 from modelgen.sim import linearize as linearization
 from modelgen.sim.conditioning import (PIVOT_TOL, failing_pivot, failure_kind,
@@ -25,7 +26,7 @@ from modelgen.sim.conditioning import (PIVOT_TOL, failing_pivot, failure_kind,
 from modelgen.sim.result import DenseOutput, Result
 
 
-class CompiledModel:
+class CompiledModel(FrameKinematics):
     """A generated, compiled model.
 
     >>> cm = modelgen.load("models/double_pendulum.yaml")          # doctest: +SKIP

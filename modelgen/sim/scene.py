@@ -52,6 +52,8 @@ class Scene:
         # stiff scenes get the symbolic Jacobian, for implicit integrators
         options = replace(options, outputs=spec.outputs + extra, jacobian=options.jacobian or (
             bool(spec.stiff_effects) and spec.model.n <= 12))
+        if spec.kinematics:
+            options = replace(options, kinematics=dict(spec.kinematics))
         key = index.fast_key(files, options, out_dir) if files else None
         hit = None if force else index.lookup(key)
         if hit is not None:
