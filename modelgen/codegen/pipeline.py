@@ -83,9 +83,10 @@ def part_statements(statements: dict) -> dict:
 LIBRARY_FORMAT = "shared-library+runtime-trampolines"
 
 
-def runtime() -> tuple:
-    """(module name, path) of the compiled runtime module, built on first use."""
-    return runtime_module(integrator_sources(), runtime_sources())
+def runtime(rebuild: bool = False) -> tuple:
+    """(module name, path) of the compiled runtime module, built on first use (and
+    again with ``rebuild``, when its import failed)."""
+    return runtime_module(integrator_sources(), runtime_sources(), rebuild=rebuild)
 
 
 def build_hash(spec: ModelSpec, options: BuildOptions | None = None) -> str:
