@@ -144,7 +144,8 @@ class BuildResult:
     rebuilt_because: str = ""
 
 
-#: the stages of a build, in order (the keys of ``Generated.seconds``)
+#: the stages of a build, in order (each announced to ``progress``); ``Generated.seconds``
+#: has them and, first, ``check`` (hashes, formulation, cache, budget), adding up to the build
 STAGES = ("derive", "cse", "emit", "compile")
 
 
