@@ -30,10 +30,10 @@ from modelgen.errors import ModelError
 #: gcc 12 (the levels of build.OPT_LEVELS), 2-core machine shared with other
 #: work: spatial chains n = 20 / 50 / 100 cost 18k / 56k / 142k and compile in
 #: 3.5 / 8.0 s / (n = 100) 3.1 s idle; a sum of 100 terms ``c*sin(k*q)*cos(q)``
-#: costs 8.5k operations with about 1,500 sin and cos (68k weighted) and
+#: costs 8,505 operations with 1,301 sin and cos (59k weighted) and
 #: compiles in 10.5 s (3.5 s with libm's sin); 360 such terms (8,889 characters)
 #: cost 212k weighted and compile in 61 s.  250k keeps a build's compile to
-#: about a minute on such a machine and admits the 100-link chain (196k).
+#: about 70 s on such a machine and admits the 100-link chain (196k).
 MAX_OPERATIONS = 250_000
 #: Operations a ``sin`` or ``cos`` counts for: the inline ``mg_sin``'s kernels
 #: and reduction are about 40 operations that gcc compiles at every call.
