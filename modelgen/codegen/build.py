@@ -38,8 +38,19 @@ manifest that is not a complete, well-typed dict, was edited, or describes a
 missing, truncated or altered library is a cache miss (the build says why in
 ``BuildResult.rebuilt_because``); the damaged library is never imported.
 
-Housekeeping: a build removes ``.build-*`` directories older than an hour (a
-killed build's leftovers); the last :data:`KEEP_BUILDS` modules of a model
+The other files the cache reuses are verified too: the runtime module and
+the integrators' object have their size and SHA-256 recorded beside them
+(``<file>.json``, written atomically after a successful build) and are
+checked before they are imported or linked (:func:`file_problem`); a
+damaged, substituted or unrecorded one is rebuilt with a warning that names
+it, and a rebuild that fails too is a BuildError naming it.  (A truncated
+shared object can kill its loader with SIGBUS before Python can react, so the
+check comes before the import, never after a failure.)
+
+Housekeeping: a build removes the temporary directories of killed builds
+(:func:`remove_stale_builds`: in its output directory, and ``.mg-*`` and
+``runtime/.build-*`` in the cache): at once when the name records a process
+of this machine that is gone, else after an hour; the last :data:`KEEP_BUILDS` modules of a model
 name are kept, each with its manifest (``manifest.json`` for the newest,
 ``manifest-<hash16>.json`` for the others), so two variants of one model
 built into one directory do not rebuild each other; older ones are deleted.
@@ -55,11 +66,13 @@ import platform
 import re
 import shlex
 import shutil
+import socket
 import subprocess
 import sys
 import sysconfig
 import tempfile
 import time
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -122,7 +135,8 @@ class BuildResult:
     rebuilt_because: str = ""
 
 
-#: the stages of a build, in order (the keys of ``Generated.seconds``)
+#: the stages of a build, in order (each announced to ``progress``); ``Generated.seconds``
+#: has them and, first, ``check`` (hashes, formulation, cache, budget), adding up to the build
 STAGES = ("derive", "cse", "emit", "compile")
 
 
@@ -256,22 +270,102 @@ def integrator_object(sources: dict) -> tuple:
     """(path, cached): the compiled ``mg_integrate.o`` for these sources
     (:func:`modelgen.codegen.emit.integrator_sources`), from the cache or compiled now.
 
-    Compiled in a private temporary directory and moved into the cache with
-    ``os.replace``, so concurrent builds never see a partial object.
+    A cached object is linked only if it has the size and SHA-256 recorded when
+    it was compiled (:func:`file_problem`); else it is compiled again, with a
+    warning naming it.  Compiled in a private temporary directory and moved into
+    the cache with ``os.replace``, so concurrent builds never see a partial object.
     """
     directory = cache_dir()
     target = directory / f"mg_integrate-{integrator_hash(sources)[:20]}.o"
-    if target.is_file():
+    remove_stale_builds(directory, ".mg-")
+    if _reusable(target, directory):
         return target, True
     tmp = _private_dir(directory, ".mg-")
     try:
         write_sources(tmp, sources)
-        run_commands([[*compiler(), *integrator_flags(), "-c", "mg_integrate.c", "-o", "mg_integrate.o"]],
-             tmp)
-        os.replace(tmp / "mg_integrate.o", target)
+        try:
+            run_commands([[*compiler(), *integrator_flags(), "-c", "mg_integrate.c",
+                           "-o", "mg_integrate.o"]], tmp)
+        except BuildError as exc:
+            raise _naming(exc, f"the integrators' object {target} could not be compiled") \
+                from None
+        with _locked(directory):
+            os.replace(tmp / "mg_integrate.o", target)
+            record_file(target)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     return target, False
+
+
+def _naming(exc: BuildError, what: str) -> BuildError:
+    """``exc`` with ``what`` (which names the file being built) before its message."""
+    first = str(exc).split("; fix:", 1)[0].split("\n", 1)[0]
+    return BuildError(f"{what}: {first}", exc.command, exc.output,
+                      returncode=exc.returncode, fix=exc.fix)
+
+
+def record_path(path: Path) -> Path:
+    """Where the size and SHA-256 of a reused cache file are recorded: ``<file>.json``."""
+    return Path(path).with_name(Path(path).name + ".json")
+
+
+def record_file(path: Path) -> None:
+    """Record the size and SHA-256 of ``path`` (just built) beside it, atomically."""
+    path = Path(path)
+    text = json.dumps({"file": path.name, "size": path.stat().st_size,
+                       "sha256": file_sha256(path)})
+    fd, tmp = tempfile.mkstemp(prefix=".record-", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w") as f:
+            f.write(text)
+        os.replace(tmp, record_path(path))
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        raise
+
+
+def file_problem(path: Path) -> str | None:
+    """What is wrong with the cache file ``path`` (a sentence naming it), or None
+    when it has the size and SHA-256 recorded when it was built (:func:`record_file`).
+    Nothing is loaded: a damaged shared object can crash its loader."""
+    path = Path(path)
+    try:
+        record = json.loads(record_path(path).read_text())
+        size, digest = record["size"], record["sha256"]
+        if record["file"] != path.name or not isinstance(size, int) \
+                or not isinstance(digest, str):
+            raise ValueError(record)
+    except FileNotFoundError:
+        return (f"{path} has no record of its size and SHA-256 (an older modelgen or an "
+                f"interrupted build made it)")
+    except (OSError, ValueError, KeyError, TypeError):
+        return f"the record of {path}'s size and SHA-256 ({record_path(path).name}) is damaged"
+    try:
+        actual = path.stat().st_size
+        if actual != size:
+            return f"{path} has {actual} bytes, its build wrote {size}"
+        if file_sha256(path) != digest:
+            return f"{path} was altered (its SHA-256 is not the one recorded when it was built)"
+    except OSError as exc:
+        return f"{path} cannot be read ({exc.strerror or exc})"
+    return None
+
+
+def _reusable(target: Path, directory: Path) -> bool:
+    """True if ``target`` (a file the cache reuses) verifies; False if it is missing
+    or must be rebuilt (then a warning says why, naming it)."""
+    if not target.exists():
+        return False
+    if file_problem(target) is None:
+        return True
+    # a concurrent build may be between moving the file into place and recording it
+    with _locked(directory):
+        problem = file_problem(target) if target.exists() else None
+    if problem is None:
+        return target.exists()
+    warnings.warn(f"{problem}; rebuilding it", stacklevel=3)
+    return False
 
 
 def manifest_path(directory: Path, build_hash: str | None = None) -> Path:
@@ -367,13 +461,21 @@ def cache_lookup(directory: Path, build_hash: str) -> tuple:
     return BuildResult(directory, manifest["module_name"], module_path, manifest, True, 0.0), ""
 
 
+def host_tag() -> str:
+    """8 hex digits naming this machine, in a temporary directory's name beside its
+    process id (a cache may be shared between machines, whose pids differ)."""
+    return hashlib.sha256(socket.gethostname().encode()).hexdigest()[:8]
+
+
 def _private_dir(directory: Path, prefix: str) -> Path:
-    """A new private temporary directory in ``directory`` (created with its parents);
-    BuildError naming the path if it cannot be written."""
+    """A new private temporary directory in ``directory`` (created with its parents),
+    named ``<prefix><pid>-<host tag>-...`` so a later build can tell when its
+    owner is gone; BuildError naming the path if it cannot be written."""
     directory = Path(directory)
     try:
         directory.mkdir(parents=True, exist_ok=True)
-        return Path(tempfile.mkdtemp(prefix=prefix, dir=directory))
+        return Path(tempfile.mkdtemp(prefix=f"{prefix}{os.getpid()}-{host_tag()}-",
+                                     dir=directory))
     except OSError as exc:
         what = "is a file, not a directory" if isinstance(exc, (FileExistsError,
                                                                 NotADirectoryError)) \
@@ -383,14 +485,35 @@ def _private_dir(directory: Path, prefix: str) -> Path:
                              "MODELGEN_CACHE_DIR for the cache)") from None
 
 
+def _process_gone(pid: int) -> bool:
+    """True if no process ``pid`` runs on this machine (POSIX only: elsewhere
+    signalling a process is not a harmless probe)."""
+    if os.name != "posix":
+        return False
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return True
+    except OSError:             # it exists (another user's): not ours to judge
+        return False
+    return False
+
+
 def remove_stale_builds(directory: Path, prefix: str = ".build-",
                         age: float = STALE_SECONDS) -> list:
-    """Remove ``prefix*`` temporary directories older than ``age`` seconds (left by
-    killed builds); returns their paths."""
+    """Remove the ``prefix*`` temporary directories of killed builds: those whose
+    name records a process of this machine that is gone (:func:`_private_dir`),
+    and any older than ``age`` seconds; returns their paths."""
     removed, now = [], time.time()
+    owner = re.compile(rf"{re.escape(prefix)}(\d+)-([0-9a-f]{{8}})-")
     for path in Path(directory).glob(prefix + "*"):
-        with contextlib.suppress(OSError):
-            if path.is_dir() and now - path.stat().st_mtime > age:
+        with contextlib.suppress(OSError, ValueError):
+            if not path.is_dir():
+                continue
+            match = owner.match(path.name)
+            dead = bool(match) and match[2] == host_tag() and int(match[1]) != os.getpid() \
+                and _process_gone(int(match[1]))
+            if dead or now - path.stat().st_mtime > age:
                 shutil.rmtree(path)
                 removed.append(path)
     return removed
@@ -500,44 +623,35 @@ def runtime_hash(integrator: dict, runtime: dict) -> str:
     return h.hexdigest()
 
 
-def runtime_module(integrator: dict, runtime: dict) -> tuple:
+def runtime_module(integrator: dict, runtime: dict, *, rebuild: bool = False) -> tuple:
     """(module name, path) of the compiled runtime module for these sources, from
-    the cache (``runtime/`` in :func:`cache_dir`) or built now (once: about 2 s)."""
+    the cache (``runtime/`` in :func:`cache_dir`) or built now (once: about 2 s).
+
+    A cached module is returned only if it has the size and SHA-256 recorded when
+    it was built (:func:`file_problem`), since importing a truncated one can kill
+    the process; else it is rebuilt, with a warning naming it.  ``rebuild``:
+    build it again even so (its import failed); a failed rebuild names it.
+    """
     directory = cache_dir() / "runtime"
     module_name = f"_mg_runtime_{runtime_hash(integrator, runtime)[:16]}"
     suffix = sysconfig.get_config_var("EXT_SUFFIX") or ".so"
     target = directory / (module_name + suffix)
-    if target.is_file():
+    if not rebuild and _reusable(target, directory):
         return module_name, target
+    damaged = rebuild or target.exists()
     tmp = _private_dir(directory, ".build-")
+    remove_stale_builds(directory)
     try:
         with _locked(directory):
-            if target.is_file():                  # built by another process meanwhile
-                return module_name, target
-            write_sources(tmp, integrator)
-            import cffi
-            ffi = cffi.FFI()
-            ffi.cdef(runtime["cdef"])
-            ffi.set_source(module_name, runtime["mg_runtime.c"],
-                           sources=[str(tmp / "mg_integrate.c")], include_dirs=[str(tmp)],
-                           extra_compile_args=["-O2"],
-                           libraries=["m"] if os.name == "posix" else [])
-            include = Path(sysconfig.get_paths()["include"])
-            if not (include / "Python.h").is_file():
-                raise BuildError(f"the Python headers (Python.h) are missing from {include}",
-                                 fix=FIX_PYTHON_H)
+            if not rebuild and target.exists() and file_problem(target) is None:
+                return module_name, target            # built by another process meanwhile
             try:
-                with _captured_output(tmp / "compiler.log"):
-                    built = tmp / ffi.compile(tmpdir=str(tmp), verbose=False)
-            except Exception as exc:              # setuptools' and cffi's errors alike
-                text = f"{(tmp / 'compiler.log').read_text(errors='replace')}{exc}"
-                python_h = "Python.h" in text
-                raise BuildError(
-                    "the Python headers (Python.h) are missing" if python_h
-                    else "the runtime module (cffi) failed to build",
-                    ["cffi", "compile", module_name], text,
-                    fix=FIX_PYTHON_H if python_h else FIX_COMPILER) from None
-            os.replace(built, target)
+                _build_runtime(tmp, module_name, integrator, runtime, target)
+            except BuildError as exc:
+                if not damaged:
+                    raise
+                raise _naming(exc, f"the runtime module {target} is damaged and could not "
+                                   f"be rebuilt") from None
     except OSError as exc:
         raise BuildError(f"the runtime module cannot be written to {directory} "
                          f"({exc.strerror or exc})",
@@ -545,6 +659,36 @@ def runtime_module(integrator: dict, runtime: dict) -> tuple:
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     return module_name, target
+
+
+def _build_runtime(tmp: Path, module_name: str, integrator: dict, runtime: dict,
+                   target: Path) -> None:
+    """Compile the runtime module in ``tmp``, move it to ``target`` and record it."""
+    write_sources(tmp, integrator)
+    import cffi
+    ffi = cffi.FFI()
+    ffi.cdef(runtime["cdef"])
+    ffi.set_source(module_name, runtime["mg_runtime.c"],
+                   sources=[str(tmp / "mg_integrate.c")], include_dirs=[str(tmp)],
+                   extra_compile_args=["-O2"],
+                   libraries=["m"] if os.name == "posix" else [])
+    include = Path(sysconfig.get_paths()["include"])
+    if not (include / "Python.h").is_file():
+        raise BuildError(f"the Python headers (Python.h) are missing from {include}",
+                         fix=FIX_PYTHON_H)
+    try:
+        with _captured_output(tmp / "compiler.log"):
+            built = tmp / ffi.compile(tmpdir=str(tmp), verbose=False)
+    except Exception as exc:              # setuptools' and cffi's errors alike
+        text = f"{(tmp / 'compiler.log').read_text(errors='replace')}{exc}"
+        python_h = "Python.h" in text
+        raise BuildError(
+            "the Python headers (Python.h) are missing" if python_h
+            else "the runtime module (cffi) failed to build",
+            ["cffi", "compile", module_name], text,
+            fix=FIX_PYTHON_H if python_h else FIX_COMPILER) from None
+    os.replace(built, target)
+    record_file(target)
 
 
 def library_suffix() -> str:
@@ -594,6 +738,7 @@ def build_module(directory: Path, name: str, sources: dict, manifest: dict,
 
     tmp = _private_dir(directory, ".build-")
     remove_stale_builds(directory)
+    remove_stale_builds(cache_dir() / "runtime")
     try:
         integrator_obj, integrator_cached = integrator_object(integrator)
         for fname in (f"{name}.c", f"{name}.h"):

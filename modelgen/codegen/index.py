@@ -19,7 +19,9 @@ from, read as plain files and the environment:
 An entry (``index/<key>.json`` in :func:`~modelgen.codegen.build.cache_dir`)
 names the build's directory, its build key and the runtime module.  A hit is
 then verified like every cache hit (:func:`~modelgen.codegen.build.cache_lookup`:
-the manifest's own digest, the library's size and SHA-256); a missing,
+the manifest's own digest, the library's size and SHA-256; the runtime
+module's recorded size and SHA-256, :func:`~modelgen.codegen.build.file_problem`,
+before anything imports it); a missing,
 stale or damaged entry is a miss, and the caller takes the full path and
 records the entry again.  This module imports nothing symbolic.
 """
@@ -35,8 +37,8 @@ import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
-from modelgen.codegen.build import (BuildResult, cache_dir, cache_lookup, compiler, host_flags,
-                                    integrator_flags)
+from modelgen.codegen.build import (BuildResult, cache_dir, cache_lookup, compiler,
+                                    file_problem, host_flags, integrator_flags)
 from modelgen.codegen.capi import ABI_VERSION
 from modelgen.codegen.options import BuildOptions
 from modelgen.version import __version__
@@ -124,7 +126,7 @@ def lookup(key: str | None) -> Hit | None:
             return None
     except (OSError, ValueError, KeyError, TypeError, IndexError):
         return None
-    if not runtime[1].is_file():
+    if file_problem(runtime[1]) is not None:     # the full path rebuilds it, saying why
         return None
     build, _ = cache_lookup(directory, build_hash)
     if build is None or build.manifest.get("version") != __version__:

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from modelgen.version import __version__
+from modelgen.codegen import budget
 from modelgen.codegen.build import (Generated, build_module, cache_dir, cache_lookup,
                                     compiler, host_flags, integrator_hash, runtime_module)
 from modelgen.codegen.capi import signature_of
@@ -91,9 +92,10 @@ def part_statements(statements: dict) -> dict:
 LIBRARY_FORMAT = "shared-library+runtime-trampolines"
 
 
-def runtime() -> tuple:
-    """(module name, path) of the compiled runtime module, built on first use."""
-    return runtime_module(integrator_sources(), runtime_sources())
+def runtime(rebuild: bool = False) -> tuple:
+    """(module name, path) of the compiled runtime module, built on first use (and
+    again with ``rebuild``, when its import failed)."""
+    return runtime_module(integrator_sources(), runtime_sources(), rebuild=rebuild)
 
 
 def build_hash(spec: ModelSpec, options: BuildOptions | None = None) -> str:
@@ -241,7 +243,7 @@ def _check_generable(spec: ModelSpec) -> None:
 def generate(spec: ModelSpec, out_dir=None, *, force: bool = False,
              options: BuildOptions | None = None, progress=None, outputs=None,
              jacobian: bool | None = None, formulation: str | None = None,
-             linearize: bool | None = None) -> Generated:
+             linearize: bool | None = None, max_operations: int | None = None) -> Generated:
     """Generate, compile and cache the model; reuse an unchanged build.
 
     ``out_dir`` defaults to :func:`default_output` (the per-user cache).
@@ -258,11 +260,18 @@ def generate(spec: ModelSpec, out_dir=None, *, force: bool = False,
     implies ``jacobian``.
     ``progress`` is None or a callable ``progress(stage)`` called as each of
     :data:`~modelgen.codegen.build.STAGES` starts (not at all when the build is reused).
+    ``max_operations`` is the build budget (:mod:`modelgen.codegen.budget`:
+    default ``$MODELGEN_MAX_OPERATIONS``, else 250,000 operations after CSE): a
+    model over it is refused with a ModelError before deriving (by an estimate
+    from its size) or after CSE, never after minutes of compiling.  The seconds
+    of the result (``check``, then each stage) add up to the whole call.
 
     >>> g = generate(load_model("models/double_pendulum.yaml"))   # doctest: +SKIP
     >>> g.manifest["n"]                                             # doctest: +SKIP
     2
     """
+    start = time.perf_counter()
+    limit = budget.max_operations(max_operations)
     options = BuildOptions.of(options, outputs=outputs, jacobian=jacobian,
                               formulation=formulation, linearize=linearize)
     _check_options(spec, options)
@@ -277,15 +286,18 @@ def generate(spec: ModelSpec, out_dir=None, *, force: bool = False,
         hit, damage = cache_lookup(directory, key)
         if hit is not None:
             return Generated(hit, hit.manifest)
+    budget.check_estimate(spec, tree, limit)
     clock = _Clock(progress)
+    clock.seconds["check"] = time.perf_counter() - start    # hashes, formulation, cache
     with clock("derive"):
         derived = _derive(spec, options, tree)
     with clock("cse"):
         routines = _eliminate(derived)
+        budget.check_cost(spec, budget.build_cost(routines), limit)
     with clock("emit"):
         emitted = _emit(spec, options, derived, routines, model_key)
-    clock.start("compile")
-    return _compile(directory, spec, options, derived, emitted, key, clock.seconds, damage)
+    with clock("compile"):
+        return _compile(directory, spec, options, derived, emitted, key, clock.seconds, damage)
 
 
 # -- the stages ------------------------------------------------------------------------
@@ -305,8 +317,10 @@ class _Clock:
     def __call__(self, name: str):
         self.start(name)
         t0 = time.perf_counter()
-        yield
-        self.seconds[name] = time.perf_counter() - t0
+        try:
+            yield
+        finally:        # set before a return inside the block reaches the caller
+            self.seconds[name] = time.perf_counter() - t0
 
 
 def _check_options(spec: ModelSpec, options: BuildOptions) -> None:
@@ -502,12 +516,11 @@ def _kinematics_manifest(frames: FrameTerms | None) -> dict:
 
 def _compile(directory: Path, spec: ModelSpec, options: BuildOptions, derived: Derived,
              emitted: Emitted, key: str, seconds: dict, damage: str) -> Generated:
-    """Compile and cache the sources; ``seconds`` gets the compile time.  ``damage``
-    says why a cached build was not reused (recorded in the result)."""
+    """Compile and cache the sources (the caller times it into ``seconds``).
+    ``damage`` says why a cached build was not reused (recorded in the result)."""
     manifest = _manifest(spec, options, derived, emitted, key)
     statements = part_statements({f.name: f.statements for f in emitted.functions.values()})
     build = build_module(directory, spec.name, emitted.sources, dict(manifest, seconds=seconds),
                          statements, integrator_sources())
-    seconds["compile"] = build.seconds
     build = replace(build, rebuilt_because=damage)
     return Generated(build, dict(build.manifest, seconds=seconds))

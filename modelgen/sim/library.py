@@ -20,7 +20,10 @@ from __future__ import annotations
 import ctypes
 import functools
 import importlib.util
+import os
 import sys
+import tempfile
+import warnings
 from pathlib import Path
 
 from modelgen.errors import BuildError
@@ -33,7 +36,25 @@ def runtime_module(location: tuple | None = None):
     rendering its sources to find it (:mod:`modelgen.codegen.index`); without
     it the codegen stage says where it is, building it if need be.
     """
-    return _import_runtime(*(location if location is not None else _runtime_location()))
+    location = location if location is not None else _runtime_location()
+    try:
+        return _import_runtime(*location)
+    except ImportError as exc:
+        # verified before the import, so rarely reached: rebuild it once, then name it
+        from modelgen.codegen.pipeline import runtime
+        warnings.warn(f"the runtime module {location[1]} cannot be imported ({exc}); "
+                      f"rebuilding it", stacklevel=2)
+        location = runtime(rebuild=True)
+    try:
+        # through a fresh path: the library of the failed import stays loaded under
+        # the old one, and the dynamic loader would hand it out again
+        with tempfile.TemporaryDirectory(prefix=".import-", dir=location[1].parent) as tmp:
+            fresh = Path(tmp) / location[1].name
+            os.link(location[1], fresh)
+            return _import_runtime(location[0], fresh)
+    except (ImportError, OSError) as exc:
+        raise BuildError(f"the runtime module {location[1]} cannot be imported ({exc}), "
+                         f"even rebuilt", fix=f"delete {location[1]} and report this") from None
 
 
 @functools.lru_cache(maxsize=None)

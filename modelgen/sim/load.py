@@ -28,7 +28,7 @@ def generate_model(source, out_dir=None, *, force: bool = False,
                    linearize: bool | None = None, floating_base: bool | None = None,
                    inertia: str | None = None, min_mass: float | None = None,
                    min_inertia: float | None = None, kinematics=None,
-                   frames=None) -> Generated:
+                   frames=None, max_operations: int | None = None) -> Generated:
     """Generate and compile a model (or reuse the cache); returns the report.
 
     ``options`` and the shorthand keywords are those of :func:`load`.
@@ -40,7 +40,7 @@ def generate_model(source, out_dir=None, *, force: bool = False,
                               linearize=linearize, floating_base=floating_base,
                               inertia=inertia, min_mass=min_mass, min_inertia=min_inertia,
                               kinematics=_kinematics(kinematics, frames))
-    generated = _generate(source, out_dir, force, options, progress)
+    generated = _generate(source, out_dir, force, options, progress, max_operations)
     _loaded(generated)
     index.record(_fast_key(source, options, out_dir), generated.build, _runtime())
     return generated
@@ -61,7 +61,8 @@ def load(source, out_dir=None, *, force: bool = False, options: BuildOptions | N
          progress=None, jacobian: bool | None = None, formulation: str | None = None,
          linearize: bool | None = None, floating_base: bool | None = None,
          inertia: str | None = None, min_mass: float | None = None,
-         min_inertia: float | None = None, kinematics=None, frames=None) -> CompiledModel:
+         min_inertia: float | None = None, kinematics=None, frames=None,
+         max_operations: int | None = None) -> CompiledModel:
     """Build (on first use) and import a model; returns a :class:`CompiledModel`.
 
     ``source`` is a YAML path, a URDF (``.urdf``) or MJCF (``.xml``, compiled by
@@ -103,7 +104,7 @@ def load(source, out_dir=None, *, force: bool = False, options: BuildOptions | N
         cm = CompiledModel(hit.build.manifest, hit.build.module_path, hit.runtime)
         check_mass_matrix(cm)
         return cm
-    generated = _generate(source, out_dir, force, options, progress)
+    generated = _generate(source, out_dir, force, options, progress, max_operations)
     cm = _loaded(generated)
     index.record(key, generated.build, _runtime())
     return cm
@@ -129,14 +130,16 @@ def _fast_key(source, options: BuildOptions, out_dir) -> str | None:
     return index.fast_key([source], options, out_dir)
 
 
-def _generate(source, out_dir, force: bool, options: BuildOptions, progress) -> Generated:
+def _generate(source, out_dir, force: bool, options: BuildOptions, progress,
+              max_operations: int | None = None) -> Generated:
     """The full path: read the model, then generate (or find by the build key)."""
     # imported here, not at the top: the reader and the symbolic pipeline (about a
     # second of imports) are needed only when the fast index has no build
     from modelgen.codegen.pipeline import generate
     from modelgen.model import as_spec
     return generate(as_spec(source, **options.reading()), out_dir,
-                    force=force, options=options, progress=progress)
+                    force=force, options=options, progress=progress,
+                    max_operations=max_operations)
 
 
 def _runtime() -> tuple:
@@ -146,7 +149,8 @@ def _runtime() -> tuple:
 
 
 def load_scene(path, out_dir=None, *, force: bool = False, progress=None,
-               options: BuildOptions | None = None, linearize: bool | None = None) -> Scene:
+               options: BuildOptions | None = None, linearize: bool | None = None,
+               max_operations: int | None = None) -> Scene:
     """Load a scene file and build its reduced model; returns a :class:`Scene`.
 
     Only the effects and outputs the scene selects are generated.  Output goes
@@ -164,4 +168,4 @@ def load_scene(path, out_dir=None, *, force: bool = False, progress=None,
     options = BuildOptions.of(options, linearize=linearize)
     spec = load_scene_spec(path)
     return Scene(spec, out_dir, force=force, progress=progress, options=options,
-                 files=(spec.source, spec.full_model.source))
+                 files=(spec.source, spec.full_model.source), max_operations=max_operations)

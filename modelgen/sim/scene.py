@@ -34,14 +34,16 @@ class Scene:
 
     def __init__(self, spec, out_dir=None, *, force: bool = False, progress=None,
                  stages=None, linearize: bool | None = None,
-                 options: BuildOptions | None = None, files=()):
+                 options: BuildOptions | None = None, files=(),
+                 max_operations: int | None = None):
         """``progress(message)`` hears what is being done; ``stages(stage)`` is
         called as each stage of a build starts (see :func:`generate`).
         ``options`` (:class:`~modelgen.codegen.options.BuildOptions`; ``linearize``
         is shorthand) get the scene's outputs and, for stiff effects, the Jacobian.
         ``files``: the files ``spec`` was read from, unchanged (the scene's, then
         its model's), which let the build cache's fast index find a build
-        without the symbolic pipeline (:mod:`modelgen.codegen.index`)."""
+        without the symbolic pipeline (:mod:`modelgen.codegen.index`).
+        ``max_operations``: the build budget (:mod:`modelgen.codegen.budget`)."""
         self.spec = spec
         if progress:
             progress(f"{spec.name}: generating (or reusing) the model")
@@ -63,7 +65,7 @@ class Scene:
             # of imports) is needed only when the fast index has no build
             from modelgen.codegen.pipeline import generate, runtime as runtime_location
             generated = generate(spec.model, out_dir, force=force, options=options,
-                                 progress=stages)
+                                 progress=stages, max_operations=max_operations)
             runtime = runtime_location()
             index.record(key, generated.build, runtime)
         self.generated = generated

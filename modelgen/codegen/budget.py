@@ -1,0 +1,158 @@
+"""The build budget: what a model may cost before the C compiler runs.
+
+A model within the input limits (``modelgen.model.expr``) can still make C
+that takes gcc minutes: a 300-link chain, or one long expression whose every
+``sin`` is compiled inline.  The budget bounds it in *operations after CSE*
+(what the manifest's ``ops`` records, :func:`modelgen.codegen.printer.c_operations`),
+with each ``sin`` and ``cos`` counted as :data:`TRIG_OPERATIONS`, the inline
+code gcc compiles for it (``mg_sin`` in ``model.c.j2``).  It is checked twice:
+
+* before deriving, against :func:`estimated_operations`, a lower estimate from
+  the model's size alone (so a chain far past the budget is refused in
+  milliseconds, not after minutes of derivation);
+* after CSE, against the exact figure (:func:`build_cost`), before emitting.
+
+The budget is not part of what is built (a larger one builds the same C):
+``max_operations=`` of ``generate``/``load``, else ``$MODELGEN_MAX_OPERATIONS``,
+else :data:`MAX_OPERATIONS`; the CLI's ``--max-operations``.  A cached build
+is reused whatever the budget.
+"""
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+
+import sympy
+
+from modelgen.errors import ModelError
+
+#: Default budget, in operations after CSE (sin and cos weighted).  Calibrated on
+#: gcc 12 (the levels of build.OPT_LEVELS), 2-core machine shared with other
+#: work: spatial chains n = 20 / 50 / 100 cost 18k / 56k / 142k and compile in
+#: 3.5 / 8.0 s / (n = 100) 3.1 s idle; a sum of 100 terms ``c*sin(k*q)*cos(q)``
+#: costs 8,505 operations with 1,301 sin and cos (59k weighted) and
+#: compiles in 10.5 s (3.5 s with libm's sin); 360 such terms (8,889 characters)
+#: cost 212k weighted and compile in 61 s.  250k keeps a build's compile to
+#: about 70 s on such a machine and admits the 100-link chain (196k).
+MAX_OPERATIONS = 250_000
+#: Operations a ``sin`` or ``cos`` counts for: the inline ``mg_sin``'s kernels
+#: and reduction are about 40 operations that gcc compiles at every call.
+TRIG_OPERATIONS = 40
+#: Lower estimate per entry of the mass matrix that a joint tree leaves nonzero
+#: (fitted on the chains n = 100 and 150, sin and cos weighted: 11.2 per entry).
+PER_MASS_ENTRY = 10
+#: Lower estimate per coordinate (a chain's routines cost about 1,400 a coordinate
+#: with sin and cos weighted; a one-link chain 301 in all).
+PER_COORDINATE = 250
+ENV = "MODELGEN_MAX_OPERATIONS"
+
+
+@dataclass(frozen=True)
+class Cost:
+    """The figure the budget is checked against, and its parts."""
+    operations: int         # after CSE, each sin and cos counted once
+    trig: int               # calls of sin and cos
+    largest: str            # the costliest routine
+
+    @property
+    def weighted(self) -> int:
+        return self.operations + (TRIG_OPERATIONS - 1) * self.trig
+
+
+def max_operations(value: int | None = None) -> int:
+    """The budget: ``value``, else ``$MODELGEN_MAX_OPERATIONS``, else
+    :data:`MAX_OPERATIONS`; a ModelError if it is not a positive integer.
+
+    >>> max_operations(1000)
+    1000
+    """
+    source = "max_operations"
+    if value is None:
+        text = os.environ.get(ENV, "").strip()
+        if not text:
+            return MAX_OPERATIONS
+        source = f"${ENV}"
+        try:
+            value = int(text.replace("_", ""))
+        except ValueError:
+            value = text
+    if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+        raise ModelError(f"{source} must be a positive integer, got {value!r}", key=source,
+                         fix=f"give a number of operations, e.g. {MAX_OPERATIONS}")
+    return value
+
+
+def estimated_operations(n: int, tree=None) -> int:
+    """A lower estimate of a model's cost from its size alone, before deriving: the
+    nonzero entries of the mass matrix (a joint ``tree``'s: each coordinate with
+    its ancestors'; without a tree, the diagonal) and the coordinates.
+
+    >>> estimated_operations(300) < estimated_operations(300, _chain(300))
+    True
+    """
+    entries = n
+    if tree is not None:
+        depth = []                  # coordinates on the path from the ground, per joint
+        entries = 0
+        for joint in tree.joints:
+            dofs = len(joint.dofs)
+            depth.append(dofs + (depth[joint.parent] if joint.parent >= 0 else 0))
+            entries += dofs * depth[-1]
+    return PER_MASS_ENTRY * entries + PER_COORDINATE * n
+
+
+def _chain(n: int):
+    """A stand-in joint tree of an n-link chain (for the doctest)."""
+    class Joint:
+        dofs = ((0, ()),)
+
+        def __init__(self, parent):
+            self.parent = parent
+
+    class Tree:
+        joints = tuple(Joint(i - 1) for i in range(n))
+    return Tree()
+
+
+def build_cost(routines) -> Cost:
+    """The exact cost of CSE'd ``routines`` (:class:`modelgen.codegen.cse.Routine`)."""
+    operations, trig, largest, most = 0, 0, "", -1
+    for r in routines:
+        calls = 0
+        for expr in [e for _, e in r.statements] + [e for _, es in r.outputs for e in es]:
+            if isinstance(expr, sympy.Basic) and expr.has(sympy.sin, sympy.cos):
+                calls += sum(1 for node in sympy.preorder_traversal(expr)
+                             if isinstance(node, (sympy.sin, sympy.cos)))
+        operations += r.ops_after
+        trig += calls
+        if r.ops_after + (TRIG_OPERATIONS - 1) * calls > most:
+            largest, most = r.name, r.ops_after + (TRIG_OPERATIONS - 1) * calls
+    return Cost(operations, trig, largest)
+
+
+def _fix(budget: int) -> str:
+    return (f"simplify the model, or raise the budget (now {budget:,}) if the build time "
+            f"is acceptable: max_operations=... (generate, load), ${ENV}=..., "
+            f"or --max-operations ... on the command line")
+
+
+def check_estimate(spec, tree, budget: int) -> None:
+    """Refuse a model whose :func:`estimated_operations` exceed ``budget``, before
+    any derivation."""
+    estimate = estimated_operations(spec.n, tree)
+    if estimate > budget:
+        raise ModelError(
+            f"the model is too large to build within the budget: {spec.n} coordinates "
+            f"make at least {estimate:,} operations after CSE (estimated from its size "
+            f"before deriving), over the budget of {budget:,}", file=spec.source,
+            fix=_fix(budget))
+
+
+def check_cost(spec, cost: Cost, budget: int) -> None:
+    """Refuse CSE'd routines whose :class:`Cost` exceeds ``budget``, before any C."""
+    if cost.weighted > budget:
+        raise ModelError(
+            f"the model's C would cost {cost.weighted:,} operations after CSE "
+            f"({cost.operations:,} operations and {cost.trig:,} calls of sin or cos, "
+            f"each compiled inline as {TRIG_OPERATIONS}; most in {cost.largest}), over the "
+            f"budget of {budget:,}", file=spec.source, fix=_fix(budget))
