@@ -174,7 +174,7 @@ def _span(t_span):
     except (TypeError, ValueError) as exc:
         raise SimulationError(f"t_span must be (t0, t1), got {t_span!r}") from exc
     if not (np.isfinite(t0) and np.isfinite(t1)):
-        raise SimulationError(f"t_span must be finite, got {t_span!r}")
+        raise ArgumentValueError(f"t_span must be finite, got {t_span!r}")
     if t1 == t0:
         raise SimulationError(f"t_span must not be empty, got {t_span!r}")
     return t0, t1, (-1.0 if t1 < t0 else 1.0)
@@ -368,7 +368,7 @@ def _direction(ev, i: int) -> int:
 def _check_step_count(fixed, t0, t1):
     """Refuse a fixed step so small that its step count overflows the C counter."""
     if fixed > 0 and not (t1 - t0) / fixed < _MAX_FIXED_STEPS:
-        raise SimulationError(
+        raise ArgumentValueError(
             f"step={fixed!r} over t_span ({t0!r}, {t1!r}) needs {(t1 - t0) / fixed:.3g} steps, "
             f"more than the C integrator can count; give a larger step")
 
@@ -450,7 +450,7 @@ def simulate(cm, x0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10
     max_steps = budget
     x = cm.state_vector(x0, "x0").copy()
     if not np.all(np.isfinite(x)):
-        raise SimulationError(f"{cm.name}: x0 must be finite")
+        raise ArgumentValueError(f"{cm.name}: x0 must be finite")
     _check_quaternions(cm, x[None, :], "x0")
     x_start = x.copy()
     inputs = _Inputs(cm, u, sign)
@@ -692,7 +692,7 @@ def _parameter_rows(cm, P, n_runs):
         rows = np.tile(cm.params(None), (n_runs, 1))
         for key, value in P.items():
             if key not in cm._param_index:
-                raise SimulationError(f"{cm.name}: unknown parameter {key!r}; parameters are "
+                raise ArgumentValueError(f"{cm.name}: unknown parameter {key!r}; parameters are "
                                       f"{', '.join(cm.parameters)}")
             rows[:, cm._param_index[key]] = np.broadcast_to(np.asarray(value, dtype=float),
                                                             (n_runs,))
@@ -705,7 +705,7 @@ def _parameter_rows(cm, P, n_runs):
                                   f"got {rows.shape}")
     rows = np.ascontiguousarray(rows)
     if not np.all(np.isfinite(rows)):
-        raise SimulationError(f"{cm.name}: parameters must be finite")
+        raise ArgumentValueError(f"{cm.name}: parameters must be finite")
     return rows, n_p
 
 
@@ -736,7 +736,7 @@ def simulate_batch(cm, X0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol
     if X0.ndim != 2 or X0.shape[1] != nx:
         raise SimulationError(f"{cm.name}: X0 must have shape (n_runs, {nx}), got {X0.shape}")
     if not np.all(np.isfinite(X0)):
-        raise SimulationError(f"{cm.name}: X0 must be finite")
+        raise ArgumentValueError(f"{cm.name}: X0 must be finite")
     _check_quaternions(cm, X0, "X0")
     n_runs = X0.shape[0]
     times = _times([t1] if t_eval is None else t_eval, t0, t1, sign)
