@@ -722,13 +722,13 @@ def build_parser() -> argparse.ArgumentParser:
                    help="(a URDF) make the root link a free body (a free joint root_joint)")
     s.set_defaults(func=_simulate)
 
-    i = sub.add_parser("import", help="import a robot description (URDF; MJCF where "
+    i = sub.add_parser("import", help="import a robot description (URDF, or MJCF where "
                                       "supported) as a model file",
                        description="Read a URDF file and write a model file in modelgen's "
                                    "YAML: bases, points, bodies, gravity, one input "
                                    "tau_<joint> per joint and the joints' damping and "
                                    "friction as effects. Meshes are not read.")
-    i.add_argument("urdf", help="URDF file")
+    i.add_argument("urdf", help="URDF file (or MJCF file, where that importer is installed)")
     i.add_argument("-o", "--output", default=None,
                    help="model file to write (default: the URDF path with .yaml)")
     i.add_argument("--fix-floating-root", action="store_true",

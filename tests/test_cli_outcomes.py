@@ -197,3 +197,37 @@ def test_an_unreachable_scheduler_is_named(tmp_path, build_root, monkeypatch, ca
     err = capsys.readouterr().err
     assert "could not reach the Dask scheduler at 'tcp://127.0.0.1:9'" in err
     assert "None" not in err
+
+
+def test_results_too_large_for_memory_are_a_clear_error(compiled, monkeypatch):
+    from modelgen.errors import ArgumentValueError
+    cm = compiled("double_pendulum")
+
+    def short_of_memory(real):                      # as numpy fails a huge allocation
+        def allocate(shape, *args, **kwargs):
+            if np.prod(shape) > 10**6:
+                raise MemoryError
+            return real(shape, *args, **kwargs)
+        return allocate
+    for name in ("empty", "full"):
+        monkeypatch.setattr(np, name, short_of_memory(getattr(np, name)))
+    t_eval = np.linspace(0.0, 1.0, 400_000)
+    with pytest.raises(ArgumentValueError, match=r"the results of 400000 samples need "
+                                                 r"0\.0\d+ GB.*fix: fewer samples"):
+        cm.simulate([1.0, 0.0, 0.0, 0.0], (0.0, 1.0), t_eval=t_eval)
+    with pytest.raises(ArgumentValueError, match=r"the results of 3 runs x 400000 samples"):
+        cm.simulate_batch(np.zeros((3, 4)), (0.0, 1.0), t_eval=t_eval)
+
+
+def test_generate_takes_build_dir_as_its_output_directory(tmp_path, capsys):
+    assert main(["generate", str(MODELS / "simple_pendulum.yaml"), "--build-dir",
+                 str(tmp_path / "b")]) == 0
+    assert (tmp_path / "b" / "simple_pendulum.c").is_file()
+    assert f"output     {tmp_path / 'b'}/simple_pendulum.c" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("command", ["generate", "simulate", "linearize", "sweep", "fmu"])
+def test_help_names_every_accepted_source(command, capsys):
+    with pytest.raises(SystemExit):
+        main([command, "--help"])
+    assert "URDF" in " ".join(capsys.readouterr().out.split())

@@ -515,8 +515,9 @@ def simulate(cm, x0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10
             rows_max, t_eval_arg = capacity, None
         else:
             rows_max, t_eval_arg = len(remaining), (remaining if len(remaining) else np.array([t1]))
-        t_out, x_out = np.empty(max(rows_max, 1)), np.empty((max(rows_max, 1), nx))
-        y_out = np.empty((max(rows_max, 1), max(ny, 1)))
+        t_out, x_out, y_out = _result_arrays(
+            cm, [(max(rows_max, 1),), (max(rows_max, 1), nx), (max(rows_max, 1), max(ny, 1))],
+            f"{rows_max} samples")
         t_found, x_found = np.empty(ev_capacity), np.empty((ev_capacity, nx))
         which = np.empty(ev_capacity, dtype=np.intc)
         out.capacity = rows_max
@@ -600,6 +601,18 @@ def simulate(cm, x0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10
         if status == INPUT_ERROR and isinstance(failure, Exception):
             _reraise(failure, res, f"near t={t_reached!r}")
     return res
+
+
+def _result_arrays(cm, shapes, what: str, fill=None) -> list:
+    """The arrays a run's results are written into, or, when memory cannot hold them,
+    an :class:`ArgumentValueError` naming their size (a raw MemoryError named nothing)."""
+    try:
+        return [np.empty(shape) if fill is None else np.full(shape, fill) for shape in shapes]
+    except MemoryError:
+        size = sum(float(np.prod(shape, dtype=float)) for shape in shapes) * 8
+        raise ArgumentValueError(
+            f"{cm.name}: the results of {what} need {size / 1e9:.3g} GB, more than this "
+            f"machine's memory gives; fix: fewer samples in t_eval (or fewer runs)") from None
 
 
 def _reraise(exc: Exception, res: Result, where: str):
@@ -747,9 +760,9 @@ def simulate_batch(cm, X0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol
 
     _check_step_count(fixed, t0, t1)
     n_t = len(times)
-    x_out = np.full((n_runs, n_t, nx), np.nan)
     ny = len(cm.output_columns) if outputs else 0
-    y_out = np.full((n_runs, n_t, max(ny, 1)), np.nan)
+    x_out, y_out = _result_arrays(cm, [(n_runs, n_t, nx), (n_runs, n_t, max(ny, 1))],
+                                  f"{n_runs} runs x {n_t} samples", np.nan)
     n_out = np.zeros(n_runs, dtype=_LONG)
     status = np.zeros(n_runs, dtype=np.intc)
     stats = cm.ffi.new("mg_stats[]", max(n_runs, 1))
