@@ -10,6 +10,10 @@ runs a grid of runs (in-process or on Dask) into a netCDF dataset.
 reduced model, integrates it in C and writes CSV, NPZ and PNG; given a model
 file instead of a scene, integrates it with RK4 from ``--init`` values.
 
+Every command's ``-o`` names the file or directory of its product, and
+``--build-dir`` where the model is built (``generate``'s product is the build,
+so there the two are one).
+
 Exit status (:data:`EXIT`): 0 success; 2 bad input (a model, scene or
 command-line mistake, a value out of range, a result larger than
 ``--max-output-mb``); 3 a build error (compiler missing or failing); 4 a
