@@ -10,11 +10,18 @@ runs a grid of runs (in-process or on Dask) into a netCDF dataset.
 reduced model, integrates it in C and writes CSV, NPZ and PNG; given a model
 file instead of a scene, integrates it with RK4 from ``--init`` values.
 
+Every command's ``-o`` names the file or directory of its product, and
+``--build-dir`` where the model is built (``generate``'s product is the build,
+so there the two are one).
+
 Exit status (:data:`EXIT`): 0 success; 2 bad input (a model, scene or
-command-line mistake); 3 a build error (compiler missing or failing); 4 a
+command-line mistake, a value out of range, a result larger than
+``--max-output-mb``); 3 a build error (compiler missing or failing); 4 a
 simulation that failed (its partial results are still written); 1 an
-unexpected internal error; 130 interrupted.  Errors print one line,
-``modelgen: error: ...``, with the fix; ``--debug`` shows the traceback.
+unexpected internal error; 130 interrupted by Ctrl-C (SIGINT), 143 by SIGTERM
+(both keep and write the results so far, marked partial; a second signal
+stops at once).  Errors print one line, ``modelgen: error: ...``, with the
+fix; ``--debug`` also shows the traceback and keeps the exit status.
 """
 from __future__ import annotations
 
@@ -22,6 +29,8 @@ import argparse
 import contextlib
 import math
 import os
+import shutil
+import signal
 import sys
 import threading
 import time
@@ -30,9 +39,17 @@ from pathlib import Path
 
 from modelgen.codegen.capi import STATUS_BY_NAME
 from modelgen.codegen.options import BuildOptions
-from modelgen.errors import (BuildError, ModelgenError, SimulationError, TemplateError)
+from modelgen.errors import (ArgumentTypeError, ArgumentValueError, BuildError, ModelgenError,
+                             SimulationError, TemplateError)
 from modelgen.version import __version__
 
+
+#: the largest output a run or sweep may write without --max-output-mb [MB]: its
+#: samples x columns x runs doubles, plus a run's CSV text
+MAX_OUTPUT_MB = 1000.0
+#: the columns an output of each kind adds to a result (n: one per speed)
+_OUTPUT_COLUMNS = {"position": 3, "velocity": 3, "orientation": 9, "angular_velocity": 3,
+                   "energy": 1, "generalized_force": "n", "power": 1, "pose": 16}
 
 #: a progress bar appears only once its task has run this long [s]
 #: (``MODELGEN_PROGRESS_DELAY`` overrides it)
@@ -142,6 +159,7 @@ def _generate(args) -> int:
         raise ModelgenError(f"{args.model} is a scene file, not a model; fix: run it with "
                             f"`modelgen simulate {args.model}` (which builds its reduced model), "
                             f"or generate the model file it names")
+    _check_floating_base(args)
     # --floating-base and the inertia options act as the file is read; the rest says
     # what to build
     options = BuildOptions(jacobian=args.jacobian, formulation=args.formulation)
@@ -230,6 +248,8 @@ def _parse_assignments(items, what):
             out[name.strip()] = float(value)
         except ValueError:
             raise ModelgenError(f"--{what} {item!r}: {value!r} is not a number") from None
+        if not math.isfinite(out[name.strip()]):
+            raise ModelgenError(f"--{what} {item!r}: the value must be a finite number")
     return out
 
 
@@ -264,6 +284,48 @@ def _check_times(args) -> None:
     for flag, value in (("--t-end", args.t_end), ("--dt", args.dt), ("--sample", args.sample)):
         if value is not None and not (value > 0 and value < float("inf")):
             raise ModelgenError(f"{flag} must be a positive number of seconds, got {value!r}")
+    if args.max_output_mb is not None and not (0 < args.max_output_mb < float("inf")):
+        raise ModelgenError(f"--max-output-mb must be a positive number, got "
+                            f"{args.max_output_mb!r}")
+
+
+def _check_floating_base(args) -> None:
+    """--floating-base acts on a robot description as it is read, never on a model or
+    scene file (whose free joints are declared in the file)."""
+    if getattr(args, "floating_base", False) and Path(args.model).suffix.lower() != ".urdf":
+        raise ModelgenError(f"--floating-base applies to a URDF file, not {args.model}; fix: "
+                            f"in a model file, declare a free joint under 'joints:' (a scene "
+                            f"runs the model it names as that file declares it)")
+
+
+def _columns_of(model, outputs=()) -> int:
+    """Columns of a run's table: t, the state, the energies and the outputs' columns."""
+    n = 1 + model.nq + model.n + 3
+    for out in outputs:
+        width = _OUTPUT_COLUMNS.get(out.kind, 1)
+        n += model.n if width == "n" else width
+    return n
+
+
+def _check_output_size(args, samples: float, columns: int, runs: float = 1,
+                       csv: bool = True) -> None:
+    """Refuse, before anything is built or run, a run or sweep whose results (samples x
+    columns x runs doubles, plus a run's CSV text) exceed --max-output-mb."""
+    from modelgen.sim.result import output_bytes
+    limit = MAX_OUTPUT_MB if args.max_output_mb is None else args.max_output_mb
+    size = output_bytes(samples, columns, runs, csv=csv)
+    if not size <= limit * 1e6:
+        what = f"{samples:.4g} samples x {columns} columns" + \
+            (f" x {runs:.4g} runs" if runs != 1 else "")
+        raise ModelgenError(f"the results would take {size / 1e6:.4g} MB ({what}), more than "
+                            f"--max-output-mb {limit:g}; fix: fewer samples (a larger "
+                            f"--sample, a shorter --t-end{', fewer runs' if runs != 1 else ''}), "
+                            f"or raise --max-output-mb")
+
+
+def _samples(t0: float, t1: float, dt: float) -> float:
+    """How many samples every dt from t0 to t1 (the end included): a float, never huge."""
+    return (t1 - t0) / dt + 1
 
 
 def _report(result, out: Path, name: str, args, title: str, conservative,
@@ -273,8 +335,13 @@ def _report(result, out: Path, name: str, args, title: str, conservative,
     energy balance; the exit status."""
     import numpy as np
     out.mkdir(parents=True, exist_ok=True)
-    print(f"wrote {result.to_csv(out / f'{name}.csv')}")
-    print(f"wrote {result.to_npz(out / f'{name}.npz')}")
+    partial = "" if result.success else \
+        f" (partial: {len(result.t)} samples to t = {result.t[-1] if len(result.t) else 0:g} s)"
+    if not args.quiet:
+        print(f"{name}: writing {len(result.t)} samples{partial} (Ctrl-C again stops "
+              f"at once)", file=sys.stderr, flush=True)
+    print(f"wrote {result.to_csv(out / f'{name}.csv')}{partial}")
+    print(f"wrote {result.to_npz(out / f'{name}.npz')}{partial}")
     if not args.no_plot:
         png = out / f"{name}.png"
         result.plot(png, title=title, conservative=conservative)
@@ -337,6 +404,8 @@ def _simulate_scene(args) -> int:
     if changes.get("t_end", spec.t_end) <= spec.t_start:
         raise ModelgenError(f"--t-end must be after the scene's start {spec.t_start:g} s")
     spec = replace(spec, **changes)
+    _check_output_size(args, _samples(spec.t_start, spec.t_end, spec.sample_dt),
+                       _columns_of(spec.model, spec.outputs))
     with _generation_progress(args, spec.name) as stages:
         # the run settings changed above do not change the build: the files still say it
         scene = Scene(spec, args.build_dir, progress=progress, stages=stages,
@@ -344,7 +413,8 @@ def _simulate_scene(args) -> int:
                       max_operations=args.max_operations)
     x0 = scene.initial_state(init)
     print(scene.summary())
-    progress(f"{spec.name}: integrating ({time.perf_counter() - t0:.2f} s so far)")
+    progress(f"{spec.name}: integrating (after {time.perf_counter() - t0:.2f} s of "
+             f"set-up)")
     with _simulation_progress(args, spec.name, spec.t_start, spec.t_end) as advance:
         result = _quietly(scene.run, p=p, x0=x0, max_steps=args.max_steps, progress=advance)
     return _report(result, Path(args.output), spec.name, args, f"scene {spec.name}",
@@ -367,18 +437,23 @@ def _simulate(args) -> int:
     from modelgen.sim.load import load
     _check_times(args)
     _check_output_dir(args.output)
+    _check_floating_base(args)
+    if args.animate and args.animate_format == "mp4" and shutil.which("ffmpeg") is None:
+        raise ModelgenError("--animate-format mp4 needs ffmpeg on PATH; fix: install ffmpeg, "
+                            "or use --animate-format gif")
     if is_scene_file(args.model):
         return _simulate_scene(args)
     model = as_spec(args.model, floating_base=args.floating_base, **_reading(args))
+    method = _method(args.method or "rk4")
+    t_end, dt = args.t_end or 10.0, args.dt or 1e-3
+    sample = args.sample or dt
+    _check_output_size(args, _samples(0.0, t_end, sample), _columns_of(model))
     with _generation_progress(args, model.name) as stages:
         cm = load(model, args.build_dir, progress=stages, max_operations=args.max_operations)
     x0 = cm.neutral_state()
     for key, value in _state_overrides(cm.state_names, args.init).items():
         x0[cm.state_names.index(key)] = value
     p = _parameter_overrides(cm.parameters, args.set) or None
-    method = _method(args.method or "rk4")
-    t_end, dt = args.t_end or 10.0, args.dt or 1e-3
-    sample = args.sample or dt
     times = np.linspace(0.0, t_end, int(round(t_end / sample)) + 1)
     with _simulation_progress(args, cm.name, 0.0, t_end) as advance:
         result = _quietly(cm.simulate, x0, (0.0, t_end), t_eval=times, method=method.name,
@@ -402,6 +477,8 @@ def _linearize(args) -> int:
     out = Path(args.output) if args.output else None
     if out is not None and out.suffix.lower() not in (".npz", ".mat"):
         raise ModelgenError(f"-o {out}: the file must end in .npz or .mat")
+    if args.t is not None and not math.isfinite(args.t):
+        raise ModelgenError(f"--t must be a finite time [s], got {args.t!r}")
     if is_scene_file(args.model):
         spec = load_scene(args.model)
         model, x0 = spec.model, np.array(spec.initial, dtype=float)
@@ -428,14 +505,20 @@ def _linearize(args) -> int:
     else:
         cm = load(model, args.build_dir, options=BuildOptions(linearize=True))
     if args.equilibrium:
-        q = cm.equilibrium(x0[:cm.n], u=u, p=p, t=t)
+        try:
+            q = cm.equilibrium(x0[:cm.n], u=u, p=p, t=t)
+        except SimulationError as exc:      # a start or parameters without a rest point
+            raise ModelgenError(f"--equilibrium: {exc}") from exc
         print("equilibrium " + ", ".join(f"{c}={v:.12g}" for c, v in zip(cm.coordinates, q)))
         x0 = np.concatenate([q, np.zeros(cm.n)])
     lin = cm.linearize(x0, u=u, t=t, p=p)
     print(lin)
     if out is not None:
+        from modelgen.sim.result import replacing
         out.parent.mkdir(parents=True, exist_ok=True)
-        print(f"wrote {lin.to_npz(out) if out.suffix.lower() == '.npz' else lin.to_mat(out)}")
+        with replacing(out) as part:
+            lin.to_npz(part) if out.suffix.lower() == ".npz" else lin.to_mat(part)
+        print(f"wrote {out}")
     return 0
 
 
@@ -531,7 +614,7 @@ def _fmu_parser(sub) -> None:
                                    "scene's outputs), the C sources and the binary for this "
                                    "platform. Co-Simulation steps with modelgen's own "
                                    "integrator, chosen here.")
-    f.add_argument("model", help="model or scene YAML file")
+    f.add_argument("model", help="model YAML, URDF or scene YAML file")
     f.add_argument("-o", "--output", default="out",
                    help="the .fmu file, or a directory for <name>.fmu (default: out)")
     f.add_argument("--method", default=None,
@@ -552,22 +635,24 @@ def _fmu_parser(sub) -> None:
 def _sweep(args) -> int:
     """``modelgen sweep``: a grid of parameters and initial values, in-process or on Dask."""
     import numpy as np
-    from modelgen.model import is_scene_file
+    from modelgen.model import as_spec, is_scene_file
     from modelgen.model.scene import load_scene
     from modelgen.sim import sweep as sw
+    from modelgen.sim.result import replacing
 
     def axis(item, flag):
         name, sep, text = item.partition("=")
         parts = text.split(":")
         try:
             values = [float(v) for v in parts]
-            if not sep or len(parts) not in (1, 3) or (len(parts) == 3 and values[2] < 1):
+            if not sep or len(parts) not in (1, 3) or (len(parts) == 3 and values[2] < 1) \
+                    or not all(map(math.isfinite, values)):
                 raise ValueError
         except ValueError:
-            raise ModelgenError(f"{flag} takes NAME=VALUE or NAME=START:STOP:COUNT, "
-                                f"got {item!r}") from None
-        return name.strip(), (values if len(parts) == 1
-                              else np.linspace(values[0], values[1], int(values[2])))
+            raise ModelgenError(f"{flag} takes NAME=VALUE or NAME=START:STOP:COUNT of finite "
+                                f"numbers, got {item!r}") from None
+        return name.strip(), values
+    # the values are made only once the sweep's size is known to fit
     axes = dict(axis(i, "--param") for i in args.param or ())
     inits = dict(axis(i, "--init") for i in args.init or ())
     if set(axes) & set(inits):
@@ -580,13 +665,19 @@ def _sweep(args) -> int:
     _check_times(args)
     t_eval = None
     scene = is_scene_file(args.scene)
+    spec = load_scene(args.scene) if scene else as_spec(args.scene)
+    model = spec.model if scene else spec
+    t0 = spec.t_start if scene else 0.0
+    t1 = args.t_end or (spec.t_end if scene else 10.0)
+    dt = args.sample or (spec.sample_dt if scene else 0.01)
+    if t1 <= t0:
+        raise ModelgenError(f"--t-end must be after the scene's start {t0:g} s")
+    runs = math.prod(1 if len(v) == 1 else int(v[2]) for v in (*axes.values(), *inits.values()))
+    _check_output_size(args, max(_samples(t0, t1, dt), 2), _columns_of(
+        model, spec.outputs if scene else ()) - 3, runs, csv=False)
+    axes, inits = ({k: v if len(v) == 1 else np.linspace(v[0], v[1], int(v[2]))
+                    for k, v in d.items()} for d in (axes, inits))
     if not scene or args.t_end is not None or args.sample is not None:
-        spec = load_scene(args.scene) if scene else None
-        t0 = spec.t_start if scene else 0.0
-        t1 = args.t_end or (spec.t_end if scene else 10.0)
-        if t1 <= t0:
-            raise ModelgenError(f"--t-end must be after the scene's start {t0:g} s")
-        dt = args.sample or (spec.sample_dt if scene else 0.01)
         t_eval = np.linspace(t0, t1, max(int(round((t1 - t0) / dt)), 1) + 1)
     g = sw.grid(**axes, **inits)
     bar = None
@@ -609,7 +700,8 @@ def _sweep(args) -> int:
             bar.close()
     out = Path(args.output)
     out.parent.mkdir(parents=True, exist_ok=True)
-    ds.to_netcdf(out)
+    with replacing(out) as part:
+        ds.to_netcdf(part)
     print(sw.summary(ds))
     print(f"wrote {out}")
     if args.plot:
@@ -634,9 +726,11 @@ def build_parser() -> argparse.ArgumentParser:
                                    "write <name>.c/<name>.h and compile them into a shared "
                                    "library. An "
                                    "unchanged model reuses the cached build.")
-    g.add_argument("model", help="model YAML file")
-    g.add_argument("-o", "--output", default=None,
-                   help="output directory (default: the per-user cache, see modelgen.codegen.pipeline.default_output)")
+    g.add_argument("model", help="model YAML or URDF file")
+    g.add_argument("-o", "--output", "--build-dir", dest="output", default=None,
+                   help="output directory of the C, header and library: the build directory "
+                        "(-o and --build-dir are the same here; default: the per-user cache, "
+                        "see modelgen.codegen.pipeline.default_output)")
     g.add_argument("--force", action="store_true", help="rebuild even if cached")
     g.add_argument("-q", "--quiet", action="store_true",
                    help="no progress bar (one is drawn on a terminal when the build takes "
@@ -662,7 +756,7 @@ def build_parser() -> argparse.ArgumentParser:
                                    "only the effects and outputs it selects, integrate it in C "
                                    "and write OUT/<scene>.csv, .npz and .png. Given a model "
                                    "file instead, integrate it with RK4 from --init values.")
-    s.add_argument("model", help="scene YAML file (or model YAML file)")
+    s.add_argument("model", help="scene YAML file (or model YAML or URDF file)")
     s.add_argument("-o", "--output", default="out", help="output directory (default: out)")
     s.add_argument("--build-dir", default=None,
                    help="where the model is built (default: the per-user cache)")
@@ -693,6 +787,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("-q", "--quiet", action="store_true",
                    help="no progress bars or messages on stderr (bars are drawn on a "
                         "terminal for a build or a run taking more than 2 s)")
+    s.add_argument("--max-output-mb", type=float, default=None, metavar="MB",
+                   help=f"refuse, before anything runs, results larger than MB megabytes "
+                        f"(samples x columns doubles plus the CSV text; default {MAX_OUTPUT_MB:g})")
     s.add_argument("--animate", action="store_true",
                    help="also write OUT/<name>.gif (the bodies' frames, the points as a "
                         "stick figure, traces) and OUT/<name>.html (a 3D viewer that plays "
@@ -707,7 +804,8 @@ def build_parser() -> argparse.ArgumentParser:
     _add_reading_options(s)
     s.set_defaults(func=_simulate)
 
-    i = sub.add_parser("import", help="import a URDF robot as a model file",
+    i = sub.add_parser("import", help="import a robot description (URDF, or MJCF where "
+                                      "supported) as a model file",
                        description="Read a URDF file and write a model file in modelgen's "
                                    "YAML: bases, points, bodies, gravity, one input "
                                    "tau_<joint> per joint and the joints' damping and "
@@ -751,7 +849,7 @@ def build_parser() -> argparse.ArgumentParser:
                                     "(and, for a scene's outputs, C and D) at --at and --u, "
                                     "and print them with the eigenvalues, their natural "
                                     "frequencies and damping ratios.")
-    lz.add_argument("model", help="model or scene YAML file")
+    lz.add_argument("model", help="model YAML, URDF or scene YAML file")
     lz.add_argument("--at", action="append", metavar="NAME=VALUE",
                     help="coordinate or speed of the operating point, e.g. q1=3.14159 "
                          "(repeatable; default: the scene's initial state, or 0)")
@@ -778,7 +876,7 @@ def build_parser() -> argparse.ArgumentParser:
                                    "(netCDF): a variable per state and output, dims run and "
                                    "time, per-run status. Needs the sweep extra "
                                    "(pip install 'modelgen[sweep]').")
-    w.add_argument("scene", help="scene YAML file (or model YAML file)")
+    w.add_argument("scene", help="scene YAML file (or model YAML or URDF file)")
     w.add_argument("--param", action="append", metavar="NAME=START:STOP:COUNT",
                    help="sweep a parameter over COUNT values (or one NAME=VALUE); repeatable")
     w.add_argument("--init", action="append", metavar="NAME=START:STOP:COUNT",
@@ -805,6 +903,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "scalar output against the swept values, e.g. final:q2, period:q1")
     w.add_argument("--build-dir", default=None,
                    help="where the model is built (default: the per-user cache)")
+    w.add_argument("--max-output-mb", type=float, default=None, metavar="MB",
+                   help=f"refuse, before anything runs, results larger than MB megabytes "
+                        f"(runs x samples x columns doubles; default {MAX_OUTPUT_MB:g})")
     w.add_argument("--quiet", action="store_true", help="no progress bar")
     w.add_argument("--strict", action="store_true",
                    help="exit with status 4 when a run failed (default: 0, failures are data)")
@@ -832,19 +933,62 @@ def build_parser() -> argparse.ArgumentParser:
 
 #: the C integrators' status for a run stopped by Ctrl-C
 INTERRUPTED = STATUS_BY_NAME["INTERRUPTED"].code
-#: exit status of each outcome (documented in the module docstring and the README)
-EXIT = {"ok": 0, "internal": 1, "input": 2, "build": 3, "simulation": 4, "interrupted": 130}
+#: exit status of each outcome (documented in the module docstring and the README):
+#: 128 + the signal's number for SIGINT and SIGTERM, as a shell reports them
+EXIT = {"ok": 0, "internal": 1, "input": 2, "build": 3, "simulation": 4, "interrupted": 130,
+        "terminated": 143}
 
 
 def exit_status(exc: BaseException) -> int:
-    """The exit status for an error that ends a command."""
+    """The exit status for an error that ends a command: a wrong argument value or type
+    is bad input (2), like a model mistake, even when the simulation layer finds it."""
     if isinstance(exc, (BuildError, TemplateError)):
         return EXIT["build"]
+    if isinstance(exc, (ArgumentTypeError, ArgumentValueError)):
+        return EXIT["input"]
     if isinstance(exc, SimulationError):
         return EXIT["simulation"]
     if isinstance(exc, (ModelgenError, OSError)):
         return EXIT["input"]
     return EXIT["internal"]
+
+
+@contextlib.contextmanager
+def _terminate_as_interrupt():
+    """SIGTERM handled as Ctrl-C, in the main thread: a run stops within a step and its
+    results so far are written (the integrator's own SIGINT handler sees it), or a
+    KeyboardInterrupt is raised.  Yields a list of the SIGTERMs received."""
+    received = []
+    if threading.current_thread() is not threading.main_thread():
+        yield received
+        return
+
+    def on_sigterm(signum, frame):
+        received.append(signum)
+        if len(received) > 1:       # a second one stops at once
+            raise KeyboardInterrupt
+        handler = signal.getsignal(signal.SIGINT)
+        if callable(handler):       # the integrator's (sets its stop flag) or Python's
+            handler(signal.SIGINT, frame)
+        else:
+            raise KeyboardInterrupt
+    previous = signal.signal(signal.SIGTERM, on_sigterm)
+    try:
+        yield received
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def _os_error_text(exc: OSError) -> str:
+    """One line for an operating-system error: what failed, on which path, the fix."""
+    import errno
+    where = f": {exc.filename}" if exc.filename is not None else ""
+    if exc.errno == errno.ENOSPC:
+        return (f"no space left on the device{where} (the disk is full); fix: free space "
+                f"there or write elsewhere (-o)")
+    if exc.filename is None:
+        return f"{exc}; fix: check that what it names exists and is reachable"
+    return f"{exc.strerror or exc}{where}; fix: check the path and its permissions"
 
 
 def main(argv=None) -> int:
@@ -853,24 +997,32 @@ def main(argv=None) -> int:
     args, extra = parser.parse_known_args(argv)
     if extra:     # the subcommand's own usage, not the top-level one
         args.command_parser.error(f"unrecognized arguments: {' '.join(extra)}")
-    try:
-        return args.func(args)
-    except KeyboardInterrupt:
-        print("modelgen: interrupted", file=sys.stderr)
-        return EXIT["interrupted"]
-    except (ModelgenError, OSError) as exc:
-        if args.debug:
-            raise
-        text = str(exc) if isinstance(exc, ModelgenError) else \
-            f"{exc.strerror or exc}: {exc.filename!r}; fix: check the path and its permissions"
-        print(f"modelgen: error: {text}", file=sys.stderr)
-        return exit_status(exc)
-    except Exception as exc:            # a bug: say so, briefly, unless --debug
-        if args.debug:
-            raise
-        print(f"modelgen: internal error: {type(exc).__name__}: {exc} (please report it; "
-              f"--debug shows the traceback)", file=sys.stderr)
-        return EXIT["internal"]
+    with _terminate_as_interrupt() as signals:
+        try:
+            status = args.func(args)
+        except KeyboardInterrupt:
+            print("modelgen: interrupted", file=sys.stderr)
+            status = EXIT["interrupted"]
+        except (ModelgenError, OSError) as exc:
+            text = str(exc) if isinstance(exc, ModelgenError) else _os_error_text(exc)
+            _debug_traceback(args)
+            print(f"modelgen: error: {text}", file=sys.stderr)
+            status = exit_status(exc)
+        except Exception as exc:            # a bug: say so, briefly, unless --debug
+            _debug_traceback(args)
+            print(f"modelgen: internal error: {type(exc).__name__}: {exc} (please report it; "
+                  f"--debug shows the traceback)", file=sys.stderr)
+            status = EXIT["internal"]
+    if status == EXIT["interrupted"] and signals:
+        return EXIT["terminated"]
+    return status
+
+
+def _debug_traceback(args) -> None:
+    """With --debug, the traceback of the error being handled (the status is kept)."""
+    if args.debug:
+        import traceback
+        traceback.print_exc()
 
 
 if __name__ == "__main__":   # pragma: no cover

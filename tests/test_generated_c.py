@@ -201,6 +201,16 @@ def example_binary(generated, tmp_path_factory) -> Path:
     return build / "double_pendulum_sim"
 
 
+def test_embedded_example_prints_what_its_readme_shows(example_binary):
+    """The README's output block is the program's output, digit for digit (the model
+    code computes the same bits on every machine: mg_sin/mg_cos, no libm)."""
+    readme = (EXAMPLE / "README.md").read_text()
+    shown = re.search(r"```\n(steps: .*?)```", readme, re.DOTALL).group(1)
+    r = _run([example_binary])
+    assert r.returncode == 0, r.stdout
+    assert r.stdout == shown
+
+
 @pytest.mark.parametrize("args, why", [
     (["abc"], "t_end 'abc' is not a finite number"),
     (["2x"], "t_end '2x' is not a finite number"),

@@ -389,3 +389,48 @@ def test_shipped_inertias_are_physical_at_default_parameters(path):
         moments = np.linalg.eigvalsh(_numeric_inertia(spec, body))
         assert moments[0] >= -1e-12
         assert moments[0] + moments[1] >= moments[2] - 1e-12
+
+
+def test_python_api_spells_the_yaml_keys_and_keeps_the_old_names():
+    """The Python API takes what the YAML takes: ``from_=`` for the key ``from``, lists
+    for the list sections and mappings or keywords for the maps; the old spellings
+    (``parent=``, ``origin=``, varargs) build the same model."""
+    yaml_spec = parse_model("""
+name: m
+coordinates: [q1, q2]
+inputs: [T1, T2]
+parameters: {L: 1.0, m: 2.0}
+bases: {B1: {parent: E, axis: 3, angle: q1}}
+points:
+  P: {from: O, base: B1, coordinates: [L, 0, 0]}
+  Q: {from: P, base: E, coordinates: [0, q2, 0]}
+bodies: {b: {mass: m, G: Q, base: B1}}
+joints: {J: {type: free, parent: E, base: B2, from: P, point: R}}
+""")
+
+    def build(new: bool) -> Model:
+        m = Model("m")
+        if new:
+            m.add_coordinates(["q1", "q2"]).add_inputs(["T1", "T2"]).add_parameters(L=1.0, m=2.0)
+        else:
+            m.add_coordinates("q1", "q2").add_inputs("T1", "T2").add_parameters({"L": 1.0,
+                                                                                 "m": 2.0})
+        m.add_joint("J", "free", parent="E", base="B2", point="R",      # the YAML's order
+                    **({"from_": "P"} if new else {"origin": "P"}))
+        m.add_base("B1", parent="E", axis=3, angle="q1")
+        where = (lambda p: {"from_": p}) if new else (lambda p: {"parent": p})
+        m.add_point("P", base="B1", coordinates=["L", 0, 0], **where("O"))
+        m.add_point("Q", base="E", coordinates=[0, "q2", 0], **where("P"))
+        m.add_body("b", mass="m", G="Q", base="B1")
+        return m
+    assert build(new=True).spec() == yaml_spec == build(new=False).spec()
+
+
+def test_python_api_refuses_two_spellings_that_disagree():
+    from modelgen.errors import ModelError
+    m = Model("m").add_parameters({"a": 1.0})
+    with pytest.raises(ModelError, match="points.P: both from_='O' and parent='E1'"):
+        m.add_point("P", from_="O", parent="E1", base="E", coordinates=[0, 0, 0])
+    with pytest.raises(ModelError, match="parameters a given both in the mapping and as"):
+        Model("m").add_parameters({"a": 1.0}, a=2.0)
+    assert m.spec().parameters == (("a", 1.0),)

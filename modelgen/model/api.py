@@ -16,6 +16,7 @@ from __future__ import annotations
 
 from typing import Mapping, Optional
 
+from modelgen.errors import ModelError
 from modelgen.model.builder import ModelBuilder, replay
 from modelgen.model.messages import API_FILE
 from modelgen.model.names import check_name
@@ -57,8 +58,45 @@ def load_model(path) -> ModelSpec:
 
 
 
+def _listed(names: tuple) -> tuple:
+    """``add_coordinates("q1", "q2")`` or ``add_coordinates(["q1", "q2"])``, as the YAML's
+    list: the names either way."""
+    if len(names) == 1 and not isinstance(names[0], str) and hasattr(names[0], "__iter__"):
+        return tuple(names[0])
+    return names
+
+
+def _mapping(defaults, keywords: dict, what: str) -> dict:
+    """``add_parameters({"m": 1.0})`` or ``add_parameters(m=1.0)`` (or both), as the
+    YAML's mapping: one dict of name -> default."""
+    out = dict(defaults or {})
+    twice = sorted(set(out) & set(keywords))
+    if twice:
+        raise ModelError(f"{what} {', '.join(twice)} given both in the mapping and as "
+                         f"keywords", file=API_FILE, key=what,
+                         fix="give each name once")
+    out.update(keywords)
+    return out
+
+
+def _origin(name: str, from_, parent, key: str, what: str):
+    """The YAML's ``from:`` given as ``from_=`` (a Python keyword cannot be ``from``) or
+    by its older name ``parent=``/``origin=``: the point it names, or None."""
+    if from_ is not None and parent is not None and from_ != parent:
+        raise ModelError(f"both from_={from_!r} and {what}={parent!r} given", file=API_FILE,
+                         key=key, fix=f"give from_= only ({what}= is its older name)")
+    return from_ if from_ is not None else parent
+
+
 class Model:
     """Build a model in Python; :meth:`spec` returns the same ModelSpec as the YAML.
+
+    Method and keyword names follow the YAML: ``from_=`` is the key ``from`` (``from``
+    is a Python keyword; the older ``parent=`` of :meth:`add_point` and ``origin=`` of
+    :meth:`add_joint` still work), and the methods adding several names take them as
+    the YAML lists or maps them, or as arguments: ``add_coordinates(["q1", "q2"])`` or
+    ``add_coordinates("q1", "q2")``, ``add_parameters({"m": 1.0})`` or
+    ``add_parameters(m=1.0)``.
 
     Expressions may be strings (parsed by :mod:`modelgen.model.expr`), ints, floats
     or sympy expressions built from :func:`modelgen.model.spec.symbol`.  Declare
@@ -72,7 +110,7 @@ class Model:
     >>> _ = m.add_coordinate("q").add_parameter("L", 1.0).add_parameter("m", 1.0)
     >>> _ = m.add_parameter("g", 9.81)
     >>> _ = m.add_base("B1", parent="E", axis=3, angle="q")
-    >>> _ = m.add_point("P", parent="O", base="B1", coordinates=[0, "-L", 0])
+    >>> _ = m.add_point("P", from_="O", base="B1", coordinates=[0, "-L", 0])
     >>> _ = m.add_body("bob", mass="m", G="P", base="B1")
     >>> _ = m.set_gravity([0, "-g", 0])
     >>> m.spec().bodies[0].mass
@@ -114,12 +152,16 @@ class Model:
         """
         return self._apply(lambda c: c.add_coordinate(name, f"coordinates[{len(c.coordinates)}]"))
 
-    def add_coordinates(self, *names: str) -> "Model":
-        """Add several coordinates (all or none).
+    def add_coordinates(self, *names) -> "Model":
+        """Add several coordinates (all or none), as arguments or one list.
 
         >>> Model("m").add_coordinates("q1", "q2").spec().coordinates
         ('q1', 'q2')
+        >>> Model("m").add_coordinates(["q1", "q2"]).spec().coordinates
+        ('q1', 'q2')
         """
+        names = _listed(names)
+
         def change(c):
             for name in names:
                 c.add_coordinate(name, f"coordinates[{len(c.coordinates)}]")
@@ -133,12 +175,18 @@ class Model:
         """
         return self._apply(lambda c: c.add_parameter(name, default, f"parameters.{name}"))
 
-    def add_parameters(self, defaults: Mapping[str, float]) -> "Model":
-        """Add several parameters from a ``{name: default}`` mapping (all or none).
+    def add_parameters(self, defaults: Optional[Mapping[str, float]] = None, /,
+                       **more: float) -> "Model":
+        """Add several parameters from a ``{name: default}`` mapping and/or keywords
+        (all or none).
 
         >>> Model("m").add_parameters({"m": 1.0, "g": 9.81}).spec().parameter_names
         ('m', 'g')
+        >>> Model("m").add_parameters(m=1.0, g=9.81).spec().parameter_names
+        ('m', 'g')
         """
+        defaults = _mapping(defaults, more, "parameters")
+
         def change(c):
             for name, default in defaults.items():
                 c.add_parameter(name, default, f"parameters.{name}")
@@ -152,12 +200,16 @@ class Model:
         """
         return self._apply(lambda c: c.add_input(name, f"inputs[{len(c.inputs)}]"))
 
-    def add_inputs(self, *names: str) -> "Model":
-        """Add several inputs (all or none).
+    def add_inputs(self, *names) -> "Model":
+        """Add several inputs (all or none), as arguments or one list.
 
         >>> Model("m").add_inputs("T1", "T2").spec().inputs
         ('T1', 'T2')
+        >>> Model("m").add_inputs(["T1", "T2"]).spec().inputs
+        ('T1', 'T2')
         """
+        names = _listed(names)
+
         def change(c):
             for name in names:
                 c.add_input(name, f"inputs[{len(c.inputs)}]")
@@ -173,30 +225,37 @@ class Model:
         return self._apply(lambda c: c.add_base(name, parent, axis, angle, f"bases.{name}"))
 
     def add_joint(self, name: str, kind: str, *, parent: str, base: str,
-                  origin: Optional[str] = None, point: Optional[str] = None) -> "Model":
+                  from_: Optional[str] = None, point: Optional[str] = None,
+                  origin: Optional[str] = None) -> "Model":
         """Add a ``ball`` or ``free`` joint: base ``base`` turned from ``parent`` by
         a unit quaternion; a free joint also makes ``point`` at a position from
-        ``origin`` (default O; the YAML key is ``from``) in ``parent``'s components.
+        ``from_`` (default O; the YAML key ``from``; ``origin=`` is its older name)
+        in ``parent``'s components.
 
         >>> spec = Model("m").add_joint("J", "free", parent="E", base="B", point="P").spec()
         >>> spec.coordinates, spec.speeds
         (('J_x', 'J_y', 'J_z', 'J_qw', 'J_qx', 'J_qy', 'J_qz'), ('J_vx', 'J_vy', 'J_vz', 'J_wx', 'J_wy', 'J_wz'))
         """
+        origin = _origin(name, from_, origin, f"joints.{name}", "origin")
         return self._apply(lambda c: c.add_joint(name, kind, parent, base, origin, point,
                                                  f"joints.{name}"))
 
-    def add_point(self, name: str, *, coordinates, parent: Optional[str] = None,
-                  base: Optional[str] = None, frame: Optional[str] = None) -> "Model":
-        """Add a point at ``coordinates`` (in ``base``) from point ``parent``.
+    def add_point(self, name: str, *, coordinates, from_: Optional[str] = None,
+                  base: Optional[str] = None, frame: Optional[str] = None,
+                  parent: Optional[str] = None) -> "Model":
+        """Add a point at ``coordinates`` (in ``base``) from point ``from_`` (the YAML
+        key ``from``; ``parent=`` is its older name and still works).
 
-        Give ``frame=`` instead of ``parent``/``base`` to use a frame's point
-        and base, or neither for an absolute point (from O in base E).  The
-        YAML key for ``parent`` is ``from``.
+        Give ``frame=`` instead of ``from_``/``base`` to use a frame's point
+        and base, or neither for an absolute point (from O in base E).
 
         >>> m = Model("m").add_parameter("l", 1.0)
         >>> m.add_point("P", coordinates=["l", 0, 0]).spec().points[0].parent
         'O'
+        >>> m.add_point("Q", from_="P", base="E", coordinates=["l", 0, 0]).spec().points[1].parent
+        'P'
         """
+        parent = _origin(name, from_, parent, f"points.{name}", "parent")
         return self._apply(lambda c: c.add_point(name, parent, base, frame, coordinates,
                                                  f"points.{name}"))
 

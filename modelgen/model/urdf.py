@@ -272,6 +272,8 @@ class _Builder:
                    line: int) -> None:
         """A free joint from (parent_point, parent_base) to ``link``'s own base and point."""
         name = sanitize(wanted)
+        check_name(name, file=self.robot.file, line=line, key=f"joint[{wanted}]",
+                   what="joint name (the sanitized URDF joint name)")
         taken = [name] + [f"{name}_{s}" for kind in ("free",)
                           for part in JOINT_KINDS[kind] for s in part]
         clash = [t for t in taken if t in self.taken]

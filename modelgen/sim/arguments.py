@@ -77,7 +77,7 @@ def span(t_span):
     except (TypeError, ValueError) as exc:
         raise SimulationError(f"t_span must be (t0, t1), got {t_span!r}") from exc
     if not (np.isfinite(t0) and np.isfinite(t1)):
-        raise SimulationError(f"t_span must be finite, got {t_span!r}")
+        raise ArgumentValueError(f"t_span must be finite, got {t_span!r}")
     if t1 == t0:
         raise SimulationError(f"t_span must not be empty, got {t_span!r}")
     return t0, t1, (-1.0 if t1 < t0 else 1.0)
@@ -271,7 +271,7 @@ def crossing_direction(ev, i: int) -> int:
 def check_step_count(fixed, t0, t1):
     """Refuse a fixed step so small that its step count overflows the C counter."""
     if fixed > 0 and not (t1 - t0) / fixed < MAX_FIXED_STEPS:
-        raise SimulationError(
+        raise ArgumentValueError(
             f"step={fixed!r} over t_span ({t0!r}, {t1!r}) needs {(t1 - t0) / fixed:.3g} steps, "
             f"more than the C integrator can count; give a larger step")
 

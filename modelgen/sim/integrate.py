@@ -35,7 +35,7 @@ import numpy as np
 
 from modelgen.codegen.capi import (ALIASES, METHODS, STAT_NAMES, STATUS, STATUS_BY_NAME, STOP_X,
                                    Method, define_values, work_size)
-from modelgen.errors import MassMatrixError, SimulationError
+from modelgen.errors import ArgumentValueError, MassMatrixError, SimulationError
 from modelgen.sim.arguments import (LONG, MIN_ATOL, MIN_RTOL, Inputs, c_options,
                                      check_step_count, crossing_direction, event_functions,
                                      method_of, run_options, sample_times, span,
@@ -181,7 +181,7 @@ def simulate(cm, x0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10
     max_steps = budget
     x = cm.state_vector(x0, "x0").copy()
     if not np.all(np.isfinite(x)):
-        raise SimulationError(f"{cm.name}: x0 must be finite")
+        raise ArgumentValueError(f"{cm.name}: x0 must be finite")
     _check_quaternions(cm, x[None, :], "x0")
     x_start = x.copy()
     inputs = Inputs(cm, u, sign)
@@ -277,8 +277,9 @@ def _drive(cm, opt, inputs, flag, poll, sign, t0, t1, x, p_vec, times, terminal,
             rows_max, t_eval_arg = capacity, None
         else:
             rows_max, t_eval_arg = len(remaining), (remaining if len(remaining) else np.array([t1]))
-        t_out, x_out = np.empty(max(rows_max, 1)), np.empty((max(rows_max, 1), nx))
-        y_out = np.empty((max(rows_max, 1), max(ny, 1)))
+        t_out, x_out, y_out = _result_arrays(
+            cm, [(max(rows_max, 1),), (max(rows_max, 1), nx), (max(rows_max, 1), max(ny, 1))],
+            f"{rows_max} samples")
         t_found, x_found = np.empty(ev_capacity), np.empty((ev_capacity, nx))
         which = np.empty(ev_capacity, dtype=np.intc)
         out.capacity = rows_max
@@ -367,6 +368,18 @@ def _finish(cm, m, run: _Run, errors, inputs, sign, p_vec, x_start, max_steps, t
         if status == INPUT_ERROR and isinstance(failure, Exception):
             _reraise(failure, res, f"near t={t_reached!r}")
     return res
+
+
+def _result_arrays(cm, shapes, what: str, fill=None) -> list:
+    """The arrays a run's results are written into, or, when memory cannot hold them,
+    an :class:`ArgumentValueError` naming their size (a raw MemoryError named nothing)."""
+    try:
+        return [np.empty(shape) if fill is None else np.full(shape, fill) for shape in shapes]
+    except MemoryError:
+        size = sum(float(np.prod(shape, dtype=float)) for shape in shapes) * 8
+        raise ArgumentValueError(
+            f"{cm.name}: the results of {what} need {size / 1e9:.3g} GB, more than this "
+            f"machine's memory gives; fix: fewer samples in t_eval (or fewer runs)") from None
 
 
 def _reraise(exc: Exception, res: Result, where: str):
@@ -459,7 +472,7 @@ def _parameter_rows(cm, P, n_runs):
         rows = np.tile(cm.params(None), (n_runs, 1))
         for key, value in P.items():
             if key not in cm._param_index:
-                raise SimulationError(f"{cm.name}: unknown parameter {key!r}; parameters are "
+                raise ArgumentValueError(f"{cm.name}: unknown parameter {key!r}; parameters are "
                                       f"{', '.join(cm.parameters)}")
             rows[:, cm._param_index[key]] = np.broadcast_to(np.asarray(value, dtype=float),
                                                             (n_runs,))
@@ -472,7 +485,7 @@ def _parameter_rows(cm, P, n_runs):
                                   f"got {rows.shape}")
     rows = np.ascontiguousarray(rows)
     if not np.all(np.isfinite(rows)):
-        raise SimulationError(f"{cm.name}: parameters must be finite")
+        raise ArgumentValueError(f"{cm.name}: parameters must be finite")
     return rows, n_p
 
 
@@ -503,7 +516,7 @@ def simulate_batch(cm, X0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol
     if X0.ndim != 2 or X0.shape[1] != nx:
         raise SimulationError(f"{cm.name}: X0 must have shape (n_runs, {nx}), got {X0.shape}")
     if not np.all(np.isfinite(X0)):
-        raise SimulationError(f"{cm.name}: X0 must be finite")
+        raise ArgumentValueError(f"{cm.name}: X0 must be finite")
     _check_quaternions(cm, X0, "X0")
     n_runs = X0.shape[0]
     times = sample_times([t1] if t_eval is None else t_eval, t0, t1, sign)
@@ -514,9 +527,9 @@ def simulate_batch(cm, X0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol
 
     check_step_count(fixed, t0, t1)
     n_t = len(times)
-    x_out = np.full((n_runs, n_t, nx), np.nan)
     ny = len(cm.output_columns) if outputs else 0
-    y_out = np.full((n_runs, n_t, max(ny, 1)), np.nan)
+    x_out, y_out = _result_arrays(cm, [(n_runs, n_t, nx), (n_runs, n_t, max(ny, 1))],
+                                  f"{n_runs} runs x {n_t} samples", np.nan)
     n_out = np.zeros(n_runs, dtype=LONG)
     status = np.zeros(n_runs, dtype=np.intc)
     stats = cm.ffi.new("mg_stats[]", max(n_runs, 1))

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from modelgen.errors import MassMatrixError, SimulationError
+from modelgen.errors import ArgumentValueError, MassMatrixError, SimulationError
 from modelgen.sim.conditioning import failure_kind
 from modelgen.sim.integrate import jacobian_source
 
@@ -157,13 +157,15 @@ class Linearization:
             if self.inputs:
                 parts.append("u = " + ", ".join(f"{n}={v:.9g}"
                                                 for n, v in zip(self.inputs, self.u)))
-            parts += [f"A ({', '.join(self.states)}):", str(self.A)]
+            # + 0.0 prints a negative zero (a product with a zero entry) as 0
+            parts += [f"A ({', '.join(self.states)}):", str(self.A + 0.0)]
             if self.inputs:
-                parts += [f"B ({', '.join(self.inputs)}):", str(self.B)]
+                parts += [f"B ({', '.join(self.inputs)}):", str(self.B + 0.0)]
             if self.outputs:
-                parts += [f"C ({', '.join(self.outputs)}):", str(self.C)]
+                parts += [f"C ({', '.join(self.outputs)}):", str(self.C + 0.0)]
                 if self.inputs:
-                    parts += ["D:", str(self.D)]
+                    parts += [f"D (rows: the outputs of C; columns: {', '.join(self.inputs)}):",
+                              str(self.D + 0.0)]
             parts += ["eigenvalues:", self.table()]
         return "\n".join(parts)
 
@@ -253,6 +255,8 @@ def equilibrium(cm, q_guess, u=None, p=None, t=0.0, *, tol=1e-10, max_iter=50) -
         raise SimulationError(f"{cm.name}: equilibrium needs the symbolic Jacobian; fix: "
                               f"load the model with linearize=True (or jacobian=True)")
     q = cm._vector(q_guess, n, "q_guess").copy()
+    if not np.all(np.isfinite(q)):
+        raise ArgumentValueError(f"{cm.name}: q_guess must be finite, got {list(map(float, q))}")
     t = cm._time(t)
     u_vec, p_vec = cm.input_vector(u), cm.params(p)
     zero = np.zeros(n)
@@ -261,10 +265,26 @@ def equilibrium(cm, q_guess, u=None, p=None, t=0.0, *, tol=1e-10, max_iter=50) -
         return cm.rhs(t, np.concatenate([q, zero]), u_vec, p_vec)[n:]
 
     f = residual(q)
+    if not np.all(np.isfinite(f)):
+        # LAPACK would be handed NaN (and print its own noise) on the first step
+        raise ArgumentValueError(
+            f"{cm.name}: q_ddot is not finite at the start q = {list(map(float, q))} (a "
+            f"division by zero in the model there, e.g. a spring of zero length); fix: start "
+            f"from another q or other parameters")
     for _ in range(max_iter):
         if np.max(np.abs(f)) <= tol:
             return q
         J = cm.jac(t, np.concatenate([q, zero]), u_vec, p_vec)[n:, :n]
+        if not np.all(np.isfinite(J)):
+            raise SimulationError(
+                f"{cm.name}: no equilibrium found from q = {list(map(float, q_guess))}: the "
+                f"Jacobian of q_ddot is not finite at q = {list(map(float, q))}; fix: start "
+                f"nearer a rest point")
+        if not np.any(J):
+            raise SimulationError(
+                f"{cm.name}: no equilibrium found from q = {list(map(float, q_guess))}: q_ddot "
+                f"= {list(map(float, f))} does not depend on q at q = {list(map(float, q))} "
+                f"(a zero Jacobian: no rest point nearby for these parameters and inputs)")
         step = np.linalg.lstsq(J, -f, rcond=None)[0]
         norm, alpha = float(f @ f), 1.0
         while alpha > 1e-10:

@@ -20,12 +20,61 @@ time of the failure and ``message`` says why.
 """
 from __future__ import annotations
 
+import contextlib
 import csv
+import errno
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, NamedTuple, Optional
 
 import numpy as np
+
+#: bytes of CSV text per value, on average (repr of a double and a comma): for estimates
+CSV_BYTES_PER_VALUE = 20
+#: rows of CSV formatted per write (a Ctrl-C between two writes stops at once)
+CSV_BLOCK = 4096
+
+
+def output_bytes(samples: float, columns: int, runs: float = 1, *, csv: bool = False) -> float:
+    """The size in bytes of a run's (or a sweep's) results: samples x columns x runs
+    doubles, plus the CSV text when ``csv``; a float, so huge counts never overflow.
+
+    >>> output_bytes(1001, 5) / 1e6, output_bytes(1001, 5, csv=True) / 1e6
+    (0.04004, 0.14014)
+    """
+    values = float(samples) * float(columns) * float(runs)
+    return values * 8 + (values * CSV_BYTES_PER_VALUE if csv else 0.0)
+
+
+@contextlib.contextmanager
+def replacing(path):
+    """Write a file under a temporary name beside ``path`` and rename it to ``path``
+    only when the writing succeeded: an interrupt, a full disk or any error never
+    leaves a cut file under the final name (the temporary one is removed).  Yields
+    the temporary path (it keeps ``path``'s suffix, as ``np.savez`` wants).
+
+    >>> with replacing(tmp / "a.txt") as part:                    # doctest: +SKIP
+    ...     part.write_text("done")
+    """
+    path = Path(path)
+    part = path.with_name(f".{path.stem}.part-{os.getpid()}{path.suffix}")
+    try:
+        yield part
+        os.replace(part, path)
+    except OSError as exc:
+        with contextlib.suppress(OSError):
+            part.unlink()
+        if exc.errno == errno.ENOSPC:
+            raise OSError(exc.errno, "No space left on device (the disk is full) while "
+                                     "writing", str(path)) from exc
+        if exc.filename is None or Path(exc.filename) == part:
+            raise OSError(exc.errno, exc.strerror or str(exc), str(path)) from exc
+        raise
+    except BaseException:           # KeyboardInterrupt included: no cut file stays behind
+        with contextlib.suppress(OSError):
+            part.unlink()
+        raise
 
 
 class EnergyChange(NamedTuple):
@@ -152,26 +201,33 @@ class Result:
         return np.hstack(parts)
 
     def to_csv(self, path) -> Path:
-        """Write :meth:`table` with a header line; floats round-trip exactly."""
+        """Write :meth:`table` with a header line; floats round-trip exactly.  The file
+        appears under ``path`` only once it is complete (see :func:`replacing`)."""
         path = Path(path)
-        with path.open("w", newline="") as fh:
-            writer = csv.writer(fh)
-            writer.writerow(self.columns())
-            for row in self.table():
-                writer.writerow([repr(float(v)) for v in row])
+        table = self.table()
+        # one format string per row over Python floats (tolist) spares a csv.writer call
+        # and a numpy scalar per value; blocks of rows let a second Ctrl-C stop it at once
+        row = ",".join(["%r"] * table.shape[1]) + "\r\n"
+        with replacing(path) as part, part.open("w", newline="") as fh:
+            csv.writer(fh).writerow(self.columns())
+            for start in range(0, len(table), CSV_BLOCK):
+                fh.write("".join(row % tuple(r) for r in table[start:start + CSV_BLOCK].tolist()))
         return path
 
     def to_npz(self, path) -> Path:
-        """t, y, the state names, every output (``output:<name>``), the energies and the
-        work of each effect (``work:<name>``)."""
+        """t, y, the state names, every output (``output:<name>``), the energies, the
+        work of each effect (``work:<name>``), ``status``, ``message`` and ``partial``
+        (True when the run did not reach its end: interrupted or failed).  The file
+        appears under ``path`` only once it is complete (see :func:`replacing`)."""
         path = Path(path)
         arrays = {"t": self.t, "y": self.y, "x": self.y.T,
                   **{f"output:{k}": v for k, v in self.outputs.items()}}
         if self.energy is not None:
             arrays["energy"] = self.energy
         arrays.update({f"work:{k}": v for k, v in self.work.items()})
-        np.savez(path, status=self.status, message=self.message,
-                 state_names=np.array(self.state_names), **arrays)
+        with replacing(path) as part:
+            np.savez(part, status=self.status, message=self.message, partial=not self.success,
+                     state_names=np.array(self.state_names), **arrays)
         return path
 
     def to_dataframe(self):
@@ -193,7 +249,8 @@ class Result:
         from modelgen.sim.plots import result_figure
         fig = result_figure(self, title=title, conservative=conservative)
         if path is not None:
-            fig.savefig(path, dpi=110)
+            with replacing(path) as part:
+                fig.savefig(part, dpi=110)
         return fig
 
     def __repr__(self) -> str:

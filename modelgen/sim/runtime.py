@@ -139,7 +139,7 @@ class CompiledModel(FrameKinematics):
         except (TypeError, ValueError):
             raise SimulationError(f"{self.name}: t must be a real number, got {t!r}") from None
         if not np.isfinite(t):
-            raise SimulationError(f"{self.name}: t must be finite, got {t!r}")
+            raise ArgumentValueError(f"{self.name}: t must be finite, got {t!r}")
         return t
 
     def params(self, p=None) -> np.ndarray:
@@ -153,7 +153,7 @@ class CompiledModel(FrameKinematics):
             out = self._p_default.copy()
             for key, value in p.items():
                 if key not in self._param_index:
-                    raise SimulationError(
+                    raise ArgumentValueError(
                         f"{self.name}: unknown parameter {key!r}; parameters are "
                         f"{', '.join(self.parameters)}")
                 out[self._param_index[key]] = self._vector([value], 1, f"parameter {key}")[0]
@@ -161,7 +161,7 @@ class CompiledModel(FrameKinematics):
             out = self._vector(p, len(self.parameters), "p")
         if not np.all(np.isfinite(out)):
             bad = [name for name, v in zip(self.parameters, out) if not np.isfinite(v)]
-            raise SimulationError(f"{self.name}: parameters must be finite; got {bad}")
+            raise ArgumentValueError(f"{self.name}: parameters must be finite; got {bad}")
         return out
 
     def input_vector(self, u=None) -> np.ndarray:
@@ -180,14 +180,14 @@ class CompiledModel(FrameKinematics):
             out = np.zeros(len(self.inputs))
             for key, value in u.items():
                 if key not in self.inputs:
-                    raise SimulationError(f"{self.name}: unknown input {key!r}; inputs are "
+                    raise ArgumentValueError(f"{self.name}: unknown input {key!r}; inputs are "
                                           f"{', '.join(self.inputs) or 'none'}")
                 out[self.inputs.index(key)] = self._vector([value], 1, f"input {key}")[0]
         else:
             out = self._vector(u, len(self.inputs), "u")
         if not np.all(np.isfinite(out)):
             bad = [name for name, v in zip(self.inputs, out) if not np.isfinite(v)]
-            raise SimulationError(f"{self.name}: inputs must be finite; got {bad}")
+            raise ArgumentValueError(f"{self.name}: inputs must be finite; got {bad}")
         return out
 
     def state_vector(self, x, what: str = "x0", base=None) -> np.ndarray:
@@ -500,8 +500,18 @@ class CompiledModel(FrameKinematics):
 
     def energies(self, res, p=None) -> np.ndarray:
         """Kinetic and potential energy at every time of a result, shape (n_times, 2)."""
-        nq = self.nq
-        return np.array([self.energy(x[:nq], x[nq:], p) for x in res.y.T]).reshape(-1, 2)
+        nq, nx = self.nq, self.nx
+        X = np.ascontiguousarray(np.asarray(res.y, dtype=float).T)
+        if X.ndim != 2 or X.shape[1] != nx:
+            raise ArgumentValueError(f"{self.name}: res.y must have {nx} rows, got shape "
+                                     f"{np.shape(res.y)}")
+        out = np.empty((len(X), 2))
+        # one checked conversion for the whole run, then pointer arithmetic per sample:
+        # a long interrupted run's energies must not cost a Python check per sample
+        x, e, pp = self._ptr(X), self._ptr(out), self._ptr(self.params(p))
+        for k in range(len(X)):
+            self._energy(x + k * nx, x + k * nx + nq, pp, e + 2 * k)
+        return out
 
     def simulate_batch(self, X0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10,
                        u=None, P=None, **options):

@@ -40,7 +40,7 @@ import numpy as np
 from modelgen.codegen.build import build_module, cache_lookup
 from modelgen.codegen.emit import integrator_sources
 from modelgen.codegen.pipeline import default_output, part_statements
-from modelgen.errors import ModelgenError, SimulationError
+from modelgen.errors import ArgumentValueError, ModelgenError, SimulationError
 from modelgen.model import as_spec, is_scene_file
 from modelgen.sim.integrate import STATUS, method_of
 from modelgen.sim.load import load, load_scene
@@ -253,7 +253,7 @@ def _columns(values: dict | None, names, what: str, n_runs: int | None) -> tuple
     out = {}
     for name, value in (values or {}).items():
         if name not in names:
-            raise SimulationError(f"unknown {what} {name!r}; {what}s are {', '.join(names)}")
+            raise ArgumentValueError(f"unknown {what} {name!r}; {what}s are {', '.join(names)}")
         a = np.atleast_1d(np.asarray(value, dtype=float))
         if a.ndim != 1:
             raise SimulationError(f"{what} {name!r}: give a 1-D array, got shape {a.shape}")
@@ -319,7 +319,13 @@ def _client(client):
                                                threads_per_worker=1, processes=True,
                                                dashboard_address=None)
             return distributed.Client(cluster), True
-        return distributed.Client(client), True
+        try:
+            return distributed.Client(client), True
+        except OSError as exc:          # distributed's connection timeout names no path
+            raise ModelgenError(f"could not reach the Dask scheduler at {client!r}: {exc}; "
+                                f"fix: start the scheduler there (dask scheduler) or check "
+                                f"the address, or use 'local' for a cluster on this "
+                                f"machine") from None
     return client, False
 
 
