@@ -23,8 +23,10 @@ from modelgen.derive.graph import GraphBuilder
 from modelgen.derive.joint_tree import JointTree, extract_joint_tree
 from modelgen.derive.rnea import derive_inverse_dynamics, derive_velocity_terms
 from modelgen.errors import ModelError
-from modelgen.codegen.emit import (ABI_VERSION, emit_sources, integrator_sources, print_routine,
-                                   runtime_sources, template_context, templates_digest)
+from modelgen.codegen.emit import (ABI_VERSION, constraint_context, emit_sources,
+                                   integrator_sources, print_routine, runtime_sources,
+                                   template_context, templates_digest)
+from modelgen.derive.constraints import check_constraints, derive_constraints
 from modelgen.codegen.options import FORMULATIONS, BuildOptions
 from modelgen.derive.jacobian import accelerations, derive_jacobian_terms, residual
 from modelgen.derive.linearize import derive_linearization_terms
@@ -68,7 +70,7 @@ def model_hash(spec: ModelSpec, options: BuildOptions | None = None) -> str:
 
 #: The routines on the integration path (compiled as MG_PART 2, see model.c.j2).
 INTEGRATION_PATH = ("prepare", "rhs", "outputs", "jacobian_terms", "linearize_terms",
-                    "inverse_dynamics")
+                    "inverse_dynamics", "constraint_residuals", "constraint_jacobian")
 
 def part_statements(statements: dict) -> dict:
     """Routine name -> statements, to part -> its largest routine's statements (what
@@ -120,8 +122,12 @@ def choose_formulation(spec: ModelSpec, formulation: str = BuildOptions.formulat
     if formulation not in FORMULATIONS:
         raise ModelError(f"unknown formulation {formulation!r}", file=spec.source,
                          key="formulation", fix="use one of " + ", ".join(FORMULATIONS))
-    if formulation == "crba":
+    if formulation == "crba" or (spec.constraints and formulation == "auto"):
         return "crba", None
+    if formulation == "aba" and spec.constraints:
+        raise ModelError("formulation 'aba' needs a joint tree, and a model with "
+                         "constraints is not one", file=spec.source, key="formulation",
+                         fix="use formulation 'crba' (or 'auto') for a constrained model")
     if formulation == "aba":
         return "aba", extract_joint_tree(spec)
     if spec.n < ABA_CROSSOVER:
@@ -133,7 +139,8 @@ def choose_formulation(spec: ModelSpec, formulation: str = BuildOptions.formulat
 
 
 def routines_for(eqs: Equations, output_exprs=(), jacobian=None,
-                 forward: ForwardDynamics | None = None, linearization=None, inverse=None):
+                 forward: ForwardDynamics | None = None, linearization=None, inverse=None,
+                 constraints=None):
     """The C routines of a model: (name, inputs, outputs) for make_routines.
 
     With ``forward`` (the ABA program) the ``rhs`` routine writes q_ddot and
@@ -156,7 +163,8 @@ def routines_for(eqs: Equations, output_exprs=(), jacobian=None,
                + qdot)
         jac_inputs = t + (x, u, p)
     else:
-        rhs = ("rhs", t + (x, u, p), (("A", A_flat), ("b", b)) + qdot)
+        rhs = ("rhs", t + (x, u, p), (("A", A_flat), ("b", b)) + qdot
+               + ((("gamma", constraints.gamma),) if constraints else ()))
         jac_inputs = t + (x, u, p, ("a", jacobian.a)) if jacobian else ()
     lin = []
     if linearization is not None:
@@ -165,7 +173,13 @@ def routines_for(eqs: Equations, output_exprs=(), jacobian=None,
                 (("R", tuple(e for row in linearization.R for e in row)),)
                 + ((("Y", tuple(e for row in linearization.Y for e in row)),)
                    if linearization.Y else ()))]
-    return [
+    cons = []
+    if constraints is not None:
+        if constraints.residuals:
+            cons.append(("constraint_residuals", (q, p), (("f", constraints.residuals),)))
+        cons.append(("constraint_jacobian", (q, p),
+                     (("G", tuple(e for row in constraints.G for e in row)),)))
+    return cons + [
         ("mass_matrix", (q, p), (("A", A_flat),)),
         ("velocity_terms", (q, qd, p), (("h", eqs.h),)),
         ("generalized_forces", t + (q, qd, u, p), (("tau", eqs.tau),)),
@@ -289,6 +303,12 @@ class _Clock:
 def _check_options(spec: ModelSpec, options: BuildOptions) -> None:
     """Refuse what cannot be generated before any work."""
     _check_generable(spec)
+    if spec.constraints and (options.jacobian or options.linearize):
+        raise ModelError("the symbolic Jacobian and linearization of a model with "
+                         "constraints are not generated yet", file=spec.source,
+                         key="jacobian" if options.jacobian else "linearize",
+                         fix="build without them (implicit methods then use central "
+                             "differences)")
     if options.linearize and spec.joints:
         raise ModelError("linearization of a model with ball or free joints is not supported: "
                          "its state holds unit quaternions, whose four components cannot "
@@ -307,6 +327,7 @@ class Derived:
     linearization: object       # LinearizationTerms, or None
     terms: object               # the Jacobian's terms, or None
     graph: object = field(repr=False)
+    constraints: object = None  # ConstraintTerms of a constrained model, or None
 
     @property
     def output_exprs(self) -> tuple:
@@ -348,7 +369,12 @@ def _derive(spec: ModelSpec, options: BuildOptions, tree: JointTree | None) -> D
     else:
         terms = None
     graph = terms.graph if terms else graph
-    return Derived(eqs, columns, forward, inverse, linearization, terms, graph)
+    constraints = None
+    if spec.constraints:
+        constraints = derive_constraints(kin, graph)
+        check_constraints(constraints, spec)
+        graph = constraints.graph
+    return Derived(eqs, columns, forward, inverse, linearization, terms, graph, constraints)
 
 
 def _eliminate(derived: Derived) -> tuple:
@@ -356,7 +382,7 @@ def _eliminate(derived: Derived) -> tuple:
     dynamics are eliminated on their own, and the rhs's parameter-only part hoisted."""
     d = derived
     routines = make_routines(d.graph, routines_for(d.eqs, d.output_exprs, d.terms, d.forward,
-                                                   d.linearization, d.inverse),
+                                                   d.linearization, d.inverse, d.constraints),
                              alone=("rhs", "inverse_dynamics"))
     return _hoisted(routines)
 
@@ -387,8 +413,14 @@ def _emit(spec: ModelSpec, options: BuildOptions, derived: Derived, routines: tu
         npd=next(len(r.outputs[0][1]) for r in routines if r.name == "prepare"),
         # the crba rhs's solve skips the entries of A that are structurally zero
         mass_pattern=None if forward else [[e != 0 for e in row] for row in eqs.A],
-        formulation=options.formulation, aba_inward=forward.inward if forward else ())
+        formulation=options.formulation, aba_inward=forward.inward if forward else (),
+        constraints=_constraint_context(spec, derived.constraints))
     return Emitted(functions, context, emit_sources(context))
+
+
+def _constraint_context(spec: ModelSpec, terms) -> dict | None:
+    return None if terms is None else constraint_context(
+        terms.m, len(terms.residuals), terms.dependent, terms.independent, spec.n)
 
 
 def _quaternions(spec: ModelSpec) -> list:
@@ -418,6 +450,8 @@ def _manifest(spec: ModelSpec, options: BuildOptions, derived: Derived, emitted:
         "jacobian": options.jacobian,
         "linearize": options.linearize,
         "formulation": options.formulation,
+        **({"constraints": _constraint_manifest(spec, derived.constraints)}
+           if derived.constraints else {}),
         "bodies": list(derived.eqs.bodies),
         "outputs": [{"name": name, "columns": list(cols)}
                     for name, cols in zip(columns.names, columns.columns)] if columns else [],
@@ -428,6 +462,14 @@ def _manifest(spec: ModelSpec, options: BuildOptions, derived: Derived, emitted:
         "ops": {f.name: {"before_cse": f.ops_before, "after_cse": f.ops_after,
                          "statements": f.statements} for f in emitted.functions.values()},
     }
+
+
+def _constraint_manifest(spec: ModelSpec, terms) -> dict:
+    """What the loader needs of a constrained model."""
+    return {"m": terms.m, "holonomic": len(terms.residuals),
+            "rows": [[name, axis] for name, axis in terms.rows],
+            "dependent_speeds": list(terms.dependent), "independent_speeds":
+            list(terms.independent), "dependent_coordinates": list(terms.dependent_coordinates)}
 
 
 def _compile(directory: Path, spec: ModelSpec, options: BuildOptions, derived: Derived,

@@ -146,6 +146,10 @@ def builder_from_data(data, lines: dict, file: str) -> ModelBuilder:
         ctx.add_action(name, e["body"], e.get("point"), e.get("base"), e.get("frame"),
                        e.get("torque"), e.get("force"), e.get("vector"), key)
     load_effects(ctx, data.get("effects"))
+    for name, e, key in entries("constraints"):
+        ctx.add_constraint(name, e["type"], {k: v for k, v in e.items() if k != "type"}, key)
+    if "dependent" in data:
+        ctx.set_dependent(data["dependent"])
     return ctx
 
 

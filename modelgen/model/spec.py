@@ -343,6 +343,47 @@ def effect_fields(effect) -> dict:
     return given
 
 
+#: Constraint kinds and the equations each gives: ``coincide`` (two points
+#: coincide along chosen axes of a base: one position equation per axis),
+#: ``position`` (a scalar f(q) = 0), ``velocity`` (the components along chosen
+#: axes of a base of a point's velocity are zero; with ``body``, the velocity of
+#: the body's material point at the point, as for rolling without slip) and
+#: ``speeds`` (a scalar expression linear in the speeds is zero).  The first two
+#: are holonomic, the last two nonholonomic.
+CONSTRAINT_KINDS = ("coincide", "position", "velocity", "speeds")
+HOLONOMIC_KINDS = ("coincide", "position")
+
+
+@dataclass(frozen=True)
+class ConstraintSpec:
+    """One named constraint: ``kind`` (one of :data:`CONSTRAINT_KINDS`) and its fields.
+
+    ``coincide``: points ``point_a``, ``point_b``, base ``base``, ``axes``
+    (1, 2, 3); ``position``: ``expression`` of coordinates and parameters;
+    ``velocity``: ``point``, optional ``body``, ``base``, ``axes``; ``speeds``:
+    ``expression`` linear and homogeneous in the speeds.  Unused fields are
+    empty.
+    """
+    name: str
+    kind: str
+    point_a: str = ""
+    point_b: str = ""
+    point: str = ""
+    body: str = ""
+    base: str = ""
+    axes: tuple = ()
+    expression: Optional[Expr] = None
+
+    @property
+    def holonomic(self) -> bool:
+        return self.kind in HOLONOMIC_KINDS
+
+    @property
+    def size(self) -> int:
+        """Number of scalar equations."""
+        return len(self.axes) if self.axes else 1
+
+
 @dataclass(frozen=True)
 class ModelSpec:
     """A complete, validated model."""
@@ -364,6 +405,12 @@ class ModelSpec:
     #: ((name, unit), ...): units of coordinates, parameters and inputs, for people
     #: and for exports (an FMU's variables); they never change the equations
     units: tuple = ()
+    #: constraints (ConstraintSpec), and the coordinates and speeds they make
+    #: dependent (names): as many speeds as constraint equations, as many
+    #: coordinates as holonomic ones
+    constraints: tuple = ()
+    dependent_coordinates: tuple = ()
+    dependent_speeds: tuple = ()
     #: where the spec came from (file path or None) -- for error messages only
     source: Optional[str] = field(default=None, compare=False)
     #: (dotted key, line) pairs for error messages from later stages
@@ -391,6 +438,16 @@ class ModelSpec:
         """The coordinates whose speed is their time derivative (all but joints')."""
         return self.coordinates[:len(self.coordinates) - sum(len(j.coordinates)
                                                              for j in self.joints)]
+
+    @property
+    def n_constraints(self) -> int:
+        """Number of scalar constraint equations (rows of the constraint Jacobian)."""
+        return sum(c.size for c in self.constraints)
+
+    @property
+    def n_holonomic(self) -> int:
+        """Number of scalar position constraints (the first rows, in declaration order)."""
+        return sum(c.size for c in self.constraints if c.holonomic)
 
     @property
     def parameter_names(self) -> tuple:

@@ -13,6 +13,7 @@ import re
 
 import yaml
 
+from modelgen.model.constraints import constraint_fields
 from modelgen.model.expr import format_expression
 from modelgen.model.spec import CANONICAL_BASE, CANONICAL_POINT, ModelSpec, effect_fields
 
@@ -126,6 +127,17 @@ def spec_to_yaml(spec: ModelSpec) -> str:
     if spec.effects:
         out.append("effects:")
         out += [f"  {name(e.name)}: {{{_yaml_effect(e)}}}" for e in spec.effects]
+    if spec.constraints:
+        out.append("constraints:")
+        for c in spec.constraints:
+            parts = [f"type: {c.kind}"]
+            for field, value in constraint_fields(c).items():
+                text = ("[" + ", ".join(str(a) for a in value) + "]" if field == "axes" else
+                        _yaml_expr(value) if field == "expression" else name(value))
+                parts.append(f"{field}: {text}")
+            out.append(f"  {name(c.name)}: {{{', '.join(parts)}}}")
+        out.append("dependent: {coordinates: [" + ", ".join(map(name, spec.dependent_coordinates))
+                   + "], speeds: [" + ", ".join(map(name, spec.dependent_speeds)) + "]}")
     if spec.units:
         out.append("units: {" + ", ".join(f"{name(n)}: {name(u)}" for n, u in spec.units) + "}")
     return "\n".join(out) + "\n"
