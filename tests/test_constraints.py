@@ -151,3 +151,161 @@ def test_rolling_disc_rhs_matches_kanes_method_with_dependent_speeds(rolling_dis
     reference = rolling_disc_reference(list(rolling_disc.parameters.values()))
     worst = _compare(rolling_disc, reference, np.random.default_rng(27), 20, q_scale=1.2)
     assert worst <= RTOL, worst
+
+
+# -- positions, assembly, drift --------------------------------------------------
+
+def freudenstein_rocker(theta2, a, b, c, d):
+    """Both rocker angles theta4 of a four-bar (ground d, crank a, coupler b, rocker c)
+    from Freudenstein's equation K1 cos t4 - K2 cos t2 + K3 = cos(t2 - t4)."""
+    K1, K2, K3 = d / a, d / c, (a**2 - b**2 + c**2 + d**2) / (2 * a * c)
+    A, B, C = K1 - np.cos(theta2), -np.sin(theta2), K3 - K2 * np.cos(theta2)
+    root = np.sqrt(B**2 - (C - A) * (C + A))
+    return [2 * np.arctan((-B + s * root) / (C - A)) for s in (1.0, -1.0)]
+
+
+def test_four_bar_assembly_matches_freudenstein(four_bar):
+    a, b, c, d = (four_bar.parameters[k] for k in "abcd")
+    q = np.array([0.3, 1.0, 2.0])
+    worst = 0.0
+    for theta2 in np.linspace(0.0, 2 * np.pi, 13):
+        q = four_bar.assemble([theta2, q[1], q[2]], keep=["q1"])
+        assert q[0] == theta2
+        assert np.max(np.abs(four_bar.constraint_residuals(q))) <= 1e-13
+        expected = min(freudenstein_rocker(theta2, a, b, c, d),
+                       key=lambda t4: abs(np.angle(np.exp(1j * (t4 - q[2])))))
+        worst = max(worst, abs(np.angle(np.exp(1j * (q[2] - expected)))))
+    assert worst <= 1e-12, worst
+
+
+def test_four_bar_energy_and_constraints_hold_over_100_s(four_bar):
+    q0 = four_bar.assemble([0.3, 1.0, 2.0], keep=["q1"])
+    qd0 = four_bar.consistent_speeds(q0, [2.0, 0.0, 0.0])
+    res = four_bar.simulate(np.concatenate([q0, qd0]), (0.0, 100.0),
+                            t_eval=np.linspace(0.0, 100.0, 2001), method="dop853",
+                            rtol=1e-12, atol=1e-12)
+    assert res.success, res.message
+    q, qd = res.y[:3], res.y[3:]
+    residual = max(np.max(np.abs(four_bar.constraint_residuals(q[:, k])))
+                   for k in range(q.shape[1]))
+    velocity = max(np.max(np.abs(four_bar.constraint_jacobian(q[:, k]) @ qd[:, k]))
+                   for k in range(q.shape[1]))
+    energy = np.array([four_bar.energy(q[:, k], qd[:, k]).sum() for k in range(q.shape[1])])
+    drift = np.max(np.abs(energy - energy[0])) / abs(energy[0])
+    assert residual <= 1e-12, residual
+    assert velocity <= 1e-10, velocity
+    assert drift <= 1e-8, drift
+
+
+def test_simulate_refuses_a_state_off_the_constraints(four_bar):
+    with pytest.raises(modelgen.errors.SimulationError, match="assemble it first"):
+        four_bar.simulate([0.3, 1.0, 2.0, 0.0, 0.0, 0.0], (0.0, 1.0))
+    q0 = four_bar.assemble([0.3, 1.0, 2.0], keep=["q1"])
+    with pytest.raises(modelgen.errors.SimulationError, match="consistent_speeds"):
+        four_bar.simulate(np.concatenate([q0, [1.0, 1.0, 1.0]]), (0.0, 1.0))
+
+
+def test_four_bar_dead_point_is_a_status_not_nan(four_bar):
+    # coupler and rocker collinear: the dependent columns of G are singular
+    a, b, c, d = (four_bar.parameters[k] for k in "abcd")
+    q = np.array([0.0, 0.0, 0.0])
+    xdot_status = None
+    x = np.concatenate([q, [1.0, 0.0, 0.0]])
+    with pytest.raises(modelgen.errors.SimulationError) as info:
+        four_bar.rhs(0.0, x)
+    xdot_status = str(info.value)
+    assert "nan" not in xdot_status.lower()
+
+
+def test_four_bar_at_its_dead_point_stops_with_a_status(tmp_path):
+    # the rocker's speed independent: at the rocker's extreme positions crank and
+    # coupler are collinear and the crank's and coupler's speeds are not determined
+    text = (ROOT / "models" / "four_bar.yaml").read_text().replace(
+        "name: four_bar", "name: four_bar_rocker").replace(
+        "dependent: {coordinates: [q2, q3], speeds: [q2_dot, q3_dot]}",
+        "dependent: {coordinates: [q1, q2], speeds: [q1_dot, q2_dot]}")
+    path = tmp_path / "four_bar_rocker.yaml"
+    path.write_text(text)
+    cm = modelgen.load(path)
+    a, b, c, d = (cm.parameters[k] for k in "abcd")
+    # |D + c e(q3)| = a + b: crank and coupler stretched out in line
+    q3 = np.arccos(((a + b) ** 2 - d**2 - c**2) / (2 * c * d))
+    theta = np.arctan2(c * np.sin(q3), d + c * np.cos(q3))
+    x0 = np.array([theta, theta, q3, 0.0, 0.0, 0.0])
+    assert np.max(np.abs(cm.constraint_residuals(x0[:3]))) <= 1e-14
+    res = cm.simulate(x0, (0.0, 1.0), method="dop853")
+    assert not res.success
+    assert "singular" in res.message and "dependent speeds" in res.message, res.message
+    assert np.all(np.isfinite(res.y))
+    with pytest.raises(modelgen.errors.SimulationError, match="pivot of q"):
+        cm.rhs(0.0, x0)
+
+
+# -- the model format ------------------------------------------------------------------
+
+FOUR_BAR = (ROOT / "models" / "four_bar.yaml").read_text()
+
+
+def test_constraints_round_trip_through_yaml():
+    for name in ("four_bar", "rolling_disc"):
+        spec = modelgen.model.api.load_model(ROOT / "models" / f"{name}.yaml")
+        assert parse_model(spec_to_yaml(spec)) == spec
+
+
+def test_constraints_from_the_python_api_equal_the_yaml():
+    m = Model("slider").add_coordinates("x", "y").add_parameters({"L": 1.0, "m": 1.0})
+    m.add_point("P", coordinates=["x", "y", 0]).add_body("b", mass="m", G="P", base="E")
+    m.add_constraint("circle", "position", expression="x**2 + y**2 - L**2")
+    m.set_dependent(coordinates=["y"], speeds=["y_dot"])
+    spec = m.spec()
+    assert parse_model(spec_to_yaml(spec)) == spec
+    assert spec.constraints[0].expression == sympy.sympify("x**2 + y**2 - L**2")
+
+
+@pytest.mark.parametrize("old, new, message, key", [
+    ("point_b: P3", "point_b: P9", "unknown point 'P9'", "constraints.loop.point_b"),
+    ("base: E, axes", "base: B7, axes", "unknown base 'B7'", "constraints.loop.base"),
+    ("axes: [1, 2]", "axes: [1, 4]", "axis must be 1, 2 or 3", "constraints.loop.axes[1]"),
+    ("type: coincide", "type: coincident", "unknown constraint type", "constraints.loop.type"),
+    ("speeds: [q2_dot, q3_dot]", "speeds: [q2_dot]", "1 dependent speeds for 2 constraint",
+     "dependent"),
+    ("coordinates: [q2, q3], speeds", "coordinates: [q2, q9], speeds",
+     "'q9' is not a declared coordinate", "dependent.coordinates[1]"),
+    ("axes: [1, 2]", "axes: [1, 2, 3]",
+     "3 constraint equations for 3 coordinates", "constraints.loop"),
+])
+def test_constraint_errors_name_file_line_key_and_fix(old, new, message, key):
+    assert old in FOUR_BAR
+    with pytest.raises(ModelError) as info:
+        parse_model(FOUR_BAR.replace(old, new), "four_bar.yaml")
+    err = info.value
+    assert message in str(err), str(err)
+    assert err.key == key and err.file == "four_bar.yaml" and err.line is not None
+    assert err.fix
+
+
+def test_a_constraint_not_linear_in_the_speeds_is_refused():
+    text = FOUR_BAR.replace(
+        "loop: {type: coincide, point_a: P2, point_b: P3, base: E, axes: [1, 2]}",
+        "loop: {type: coincide, point_a: P2, point_b: P3, base: E, axes: [1]}\n"
+        "  spin: {type: speeds, expression: 'q1_dot*q2_dot - q3_dot'}")
+    with pytest.raises(ModelError, match="not linear in the speeds") as info:
+        parse_model(text, "four_bar.yaml")
+    assert info.value.key == "constraints.spin.expression" and info.value.line is not None
+    text = text.replace("q1_dot*q2_dot - q3_dot", "q1_dot - 1")
+    with pytest.raises(ModelError, match="term without a speed"):
+        parse_model(text, "four_bar.yaml")
+
+
+def test_redundant_constraints_are_refused_at_generation(tmp_path):
+    # a planar loop closed along z as well: the z equation is 0 = 0
+    text = FOUR_BAR.replace("name: four_bar", "name: four_bar_z").replace(
+        "coordinates: [q1, q2, q3]", "coordinates: [q1, q2, q3, q4]").replace(
+        "axes: [1, 2]}", "axes: [1, 2, 3]}").replace(
+        "coordinates: [q2, q3], speeds: [q2_dot, q3_dot]",
+        "coordinates: [q2, q3, q4], speeds: [q2_dot, q3_dot, q4_dot]")
+    path = tmp_path / "four_bar_z.yaml"
+    path.write_text(text)
+    with pytest.raises(ModelError, match="redundant") as info:
+        modelgen.load(path)
+    assert info.value.line is not None and "loop" in str(info.value)

@@ -40,6 +40,7 @@ from modelgen.codegen.capi import (ALIASES, LIMITS, MAX_EVENTS, METHODS, STAT_NA
 from modelgen.errors import (ArgumentTypeError, ArgumentValueError, MassMatrixError,
                              SimulationError)
 from modelgen.sim.conditioning import condition_number, failure_kind, growth_note
+from modelgen.sim.assemble import singular_message as constraint_message
 from modelgen.sim.result import Result, make_result
 
 __all__ = ["METHODS", "ALIASES", "STATUS", "Method", "method_of",
@@ -572,6 +573,8 @@ def simulate(cm, x0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10
         coordinate=cm.dof_names[pivot - 1] if 0 < pivot <= cm.n else "?", max_steps=max_steps,
         kind=_mass_matrix_kind(cm, status, pivot, p_vec, x_start,
                                stats_total["naccept"] == 0))
+    if pivot > cm.n and cm.manifest.get("constraints"):
+        message = constraint_message(cm, pivot, t_fail, stop[STOP_X:])
     if failure is not None:
         message = f"{message.rstrip('.')}: {type(failure).__name__}: {failure}."
     if status < 0:
