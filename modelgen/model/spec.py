@@ -478,6 +478,9 @@ class ModelSpec:
         for a in self.actions:
             yield from a.torque
             yield from a.force
+        for c in self.constraints:
+            if c.expression is not None:
+                yield c.expression
         for e in self.effects:
             for value in vars(e).values():
                 if isinstance(value, tuple):
