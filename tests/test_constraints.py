@@ -309,3 +309,34 @@ def test_redundant_constraints_are_refused_at_generation(tmp_path):
     with pytest.raises(ModelError, match="redundant") as info:
         modelgen.load(path)
     assert info.value.line is not None and "loop" in str(info.value)
+
+
+def test_slider_crank_piston_follows_the_closed_form():
+    cm = modelgen.load(ROOT / "models" / "slider_crank.yaml")
+    r, l = cm.parameters["r"], cm.parameters["l"]
+    q = np.array([0.0, 0.0, r + l])
+    worst = 0.0
+    for q1 in np.linspace(0.0, 2 * np.pi, 17):
+        q = cm.assemble([q1, q[1], q[2]], keep=["q1"])
+        expected = r * np.cos(q1) + np.sqrt(l**2 - (r * np.sin(q1)) ** 2)
+        worst = max(worst, abs(q[2] - expected))
+    assert worst <= 1e-12, worst
+
+
+def test_dependent_speeds_chosen_by_pivoting_give_the_same_motion(tmp_path, four_bar):
+    text = FOUR_BAR.replace("name: four_bar", "name: four_bar_auto").replace(
+        "dependent: {coordinates: [q2, q3], speeds: [q2_dot, q3_dot]}\n", "")
+    path = tmp_path / "four_bar_auto.yaml"
+    path.write_text(text)
+    cm = modelgen.load(path)
+    info = cm.manifest["constraints"]
+    assert info["chosen"] and len(info["dependent_speeds"]) == 2
+    rng = np.random.default_rng(5)
+    worst = 0.0
+    for _ in range(10):
+        q = four_bar.assemble(rng.uniform(-np.pi, np.pi, 3))
+        qd = four_bar.consistent_speeds(q, [rng.normal(), 0.0, 0.0])
+        x = np.concatenate([q, qd])
+        a, b = cm.rhs(0.0, x), four_bar.rhs(0.0, x)
+        worst = max(worst, np.linalg.norm(a - b) / np.linalg.norm(b))
+    assert worst <= 1e-12, worst

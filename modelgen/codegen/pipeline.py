@@ -469,7 +469,11 @@ def _constraint_manifest(spec: ModelSpec, terms) -> dict:
     return {"m": terms.m, "holonomic": len(terms.residuals),
             "rows": [[name, axis] for name, axis in terms.rows],
             "dependent_speeds": list(terms.dependent), "independent_speeds":
-            list(terms.independent), "dependent_coordinates": list(terms.dependent_coordinates)}
+            list(terms.independent), "dependent_coordinates": list(terms.dependent_coordinates),
+            # by name, and whether modelgen chose them (no 'dependent:' in the model)
+            "dependent": [spec.speeds[k] for k in terms.dependent]
+            + [spec.coordinates[k] for k in terms.dependent_coordinates],
+            "chosen": not spec.dependent_speeds}
 
 
 def _compile(directory: Path, spec: ModelSpec, options: BuildOptions, derived: Derived,

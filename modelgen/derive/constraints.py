@@ -35,7 +35,8 @@ from modelgen.derive.spatial import ZERO3, add, cross, dot, sub
 from modelgen.errors import ModelError
 from modelgen.model.spec import symbol
 
-__all__ = ["ConstraintTerms", "derive_constraints", "check_constraints", "RANK_SAMPLES"]
+__all__ = ["ConstraintTerms", "derive_constraints", "check_constraints", "choose_dependent",
+           "RANK_SAMPLES"]
 
 #: seeded random configurations at which redundancy and the dependent speeds are checked
 RANK_SAMPLES = 3
@@ -135,11 +136,44 @@ def derive_constraints(kin: Kinematics, graph: Graph | None = None) -> Constrain
                 G.append(builder.vec(dot(e, partials[k]) for k in range(n)))
                 gamma.append(builder.name(dot(w_e, v) + dot(e, a)))
             rows.append((c.name, axis))
-    dependent = tuple(spec.speeds.index(s) for s in spec.dependent_speeds)
+    graph_ = builder.freeze()
+    if spec.dependent_speeds:
+        dependent = tuple(spec.speeds.index(s) for s in spec.dependent_speeds)
+        dep_q = tuple(spec.coordinates.index(c) for c in spec.dependent_coordinates)
+    else:
+        dependent, dep_q = choose_dependent(graph_, G, len(residuals), spec)
     independent = tuple(k for k in range(n) if k not in dependent)
-    dep_q = tuple(spec.coordinates.index(c) for c in spec.dependent_coordinates)
-    return ConstraintTerms(builder.freeze(), tuple(residuals), tuple(G), tuple(gamma),
+    return ConstraintTerms(graph_, tuple(residuals), tuple(G), tuple(gamma),
                            tuple(rows), dependent, independent, dep_q)
+
+
+def _pivots(M: np.ndarray, count: int) -> tuple:
+    """The first ``count`` columns chosen by Gaussian elimination with complete
+    pivoting (largest remaining entry first)."""
+    M = np.array(M, dtype=float)
+    chosen = []
+    for _ in range(count):
+        i, j = np.unravel_index(np.argmax(np.abs(M)), M.shape)
+        chosen.append(int(j))
+        if M[i, j] != 0:
+            M = M - np.outer(M[:, j] / M[i, j], M[i, :])
+        M[:, j] = 0.0
+        M[i, :] = 0.0
+    return tuple(sorted(chosen))
+
+
+def choose_dependent(graph: Graph, G, m_h: int, spec, seed: int = 0) -> tuple:
+    """(dependent speed indices, dependent coordinate indices) for a model that
+    declares none: the columns of G (and of its position rows) picked by
+    complete pivoting at the parameter defaults and a seeded random
+    configuration (the coordinates' zero is often a singular one: a four-bar
+    with every angle zero)."""
+    rng = np.random.default_rng(seed)
+    values = {symbol(p): v for p, v in zip(spec.parameter_names, spec.parameter_defaults)}
+    values.update({symbol(c): rng.uniform(-np.pi, np.pi) for c in spec.coordinates})
+    m, n = len(G), spec.n
+    Gv = _evaluate(graph, [e for row in G for e in row], values).reshape(m, n)
+    return _pivots(Gv, m), _pivots(Gv[:m_h], m_h) if m_h else ()
 
 
 def _evaluate(graph: Graph, exprs, values: dict) -> np.ndarray:
@@ -181,7 +215,8 @@ def check_constraints(terms: ConstraintTerms, spec, samples: int = RANK_SAMPLES,
                 "that a planar model satisfies anyway)")
     if max(dep_ranks) < m:
         raise ModelError(
-            "the dependent speeds " + ", ".join(spec.dependent_speeds) + " cannot be solved "
+            "the dependent speeds " + ", ".join(spec.speeds[k] for k in terms.dependent)
+            + " cannot be solved "
             "for: their columns of the constraint Jacobian are singular at "
             f"{samples} random configurations", file=spec.source,
             line=spec.line_of("dependent"), key="dependent.speeds",

@@ -755,7 +755,7 @@ def replay(ctx: ModelBuilder, spec: ModelSpec, parameters=None) -> ModelBuilder:
         ctx.add_effect(e.name, e.kind, effect_fields(e), f"effects.{e.name}")
     for c in spec.constraints:
         ctx.add_constraint(c.name, c.kind, constraint_fields(c), f"constraints.{c.name}")
-    if spec.constraints:
+    if spec.dependent_speeds:
         ctx.set_dependent({"coordinates": list(spec.dependent_coordinates),
                            "speeds": list(spec.dependent_speeds)})
     # a reduced model (a scene's) may have dropped some names: their units go too

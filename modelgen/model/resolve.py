@@ -167,6 +167,8 @@ def _resolve_constraints(builder) -> tuple:
                             "move", first, "remove constraints (each coincide axis is one "
                             "equation), or add coordinates; there must be fewer equations "
                             "than coordinates")
+    if not coords and not speeds:
+        return tuple(out)      # chosen when the model is generated (largest pivots)
     if len(speeds) != m:
         raise builder.error(f"{len(speeds)} dependent speeds for {m} constraint equations",
                             key, f"name {m} dependent speeds (one per equation), e.g. "

@@ -136,8 +136,10 @@ def spec_to_yaml(spec: ModelSpec) -> str:
                         _yaml_expr(value) if field == "expression" else name(value))
                 parts.append(f"{field}: {text}")
             out.append(f"  {name(c.name)}: {{{', '.join(parts)}}}")
-        out.append("dependent: {coordinates: [" + ", ".join(map(name, spec.dependent_coordinates))
-                   + "], speeds: [" + ", ".join(map(name, spec.dependent_speeds)) + "]}")
+        if spec.dependent_speeds:
+            out.append("dependent: {coordinates: ["
+                       + ", ".join(map(name, spec.dependent_coordinates))
+                       + "], speeds: [" + ", ".join(map(name, spec.dependent_speeds)) + "]}")
     if spec.units:
         out.append("units: {" + ", ".join(f"{name(n)}: {name(u)}" for n, u in spec.units) + "}")
     return "\n".join(out) + "\n"
