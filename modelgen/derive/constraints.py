@@ -35,8 +35,13 @@ from modelgen.derive.spatial import ZERO3, add, cross, dot, sub
 from modelgen.errors import ModelError
 from modelgen.model.spec import symbol
 
-__all__ = ["ConstraintTerms", "derive_constraints", "check_constraints", "choose_dependent",
-           "RANK_SAMPLES"]
+__all__ = [
+    "RANK_SAMPLES",
+    "ConstraintTerms",
+    "check_constraints",
+    "choose_dependent",
+    "derive_constraints",
+]
 
 #: seeded random configurations at which redundancy and the dependent speeds are checked
 RANK_SAMPLES = 3

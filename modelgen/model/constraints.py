@@ -10,7 +10,7 @@ the format is documented in ``docs/constraints.md``.
 from __future__ import annotations
 
 import numbers
-from typing import NamedTuple, Optional
+from typing import NamedTuple
 
 import sympy
 
@@ -18,8 +18,13 @@ from modelgen.model.expr import format_expression
 from modelgen.model.messages import as_list, closest, describe, join_and
 from modelgen.model.spec import CANONICAL_BASE, CONSTRAINT_KINDS, speed_name
 
-__all__ = ["ConstraintDecl", "constraint_decl", "constraint_fields", "dependent_decl",
-           "KIND_FIELDS"]
+__all__ = [
+    "KIND_FIELDS",
+    "ConstraintDecl",
+    "constraint_decl",
+    "constraint_fields",
+    "dependent_decl",
+]
 
 #: The keys each kind takes (besides ``type``), and those it needs.
 KIND_FIELDS = {
@@ -39,7 +44,7 @@ class ConstraintDecl(NamedTuple):
     body: str
     base: str
     axes: tuple
-    expression: Optional[sympy.Expr]
+    expression: sympy.Expr | None
     key: str
 
 
@@ -98,7 +103,7 @@ def constraint_decl(ctx, name, kind, fields: dict, key: str) -> ConstraintDecl:
         if fields.get(field) is None:
             raise ctx.error(f"missing required key '{field}'", key,
                             f"add '{field}'; a {kind} constraint needs " + join_and(required))
-    ref = lambda field, what: (ctx.reference(fields[field], what, f"{key}.{field}")  # noqa: E731
+    ref = lambda field, what: (ctx.reference(fields[field], what, f"{key}.{field}")
                                if fields.get(field) is not None else "")
     expression = None
     if kind in ("position", "speeds"):

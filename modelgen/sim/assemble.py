@@ -17,8 +17,16 @@ import numpy as np
 
 from modelgen.errors import SimulationError
 
-__all__ = ["residuals", "constraint_jacobian", "assemble", "consistent_speeds",
-           "check_initial_state", "singular_message", "ASSEMBLY_TOL", "STATE_TOL"]
+__all__ = [
+    "ASSEMBLY_TOL",
+    "STATE_TOL",
+    "assemble",
+    "check_initial_state",
+    "consistent_speeds",
+    "constraint_jacobian",
+    "residuals",
+    "singular_message",
+]
 
 #: assembly stops when max |f(q)| is at most this (m, or rad for an angle expression)
 ASSEMBLY_TOL = 1e-13
@@ -35,7 +43,7 @@ def _vector(cm, value, size: int, what: str) -> np.ndarray:
 
 
 def _call(cm, suffix: str, q, p, out) -> np.ndarray:
-    ptr = lambda a: cm.ffi.from_buffer("double[]", a)    # noqa: E731
+    ptr = lambda a: cm.ffi.from_buffer("double[]", a)
     getattr(cm.lib, f"{cm.name}_{suffix}")(ptr(q), ptr(cm.params(p)), ptr(out))
     return out
 
