@@ -306,7 +306,7 @@ def _check_options(spec: ModelSpec, options: BuildOptions) -> None:
     if spec.constraints and (options.jacobian or options.linearize):
         raise ModelError("the symbolic Jacobian and linearization of a model with "
                          "constraints are not generated yet", file=spec.source,
-                         key="jacobian" if options.jacobian else "linearize",
+                         key="linearize" if options.linearize else "jacobian",
                          fix="build without them (implicit methods then use central "
                              "differences)")
     if options.linearize and spec.joints:
