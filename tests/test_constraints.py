@@ -341,3 +341,48 @@ def test_dependent_speeds_chosen_by_pivoting_give_the_same_motion(tmp_path, four
         a, b = cm.rhs(0.0, x), four_bar.rhs(0.0, x)
         worst = max(worst, np.linalg.norm(a - b) / np.linalg.norm(b))
     assert worst <= 1e-12, worst
+
+
+WHEEL_DISC = """
+name: wheel_disc
+coordinates: [q1, q2, q3, x, y, z]
+parameters: {m: 1.0, r: 0.5, g: 9.81}
+bases:
+  Y: {parent: E, axis: 3, angle: q1}
+  L: {parent: Y, axis: 1, angle: q2}
+  R: {parent: L, axis: 2, angle: q3}
+points:
+  Gd: {coordinates: [x, y, z]}
+bodies:
+  disc: {mass: m, G: Gd, base: R, inertia: [m*r**2/4, m*r**2/2, m*r**2/4]}
+gravity: [0, 0, -g]
+constraints:
+  wheel: {type: rolling, body: disc, axle: 2, radius: r}
+dependent: {coordinates: [z], speeds: [x_dot, y_dot, z_dot]}
+"""
+
+
+def test_rolling_helper_moves_as_the_written_out_disc(tmp_path, rolling_disc):
+    """The ``rolling`` kind (contact geometry, height and no-slip built by modelgen)
+    against the disc written out by hand (checked against KanesMethod above)."""
+    spec = parse_model(WHEEL_DISC)
+    assert parse_model(spec_to_yaml(spec)) == spec
+    path = tmp_path / "wheel_disc.yaml"
+    path.write_text(WHEEL_DISC)
+    wheel = modelgen.load(path)
+    rng = np.random.default_rng(11)
+    worst = 0.0
+    for _ in range(20):
+        q = np.concatenate([rng.uniform(-1.2, 1.2, 3), rng.normal(size=2)])
+        qd = rolling_disc.consistent_speeds(q, np.concatenate([rng.normal(size=3), [0, 0]]))
+        x = np.concatenate([q, qd])
+        centre = rolling_disc.body_poses(q).reshape(-1, 4, 4)[0][:3, 3]
+        xw = np.concatenate([q[:3], centre, qd[:3], np.zeros(3)])
+        assert np.max(np.abs(wheel.constraint_residuals(xw[:6]))) <= 1e-14
+        want, got = rolling_disc.rhs(0.0, x), wheel.rhs(0.0, xw)
+        # yaw, lean, spin and their accelerations; the centre's velocity
+        pairs = [(got[:3], want[:3]), (got[6:9], want[5:8])]
+        err = sum(np.linalg.norm(a - b) for a, b in pairs) / sum(np.linalg.norm(b)
+                                                                  for _, b in pairs)
+        worst = max(worst, err)
+    assert worst <= 1e-12, worst

@@ -99,9 +99,25 @@ def derive_constraints(kin: Kinematics, graph: Graph | None = None) -> Constrain
     n = spec.n
     q, qd = kin.q, kin.qd
     residuals, G, gamma, rows = [], [], [], []
+    # the position equations first: each wheel's contact, then the others' (a
+    # wheel's two no-slip equations come with the velocity constraints)
     ordered = [c for c in spec.constraints if c.holonomic] + \
         [c for c in spec.constraints if not c.holonomic]
+    wheels = {c.name: _Wheel(builder, kin, c) for c in spec.constraints
+              if c.kind == "rolling"}
+    for w in wheels.values():
+        residuals.append(w.height_residual)
+        G.append(w.height_row)
+        gamma.append(w.height_gamma)
+        rows.append((w.c.name, w.c.normal))
     for c in ordered:
+        if c.kind == "rolling":
+            w = wheels[c.name]
+            for axis, row, g in w.no_slip:
+                G.append(row)
+                gamma.append(g)
+                rows.append((c.name, axis))
+            continue
         if c.kind == "position":
             f = c.expression
             grad = [diff(f, qk) for qk in q]
@@ -179,6 +195,57 @@ def choose_dependent(graph: Graph, G, m_h: int, spec, seed: int = 0) -> tuple:
     m, n = len(G), spec.n
     Gv = _evaluate(graph, [e for row in G for e in row], values).reshape(m, n)
     return _pivots(Gv, m), _pivots(Gv[:m_h], m_h) if m_h else ()
+
+
+class _Wheel:
+    """A knife-edge wheel on the plane ``n . r = height`` (n: axis ``normal`` of E).
+
+    With j the axle and s = |n x j| = sqrt(1 - (n.j)^2), the contact point is
+    the centre plus rho = r d, d = -(n - (n.j) j) / s the unit vector of the
+    wheel's plane that points most down.  The height equation is
+    ``n . r_G - r s - height = 0``; the no-slip equations say the wheel's
+    material point at the contact has no velocity along the other two axes of E:
+    ``e_a . (v_G + omega x rho) = 0``.
+    """
+
+    def __init__(self, builder: GraphBuilder, kin: Kinematics, c):
+        spec = kin.spec
+        self.c = c
+        n_q = spec.n
+        body = next(b for b in spec.bodies if b.name == c.body)
+        W, Gk = kin.bases[body.base], kin.points[body.G]
+        nvec = tuple(sympy.S.One if i == c.normal - 1 else sympy.S.Zero for i in range(3))
+        j = _column(W.R, c.axle - 1)
+        r = c.radius
+        jn = builder.name(dot(nvec, j))
+        s = builder.name(sympy.sqrt(1 - jn**2))
+        jdot = builder.vec(cross(W.omega, j))
+        jn_dot = builder.name(dot(nvec, jdot))
+        jn_ddot = builder.name(dot(nvec, add(cross(W.alpha_bias, j), cross(W.omega, jdot))))
+        ratio = builder.name(jn / s)
+        # height: f = n.r_G - r s - h; df/dq_k = n.b_k^G + r (jn/s) n.(c_k x j)
+        self.height_residual = builder.name(dot(nvec, Gk.r) - r * s - c.height)
+        self.height_row = builder.vec(
+            dot(nvec, kin.point_partial(body.G, k))
+            + r * ratio * dot(nvec, cross(W.partials.get(k, ZERO3), j)) for k in range(n_q))
+        self.height_gamma = builder.name(dot(nvec, Gk.a_bias)
+                                         + r * (jn_dot**2 / s**3 + ratio * jn_ddot))
+        # no slip: the material point at rho = r d, d = -(n - jn j)/s
+        u = builder.vec(sub(nvec, tuple(jn * x for x in j)))
+        rho = builder.vec(tuple(-r * x / s for x in u))
+        u_dot = builder.vec(tuple(-jn_dot * a - jn * b for a, b in zip(j, jdot)))
+        rho_dot = builder.vec(tuple(r * (-a / s - b * jn * jn_dot / s**3)
+                                    for a, b in zip(u_dot, u)))
+        a = builder.vec(add(add(Gk.a_bias, cross(W.alpha_bias, rho)), cross(W.omega, rho_dot)))
+        self.no_slip = []
+        for axis in (1, 2, 3):
+            if axis == c.normal:
+                continue
+            e = tuple(sympy.S.One if i == axis - 1 else sympy.S.Zero for i in range(3))
+            row = builder.vec(dot(e, add(kin.point_partial(body.G, k),
+                                         cross(W.partials.get(k, ZERO3), rho)))
+                              for k in range(n_q))
+            self.no_slip.append((axis, row, builder.name(dot(e, a))))
 
 
 def _evaluate(graph: Graph, exprs, values: dict) -> np.ndarray:

@@ -32,6 +32,7 @@ KIND_FIELDS = {
     "position": (("expression",), ("expression",)),
     "velocity": (("point", "body", "base", "axes"), ("point",)),
     "speeds": (("expression",), ("expression",)),
+    "rolling": (("body", "axle", "radius", "normal", "height"), ("body", "axle", "radius")),
 }
 
 
@@ -46,6 +47,10 @@ class ConstraintDecl(NamedTuple):
     axes: tuple
     expression: sympy.Expr | None
     key: str
+    axle: int = 0
+    radius: sympy.Expr | None = None
+    normal: int = 0
+    height: sympy.Expr | None = None
 
 
 def _axes(ctx, value, key: str) -> tuple:
@@ -120,9 +125,30 @@ def constraint_decl(ctx, name, kind, fields: dict, key: str) -> ConstraintDecl:
     if kind == "coincide" and fields["point_a"] == fields["point_b"]:
         raise ctx.error(f"constraint '{name}' makes point '{fields['point_a']}' coincide with "
                         "itself", f"{key}.point_b", "give two different points")
+    rolling = {}
+    if kind == "rolling":
+        rolling["axle"] = _axis(ctx, fields["axle"], f"{key}.axle", "the axle: the axis of "
+                                "the wheel body's base about which it spins")
+        rolling["normal"] = _axis(ctx, fields.get("normal", 3), f"{key}.normal",
+                                  "the ground's normal: the axis of E pointing up from it")
+        rolling["radius"] = ctx.expression(fields["radius"], f"{key}.radius", "constant")
+        radius = ctx.at_defaults(rolling["radius"])
+        if radius is None or radius <= 0:
+            raise ctx.error(f"the radius of wheel '{name}' is not positive with the default "
+                            f"parameters: {format_expression(rolling['radius'])}",
+                            f"{key}.radius", "give a radius > 0")
+        rolling["height"] = ctx.expression(fields.get("height", 0), f"{key}.height",
+                                           "constant")
     return ConstraintDecl(name, kind, ref("point_a", "point"), ref("point_b", "point"),
                           ref("point", "point"), ref("body", "body"), base, axes,
-                          expression, key)
+                          expression, key, **rolling)
+
+
+def _axis(ctx, value, key: str, what: str) -> int:
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral) or not 1 <= value <= 3:
+        raise ctx.error(f"axis must be 1, 2 or 3 but is {describe(value)}", key,
+                        f"give {what} as 1, 2 or 3")
+    return int(value)
 
 
 def dependent_decl(ctx, value, key: str = "dependent") -> tuple:
@@ -165,7 +191,8 @@ def constraint_fields(c) -> dict:
     for field in KIND_FIELDS[c.kind][0]:
         value = getattr(c, field)
         if (field == "base" and value == CANONICAL_BASE) or (field == "axes" and value ==
-                                                               (1, 2, 3)) or value == "":
+                                                               (1, 2, 3)) or value == "" \
+                or (field == "normal" and value == 3) or (field == "height" and value == 0):
             continue
         out[field] = list(value) if field == "axes" else value
     return out

@@ -145,7 +145,8 @@ def _resolve_constraints(builder) -> tuple:
             if getattr(c, field):
                 resolve(builder, getattr(c, field), kind, f"{c.key}.{field}", canonical)
         out.append(ConstraintSpec(c.name, c.kind, c.point_a, c.point_b, c.point, c.body,
-                                  c.base, c.axes, c.expression))
+                                  c.base, c.axes, c.expression, c.axle, c.radius, c.normal,
+                                  c.height))
     coords, speeds = builder.dependent
     key = builder.dependent_key
     if not out:
@@ -155,7 +156,7 @@ def _resolve_constraints(builder) -> tuple:
                                 "'dependent'")
         return ()
     m = sum(c.size for c in out)
-    m_h = sum(c.size for c in out if c.holonomic)
+    m_h = sum(c.holonomic_size for c in out)
     first = builder.constraints[0].key
     if builder.joints:
         raise builder.error("constraints on a model with ball or free joints are not "

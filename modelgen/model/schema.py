@@ -31,7 +31,7 @@ ENTRY_KEYS = {
     "bodies": ("mass", "G", "base", "inertia"),
     "actions": ("body", "point", "base", "frame", "torque", "force", "vector"),
     "constraints": ("type", "point_a", "point_b", "point", "body", "base", "axes",
-                    "expression"),
+                    "expression", "axle", "radius", "normal", "height"),
 }
 
 #: Keys an entry must have (alternatives such as ``frame`` are checked separately).

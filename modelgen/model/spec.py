@@ -349,8 +349,11 @@ def effect_fields(effect) -> dict:
 #: axes of a base of a point's velocity are zero; with ``body``, the velocity of
 #: the body's material point at the point, as for rolling without slip) and
 #: ``speeds`` (a scalar expression linear in the speeds is zero).  The first two
-#: are holonomic, the last two nonholonomic.
-CONSTRAINT_KINDS = ("coincide", "position", "velocity", "speeds")
+#: are holonomic, the last two nonholonomic.  ``rolling`` is a knife-edge wheel
+#: (a body, the axis of its base that is its axle, its radius) on the plane
+#: normal to an axis of E at a height: one position equation (the wheel touches
+#: the plane) and two velocity ones (its contact point does not slip).
+CONSTRAINT_KINDS = ("coincide", "position", "velocity", "speeds", "rolling")
 HOLONOMIC_KINDS = ("coincide", "position")
 
 
@@ -373,15 +376,29 @@ class ConstraintSpec:
     base: str = ""
     axes: tuple = ()
     expression: Optional[Expr] = None
+    #: ``rolling``: the axle (axis 1-3 of the body's base), the radius, the plane's
+    #: normal (axis 1-3 of E, pointing away from the ground) and its height
+    axle: int = 0
+    radius: Optional[Expr] = None
+    normal: int = 0
+    height: Optional[Expr] = None
 
     @property
     def holonomic(self) -> bool:
+        """Whether every equation of it is a position constraint."""
         return self.kind in HOLONOMIC_KINDS
 
     @property
     def size(self) -> int:
         """Number of scalar equations."""
+        if self.kind == "rolling":
+            return 3
         return len(self.axes) if self.axes else 1
+
+    @property
+    def holonomic_size(self) -> int:
+        """Number of its position equations."""
+        return self.size if self.holonomic else (1 if self.kind == "rolling" else 0)
 
 
 @dataclass(frozen=True)
@@ -447,7 +464,7 @@ class ModelSpec:
     @property
     def n_holonomic(self) -> int:
         """Number of scalar position constraints (the first rows, in declaration order)."""
-        return sum(c.size for c in self.constraints if c.holonomic)
+        return sum(c.holonomic_size for c in self.constraints)
 
     @property
     def parameter_names(self) -> tuple:
@@ -479,8 +496,7 @@ class ModelSpec:
             yield from a.torque
             yield from a.force
         for c in self.constraints:
-            if c.expression is not None:
-                yield c.expression
+            yield from (e for e in (c.expression, c.radius, c.height) if e is not None)
         for e in self.effects:
             for value in vars(e).values():
                 if isinstance(value, tuple):

@@ -133,7 +133,9 @@ def spec_to_yaml(spec: ModelSpec) -> str:
             parts = [f"type: {c.kind}"]
             for field, value in constraint_fields(c).items():
                 text = ("[" + ", ".join(str(a) for a in value) + "]" if field == "axes" else
-                        _yaml_expr(value) if field == "expression" else name(value))
+                        str(value) if field in ("axle", "normal") else
+                        _yaml_expr(value) if field in ("expression", "radius", "height")
+                        else name(value))
                 parts.append(f"{field}: {text}")
             out.append(f"  {name(c.name)}: {{{', '.join(parts)}}}")
         if spec.dependent_speeds:
