@@ -28,8 +28,9 @@ from modelgen.model.chains import spatial_chain
 
 from conftest import MODELS
 
+#: constrained models are not joint trees (they close loops): see test_constraints.py
 SHIPPED = sorted(str(p.relative_to(MODELS).with_suffix("")) for p in MODELS.glob("**/*.yaml")
-                 if "scenes" not in p.parts)
+                 if "scenes" not in p.parts and "\nconstraints:" not in p.read_text())
 
 
 def _program(graph, outputs, inputs):

@@ -240,10 +240,19 @@ def test_embedded_example_refuses_bad_arguments_with_its_usage(example_binary, a
 PROTOTYPE = re.compile(r"^(int|void) (\w+)\((.*)\);$", re.M)   # params may hold a function pointer
 
 
+def _exported(model_dir: Path) -> tuple:
+    """EXPORTED, and a constrained model's constraint functions (docs/constraints.md)."""
+    info = json.loads((model_dir / "manifest.json").read_text()).get("constraints")
+    if not info:
+        return EXPORTED
+    return EXPORTED + ("constraint_jacobian",) + \
+        (("constraint_residuals",) if info["holonomic"] else ())
+
+
 def _prototypes(model_dir: Path, name: str) -> list:
     """(return type, function, parameters) of every prototype in the header."""
     protos = PROTOTYPE.findall((model_dir / f"{name}.h").read_text())
-    assert sorted(f for _, f, _ in protos) == sorted(f"{name}_{s}" for s in EXPORTED), \
+    assert sorted(f for _, f, _ in protos) == sorted(f"{name}_{s}" for s in _exported(model_dir)), \
         f"{name}.h does not declare exactly the expected functions"
     return protos
 
@@ -450,12 +459,12 @@ def test_generated_c_compiles_warning_free_as_c99_and_cxx(generated, tmp_path):
     for (name, exe), binary in binaries.items():
         r = _run([binary])
         assert r.returncode == 0, f"{name} {exe}:\n{r.stdout}"
-        for suffix in EXPORTED:
+        for suffix in _exported(models[name]):
             assert f"called {name}_{suffix}\n" in r.stdout, f"{name} {exe}:\n{r.stdout}"
 
     for name in models:
         out = tmp_path / name
-        exported = sorted(f"{name}_{s}" for s in EXPORTED)
+        exported = sorted(f"{name}_{s}" for s in _exported(models[name]))
         assert _defined_globals(out / "c_all.o") == exported, name
         parts = [g for k in (1, 2) for g in _defined_globals(out / f"c_{k}.o")]
         assert sorted(parts) == exported, f"{name}: MG_PART parts overlap or miss symbols"

@@ -389,7 +389,7 @@ def test_unknown_top_level_key_suggests_the_closest_valid_key():
     assert message("gravitation: [0, 0, -g]\n") == (
         "m.yaml:6: gravitation: unknown key 'gravitation'; fix: did you mean 'gravity'? "
         "valid keys: name, description, coordinates, parameters, inputs, bases, joints, points, "
-        "frames, bodies, gravity, actions, effects, armature, units, physical_inertia")
+        "frames, bodies, gravity, actions, effects, armature, constraints, dependent, units, physical_inertia")
 
 
 def test_unknown_key_without_a_close_match_lists_valid_keys():
@@ -489,7 +489,7 @@ def test_empty_file_and_non_mapping_file():
         "m.yaml:1: expected a mapping of model keys but got a list of 2 items; "
         "fix: start with 'name: <model name>' and use the keys name, description, "
         "coordinates, parameters, inputs, bases, joints, points, frames, bodies, gravity, actions, "
-        "effects, armature, units, physical_inertia")
+        "effects, armature, constraints, dependent, units, physical_inertia")
 
 
 def test_missing_file(tmp_path):

@@ -14,9 +14,9 @@ from modelgen.model.spec import (TIME, ActionSpec, BaseSpec, BodySpec, FrameSpec
 
 ROOT = Path(__file__).resolve().parent.parent
 MODEL_FILES = sorted((ROOT / "models").glob("*.yaml"))
-SHIPPED = ["arm7", "cart_pole", "double_pendulum", "heavy_top", "incline_block",
-           "simple_pendulum", "spherical_pendulum", "spring_chain", "tennis_racket",
-           "torque_free_body"]
+SHIPPED = ["arm7", "cart_pole", "double_pendulum", "four_bar", "heavy_top", "incline_block",
+           "rolling_disc", "simple_pendulum", "slider_crank", "spherical_pendulum", "spring_chain",
+           "tennis_racket", "torque_free_body"]
 Z = sympy.Integer(0)
 
 

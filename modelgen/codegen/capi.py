@@ -25,7 +25,7 @@ import re
 from typing import NamedTuple
 
 #: Version of the C interface (model functions and mg_integrate), checked by the loader.
-ABI_VERSION = 6
+ABI_VERSION = 7
 #: Prefix of every constant, type and function of the model-independent C.
 PREFIX = "MG"
 
@@ -89,6 +89,10 @@ STATUSES = (
     Status(-7, "BAD_ARGUMENT", "Invalid argument to the C integrator."),
     Status(-8, "INTERRUPTED", "Interrupted at t={t!r}; the trajectory up to there is kept."),
     Status(-9, "INPUT_ERROR", "The input function u(t, x) failed at t={t!r}."),
+    Status(-10, "PROJECTION", "The state could not be put back on the constraints at "
+                              "t={t_fail!r} (Gauss-Newton did not converge, or the dependent "
+                              "speeds are not determined there: a dead point); last good state "
+                              "at t={t!r}: x={x}."),
 )
 STATUS = {s.code: s for s in STATUSES}
 STATUS_BY_NAME = {s.name: s for s in STATUSES}
@@ -137,9 +141,10 @@ STRUCTS = (
         (RHS_FN.format("rhs"), "rhs", "xdot[nx] at (t, x[nx], u[nu], p[np]); returns 0 or the failing pivot"),
         (RHS_FN.format("jacobian"), "jacobian", "J[nx*nx] = d xdot / d x, row-major; NULL: central differences"),
         (OUTPUTS_FN.format("outputs"), "outputs", "y[ny] at (t, x, u, p); NULL when ny = 0"),
-        ("void (*project)(void *model, double *x)", "project",
-         "NULL, or puts x back on its manifold (unit quaternions of ball and free joints) "
-         "after each accepted step and at the start"),
+        ("int (*project)(void *model, const double *p, double *x)", "project",
+         "NULL, or puts x back on its manifold (unit quaternions of ball and free joints, "
+         "the constraints) after each accepted step and at the start; returns 0, or "
+         "nonzero when it cannot (status PROJECTION)"),
         ("void *", "model", "passed as the first argument of the functions above"),
     )),
     ("mg_inputs", "The inputs u(t): none, samples, or a callback.", (

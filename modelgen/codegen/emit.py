@@ -30,7 +30,7 @@ from modelgen.codegen.printer import ModelPrinter
 #: Version of the generated C ABI, checked by the Python loader (the C interface table's).
 ABI_VERSION = capi.ABI_VERSION
 #: The templates of a model's own code (the model hash covers these only).
-MODEL_TEMPLATES = ("model.c.j2", "model.h.j2", "macros.j2")
+MODEL_TEMPLATES = ("model.c.j2", "model.h.j2", "macros.j2", "constraints.c.j2")
 #: The templates of the frame kinematics, rendered only into builds that ask for them
 #: (so they enter the model hash of those builds only).
 KINEMATICS_TEMPLATES = ("kinematics.c.j2", "kinematics.h.j2")
@@ -248,13 +248,15 @@ def template_context(*, name: str, description: str, model_hash: str, n: int,
                      functions: dict, output_columns=(), has_jacobian=False,
                      has_linearize=False, nq: int | None = None, speeds=None,
                      quaternions=(), npd: int = 0, mass_pattern=None,
-                     formulation: str = "crba", aba_inward=(), frames=None) -> dict:
+                     formulation: str = "crba", aba_inward=(), frames=None,
+                     constraints=None) -> dict:
     """The plain dict every C template receives.
 
     ``mass_pattern`` (n x n booleans, default dense) marks the entries of the
     mass matrix that can be non-zero: the rhs's solve skips the others
     (:func:`solve_code`).  ``formulation`` is the resolved one (``aba`` or
     ``crba``); ``aba_inward`` the coordinates of the ABA's D in inward order.
+    ``constraints``: None, or the dict of :func:`constraint_context`.
 
     ``n`` is the number of speeds (the size of A), ``nq`` that of the
     coordinates (default ``n``; more with ball or free joints, whose
@@ -306,7 +308,33 @@ def template_context(*, name: str, description: str, model_hash: str, n: int,
         "formulation": formulation,
         "aba_inward": list(aba_inward),
         "capi": capi.context(),
-    }
+        "constraints": constraints,
+    } | ({"api": constraint_api(name, n, nq, len(parameters), constraints)
+          + public_api(name, n, len(parameters), len(inputs), len(bodies),
+                       len(output_columns), has_jacobian, has_linearize, nq,
+                       rhs_solve="with dependent speeds (see below)")}
+         if constraints else {})
+
+
+def constraint_context(m: int, mh: int, dependent, independent, n: int) -> dict:
+    """What ``constraints.c.j2`` needs: ``m`` equations (``mh`` holonomic, first),
+    the speed indices of the dependent and independent speeds."""
+    return {"m": m, "mh": mh, "ni": n - m, "dep": list(dependent), "ind": list(independent)}
+
+
+def constraint_api(name: str, n: int, nq: int, n_p: int, c: dict) -> list:
+    """The prototypes of a constrained model's own functions."""
+    out = [{"ret": "void", "name": f"{name}_constraint_jacobian",
+            "params": "const double *q, const double *p, double *out",
+            "doc": [f"Constraint Jacobian G(q)[{c['m']}*{n}], row-major: the constraints are",
+                    f"G qd = 0; its first {c['mh']} rows are d f / d q of the position",
+                    f"constraints f(q) = 0.  q[{nq}], p[{n_p}]."]}]
+    if c["mh"]:
+        out.insert(0, {"ret": "void", "name": f"{name}_constraint_residuals",
+                       "params": "const double *q, const double *p, double *out",
+                       "doc": [f"Position constraint residuals f(q)[{c['mh']}] (zero on the",
+                               f"constraints; m).  q[{nq}], p[{n_p}]."]})
+    return out
 
 
 def public_api(name: str, n: int, n_p: int, n_u: int, n_b: int, n_y: int = 0,

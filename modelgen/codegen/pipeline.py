@@ -25,8 +25,10 @@ from modelgen.derive.graph import GraphBuilder
 from modelgen.derive.joint_tree import JointTree, extract_joint_tree
 from modelgen.derive.rnea import derive_inverse_dynamics, derive_velocity_terms
 from modelgen.errors import ModelError
-from modelgen.codegen.emit import (ABI_VERSION, emit_sources, integrator_sources, print_routine,
-                                   runtime_sources, template_context, templates_digest)
+from modelgen.codegen.emit import (ABI_VERSION, constraint_context, emit_sources,
+                                   integrator_sources, print_routine, runtime_sources,
+                                   template_context, templates_digest)
+from modelgen.derive.constraints import check_constraints, derive_constraints
 from modelgen.codegen.options import FORMULATIONS, REFERENCES, BuildOptions
 from modelgen.derive.jacobian import accelerations, derive_jacobian_terms, residual
 from modelgen.derive.linearize import derive_linearization_terms
@@ -73,7 +75,7 @@ def model_hash(spec: ModelSpec, options: BuildOptions | None = None) -> str:
 
 #: The routines on the integration path (compiled as MG_PART 2, see model.c.j2).
 INTEGRATION_PATH = ("prepare", "rhs", "outputs", "jacobian_terms", "linearize_terms",
-                    "inverse_dynamics",
+                    "inverse_dynamics", "constraint_residuals", "constraint_jacobian",
                     # what controllers call at every step (kinematics.c.j2 puts them in part 2)
                     "frame_poses", "frame_velocities", "frame_jacobians",
                     "frame_bias_accelerations", "com", "com_jacobian",
@@ -130,8 +132,12 @@ def choose_formulation(spec: ModelSpec, formulation: str = BuildOptions.formulat
     if formulation not in FORMULATIONS:
         raise ModelError(f"unknown formulation {formulation!r}", file=spec.source,
                          key="formulation", fix="use one of " + ", ".join(FORMULATIONS))
-    if formulation == "crba":
+    if formulation == "crba" or (spec.constraints and formulation == "auto"):
         return "crba", None
+    if formulation == "aba" and spec.constraints:
+        raise ModelError("formulation 'aba' needs a joint tree, and a model with "
+                         "constraints is not one", file=spec.source, key="formulation",
+                         fix="use formulation 'crba' (or 'auto') for a constrained model")
     if formulation == "aba":
         return "aba", extract_joint_tree(spec)
     if spec.n < ABA_CROSSOVER:
@@ -143,7 +149,8 @@ def choose_formulation(spec: ModelSpec, formulation: str = BuildOptions.formulat
 
 
 def routines_for(eqs: Equations, output_exprs=(), jacobian=None,
-                 forward: ForwardDynamics | None = None, linearization=None, inverse=None):
+                 forward: ForwardDynamics | None = None, linearization=None, inverse=None,
+                 constraints=None):
     """The C routines of a model: (name, inputs, outputs) for make_routines.
 
     With ``forward`` (the ABA program) the ``rhs`` routine writes q_ddot and
@@ -166,7 +173,8 @@ def routines_for(eqs: Equations, output_exprs=(), jacobian=None,
                + qdot)
         jac_inputs = t + (x, u, p)
     else:
-        rhs = ("rhs", t + (x, u, p), (("A", A_flat), ("b", b)) + qdot)
+        rhs = ("rhs", t + (x, u, p), (("A", A_flat), ("b", b)) + qdot
+               + ((("gamma", constraints.gamma),) if constraints else ()))
         jac_inputs = t + (x, u, p, ("a", jacobian.a)) if jacobian else ()
     lin = []
     if linearization is not None:
@@ -175,7 +183,13 @@ def routines_for(eqs: Equations, output_exprs=(), jacobian=None,
                 (("R", tuple(e for row in linearization.R for e in row)),)
                 + ((("Y", tuple(e for row in linearization.Y for e in row)),)
                    if linearization.Y else ()))]
-    return [
+    cons = []
+    if constraints is not None:
+        if constraints.residuals:
+            cons.append(("constraint_residuals", (q, p), (("f", constraints.residuals),)))
+        cons.append(("constraint_jacobian", (q, p),
+                     (("G", tuple(e for row in constraints.G for e in row)),)))
+    return cons + [
         ("mass_matrix", (q, p), (("A", A_flat),)),
         ("velocity_terms", (q, qd, p), (("h", eqs.h),)),
         ("generalized_forces", t + (q, qd, u, p), (("tau", eqs.tau),)),
@@ -329,6 +343,12 @@ def _check_options(spec: ModelSpec, options: BuildOptions) -> None:
     k = options.kinematics
     if k is not None:
         _check_kinematics(spec, k)
+    if spec.constraints and (options.jacobian or options.linearize):
+        raise ModelError("the symbolic Jacobian and linearization of a model with "
+                         "constraints are not generated yet", file=spec.source,
+                         key="linearize" if options.linearize else "jacobian",
+                         fix="build without them (implicit methods then use central "
+                             "differences)")
     if options.linearize and spec.joints:
         raise ModelError("linearization of a model with ball or free joints is not supported: "
                          "its state holds unit quaternions, whose four components cannot "
@@ -366,6 +386,7 @@ class Derived:
     terms: object               # the Jacobian's terms, or None
     graph: object = field(repr=False)
     frames: FrameTerms | None = None    # the frame kinematics asked for, or None
+    constraints: object = None  # ConstraintTerms of a constrained model, or None
 
     @property
     def output_exprs(self) -> tuple:
@@ -407,9 +428,15 @@ def _derive(spec: ModelSpec, options: BuildOptions, tree: JointTree | None) -> D
     else:
         terms = None
     graph = terms.graph if terms else graph
+    constraints = None
+    if spec.constraints:
+        constraints = derive_constraints(kin, graph)
+        check_constraints(constraints, spec)
+        graph = constraints.graph
     frames = _derive_frames(spec, options, kin, graph)
     graph = frames.graph if frames else graph
-    return Derived(eqs, columns, forward, inverse, linearization, terms, graph, frames)
+    return Derived(eqs, columns, forward, inverse, linearization, terms, graph, frames,
+                   constraints)
 
 
 def _derive_frames(spec: ModelSpec, options: BuildOptions, kin, graph) -> FrameTerms | None:
@@ -427,7 +454,7 @@ def _eliminate(derived: Derived) -> tuple:
     dynamics are eliminated on their own, and the rhs's parameter-only part hoisted."""
     d = derived
     routines = make_routines(d.graph, routines_for(d.eqs, d.output_exprs, d.terms, d.forward,
-                                                   d.linearization, d.inverse)
+                                                   d.linearization, d.inverse, d.constraints)
                              + frame_routines(d.frames, d.eqs),
                              alone=("rhs", "inverse_dynamics"))
     return _hoisted(routines)
@@ -460,8 +487,14 @@ def _emit(spec: ModelSpec, options: BuildOptions, derived: Derived, routines: tu
         # the crba rhs's solve skips the entries of A that are structurally zero
         mass_pattern=None if forward else [[e != 0 for e in row] for row in eqs.A],
         formulation=options.formulation, aba_inward=forward.inward if forward else (),
-        frames=derived.frames)
+        frames=derived.frames,
+        constraints=_constraint_context(spec, derived.constraints))
     return Emitted(functions, context, emit_sources(context))
+
+
+def _constraint_context(spec: ModelSpec, terms) -> dict | None:
+    return None if terms is None else constraint_context(
+        terms.m, len(terms.residuals), terms.dependent, terms.independent, spec.n)
 
 
 def _quaternions(spec: ModelSpec) -> list:
@@ -491,6 +524,8 @@ def _manifest(spec: ModelSpec, options: BuildOptions, derived: Derived, emitted:
         "jacobian": options.jacobian,
         "linearize": options.linearize,
         "formulation": options.formulation,
+        **({"constraints": _constraint_manifest(spec, derived.constraints)}
+           if derived.constraints else {}),
         "bodies": list(derived.eqs.bodies),
         **_kinematics_manifest(derived.frames),
         "outputs": [{"name": name, "columns": list(cols)}
@@ -512,6 +547,16 @@ def _kinematics_manifest(frames: FrameTerms | None) -> dict:
     return {"kinematics": {"frames": list(frames.frames), "reference": frames.reference,
                            "bias_acceleration": bool(frames.bias), "com": bool(frames.com),
                            "centroidal": bool(frames.centroidal)}}
+def _constraint_manifest(spec: ModelSpec, terms) -> dict:
+    """What the loader needs of a constrained model."""
+    return {"m": terms.m, "holonomic": len(terms.residuals),
+            "rows": [[name, axis] for name, axis in terms.rows],
+            "dependent_speeds": list(terms.dependent), "independent_speeds":
+            list(terms.independent), "dependent_coordinates": list(terms.dependent_coordinates),
+            # by name, and whether modelgen chose them (no 'dependent:' in the model)
+            "dependent": [spec.speeds[k] for k in terms.dependent]
+            + [spec.coordinates[k] for k in terms.dependent_coordinates],
+            "chosen": not spec.dependent_speeds}
 
 
 def _compile(directory: Path, spec: ModelSpec, options: BuildOptions, derived: Derived,

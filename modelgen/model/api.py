@@ -334,6 +334,24 @@ class Model:
         return self._apply(lambda c: c.set_armature(None if armature is None
                                                      else dict(armature)))
 
+    def add_constraint(self, name: str, type: str, **fields) -> "Model":
+        """Add a named constraint of kind ``type`` (``coincide``, ``position``,
+        ``velocity`` or ``speeds``); ``fields`` as in the YAML ``constraints:``.
+
+        >>> m = Model("m").add_coordinates("x", "y").add_parameter("L", 1.0)
+        >>> _ = m.add_constraint("line", "position", expression="x - y")
+        >>> m.set_dependent(coordinates=["y"], speeds=["y_dot"]).spec().constraints[0].kind
+        'position'
+        """
+        return self._apply(lambda c: c.add_constraint(name, type, fields,
+                                                      f"constraints.{name}"))
+
+    def set_dependent(self, *, coordinates=(), speeds=()) -> "Model":
+        """Declare the dependent coordinates (one per position equation) and speeds
+        (one per constraint equation); the others stay independent."""
+        return self._apply(lambda c: c.set_dependent({"coordinates": list(coordinates),
+                                                       "speeds": list(speeds)}))
+
     def set_units(self, units: Mapping[str, str]) -> "Model":
         """Set the units of declared coordinates, parameters and inputs (replacing any
         set before); for people and exports, never in the equations.

@@ -29,6 +29,7 @@ from modelgen.errors import ModelError
 SYMMETRY_SAMPLES = 3
 SYMMETRY_RTOL = 1e-9
 from modelgen.model import spec as specmod
+from modelgen.model.constraints import constraint_decl, constraint_fields, dependent_decl
 from modelgen.model.expr import ExpressionParseError, format_expression, parse_expression
 from modelgen.model.messages import (article, as_list, closest, describe, join_and,
                                      quote_expression)
@@ -149,6 +150,9 @@ class ModelBuilder:
         self.effects: list = []
         self.gravity: Optional[tuple] = None
         self.armature: list = []      # (dof name, expression, key), checked by build()
+        self.constraints: list = []   # ConstraintDecl (modelgen.model.constraints)
+        self.dependent: tuple = ((), ())
+        self.dependent_key = "dependent"
         self.sources: list = []       # (key prefix, file, lines) of keys from other files
         self._allowed: dict = {}
 
@@ -747,6 +751,18 @@ class ModelBuilder:
                              "with the default parameters", key, fix)
         return expr
 
+    def add_constraint(self, name, kind, fields: Mapping, key: str) -> None:
+        """A constraint of type ``kind`` with ``fields`` (see modelgen.model.constraints)."""
+        self.check_new_name(name, "constraint", key)
+        decl = constraint_decl(self, name, kind, dict(fields), key)
+        self.register(name, "constraint", key)
+        self.constraints.append(decl)
+
+    def set_dependent(self, value, key: str = "dependent") -> None:
+        """The dependent coordinates and speeds: ``{coordinates: [...], speeds: [...]}``."""
+        self.dependent = dependent_decl(self, value, key)
+        self.dependent_key = key
+
     # -- the spec ------------------------------------------------------------------
     def build(self) -> ModelSpec:
         """Resolve references, check for cycles, sort and freeze into a ModelSpec."""
@@ -786,6 +802,11 @@ def replay(ctx: ModelBuilder, spec: ModelSpec, parameters=None) -> ModelBuilder:
     for e in spec.effects:
         ctx.add_effect(e.name, e.kind, effect_fields(e), f"effects.{e.name}")
     ctx.set_armature(dict(spec.armature) or None)
+    for c in spec.constraints:
+        ctx.add_constraint(c.name, c.kind, constraint_fields(c), f"constraints.{c.name}")
+    if spec.dependent_speeds:
+        ctx.set_dependent({"coordinates": list(spec.dependent_coordinates),
+                           "speeds": list(spec.dependent_speeds)})
     # a reduced model (a scene's) may have dropped some names: their units go too
     ctx.set_units({name: unit for name, unit in spec.units
                    if ctx.kind_of(name) in ("coordinate", "parameter", "input")} or None)

@@ -15,7 +15,8 @@ from typing import Optional
 from modelgen.model.messages import API_FILE, article, closest, listing
 from modelgen.model.schema import SECTION_OF
 from modelgen.model.spec import (CANONICAL_BASE, CANONICAL_POINT, EFFECT_KINDS, ActionSpec,
-                                 BaseSpec, BodySpec, FrameSpec, JointSpec, ModelSpec, PointSpec)
+                                 BaseSpec, BodySpec, ConstraintSpec, FrameSpec, JointSpec,
+                                 ModelSpec, PointSpec, speed_name)
 
 __all__ = ["build_spec", "resolve", "resolve_effect"]
 
@@ -102,6 +103,7 @@ def build_spec(builder) -> ModelSpec:
                             "gravity", key, f"rename the {kind}, or remove the top-level "
                             "'gravity:' and declare it as an effect of type gravity")
     armature = _armature(builder)
+    constraints = _resolve_constraints(builder)
     return ModelSpec(
         name=builder.name,
         description=builder.description,
@@ -125,6 +127,9 @@ def build_spec(builder) -> ModelSpec:
         units=tuple(builder.units),
         physical_inertia=builder.physical_inertia,
         armature=armature,
+        constraints=constraints,
+        dependent_coordinates=builder.dependent[0] if constraints else (),
+        dependent_speeds=builder.dependent[1] if constraints else (),
         source=None if builder.file == API_FILE else builder.file,
         lines=tuple(builder.lines.items()),
     )
@@ -146,6 +151,56 @@ def _armature(builder) -> tuple:
                                 f"joint's speed (known: {listing(dofs)})")
         given[name] = expr
     return tuple((name, given[name]) for name in dofs if name in given and given[name] != 0)
+
+
+def _resolve_constraints(builder) -> tuple:
+    """The constraints' references, and the counts of equations, coordinates and
+    dependent coordinates and speeds."""
+    out = []
+    for c in builder.constraints:
+        for field, kind, canonical in (("point_a", "point", CANONICAL_POINT),
+                                       ("point_b", "point", CANONICAL_POINT),
+                                       ("point", "point", CANONICAL_POINT),
+                                       ("body", "body", None),
+                                       ("base", "base", CANONICAL_BASE)):
+            if getattr(c, field):
+                resolve(builder, getattr(c, field), kind, f"{c.key}.{field}", canonical)
+        out.append(ConstraintSpec(c.name, c.kind, c.point_a, c.point_b, c.point, c.body,
+                                  c.base, c.axes, c.expression, c.axle, c.radius, c.normal,
+                                  c.height))
+    coords, speeds = builder.dependent
+    key = builder.dependent_key
+    if not out:
+        if coords or speeds:
+            raise builder.error("dependent coordinates or speeds but no constraints", key,
+                                "declare the constraints under 'constraints', or remove "
+                                "'dependent'")
+        return ()
+    m = sum(c.size for c in out)
+    m_h = sum(c.holonomic_size for c in out)
+    first = builder.constraints[0].key
+    if builder.joints:
+        raise builder.error("constraints on a model with ball or free joints are not "
+                            "supported", first, "write the rotations as simple bases "
+                            "(angles), or remove the constraints")
+    n = len(builder.coordinates)
+    if m >= n:
+        raise builder.error(f"{m} constraint equations for {n} coordinates: nothing could "
+                            "move", first, "remove constraints (each coincide axis is one "
+                            "equation), or add coordinates; there must be fewer equations "
+                            "than coordinates")
+    if not coords and not speeds:
+        return tuple(out)      # chosen when the model is generated (largest pivots)
+    if len(speeds) != m:
+        raise builder.error(f"{len(speeds)} dependent speeds for {m} constraint equations",
+                            key, f"name {m} dependent speeds (one per equation), e.g. "
+                            f"speeds: [{', '.join(speed_name(c) for c in builder.coordinates[-m:])}]")
+    if len(coords) != m_h:
+        raise builder.error(f"{len(coords)} dependent coordinates for {m_h} position "
+                            "constraint equations", key,
+                            f"name {m_h} dependent coordinates (one per position equation; "
+                            "velocity constraints make no coordinate dependent)")
+    return tuple(out)
 
 
 def resolve_effect(builder, e, frames: dict):

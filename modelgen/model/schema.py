@@ -20,7 +20,7 @@ __all__ = ["TOP_LEVEL_KEYS", "ENTRY_KEYS", "REQUIRED_KEYS", "ExpressionRule",
 #: in ``builder_from_data``.
 TOP_LEVEL_KEYS = ("name", "description", "coordinates", "parameters", "inputs",
                   "bases", "joints", "points", "frames", "bodies", "gravity", "actions", "effects",
-                  "armature", "units", "physical_inertia")
+                  "armature", "constraints", "dependent", "units", "physical_inertia")
 
 #: Keys of one entry of each mapping section.
 ENTRY_KEYS = {
@@ -30,6 +30,8 @@ ENTRY_KEYS = {
     "frames": ("point", "base"),
     "bodies": ("mass", "G", "base", "inertia"),
     "actions": ("body", "point", "base", "frame", "torque", "force", "vector"),
+    "constraints": ("type", "point_a", "point_b", "point", "body", "base", "axes",
+                    "expression", "axle", "radius", "normal", "height"),
 }
 
 #: Keys an entry must have (alternatives such as ``frame`` are checked separately).
@@ -40,6 +42,7 @@ REQUIRED_KEYS = {
     "frames": ("point", "base"),
     "bodies": ("mass", "G", "base"),
     "actions": ("body",),
+    "constraints": ("type",),
 }
 
 
@@ -70,11 +73,18 @@ EXPRESSION_RULES = {
     "coefficient": ExpressionRule(
         ("parameter",), "parameters", "'parameters'",
         " (effect coefficients, lengths and speeds are constant)"),
+    "holonomic": ExpressionRule(
+        ("coordinate", "parameter"), "coordinates and parameters", "'coordinates' or 'parameters'",
+        " (a position constraint f(q) = 0; a constraint on speeds has type 'speeds')"),
+    "nonholonomic": ExpressionRule(
+        ("coordinate", "speed", "parameter"), "coordinates, speeds and parameters",
+        "'coordinates' or 'parameters'", " (a velocity constraint B(q) q_dot = 0)"),
 }
 
 #: The kind of entry of each mapping section, and the section of each kind.
 SECTION_KIND = {"bases": "base", "joints": "joint", "points": "point", "frames": "frame",
-                "bodies": "body", "actions": "action", "effects": "effect"}
+                "bodies": "body", "actions": "action", "effects": "effect",
+                "constraints": "constraint"}
 SECTION_OF = {**{kind: section for section, kind in SECTION_KIND.items()},
               "coordinate": "coordinates"}
 
@@ -86,6 +96,7 @@ SECTION_EXAMPLES = {
     "frames": "F1: {point: P1, base: B1}",
     "bodies": "rod1: {mass: m1, G: G1, base: B1, inertia: [I1, I2, I3]}",
     "actions": "motor: {body: rod1, point: O, base: B1, torque: [0, 0, T1]}",
+    "constraints": "loop: {type: coincide, point_a: P3, point_b: D, base: E, axes: [1, 2]}",
     "effects": "spring1: {type: spring, point_a: A, point_b: P1, stiffness: k, "
                "rest_length: L0}",
 }

@@ -148,6 +148,10 @@ def builder_from_data(data, lines: dict, file: str) -> ModelBuilder:
                        e.get("torque"), e.get("force"), e.get("vector"), key)
     load_effects(ctx, data.get("effects"))
     ctx.set_armature(data.get("armature"))
+    for name, e, key in entries("constraints"):
+        ctx.add_constraint(name, e["type"], {k: v for k, v in e.items() if k != "type"}, key)
+    if "dependent" in data:
+        ctx.set_dependent(data["dependent"])
     return ctx
 
 

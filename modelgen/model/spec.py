@@ -344,6 +344,64 @@ def effect_fields(effect) -> dict:
     return given
 
 
+#: Constraint kinds and the equations each gives: ``coincide`` (two points
+#: coincide along chosen axes of a base: one position equation per axis),
+#: ``position`` (a scalar f(q) = 0), ``velocity`` (the components along chosen
+#: axes of a base of a point's velocity are zero; with ``body``, the velocity of
+#: the body's material point at the point, as for rolling without slip) and
+#: ``speeds`` (a scalar expression linear in the speeds is zero).  The first two
+#: are holonomic, the last two nonholonomic.  ``rolling`` is a knife-edge wheel
+#: (a body, the axis of its base that is its axle, its radius) on the plane
+#: normal to an axis of E at a height: one position equation (the wheel touches
+#: the plane) and two velocity ones (its contact point does not slip).
+CONSTRAINT_KINDS = ("coincide", "position", "velocity", "speeds", "rolling")
+HOLONOMIC_KINDS = ("coincide", "position")
+
+
+@dataclass(frozen=True)
+class ConstraintSpec:
+    """One named constraint: ``kind`` (one of :data:`CONSTRAINT_KINDS`) and its fields.
+
+    ``coincide``: points ``point_a``, ``point_b``, base ``base``, ``axes``
+    (1, 2, 3); ``position``: ``expression`` of coordinates and parameters;
+    ``velocity``: ``point``, optional ``body``, ``base``, ``axes``; ``speeds``:
+    ``expression`` linear and homogeneous in the speeds.  Unused fields are
+    empty.
+    """
+    name: str
+    kind: str
+    point_a: str = ""
+    point_b: str = ""
+    point: str = ""
+    body: str = ""
+    base: str = ""
+    axes: tuple = ()
+    expression: Optional[Expr] = None
+    #: ``rolling``: the axle (axis 1-3 of the body's base), the radius, the plane's
+    #: normal (axis 1-3 of E, pointing away from the ground) and its height
+    axle: int = 0
+    radius: Optional[Expr] = None
+    normal: int = 0
+    height: Optional[Expr] = None
+
+    @property
+    def holonomic(self) -> bool:
+        """Whether every equation of it is a position constraint."""
+        return self.kind in HOLONOMIC_KINDS
+
+    @property
+    def size(self) -> int:
+        """Number of scalar equations."""
+        if self.kind == "rolling":
+            return 3
+        return len(self.axes) if self.axes else 1
+
+    @property
+    def holonomic_size(self) -> int:
+        """Number of its position equations."""
+        return self.size if self.holonomic else (1 if self.kind == "rolling" else 0)
+
+
 @dataclass(frozen=True)
 class ModelSpec:
     """A complete, validated model."""
@@ -375,6 +433,12 @@ class ModelSpec:
     #: checks (a URDF imported with ``inertia="as_is"``, as Pinocchio reads it)
     #: (left out of the repr like ``armature``: the model hash adds it when False)
     physical_inertia: bool = field(default=True, repr=False)
+    #: constraints (ConstraintSpec), and the coordinates and speeds they make
+    #: dependent (names): as many speeds as constraint equations, as many
+    #: coordinates as holonomic ones
+    constraints: tuple = ()
+    dependent_coordinates: tuple = ()
+    dependent_speeds: tuple = ()
     #: where the spec came from (file path or None) -- for error messages only
     source: Optional[str] = field(default=None, compare=False)
     #: (dotted key, line) pairs for error messages from later stages
@@ -402,6 +466,16 @@ class ModelSpec:
         """The coordinates whose speed is their time derivative (all but joints')."""
         return self.coordinates[:len(self.coordinates) - sum(len(j.coordinates)
                                                              for j in self.joints)]
+
+    @property
+    def n_constraints(self) -> int:
+        """Number of scalar constraint equations (rows of the constraint Jacobian)."""
+        return sum(c.size for c in self.constraints)
+
+    @property
+    def n_holonomic(self) -> int:
+        """Number of scalar position constraints (the first rows, in declaration order)."""
+        return sum(c.holonomic_size for c in self.constraints)
 
     @property
     def parameter_names(self) -> tuple:
@@ -432,6 +506,8 @@ class ModelSpec:
         for a in self.actions:
             yield from a.torque
             yield from a.force
+        for c in self.constraints:
+            yield from (e for e in (c.expression, c.radius, c.height) if e is not None)
         for e in self.effects:
             for value in vars(e).values():
                 if isinstance(value, tuple):

@@ -13,6 +13,7 @@ import re
 
 import yaml
 
+from modelgen.model.constraints import constraint_fields
 from modelgen.model.expr import format_expression
 from modelgen.model.spec import CANONICAL_BASE, CANONICAL_POINT, ModelSpec, effect_fields
 
@@ -150,6 +151,21 @@ def _physics(spec: ModelSpec) -> list:
     if spec.armature:
         out.append("armature: {" + ", ".join(f"{name(n)}: {_yaml_expr(v)}"
                                              for n, v in spec.armature) + "}")
+    if spec.constraints:
+        out.append("constraints:")
+        for c in spec.constraints:
+            parts = [f"type: {c.kind}"]
+            for field, value in constraint_fields(c).items():
+                text = ("[" + ", ".join(str(a) for a in value) + "]" if field == "axes" else
+                        str(value) if field in ("axle", "normal") else
+                        _yaml_expr(value) if field in ("expression", "radius", "height")
+                        else name(value))
+                parts.append(f"{field}: {text}")
+            out.append(f"  {name(c.name)}: {{{', '.join(parts)}}}")
+        if spec.dependent_speeds:
+            out.append("dependent: {coordinates: ["
+                       + ", ".join(map(name, spec.dependent_coordinates))
+                       + "], speeds: [" + ", ".join(map(name, spec.dependent_speeds)) + "]}")
     if spec.units:
         out.append("units: {" + ", ".join(f"{name(n)}: {name(u)}" for n, u in spec.units) + "}")
     return out

@@ -41,6 +41,7 @@ from modelgen.sim.arguments import (LONG, MIN_ATOL, MIN_RTOL, Inputs, c_options,
                                      method_of, run_options, sample_times, span,
                                      terminal_count)
 from modelgen.sim.conditioning import condition_number, failure_kind, growth_note
+from modelgen.sim.assemble import singular_message as constraint_message
 from modelgen.sim.result import Result, make_result
 
 __all__ = ["METHODS", "ALIASES", "STATUS", "Method", "method_of", "MIN_RTOL", "MIN_ATOL",
@@ -340,6 +341,8 @@ def _finish(cm, m, run: _Run, errors, inputs, sign, p_vec, x_start, max_steps, t
         coordinate=cm.dof_names[pivot - 1] if 0 < pivot <= cm.n else "?", max_steps=max_steps,
         kind=_mass_matrix_kind(cm, status, pivot, p_vec, x_start,
                                run.stats["naccept"] == 0))
+    if pivot > cm.n and cm.manifest.get("constraints"):
+        message = constraint_message(cm, pivot, t_fail, stop[STOP_X:])
     if failure is not None:
         message = f"{message.rstrip('.')}: {type(failure).__name__}: {failure}."
     if status < 0:

@@ -17,7 +17,7 @@ from modelgen.codegen.build import manifest_problem
 from modelgen.codegen.capi import ABI_VERSION
 from modelgen.errors import (ArgumentTypeError, ArgumentValueError, BuildError,
                              DerivationError, MassMatrixError, SimulationError)
-from modelgen.sim import integrate
+from modelgen.sim import assemble, integrate
 from modelgen.sim.kinematics import FrameKinematics
 from modelgen.sim.library import ModelLibrary
 from modelgen.sim import linearize as linearization
@@ -225,6 +225,27 @@ class CompiledModel(FrameKinematics):
             x[list(quat)] /= np.linalg.norm(x[list(quat)])
         return x
 
+    # -- constraints (modelgen.sim.assemble) ------------------------------------
+    def constraint_residuals(self, q, p=None) -> np.ndarray:
+        """f(q) of the position constraints (see :func:`modelgen.sim.assemble.residuals`)."""
+        return assemble.residuals(self, q, p)
+
+    def constraint_jacobian(self, q, p=None) -> np.ndarray:
+        """G(q), shape (m, n), with G qd = 0 (:func:`modelgen.sim.assemble.constraint_jacobian`)."""
+        return assemble.constraint_jacobian(self, q, p)
+
+    def assemble(self, q_guess, keep=(), p=None, **options) -> np.ndarray:
+        """q on the position constraints near ``q_guess``, holding the coordinates
+        named in ``keep`` (:func:`modelgen.sim.assemble.assemble`).
+
+        >>> q = cm.assemble([0.5, 1.0, 2.0], keep=["q1"])          # doctest: +SKIP
+        """
+        return assemble.assemble(self, q_guess, keep, p, **options)
+
+    def consistent_speeds(self, q, qd, p=None) -> np.ndarray:
+        """``qd`` with the dependent speeds solved from the independent ones."""
+        return assemble.consistent_speeds(self, q, qd, p)
+
     def mass_matrix(self, q, p=None) -> np.ndarray:
         """A(q, p), shape (n, n); q has ``nq`` entries."""
         q = self._vector(q, self.nq, "q")
@@ -280,6 +301,8 @@ class CompiledModel(FrameKinematics):
 
     def _mass_matrix_error(self, pivot: int, t, x, p=None) -> MassMatrixError:
         """The error of a failing pivot at x, worded by the kind of failure."""
+        if pivot > self.n and self.manifest.get("constraints"):
+            return SimulationError(assemble.singular_message(self, pivot, t, x))
         kind = failure_kind(self.mass_matrix(x[:self.nq], p), pivot - 1)
         return MassMatrixError(pivot, self.dof_names[pivot - 1], t, x, kind)
 
@@ -436,6 +459,8 @@ class CompiledModel(FrameKinematics):
         options.update(step=step, first_step=first_step, max_step=max_step)
         if max_steps is not None:
             options["max_steps"] = max_steps
+        if self.manifest.get("constraints"):
+            assemble.check_initial_state(self, self.state_vector(x0), p)
         def run(times):
             return integrate.simulate(self, x0, t_span, times, method, rtol, atol, u, p,
                                       events, outputs=outputs, **options)

@@ -111,7 +111,8 @@ static void mg_layout(mg_run *r, double *work)
 }
 
 /* The run of these arguments (r->sys, opt, out, t0, t1, o.p, o.in and o.stats are
- * set): its work array laid out, the statistics zero, x = x0 on its manifold. */
+ * set): its work array laid out, the statistics zero, x = x0 (mg_start puts it
+ * on its manifold). */
 static void mg_begin(mg_run *r, const double *x0, double *work)
 {
     const mg_options *opt = r->opt;
@@ -143,8 +144,6 @@ static void mg_begin(mg_run *r, const double *x0, double *work)
     for (i = 0; i < MG_MAX_EVENTS; ++i)
         r->hit_i[i] = r->counts[i] = 0;
     mg_copy(r->x, x0, r->nx);
-    if (r->sys->project)
-        r->sys->project(r->sys->model, r->x);
     mg_copy(r->x_cut, r->x, r->nx);
     r->out->n = 0;
     r->out->n_events = 0;
@@ -252,6 +251,11 @@ static int mg_start(mg_run *r)
     int i, status;
     for (i = 0; i < r->n_events; ++i)
         r->g_old[i] = r->g_new[i] = r->g_work[i] = r->hit_t[i] = 0.0;
+    if (r->sys->project && r->sys->project(r->sys->model, r->o.p, r->x)) {
+        r->o.t_fail = r->t;
+        return MG_STATUS_PROJECTION;
+    }
+    mg_copy(r->x_cut, r->x, r->nx);
     if ((status = mg_first_rows(r)))
         return status;
     if ((status = mg_ode_f(&r->o, r->t, r->x, r->f0)))
@@ -359,8 +363,10 @@ static int mg_accept(mg_run *r)
 {
     const mg_system *sys = r->sys;
     int status;
-    if (sys->project)
-        sys->project(sys->model, r->xn);
+    if (sys->project && sys->project(sys->model, r->o.p, r->xn)) {
+        r->o.t_fail = r->t_new;
+        return MG_STATUS_PROJECTION;
+    }
     if (r->method == MG_METHOD_DOPRI5 && !sys->project)
         mg_copy(r->f1, r->K + 6 * r->nx, r->nx);
     else if ((status = mg_ode_f(&r->o, r->t_new, r->xn, r->f1)))
@@ -457,8 +463,10 @@ static void mg_record_events(mg_run *r, int n_hit)
             mg_copy(xe, r->xn, nx);
         } else {
             mg_dense(nx, r->cont, r->m, (r->hit_t[k] - r->t) / r->h, xe);
-            if (r->sys->project) /* the interpolant leaves the manifold */
-                r->sys->project(r->sys->model, xe);
+            /* the interpolant leaves the manifold; a sample that cannot be put
+             * back stays interpolated (the step's own end was projected) */
+            if (r->sys->project)
+                (void)r->sys->project(r->sys->model, r->o.p, xe);
         }
         out->t_events[r->found] = r->hit_t[k];
         out->which_events[r->found] = which;
@@ -514,8 +522,10 @@ static int mg_sample(mg_run *r)
             if ((status = mg_need_dense(r)))
                 return status;
             mg_dense(nx, r->cont, r->m, (te - r->t) / r->h, xr);
-            if (r->sys->project) /* the interpolant leaves the manifold */
-                r->sys->project(r->sys->model, xr);
+            /* the interpolant leaves the manifold; a sample that cannot be put
+             * back stays interpolated (the step's own end was projected) */
+            if (r->sys->project)
+                (void)r->sys->project(r->sys->model, r->o.p, xr);
         }
         if (out->t)
             out->t[r->rows] = te;

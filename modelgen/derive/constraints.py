@@ -1,0 +1,295 @@
+"""Constraints: the position residuals f(q), the constraint Jacobian G(q) and the
+velocity-product term gamma = dG/dt q_dot of a model's ``constraints:``.
+
+Input: the :class:`~modelgen.derive.kinematics.Kinematics` of a spec with
+constraints.  Output: :class:`ConstraintTerms`, named expressions in the
+kinematics' graph.  Every constraint is written as the velocity constraint
+``G(q) q_dot = 0`` (a position constraint through its time derivative
+``df/dt = (df/dq) q_dot``), and its acceleration form
+``G q_ddot + gamma = 0`` with ``gamma`` the part of ``d(G q_dot)/dt`` that
+remains when every q_ddot is zero.  The rows are the holonomic equations
+first (in declaration order; the first ``len(residuals)`` rows of G are
+df/dq), then the nonholonomic ones.
+
+Nothing is expanded: the rows are built from the kinematics' named positions,
+partial velocities and bias accelerations (for a base D with unit vector
+e_j, ``de_j/dq_k = c_k^D x e_j`` and ``de_j/dt = omega_D x e_j``), so a
+bicycle's rows cost what its kinematics costs.
+
+How the rhs uses them (the Kane form with dependent speeds, see
+``docs/constraints.md``) is in the C template; :func:`check_constraints`
+refuses redundant constraints and dependent speeds that cannot be solved
+for, at seeded random configurations.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import sympy
+
+from modelgen.derive.calculus import diff
+from modelgen.derive.graph import Graph, GraphBuilder
+from modelgen.derive.kinematics import Kinematics
+from modelgen.derive.spatial import ZERO3, add, cross, dot, sub
+from modelgen.errors import ModelError
+from modelgen.model.spec import symbol
+
+__all__ = [
+    "RANK_SAMPLES",
+    "ConstraintTerms",
+    "check_constraints",
+    "choose_dependent",
+    "derive_constraints",
+]
+
+#: seeded random configurations at which redundancy and the dependent speeds are checked
+RANK_SAMPLES = 3
+
+
+@dataclass(frozen=True)
+class ConstraintTerms:
+    """Output of :func:`derive_constraints`."""
+    graph: Graph
+    residuals: tuple        # m_h: f(q) of the holonomic equations
+    G: tuple                # m rows of n: G(q) q_dot = 0
+    gamma: tuple            # m: d(G q_dot)/dt with q_ddot = 0
+    rows: tuple             # m: (constraint name, axis or 0) of each row, for messages
+    dependent: tuple        # speed indices of the dependent speeds (declared order)
+    independent: tuple      # the other speed indices, ascending
+    dependent_coordinates: tuple    # coordinate indices (declared order)
+
+    @property
+    def m(self) -> int:
+        return len(self.G)
+
+
+def _column(R, j):
+    return (R[0][j], R[1][j], R[2][j])
+
+
+def _material_point(kin: Kinematics, point: str, body: str, n: int):
+    """(velocity, partial velocities b_k, bias acceleration) of ``point``; with a
+    ``body``, of the body's material point that is at ``point`` now."""
+    P = kin.points[point]
+    if not body:
+        return P.v, [kin.point_partial(point, k) for k in range(n)], P.a_bias
+    spec_body = next(b for b in kin.spec.bodies if b.name == body)
+    B, G = kin.bases[spec_body.base], kin.points[spec_body.G]
+    rho = sub(P.r, G.r)
+    v = add(G.v, cross(B.omega, rho))
+    partials = [add(kin.point_partial(spec_body.G, k), cross(B.partials.get(k, ZERO3), rho))
+                for k in range(n)]
+    a = add(add(G.a_bias, cross(B.alpha_bias, rho)), cross(B.omega, sub(P.v, G.v)))
+    return v, partials, a
+
+
+def derive_constraints(kin: Kinematics, graph: Graph | None = None) -> ConstraintTerms:
+    """The residuals, G and gamma of ``kin.spec.constraints``, named in a graph that
+    extends ``graph`` (default ``kin.graph``; a later graph that extends it).
+
+    >>> from modelgen.model.api import load_model                     # doctest: +SKIP
+    >>> from modelgen.derive.kinematics import derive_kinematics      # doctest: +SKIP
+    >>> terms = derive_constraints(derive_kinematics(load_model("models/four_bar.yaml")))  # doctest: +SKIP
+    >>> terms.m, terms.independent                                    # doctest: +SKIP
+    (2, (0,))
+    """
+    spec = kin.spec
+    builder = GraphBuilder(graph if graph is not None else kin.graph)
+    n = spec.n
+    q, qd = kin.q, kin.qd
+    residuals, G, gamma, rows = [], [], [], []
+    # the position equations first: each wheel's contact, then the others' (a
+    # wheel's two no-slip equations come with the velocity constraints)
+    ordered = [c for c in spec.constraints if c.holonomic] + \
+        [c for c in spec.constraints if not c.holonomic]
+    wheels = {c.name: _Wheel(builder, kin, c) for c in spec.constraints
+              if c.kind == "rolling"}
+    for w in wheels.values():
+        residuals.append(w.height_residual)
+        G.append(w.height_row)
+        gamma.append(w.height_gamma)
+        rows.append((w.c.name, w.c.normal))
+    for c in ordered:
+        if c.kind == "rolling":
+            w = wheels[c.name]
+            for axis, row, g in w.no_slip:
+                G.append(row)
+                gamma.append(g)
+                rows.append((c.name, axis))
+            continue
+        if c.kind == "position":
+            f = c.expression
+            grad = [diff(f, qk) for qk in q]
+            residuals.append(builder.name(f))
+            G.append(builder.vec(grad))
+            gamma.append(builder.name(sympy.Add(*[
+                diff(grad[k], q[l]) * qd[l] * qd[k] for k in range(n) for l in range(n)
+                if grad[k] != 0])))
+            rows.append((c.name, 0))
+            continue
+        if c.kind == "speeds":
+            g = c.expression
+            G.append(builder.vec([diff(g, v) for v in qd]))
+            gamma.append(builder.name(sympy.Add(*[diff(g, qk) * qd[k]
+                                                  for k, qk in enumerate(q)])))
+            rows.append((c.name, 0))
+            continue
+        D = kin.bases[c.base]
+        for axis in c.axes:
+            e = _column(D.R, axis - 1)
+            w_e = builder.vec(cross(D.omega, e))
+            if c.kind == "coincide":
+                A, B = kin.points[c.point_a], kin.points[c.point_b]
+                d = builder.vec(sub(A.r, B.r))
+                dv = builder.vec(sub(A.v, B.v))
+                residuals.append(builder.name(dot(e, d)))
+                G.append(builder.vec(
+                    dot(cross(D.partials.get(k, ZERO3), e), d)
+                    + dot(e, sub(kin.point_partial(c.point_a, k),
+                                 kin.point_partial(c.point_b, k))) for k in range(n)))
+                e_dd = add(cross(D.alpha_bias, e), cross(D.omega, w_e))
+                gamma.append(builder.name(dot(e_dd, d) + 2 * dot(w_e, dv)
+                                          + dot(e, sub(A.a_bias, B.a_bias))))
+            else:       # velocity
+                v, partials, a = _material_point(kin, c.point, c.body, n)
+                v, a = builder.vec(v), builder.vec(a)
+                G.append(builder.vec(dot(e, partials[k]) for k in range(n)))
+                gamma.append(builder.name(dot(w_e, v) + dot(e, a)))
+            rows.append((c.name, axis))
+    graph_ = builder.freeze()
+    if spec.dependent_speeds:
+        dependent = tuple(spec.speeds.index(s) for s in spec.dependent_speeds)
+        dep_q = tuple(spec.coordinates.index(c) for c in spec.dependent_coordinates)
+    else:
+        dependent, dep_q = choose_dependent(graph_, G, len(residuals), spec)
+    independent = tuple(k for k in range(n) if k not in dependent)
+    return ConstraintTerms(graph_, tuple(residuals), tuple(G), tuple(gamma),
+                           tuple(rows), dependent, independent, dep_q)
+
+
+def _pivots(M: np.ndarray, count: int) -> tuple:
+    """The first ``count`` columns chosen by Gaussian elimination with complete
+    pivoting (largest remaining entry first)."""
+    M = np.array(M, dtype=float)
+    chosen = []
+    for _ in range(count):
+        i, j = np.unravel_index(np.argmax(np.abs(M)), M.shape)
+        chosen.append(int(j))
+        if M[i, j] != 0:
+            M = M - np.outer(M[:, j] / M[i, j], M[i, :])
+        M[:, j] = 0.0
+        M[i, :] = 0.0
+    return tuple(sorted(chosen))
+
+
+def choose_dependent(graph: Graph, G, m_h: int, spec, seed: int = 0) -> tuple:
+    """(dependent speed indices, dependent coordinate indices) for a model that
+    declares none: the columns of G (and of its position rows) picked by
+    complete pivoting at the parameter defaults and a seeded random
+    configuration (the coordinates' zero is often a singular one: a four-bar
+    with every angle zero)."""
+    rng = np.random.default_rng(seed)
+    values = {symbol(p): v for p, v in zip(spec.parameter_names, spec.parameter_defaults)}
+    values.update({symbol(c): rng.uniform(-np.pi, np.pi) for c in spec.coordinates})
+    m, n = len(G), spec.n
+    Gv = _evaluate(graph, [e for row in G for e in row], values).reshape(m, n)
+    return _pivots(Gv, m), _pivots(Gv[:m_h], m_h) if m_h else ()
+
+
+class _Wheel:
+    """A knife-edge wheel on the plane ``n . r = height`` (n: axis ``normal`` of E).
+
+    With j the axle and s = |n x j| = sqrt(1 - (n.j)^2), the contact point is
+    the centre plus rho = r d, d = -(n - (n.j) j) / s the unit vector of the
+    wheel's plane that points most down.  The height equation is
+    ``n . r_G - r s - height = 0``; the no-slip equations say the wheel's
+    material point at the contact has no velocity along the other two axes of E:
+    ``e_a . (v_G + omega x rho) = 0``.
+    """
+
+    def __init__(self, builder: GraphBuilder, kin: Kinematics, c):
+        spec = kin.spec
+        self.c = c
+        n_q = spec.n
+        body = next(b for b in spec.bodies if b.name == c.body)
+        W, Gk = kin.bases[body.base], kin.points[body.G]
+        nvec = tuple(sympy.S.One if i == c.normal - 1 else sympy.S.Zero for i in range(3))
+        j = _column(W.R, c.axle - 1)
+        r = c.radius
+        jn = builder.name(dot(nvec, j))
+        s = builder.name(sympy.sqrt(1 - jn**2))
+        jdot = builder.vec(cross(W.omega, j))
+        jn_dot = builder.name(dot(nvec, jdot))
+        jn_ddot = builder.name(dot(nvec, add(cross(W.alpha_bias, j), cross(W.omega, jdot))))
+        ratio = builder.name(jn / s)
+        # height: f = n.r_G - r s - h; df/dq_k = n.b_k^G + r (jn/s) n.(c_k x j)
+        self.height_residual = builder.name(dot(nvec, Gk.r) - r * s - c.height)
+        self.height_row = builder.vec(
+            dot(nvec, kin.point_partial(body.G, k))
+            + r * ratio * dot(nvec, cross(W.partials.get(k, ZERO3), j)) for k in range(n_q))
+        self.height_gamma = builder.name(dot(nvec, Gk.a_bias)
+                                         + r * (jn_dot**2 / s**3 + ratio * jn_ddot))
+        # no slip: the material point at rho = r d, d = -(n - jn j)/s
+        u = builder.vec(sub(nvec, tuple(jn * x for x in j)))
+        rho = builder.vec(tuple(-r * x / s for x in u))
+        u_dot = builder.vec(tuple(-jn_dot * a - jn * b for a, b in zip(j, jdot)))
+        rho_dot = builder.vec(tuple(r * (-a / s - b * jn * jn_dot / s**3)
+                                    for a, b in zip(u_dot, u)))
+        a = builder.vec(add(add(Gk.a_bias, cross(W.alpha_bias, rho)), cross(W.omega, rho_dot)))
+        self.no_slip = []
+        for axis in (1, 2, 3):
+            if axis == c.normal:
+                continue
+            e = tuple(sympy.S.One if i == axis - 1 else sympy.S.Zero for i in range(3))
+            row = builder.vec(dot(e, add(kin.point_partial(body.G, k),
+                                         cross(W.partials.get(k, ZERO3), rho)))
+                              for k in range(n_q))
+            self.no_slip.append((axis, row, builder.name(dot(e, a))))
+
+
+def _evaluate(graph: Graph, exprs, values: dict) -> np.ndarray:
+    """``exprs`` at ``values`` (symbol -> float), through the graph's statements."""
+    values = dict(values)
+    for sym, expr in graph.closure(exprs):
+        values[sym] = float(expr.xreplace(values))
+    return np.array([float(sympy.sympify(e).xreplace(values)) for e in exprs])
+
+
+def check_constraints(terms: ConstraintTerms, spec, samples: int = RANK_SAMPLES,
+                      seed: int = 0) -> None:
+    """Refuse redundant constraints (G rank-deficient at every one of ``samples``
+    seeded random configurations) and dependent speeds whose columns of G are
+    singular there (the rhs could never solve for them)."""
+    m, n = terms.m, spec.n
+    flat = [e for row in terms.G for e in row]
+    rng = np.random.default_rng(seed)
+    params = {symbol(p): v for p, v in zip(spec.parameter_names, spec.parameter_defaults)}
+    ranks, dep_ranks = [], []
+    for _ in range(samples):
+        values = dict(params)
+        values.update({qk: rng.uniform(-np.pi, np.pi) for qk in (symbol(c) for c in
+                                                                  spec.coordinates)})
+        Gv = _evaluate(terms.graph, flat, values).reshape(m, n)
+        scale_ = max(1.0, float(np.abs(Gv).max()))
+        tol = 1e-9 * scale_
+        ranks.append(np.linalg.matrix_rank(Gv, tol))
+        dep_ranks.append(np.linalg.matrix_rank(Gv[:, list(terms.dependent)], tol))
+    where = spec.line_of(f"constraints.{terms.rows[0][0]}")
+    if max(ranks) < m:
+        raise ModelError(
+            f"the constraints are redundant: their {m} equations have rank {max(ranks)} at "
+            f"{samples} random configurations (rows: "
+            + ", ".join(f"{name}" + (f" axis {axis}" if axis else "") for name, axis in
+                        terms.rows) + ")",
+            file=spec.source, line=where, key="constraints",
+            fix="remove the equations that follow from the others (e.g. a coincide axis "
+                "that a planar model satisfies anyway)")
+    if max(dep_ranks) < m:
+        raise ModelError(
+            "the dependent speeds " + ", ".join(spec.speeds[k] for k in terms.dependent)
+            + " cannot be solved "
+            "for: their columns of the constraint Jacobian are singular at "
+            f"{samples} random configurations", file=spec.source,
+            line=spec.line_of("dependent"), key="dependent.speeds",
+            fix="choose speeds the constraints actually involve, one per equation")

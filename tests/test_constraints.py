@@ -1,0 +1,388 @@
+"""Constrained models (``constraints:``): the rhs against sympy.physics.mechanics
+``KanesMethod`` with dependent speeds and velocity constraints, written here by
+hand (nothing shared with modelgen but the parameter values), and a four-bar's
+position against Freudenstein's closed form.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import sympy
+from sympy.physics.mechanics import (
+    KanesMethod,
+    Point,
+    ReferenceFrame,
+    RigidBody,
+    dynamicsymbols,
+    inertia,
+)
+
+import modelgen
+from modelgen.errors import ModelError
+from modelgen.model.api import Model, parse_model, spec_to_yaml
+
+ROOT = Path(__file__).resolve().parent.parent
+RTOL = 1e-12
+t = dynamicsymbols._t
+
+
+def _kane_accelerations(kane, q, u, u_ind, u_dep, vc, params):
+    """A function (q values, u_i values) -> (u values, u' values): the dependent
+    speeds from the velocity constraints, every acceleration from KanesMethod's
+    ``mass_matrix`` and ``forcing`` (with dependent speeds these are the n
+    equations: Kane's projected ones and the velocity constraints' time
+    derivatives)."""
+    plain_q, plain_u = sympy.symbols(f"Q0:{len(q)}"), sympy.symbols(f"U0:{len(u)}")
+    swap = dict(zip(q, plain_q)) | dict(zip(u, plain_u))
+
+    def compile_(e):
+        return sympy.lambdify((plain_q, plain_u), sympy.sympify(e).subs(params).xreplace(swap),
+                              "numpy")
+    f_M, f_F = compile_(kane.mass_matrix), compile_(kane.forcing)
+    f_B = compile_(sympy.Matrix(vc).jacobian(u))
+    i_ind = [u.index(s) for s in u_ind]
+    i_dep = [u.index(s) for s in u_dep]
+
+    def accel(qv, ui_v):
+        uv = np.zeros(len(u))
+        uv[i_ind] = ui_v
+        B = np.array(f_B(qv, uv), dtype=float)
+        uv[i_dep] = np.linalg.solve(B[:, i_dep], -B[:, i_ind] @ uv[i_ind])
+        M = np.array(f_M(qv, uv), dtype=float)
+        assert M.shape == (len(u), len(u))
+        return uv, np.linalg.solve(M, np.array(f_F(qv, uv), dtype=float).ravel())
+    return accel
+
+
+def four_bar_reference(values):
+    q1, q2, q3 = q = list(dynamicsymbols("q1:4"))
+    u1, u2, u3 = u = list(dynamicsymbols("u1:4"))
+    a, b, c, d, m1, m2, m3, g = syms = sympy.symbols("a b c d m1 m2 m3 g")
+    N = ReferenceFrame("N")
+    frames = [N.orientnew(f"B{k}", "Axis", (qk, N.z)) for k, qk in enumerate(q, 1)]
+    for f, uk in zip(frames, u):
+        f.set_ang_vel(N, uk * N.z)
+    O = Point("O")
+    O.set_vel(N, 0)
+    D = O.locatenew("D", d * N.x)
+    P1 = O.locatenew("P1", a * frames[0].x)
+    G1 = O.locatenew("G1", a / 2 * frames[0].x)
+    P2 = P1.locatenew("P2", b * frames[1].x)
+    G2 = P1.locatenew("G2", b / 2 * frames[1].x)
+    P3 = D.locatenew("P3", c * frames[2].x)
+    G3 = D.locatenew("G3", c / 2 * frames[2].x)
+    kd = [qk.diff(t) - uk for qk, uk in zip(q, u)]
+    qd_to_u = {qk.diff(t): uk for qk, uk in zip(q, u)}
+    for P in (G1, G2, G3):
+        P.set_vel(N, P.pos_from(O).dt(N).subs(qd_to_u))
+    bodies = []
+    for name, G, f, m, L in (("crank", G1, frames[0], m1, a), ("coupler", G2, frames[1], m2, b),
+                             ("rocker", G3, frames[2], m3, c)):
+        bodies.append(RigidBody(name, G, f, m, (inertia(f, 0, m * L**2 / 12, m * L**2 / 12), G)))
+    loads = [(G, -body.mass * g * N.y) for G, body in zip((G1, G2, G3), bodies)]
+    loop = P2.pos_from(O) - P3.pos_from(O)
+    f = [loop.dot(N.x), loop.dot(N.y)]
+    vc = [sympy.diff(fi, t).subs(qd_to_u) for fi in f]
+    kane = KanesMethod(N, q_ind=[q1], u_ind=[u1], kd_eqs=kd, q_dependent=[q2, q3],
+                       configuration_constraints=f, u_dependent=[u2, u3],
+                       velocity_constraints=vc)
+    kane.kanes_equations(bodies, loads)
+    params = dict(zip(syms, values))
+    return _kane_accelerations(kane, q, u, [u1], [u2, u3], vc, params)
+
+
+def rolling_disc_reference(values):
+    q1, q2, q3, x, y = q = list(dynamicsymbols("q1:4 x y"))
+    u = list(dynamicsymbols("u1:6"))
+    m, r, g = syms = sympy.symbols("m r g")
+    N = ReferenceFrame("N")
+    Y = N.orientnew("Y", "Axis", (q1, N.z))
+    L = Y.orientnew("L", "Axis", (q2, Y.x))
+    R = L.orientnew("R", "Axis", (q3, L.y))
+    qd_to_u = {qk.diff(t): uk for qk, uk in zip(q, u)}
+    for fr in (Y, L, R):
+        fr.set_ang_vel(N, fr.ang_vel_in(N).subs(qd_to_u))
+    O = Point("O")
+    O.set_vel(N, 0)
+    C = O.locatenew("C", x * N.x + y * N.y)
+    Dm = C.locatenew("Dm", r * L.z)
+    Dm.set_vel(N, Dm.pos_from(O).dt(N).subs(qd_to_u))
+    contact = Dm.vel(N) + R.ang_vel_in(N).cross(C.pos_from(Dm))
+    vc = [contact.dot(N.x), contact.dot(N.y)]
+    disc = RigidBody("disc", Dm, R, m, (inertia(R, m * r**2 / 4, m * r**2 / 2, m * r**2 / 4),
+                                        Dm))
+    kd = [qk.diff(t) - uk for qk, uk in zip(q, u)]
+    kane = KanesMethod(N, q_ind=q, u_ind=u[:3], kd_eqs=kd, u_dependent=u[3:],
+                       velocity_constraints=vc)
+    kane.kanes_equations([disc], [(Dm, -m * g * N.z)])
+    return _kane_accelerations(kane, q, u, u[:3], u[3:], vc, dict(zip(syms, values)))
+
+
+@pytest.fixture(scope="module")
+def four_bar():
+    return modelgen.load(ROOT / "models" / "four_bar.yaml")
+
+
+@pytest.fixture(scope="module")
+def rolling_disc():
+    return modelgen.load(ROOT / "models" / "rolling_disc.yaml")
+
+
+def _compare(cm, reference, rng, n_states, q_scale=np.pi, u_scale=2.0):
+    worst = 0.0
+    ind = cm.manifest["constraints"]["independent_speeds"]
+    for _ in range(n_states):
+        q = rng.uniform(-q_scale, q_scale, cm.nq)
+        ui = rng.uniform(-u_scale, u_scale, len(ind))
+        u_ref, a_ref = reference(q, ui)
+        x = np.concatenate([q, rng.normal(size=cm.n)])     # dependent speeds: ignored
+        x[cm.nq + np.array(ind)] = ui
+        xdot = cm.rhs(0.0, x)
+        got = np.concatenate([xdot[:cm.nq], xdot[cm.nq:]])
+        want = np.concatenate([u_ref, a_ref])
+        err = np.linalg.norm(got - want) / max(np.linalg.norm(want), 1e-3)
+        worst = max(worst, err)
+    return worst
+
+
+def test_four_bar_rhs_matches_kanes_method_with_dependent_speeds(four_bar):
+    reference = four_bar_reference(list(four_bar.parameters.values()))
+    worst = _compare(four_bar, reference, np.random.default_rng(26), 20)
+    assert worst <= RTOL, worst
+
+
+def test_rolling_disc_rhs_matches_kanes_method_with_dependent_speeds(rolling_disc):
+    reference = rolling_disc_reference(list(rolling_disc.parameters.values()))
+    worst = _compare(rolling_disc, reference, np.random.default_rng(27), 20, q_scale=1.2)
+    assert worst <= RTOL, worst
+
+
+# -- positions, assembly, drift --------------------------------------------------
+
+def freudenstein_rocker(theta2, a, b, c, d):
+    """Both rocker angles theta4 of a four-bar (ground d, crank a, coupler b, rocker c)
+    from Freudenstein's equation K1 cos t4 - K2 cos t2 + K3 = cos(t2 - t4)."""
+    K1, K2, K3 = d / a, d / c, (a**2 - b**2 + c**2 + d**2) / (2 * a * c)
+    A, B, C = K1 - np.cos(theta2), -np.sin(theta2), K3 - K2 * np.cos(theta2)
+    root = np.sqrt(B**2 - (C - A) * (C + A))
+    return [2 * np.arctan((-B + s * root) / (C - A)) for s in (1.0, -1.0)]
+
+
+def test_four_bar_assembly_matches_freudenstein(four_bar):
+    a, b, c, d = (four_bar.parameters[k] for k in "abcd")
+    q = np.array([0.3, 1.0, 2.0])
+    worst = 0.0
+    for theta2 in np.linspace(0.0, 2 * np.pi, 13):
+        q = four_bar.assemble([theta2, q[1], q[2]], keep=["q1"])
+        assert q[0] == theta2
+        assert np.max(np.abs(four_bar.constraint_residuals(q))) <= 1e-13
+        expected = min(freudenstein_rocker(theta2, a, b, c, d),
+                       key=lambda t4: abs(np.angle(np.exp(1j * (t4 - q[2])))))
+        worst = max(worst, abs(np.angle(np.exp(1j * (q[2] - expected)))))
+    assert worst <= 1e-12, worst
+
+
+def test_four_bar_energy_and_constraints_hold_over_100_s(four_bar):
+    q0 = four_bar.assemble([0.3, 1.0, 2.0], keep=["q1"])
+    qd0 = four_bar.consistent_speeds(q0, [2.0, 0.0, 0.0])
+    res = four_bar.simulate(np.concatenate([q0, qd0]), (0.0, 100.0),
+                            t_eval=np.linspace(0.0, 100.0, 2001), method="dop853",
+                            rtol=1e-12, atol=1e-12)
+    assert res.success, res.message
+    q, qd = res.y[:3], res.y[3:]
+    residual = max(np.max(np.abs(four_bar.constraint_residuals(q[:, k])))
+                   for k in range(q.shape[1]))
+    velocity = max(np.max(np.abs(four_bar.constraint_jacobian(q[:, k]) @ qd[:, k]))
+                   for k in range(q.shape[1]))
+    energy = np.array([four_bar.energy(q[:, k], qd[:, k]).sum() for k in range(q.shape[1])])
+    drift = np.max(np.abs(energy - energy[0])) / abs(energy[0])
+    assert residual <= 1e-12, residual
+    assert velocity <= 1e-10, velocity
+    assert drift <= 1e-8, drift
+
+
+def test_simulate_refuses_a_state_off_the_constraints(four_bar):
+    with pytest.raises(modelgen.errors.SimulationError, match="assemble it first"):
+        four_bar.simulate([0.3, 1.0, 2.0, 0.0, 0.0, 0.0], (0.0, 1.0))
+    q0 = four_bar.assemble([0.3, 1.0, 2.0], keep=["q1"])
+    with pytest.raises(modelgen.errors.SimulationError, match="consistent_speeds"):
+        four_bar.simulate(np.concatenate([q0, [1.0, 1.0, 1.0]]), (0.0, 1.0))
+
+
+def test_a_singular_dependent_block_is_an_error_naming_the_dead_point(four_bar):
+    # every angle zero: coupler and rocker collinear, the dependent columns of G singular
+    with pytest.raises(modelgen.errors.SimulationError, match="dead point") as info:
+        four_bar.rhs(0.0, [0.0, 0.0, 0.0, 1.0, 0.0, 0.0])
+    assert "pivot of q3_dot" in str(info.value)
+
+
+def test_four_bar_at_its_dead_point_stops_with_a_status(tmp_path):
+    # the rocker's speed independent: at the rocker's extreme positions crank and
+    # coupler are collinear and the crank's and coupler's speeds are not determined
+    text = (ROOT / "models" / "four_bar.yaml").read_text().replace(
+        "name: four_bar", "name: four_bar_rocker").replace(
+        "dependent: {coordinates: [q2, q3], speeds: [q2_dot, q3_dot]}",
+        "dependent: {coordinates: [q1, q2], speeds: [q1_dot, q2_dot]}")
+    path = tmp_path / "four_bar_rocker.yaml"
+    path.write_text(text)
+    cm = modelgen.load(path)
+    a, b, c, d = (cm.parameters[k] for k in "abcd")
+    # |D + c e(q3)| = a + b: crank and coupler stretched out in line
+    q3 = np.arccos(((a + b) ** 2 - d**2 - c**2) / (2 * c * d))
+    theta = np.arctan2(c * np.sin(q3), d + c * np.cos(q3))
+    x0 = np.array([theta, theta, q3, 0.0, 0.0, 0.0])
+    assert np.max(np.abs(cm.constraint_residuals(x0[:3]))) <= 1e-14
+    res = cm.simulate(x0, (0.0, 1.0), method="dop853")
+    assert res.status == modelgen.codegen.capi.STATUS_BY_NAME["PROJECTION"].code
+    assert "dead point" in res.message and "x=[" in res.message, res.message
+    assert np.all(np.isfinite(res.y))
+    with pytest.raises(modelgen.errors.SimulationError, match="pivot of q"):
+        cm.rhs(0.0, x0)
+
+
+# -- the model format ------------------------------------------------------------------
+
+FOUR_BAR = (ROOT / "models" / "four_bar.yaml").read_text()
+
+
+def test_constraints_round_trip_through_yaml():
+    for name in ("four_bar", "rolling_disc"):
+        spec = modelgen.model.api.load_model(ROOT / "models" / f"{name}.yaml")
+        assert parse_model(spec_to_yaml(spec)) == spec
+
+
+def test_constraints_from_the_python_api_equal_the_yaml():
+    m = Model("slider").add_coordinates("x", "y").add_parameters({"L": 1.0, "m": 1.0})
+    m.add_point("P", coordinates=["x", "y", 0]).add_body("b", mass="m", G="P", base="E")
+    m.add_constraint("circle", "position", expression="x**2 + y**2 - L**2")
+    m.set_dependent(coordinates=["y"], speeds=["y_dot"])
+    spec = m.spec()
+    assert parse_model(spec_to_yaml(spec)) == spec
+    assert spec.constraints[0].expression == sympy.sympify("x**2 + y**2 - L**2")
+
+
+@pytest.mark.parametrize("old, new, message, key", [
+    ("point_b: P3", "point_b: P9", "unknown point 'P9'", "constraints.loop.point_b"),
+    ("base: E, axes", "base: B7, axes", "unknown base 'B7'", "constraints.loop.base"),
+    ("axes: [1, 2]", "axes: [1, 4]", "axis must be 1, 2 or 3", "constraints.loop.axes[1]"),
+    ("type: coincide", "type: coincident", "unknown constraint type", "constraints.loop.type"),
+    ("speeds: [q2_dot, q3_dot]", "speeds: [q2_dot]", "1 dependent speeds for 2 constraint",
+     "dependent"),
+    ("coordinates: [q2, q3], speeds", "coordinates: [q2, q9], speeds",
+     "'q9' is not a declared coordinate", "dependent.coordinates[1]"),
+    ("axes: [1, 2]", "axes: [1, 2, 3]",
+     "3 constraint equations for 3 coordinates", "constraints.loop"),
+])
+def test_constraint_errors_name_file_line_key_and_fix(old, new, message, key):
+    assert old in FOUR_BAR
+    with pytest.raises(ModelError) as info:
+        parse_model(FOUR_BAR.replace(old, new), "four_bar.yaml")
+    err = info.value
+    assert message in str(err), str(err)
+    assert err.key == key and err.file == "four_bar.yaml" and err.line is not None
+    assert err.fix
+
+
+def test_a_constraint_not_linear_in_the_speeds_is_refused():
+    text = FOUR_BAR.replace(
+        "loop: {type: coincide, point_a: P2, point_b: P3, base: E, axes: [1, 2]}",
+        "loop: {type: coincide, point_a: P2, point_b: P3, base: E, axes: [1]}\n"
+        "  spin: {type: speeds, expression: 'q1_dot*q2_dot - q3_dot'}")
+    with pytest.raises(ModelError, match="not linear in the speeds") as info:
+        parse_model(text, "four_bar.yaml")
+    assert info.value.key == "constraints.spin.expression" and info.value.line is not None
+    text = text.replace("q1_dot*q2_dot - q3_dot", "q1_dot - 1")
+    with pytest.raises(ModelError, match="term without a speed"):
+        parse_model(text, "four_bar.yaml")
+
+
+def test_redundant_constraints_are_refused_at_generation(tmp_path):
+    # a planar loop closed along z as well: the z equation is 0 = 0
+    text = FOUR_BAR.replace("name: four_bar", "name: four_bar_z").replace(
+        "coordinates: [q1, q2, q3]", "coordinates: [q1, q2, q3, q4]").replace(
+        "axes: [1, 2]}", "axes: [1, 2, 3]}").replace(
+        "coordinates: [q2, q3], speeds: [q2_dot, q3_dot]",
+        "coordinates: [q2, q3, q4], speeds: [q2_dot, q3_dot, q4_dot]")
+    path = tmp_path / "four_bar_z.yaml"
+    path.write_text(text)
+    with pytest.raises(ModelError, match="redundant") as info:
+        modelgen.load(path)
+    assert info.value.line is not None and "loop" in str(info.value)
+
+
+def test_slider_crank_piston_follows_the_closed_form():
+    cm = modelgen.load(ROOT / "models" / "slider_crank.yaml")
+    r, l = cm.parameters["r"], cm.parameters["l"]
+    q = np.array([0.0, 0.0, r + l])
+    worst = 0.0
+    for q1 in np.linspace(0.0, 2 * np.pi, 17):
+        q = cm.assemble([q1, q[1], q[2]], keep=["q1"])
+        expected = r * np.cos(q1) + np.sqrt(l**2 - (r * np.sin(q1)) ** 2)
+        worst = max(worst, abs(q[2] - expected))
+    assert worst <= 1e-12, worst
+
+
+def test_dependent_speeds_chosen_by_pivoting_give_the_same_motion(tmp_path, four_bar):
+    text = FOUR_BAR.replace("name: four_bar", "name: four_bar_auto").replace(
+        "dependent: {coordinates: [q2, q3], speeds: [q2_dot, q3_dot]}\n", "")
+    path = tmp_path / "four_bar_auto.yaml"
+    path.write_text(text)
+    cm = modelgen.load(path)
+    info = cm.manifest["constraints"]
+    assert info["chosen"] and len(info["dependent_speeds"]) == 2
+    rng = np.random.default_rng(5)
+    worst = 0.0
+    for _ in range(10):
+        q = four_bar.assemble(rng.uniform(-np.pi, np.pi, 3))
+        qd = four_bar.consistent_speeds(q, [rng.normal(), 0.0, 0.0])
+        x = np.concatenate([q, qd])
+        a, b = cm.rhs(0.0, x), four_bar.rhs(0.0, x)
+        worst = max(worst, np.linalg.norm(a - b) / np.linalg.norm(b))
+    assert worst <= 1e-12, worst
+
+
+WHEEL_DISC = """
+name: wheel_disc
+coordinates: [q1, q2, q3, x, y, z]
+parameters: {m: 1.0, r: 0.5, g: 9.81}
+bases:
+  Y: {parent: E, axis: 3, angle: q1}
+  L: {parent: Y, axis: 1, angle: q2}
+  R: {parent: L, axis: 2, angle: q3}
+points:
+  Gd: {coordinates: [x, y, z]}
+bodies:
+  disc: {mass: m, G: Gd, base: R, inertia: [m*r**2/4, m*r**2/2, m*r**2/4]}
+gravity: [0, 0, -g]
+constraints:
+  wheel: {type: rolling, body: disc, axle: 2, radius: r}
+dependent: {coordinates: [z], speeds: [x_dot, y_dot, z_dot]}
+"""
+
+
+def test_rolling_helper_moves_as_the_written_out_disc(tmp_path, rolling_disc):
+    """The ``rolling`` kind (contact geometry, height and no-slip built by modelgen)
+    against the disc written out by hand (checked against KanesMethod above)."""
+    spec = parse_model(WHEEL_DISC)
+    assert parse_model(spec_to_yaml(spec)) == spec
+    path = tmp_path / "wheel_disc.yaml"
+    path.write_text(WHEEL_DISC)
+    wheel = modelgen.load(path)
+    rng = np.random.default_rng(11)
+    worst = 0.0
+    for _ in range(20):
+        q = np.concatenate([rng.uniform(-1.2, 1.2, 3), rng.normal(size=2)])
+        qd = rolling_disc.consistent_speeds(q, np.concatenate([rng.normal(size=3), [0, 0]]))
+        x = np.concatenate([q, qd])
+        centre = rolling_disc.body_poses(q).reshape(-1, 4, 4)[0][:3, 3]
+        xw = np.concatenate([q[:3], centre, qd[:3], np.zeros(3)])
+        assert np.max(np.abs(wheel.constraint_residuals(xw[:6]))) <= 1e-14
+        want, got = rolling_disc.rhs(0.0, x), wheel.rhs(0.0, xw)
+        # yaw, lean, spin and their accelerations; the centre's velocity
+        pairs = [(got[:3], want[:3]), (got[6:9], want[5:8])]
+        err = sum(np.linalg.norm(a - b) for a, b in pairs) / sum(np.linalg.norm(b)
+                                                                  for _, b in pairs)
+        worst = max(worst, err)
+    assert worst <= 1e-12, worst
