@@ -17,20 +17,14 @@ import numbers
 import re
 from typing import Mapping, NamedTuple, Optional
 
-import numpy as np
 import sympy
 
 from modelgen.errors import ModelError
 
-#: the symmetry of an inertia matrix is checked numerically, at the default parameters
-#: and at SYMMETRY_SAMPLES - 1 seeded random scalings of them, to this relative tolerance
-#: of the matrix's largest entry (a tensor from R diag(d) R^T differs by ulps across the
-#: diagonal; an exact comparison refused most real tensors, a symbolic one could hang)
-SYMMETRY_SAMPLES = 3
-SYMMETRY_RTOL = 1e-9
 from modelgen.model import spec as specmod
 from modelgen.model.constraints import constraint_decl, constraint_fields, dependent_decl
 from modelgen.model.expr import ExpressionParseError, format_expression, parse_expression
+from modelgen.model.inertia import check_physical_inertia, read_inertia
 from modelgen.model.messages import (article, as_list, closest, describe, join_and,
                                      quote_expression)
 from modelgen.model.names import (MAX_NAME_LENGTH, NAME_FIX, NAME_RE, NAMESPACE_NOTE,
@@ -487,7 +481,7 @@ class ModelBuilder:
         mass = self.expression(mass, f"{key}.mass", "constant")
         G = self.reference(G, "point", f"{key}.G")
         base = self.reference(base, "base", f"{key}.base")
-        inertia = self.inertia(inertia, f"{key}.inertia", name)
+        inertia = read_inertia(self, inertia, f"{key}.inertia", name)
         mass_value = self.at_defaults(mass)
         if mass_value is None:
             raise self.error(f"mass of body '{name}' is not a real number with the default "
@@ -498,94 +492,9 @@ class ModelBuilder:
                              f"= {mass_value!r} with the default parameters", f"{key}.mass",
                              "give a mass >= 0")
         if self.physical_inertia:
-            self.check_physical_inertia(name, inertia, f"{key}.inertia")
+            check_physical_inertia(self, name, inertia, f"{key}.inertia")
         self.register(name, "body", key)
         self.bodies.append(BodyDecl(name, mass, G, base, inertia, key))
-
-    def inertia(self, value, key: str, body: str) -> tuple:
-        zero = sympy.Integer(0)
-        if value is None:
-            return ((zero,) * 3,) * 3
-        shape = "write [Ixx, Iyy, Izz] (principal moments) or a 3x3 matrix [[Ixx, Ixy, Ixz], " \
-                "[Ixy, Iyy, Iyz], [Ixz, Iyz, Izz]]"
-        rows = as_list(value)
-        if not isinstance(rows, list) or len(rows) != 3:
-            raise self.error("expected 3 principal moments or a 3x3 matrix but got "
-                             f"{describe(value)}", key, shape)
-        rows = [as_list(row) for row in rows]
-        if not any(isinstance(row, list) for row in rows):
-            diagonal = [self.expression(item, f"{key}[{i}]", "constant")
-                        for i, item in enumerate(rows)]
-            return tuple(tuple(diagonal[i] if i == j else zero for j in range(3))
-                         for i in range(3))
-        for i, row in enumerate(rows):
-            if not isinstance(row, list) or len(row) != 3:
-                raise self.error(f"row {i + 1} of the 3x3 inertia matrix is "
-                                 f"{describe(row)}, not a list of 3 items", key, shape)
-        matrix = [[self.expression(item, f"{key}[{i}][{j}]", "constant")
-                   for j, item in enumerate(row)] for i, row in enumerate(rows)]
-        samples = [self.sample_values(matrix, k) for k in range(SYMMETRY_SAMPLES)]
-        for i in range(3):
-            for j in range(i + 1, 3):
-                upper, lower = matrix[i][j], matrix[j][i]
-                if upper == lower:
-                    continue
-                for values in samples:
-                    if values is None:
-                        continue
-                    scale = max(abs(v) for row in values for v in row) or 1.0
-                    if not abs(values[i][j] - values[j][i]) <= SYMMETRY_RTOL * scale:
-                        raise self.error(
-                            f"inertia of body '{body}' is not symmetric: entry [{i}][{j}] is "
-                            f"{format_expression(upper)} but entry [{j}][{i}] is "
-                            f"{format_expression(lower)}", key,
-                            f"make entries [{i}][{j}] and [{j}][{i}] equal")
-                # equal to rounding (a tensor computed as R diag(d) R^T): keep their mean
-                matrix[i][j] = matrix[j][i] = (
-                    (upper + lower) / 2 if upper.is_Number and lower.is_Number else upper)
-        return tuple(tuple(row) for row in matrix)
-
-    def sample_values(self, matrix, k: int):
-        """The 3x3 ``matrix`` evaluated numerically (never expanded): at the defaults for
-        ``k = 0``, else with every parameter scaled by a seeded factor in [0.5, 2].
-        None when it is not real there."""
-        if k == 0:
-            values = self.defaults
-        else:
-            rng = np.random.default_rng(k)
-            values = {s: sympy.Float(float(v) * rng.uniform(0.5, 2.0))
-                      for s, v in self.defaults.items()}
-        out = []
-        for row in matrix:
-            try:
-                out.append([float(item.xreplace(values)) for item in row])
-            except (TypeError, ValueError, OverflowError):
-                return None
-        return out if all(math.isfinite(v) for row in out for v in row) else None
-
-    def check_physical_inertia(self, body: str, inertia: tuple, key: str) -> None:
-        values = [[self.at_defaults(item) for item in row] for row in inertia]
-        if any(v is None for row in values for v in row):
-            raise self.error(f"inertia of body '{body}' is not real with the default "
-                             "parameters", key, "check the inertia expressions")
-        # scaled by the largest entry first, so that squares inside the eigen solver
-        # cannot overflow (entries near 1e308) and the test is the same at any scale
-        matrix = np.array(values, dtype=float)
-        scale = float(np.max(np.abs(matrix))) or 1.0
-        d = np.linalg.eigvalsh(matrix / scale)
-        moments = d * scale
-        tol = 1e-9 * max(1.0 / scale, float(np.max(np.abs(d))))
-        shown = "[" + ", ".join(f"{m:.6g}" for m in moments) + "]"
-        if d[0] < -tol:
-            raise self.error(f"inertia of body '{body}' has a negative principal moment "
-                             f"with the default parameters: {shown}", key,
-                             "give a positive semi-definite inertia tensor about G")
-        if d[0] + d[1] < d[2] - tol:
-            raise self.error(f"inertia of body '{body}' violates the triangle inequality "
-                             f"with the default parameters: principal moments {shown}, "
-                             f"{moments[0]:.6g} + {moments[1]:.6g} < {moments[2]:.6g}", key,
-                             "no rigid body has these moments; each principal moment must "
-                             "be at most the sum of the other two")
 
     def set_gravity(self, vector, key: str = "gravity") -> None:
         if vector is None:

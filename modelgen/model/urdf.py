@@ -455,6 +455,22 @@ class _Builder:
         raise ModelError(f"inertia of {what} {problem}: principal moments {shown}, {off}",
                          file=self.robot.file, line=line, key=f"{key}.inertia", fix=fix)
 
+    def link_frames(self) -> None:
+        """A frame per link (its origin point and base), named after the link, or
+        ``<link>_frame`` when the name is taken (a moving link's body has it)."""
+        for link in self.robot.links:
+            name = sanitize(link)
+            try:
+                check_name(name)
+                free = name not in self.taken and not name.endswith("_dot")
+            except ModelError:
+                free = False
+            if free:
+                self.taken.add(name)
+            else:
+                name = self.unique(f"{name}_frame")
+            self.model.add_frame(name, point=self.point[link], base=self.base[link])
+
     def parameter(self, wanted: str, value) -> sympy.Symbol:
         name = self.unique(wanted)
         self.model.add_parameter(name, float(value))

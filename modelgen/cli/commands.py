@@ -1,36 +1,15 @@
-"""Command-line interface: a thin shell over the library.
-
-``modelgen generate MODEL.yaml [-o DIR]``  writes the C, header and compiled
-module and prints n, the operation counts and the time of each stage.
-
-``modelgen sweep SCENE.yaml --param m2=0.5:2:64 --init q1=0.1:3:32 [--scheduler local]``
-runs a grid of runs (in-process or on Dask) into a netCDF dataset.
-
-``modelgen simulate SCENE.yaml [-o OUT]``  builds (or reuses) the scene's
-reduced model, integrates it in C and writes CSV, NPZ and PNG; given a model
-file instead of a scene, integrates it with RK4 from ``--init`` values.
-
-Every command's ``-o`` names the file or directory of its product, and
-``--build-dir`` where the model is built (``generate``'s product is the build,
-so there the two are one).
-
-Exit status (:data:`EXIT`): 0 success; 2 bad input (a model, scene or
-command-line mistake, a value out of range, a result larger than
-``--max-output-mb``); 3 a build error (compiler missing or failing); 4 a
-simulation that failed (its partial results are still written); 1 an
-unexpected internal error; 130 interrupted by Ctrl-C (SIGINT), 143 by SIGTERM
-(both keep and write the results so far, marked partial; a second signal
-stops at once).  Errors print one line, ``modelgen: error: ...``, with the
-fix; ``--debug`` also shows the traceback and keeps the exit status.
+"""The commands of the command line: one function each (``generate_command``,
+``simulate_command``, ...), taking the parsed arguments and returning the exit
+status; the progress bars, the overrides of --set/--init, the output budget and
+the reports they share.  :mod:`modelgen.cli.parsers` builds the parser that
+calls them, :mod:`modelgen.cli` runs it.
 """
 from __future__ import annotations
 
-import argparse
 import contextlib
 import math
 import os
 import shutil
-import signal
 import sys
 import threading
 import time
@@ -39,17 +18,29 @@ from pathlib import Path
 
 from modelgen.codegen.capi import STATUS_BY_NAME
 from modelgen.codegen.options import BuildOptions
-from modelgen.errors import (ArgumentTypeError, ArgumentValueError, BuildError, ModelgenError,
-                             SimulationError, TemplateError)
-from modelgen.version import __version__
+from modelgen.errors import (ModelgenError,
+                             SimulationError)
+
+
+#: exit status of each outcome (documented in the module docstring and the README):
+#: 128 + the signal's number for SIGINT and SIGTERM, as a shell reports them
+EXIT = {"ok": 0, "internal": 1, "input": 2, "build": 3, "simulation": 4, "interrupted": 130,
+        "terminated": 143}
+
+
+#: the C integrators' status for a run stopped by Ctrl-C
+INTERRUPTED = STATUS_BY_NAME["INTERRUPTED"].code
 
 
 #: the largest output a run or sweep may write without --max-output-mb [MB]: its
 #: samples x columns x runs doubles, plus a run's CSV text
 MAX_OUTPUT_MB = 1000.0
+
+
 #: the columns an output of each kind adds to a result (n: one per speed)
 _OUTPUT_COLUMNS = {"position": 3, "velocity": 3, "orientation": 9, "angular_velocity": 3,
                    "energy": 1, "generalized_force": "n", "power": 1, "pose": 16}
+
 
 #: a progress bar appears only once its task has run this long [s]
 #: (``MODELGEN_PROGRESS_DELAY`` overrides it)
@@ -124,34 +115,7 @@ def _reading(args) -> dict:
     return out
 
 
-def _bound(text: str) -> float:
-    """A finite number >= 0 (for --min-mass and --min-inertia)."""
-    try:
-        value = float(text)
-    except ValueError:
-        value = -1.0
-    if not (math.isfinite(value) and value >= 0):
-        raise argparse.ArgumentTypeError(f"{text!r} is not a finite number >= 0")
-    return value
-
-
-def _add_reading_options(parser) -> None:
-    parser.add_argument("--inertia", choices=("physical", "as-is", "balance"),
-                        default="physical",
-                        help="(a URDF) bodies whose inertia no rigid body has: refuse them "
-                             "(physical, default), keep the file's values as Pinocchio "
-                             "does (as-is, with a warning per body), or set the principal "
-                             "moments to their mean as MuJoCo's balanceinertia does "
-                             "(balance)")
-    parser.add_argument("--min-mass", type=_bound, default=0.0, metavar="KG",
-                        help="(a URDF) lower bound on each moving body's mass, as MuJoCo's "
-                             "boundmass (for massless moving links)")
-    parser.add_argument("--min-inertia", type=_bound, default=0.0, metavar="KG_M2",
-                        help="(a URDF) lower bound on each body's principal moments of "
-                             "inertia, as MuJoCo's boundinertia")
-
-
-def _generate(args) -> int:
+def generate_command(args) -> int:
     from modelgen.model import as_spec, is_scene_file
     from modelgen.sim.load import generate_model
     t0 = time.perf_counter()
@@ -194,7 +158,7 @@ def _generate(args) -> int:
     return 0
 
 
-def _import(args) -> int:
+def import_command(args) -> int:
     if Path(args.urdf).suffix.lower() == ".xml":
         return _import_mjcf(args)
     from modelgen.model.urdf import import_urdf, urdf_to_yaml
@@ -431,7 +395,7 @@ def _check_output_dir(path) -> None:
             break
 
 
-def _simulate(args) -> int:
+def simulate_command(args) -> int:
     import numpy as np
     from modelgen.model import as_spec, is_scene_file
     from modelgen.sim.load import load
@@ -466,7 +430,7 @@ def _simulate(args) -> int:
                    conservative=None, animation=(model, cm, p))
 
 
-def _linearize(args) -> int:
+def linearize_command(args) -> int:
     """Linearize a model or scene at --at (over the scene's initial state, or zero) and
     --u (over the scene's inputs at --t, or zero); print A, B, the modes; write -o."""
     import numpy as np
@@ -522,7 +486,7 @@ def _linearize(args) -> int:
     return 0
 
 
-def _bench(args) -> int:
+def bench_command(args) -> int:
     import modelgen.bench as wp
     from modelgen.model import is_scene_file
 
@@ -557,7 +521,7 @@ def _bench(args) -> int:
     return 0
 
 
-def _hard_cases(args) -> int:
+def hard_cases_command(args) -> int:
     import modelgen.bench.hard_cases as hc
 
     def progress(name):
@@ -578,16 +542,7 @@ def _hard_cases(args) -> int:
     return 0
 
 
-class _Parser(argparse.ArgumentParser):
-    """An argument parser whose errors end with the fix: the help of the command at fault."""
-
-    def error(self, message):
-        self.print_usage(sys.stderr)
-        self.exit(EXIT["input"], f"{self.prog}: error: {message}; fix: see "
-                                 f"`{self.prog} --help` for the options\n")
-
-
-def _fmu(args) -> int:
+def fmu_command(args) -> int:
     from modelgen.codegen.fmu import build_fmu
     if not Path(args.model).is_file():
         raise ModelgenError(f"{args.model}: no such file; fix: give a model or scene file, "
@@ -605,34 +560,7 @@ def _fmu(args) -> int:
     return 0
 
 
-def _fmu_parser(sub) -> None:
-    f = sub.add_parser("fmu", help="export a model or scene as an FMI 2.0 FMU (Model Exchange "
-                                   "and Co-Simulation)",
-                       description="Write an FMI 2.0 FMU for Model Exchange and Co-Simulation "
-                                   "in one archive: modelDescription.xml (states q.., q.._dot "
-                                   "and their derivatives, tunable parameters, inputs, a "
-                                   "scene's outputs), the C sources and the binary for this "
-                                   "platform. Co-Simulation steps with modelgen's own "
-                                   "integrator, chosen here.")
-    f.add_argument("model", help="model YAML, URDF or scene YAML file")
-    f.add_argument("-o", "--output", default="out",
-                   help="the .fmu file, or a directory for <name>.fmu (default: out)")
-    f.add_argument("--method", default=None,
-                   help="Co-Simulation integrator: rk4, dopri5, dop853, rodas, midpoint, gauss4 "
-                        "(default: the scene's, or dop853)")
-    f.add_argument("--rtol", type=float, default=None,
-                   help="relative tolerance of an adaptive method (default: the scene's, "
-                        "or 1e-8)")
-    f.add_argument("--atol", type=float, default=None,
-                   help="absolute tolerance (default: the scene's, or 1e-10)")
-    f.add_argument("--step", type=float, default=None,
-                   help="step of a fixed-step method [s] (default: the scene's)")
-    f.add_argument("--build-dir", default=None,
-                   help="where the model is built (default: the per-user cache)")
-    f.set_defaults(func=_fmu)
-
-
-def _sweep(args) -> int:
+def sweep_command(args) -> int:
     """``modelgen sweep``: a grid of parameters and initial values, in-process or on Dask."""
     import numpy as np
     from modelgen.model import as_spec, is_scene_file
@@ -709,321 +637,3 @@ def _sweep(args) -> int:
         sw.plot_scalar(ds, how, variable, png)
         print(f"wrote {png}")
     return EXIT["simulation"] if ds.attrs["failed"] and args.strict else 0
-
-
-def build_parser() -> argparse.ArgumentParser:
-    parser = _Parser(
-        prog="modelgen",
-        description="Generate fast C code for the equations of motion of multibody models.")
-    parser.add_argument("--version", action="version", version=f"modelgen {__version__}")
-    parser.add_argument("--debug", action="store_true",
-                        help="show the Python traceback of an error")
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-    sub.required = True
-
-    g = sub.add_parser("generate", help="derive the equations, write C and compile the module",
-                       description="Derive A, h and tau, eliminate common subexpressions, "
-                                   "write <name>.c/<name>.h and compile them into a shared "
-                                   "library. An "
-                                   "unchanged model reuses the cached build.")
-    g.add_argument("model", help="model YAML or URDF file")
-    g.add_argument("-o", "--output", "--build-dir", dest="output", default=None,
-                   help="output directory of the C, header and library: the build directory "
-                        "(-o and --build-dir are the same here; default: the per-user cache, "
-                        "see modelgen.codegen.pipeline.default_output)")
-    g.add_argument("--force", action="store_true", help="rebuild even if cached")
-    g.add_argument("-q", "--quiet", action="store_true",
-                   help="no progress bar (one is drawn on a terminal when the build takes "
-                        "more than 2 s)")
-    g.add_argument("--jacobian", action="store_true",
-                   help="also generate <name>_jacobian, the symbolic d(xdot)/dx")
-    g.add_argument("--formulation", choices=("auto", "aba", "crba"), default="auto",
-                   help="how <name>_rhs computes q_ddot: aba (articulated-body algorithm, "
-                        "O(n), joint trees only), crba (mass matrix and Cholesky solve), or "
-                        "auto (aba for joint trees from a measured size on; default)")
-    g.add_argument("--floating-base", action="store_true",
-                   help="(a URDF) make the root link a free body: a free joint root_joint "
-                        "with a position, a unit quaternion and 6 speeds")
-    _add_reading_options(g)
-    g.add_argument("--max-operations", type=int, default=None, metavar="N",
-                   help="build budget: refuse a model whose C would cost more than N "
-                        "operations after CSE (sin, cos count 40), before compiling "
-                        "(default: $MODELGEN_MAX_OPERATIONS, else 250000)")
-    g.set_defaults(func=_generate)
-
-    s = sub.add_parser("simulate", help="run a scene (or a model) and write CSV, NPZ and PNG",
-                       description="Run a scene file: build (or reuse) its reduced model with "
-                                   "only the effects and outputs it selects, integrate it in C "
-                                   "and write OUT/<scene>.csv, .npz and .png. Given a model "
-                                   "file instead, integrate it with RK4 from --init values.")
-    s.add_argument("model", help="scene YAML file (or model YAML or URDF file)")
-    s.add_argument("-o", "--output", default="out", help="output directory (default: out)")
-    s.add_argument("--build-dir", default=None,
-                   help="where the model is built (default: the per-user cache)")
-    s.add_argument("--max-operations", type=int, default=None, metavar="N",
-                   help="build budget: refuse a model whose C would cost more than N "
-                        "operations after CSE (sin, cos count 40), before compiling "
-                        "(default: $MODELGEN_MAX_OPERATIONS, else 250000)")
-    s.add_argument("--t-end", type=float, default=None,
-                   help="final time [s] (default: the scene's, or 10 for a model)")
-    s.add_argument("--dt", type=float, default=None,
-                   help="step of a fixed-step method [s] (default: the scene's, or 1e-3)")
-    s.add_argument("--sample", type=float, default=None,
-                   help="sampling interval of the output [s] (default: the scene's, or "
-                        "the step)")
-    s.add_argument("--method", default=None,
-                   help="integration method: rk4, dopri5, dop853, rodas, midpoint, gauss4, "
-                        "or solve_ivp's RK45, DOP853, Radau, BDF, LSODA (mapped to dopri5, "
-                        "dop853, rodas) (default: the scene's, or rk4 for a model)")
-    s.add_argument("--max-steps", type=int, default=None, metavar="N",
-                   help="most steps of the integrator (default 100000); a run that needs "
-                        "more stops with a warning saying so")
-    s.add_argument("--init", action="append", metavar="NAME=VALUE",
-                   help="initial coordinate or speed, e.g. q1=1.2 or q1_dot=0 (repeatable; "
-                        "default 0)")
-    s.add_argument("--set", action="append", metavar="NAME=VALUE",
-                   help="override a parameter (repeatable)")
-    s.add_argument("--no-plot", action="store_true", help="do not write the PNG")
-    s.add_argument("-q", "--quiet", action="store_true",
-                   help="no progress bars or messages on stderr (bars are drawn on a "
-                        "terminal for a build or a run taking more than 2 s)")
-    s.add_argument("--max-output-mb", type=float, default=None, metavar="MB",
-                   help=f"refuse, before anything runs, results larger than MB megabytes "
-                        f"(samples x columns doubles plus the CSV text; default {MAX_OUTPUT_MB:g})")
-    s.add_argument("--animate", action="store_true",
-                   help="also write OUT/<name>.gif (the bodies' frames, the points as a "
-                        "stick figure, traces) and OUT/<name>.html (a 3D viewer that plays "
-                        "offline)")
-    s.add_argument("--animate-format", choices=("gif", "mp4"), default="gif",
-                   help="format of the animation (mp4 needs ffmpeg; default gif)")
-    s.add_argument("--trace", action="append", metavar="POINT",
-                   help="trace this point in the animation (repeatable; default: the ends "
-                        "of the longest branches)")
-    s.add_argument("--floating-base", action="store_true",
-                   help="(a URDF) make the root link a free body (a free joint root_joint)")
-    _add_reading_options(s)
-    s.set_defaults(func=_simulate)
-
-    i = sub.add_parser("import", help="import a robot description (URDF, or MJCF where "
-                                      "supported) as a model file",
-                       description="Read a URDF file and write a model file in modelgen's "
-                                   "YAML: bases, points, bodies, gravity, one input "
-                                   "tau_<joint> per joint and the joints' damping and "
-                                   "friction as effects. Meshes are not read.")
-    i.add_argument("urdf", help="URDF file, or an MJCF file (.xml, compiled by MuJoCo)")
-    i.add_argument("-o", "--output", default=None,
-                   help="model file to write (default: the URDF path with .yaml)")
-    i.add_argument("--fix-floating-root", action="store_true",
-                   help="weld a floating joint at the root to the ground instead of making "
-                        "it a free joint")
-    i.add_argument("--floating-base", action="store_true",
-                   help="make the root link a free body (a free joint root_joint, as "
-                        "Pinocchio's free-flyer)")
-    i.add_argument("--inertial-parameters", action="store_true",
-                   help="make masses and inertias parameters instead of numbers")
-    _add_reading_options(i)
-    i.set_defaults(func=_import)
-
-    b = sub.add_parser("bench", help="work-precision diagram of a scene: the C integrators "
-                                     "against scipy's solve_ivp",
-                       description="Integrate a scene with every C integrator (the adaptive "
-                                   "ones over tolerances, the fixed-step ones over steps) and with "
-                                   "solve_ivp (RK45, DOP853, Radau) on the same compiled rhs; "
-                                   "measure the final-time and dense L2 errors of the positions "
-                                   "against a reference by two high-order methods at 1e-14, the "
-                                   "minimum wall time and the rhs evaluations. Writes "
-                                   "OUT/<scene>_work_precision.png, .md and .csv.")
-    b.add_argument("scene", help="scene YAML file")
-    b.add_argument("-o", "--output", default="out", help="output directory (default: out)")
-    b.add_argument("--quick", action="store_true",
-                   help="whole-decade tolerances, half-decade steps, 2 repeats")
-    b.add_argument("--build-dir", default=None,
-                   help="where the model is built (default: the per-user cache)")
-    b.add_argument("-v", "--verbose", action="store_true", help="report every run on stderr")
-    b.set_defaults(func=_bench)
-
-    lz = sub.add_parser("linearize", help="linearize a model or scene at an operating point: "
-                                          "A, B, C, D and the modes",
-                        description="Build (or reuse) the model with its symbolic "
-                                    "linearization, evaluate A = d xdot/dx and B = d xdot/du "
-                                    "(and, for a scene's outputs, C and D) at --at and --u, "
-                                    "and print them with the eigenvalues, their natural "
-                                    "frequencies and damping ratios.")
-    lz.add_argument("model", help="model YAML, URDF or scene YAML file")
-    lz.add_argument("--at", action="append", metavar="NAME=VALUE",
-                    help="coordinate or speed of the operating point, e.g. q1=3.14159 "
-                         "(repeatable; default: the scene's initial state, or 0)")
-    lz.add_argument("--u", action="append", metavar="NAME=VALUE",
-                    help="input at the operating point (repeatable; default: the scene's "
-                         "input at --t, or 0)")
-    lz.add_argument("--set", action="append", metavar="NAME=VALUE",
-                    help="override a parameter (repeatable)")
-    lz.add_argument("--t", type=float, default=None,
-                    help="time of the operating point [s] (default: the scene's start, or 0)")
-    lz.add_argument("--equilibrium", action="store_true",
-                    help="first find the rest point (q_ddot = 0 at zero speeds) by Newton "
-                         "from the --at coordinates, and linearize there")
-    lz.add_argument("-o", "--output", default=None, metavar="FILE.npz|FILE.mat",
-                    help="write A, B, C, D, the operating point and the names")
-    lz.add_argument("--build-dir", default=None,
-                    help="where the model is built (default: the per-user cache)")
-    lz.set_defaults(func=_linearize)
-    w = sub.add_parser("sweep", help="run a scene over a grid of parameters and initial "
-                                     "values, in-process or on a Dask cluster",
-                       description="Run a scene (or a model) over the product of --param and "
-                                   "--init ranges (one simulate_batch call per chunk, on Dask "
-                                   "workers with --scheduler) and write an xarray dataset "
-                                   "(netCDF): a variable per state and output, dims run and "
-                                   "time, per-run status. Needs the sweep extra "
-                                   "(pip install 'modelgen[sweep]').")
-    w.add_argument("scene", help="scene YAML file (or model YAML or URDF file)")
-    w.add_argument("--param", action="append", metavar="NAME=START:STOP:COUNT",
-                   help="sweep a parameter over COUNT values (or one NAME=VALUE); repeatable")
-    w.add_argument("--init", action="append", metavar="NAME=START:STOP:COUNT",
-                   help="sweep an initial value (q1, q1_dot, ...); repeatable")
-    w.add_argument("--scheduler", default=None, metavar="local|tcp://HOST:8786",
-                   help="run on Dask: 'local' starts a LocalCluster with one worker per "
-                        "core; an address joins a running scheduler (default: in-process)")
-    w.add_argument("--chunk", type=int, default=None,
-                   help="runs per simulate_batch call (default: 4 chunks per worker)")
-    w.add_argument("--method", default=None, help="integration method (default: the scene's)")
-    w.add_argument("--rtol", type=float, default=None, help="relative tolerance")
-    w.add_argument("--dt", type=float, default=None, help="fixed step [s]")
-    w.add_argument("--max-steps", type=int, default=None, metavar="N",
-                   help="most steps of each run (default 100000); a run that needs more "
-                        "stops with status -1, keeping what it computed")
-    w.add_argument("--t-end", type=float, default=None,
-                   help="final time [s] (default: the scene's, or 10 for a model)")
-    w.add_argument("--sample", type=float, default=None,
-                   help="sampling interval [s] (default: the scene's, or 0.01 for a model)")
-    w.add_argument("-o", "--output", default="out/sweep.nc",
-                   help="netCDF file to write (default: out/sweep.nc)")
-    w.add_argument("--plot", default=None, metavar="HOW:VARIABLE",
-                   help="also write OUTPUT.png: final|max|min|mean|period of a state or "
-                        "scalar output against the swept values, e.g. final:q2, period:q1")
-    w.add_argument("--build-dir", default=None,
-                   help="where the model is built (default: the per-user cache)")
-    w.add_argument("--max-output-mb", type=float, default=None, metavar="MB",
-                   help=f"refuse, before anything runs, results larger than MB megabytes "
-                        f"(runs x samples x columns doubles; default {MAX_OUTPUT_MB:g})")
-    w.add_argument("--quiet", action="store_true", help="no progress bar")
-    w.add_argument("--strict", action="store_true",
-                   help="exit with status 4 when a run failed (default: 0, failures are data)")
-    w.set_defaults(func=_sweep)
-
-    h = sub.add_parser("hard-cases", help="run the hard-case suite: each case against an "
-                                          "independent reference, a table and a figure",
-                       description="Run the named hard cases (pendulum near the top, Lagrange "
-                                   "top, stiff springs, mass ratios, singular mass matrices, "
-                                   "long-run energy, friction, chains against MuJoCo, tennis "
-                                   "racket, ...) and write OUT/hard_cases.md and .png. Exit "
-                                   "status 4 when a case fails.")
-    h.add_argument("-o", "--output", default="out", help="output directory (default: out)")
-    h.add_argument("--quick", action="store_true", help="the short version of each case")
-    h.add_argument("--cases", nargs="+", metavar="NAME", default=None,
-                   help="run only these cases")
-    h.add_argument("--build-dir", default=None,
-                   help="where the models are built (default: the per-user build cache)")
-    h.set_defaults(func=_hard_cases)
-    _fmu_parser(sub)
-    for command in sub.choices.values():
-        command.set_defaults(command_parser=command)
-    return parser
-
-
-#: the C integrators' status for a run stopped by Ctrl-C
-INTERRUPTED = STATUS_BY_NAME["INTERRUPTED"].code
-#: exit status of each outcome (documented in the module docstring and the README):
-#: 128 + the signal's number for SIGINT and SIGTERM, as a shell reports them
-EXIT = {"ok": 0, "internal": 1, "input": 2, "build": 3, "simulation": 4, "interrupted": 130,
-        "terminated": 143}
-
-
-def exit_status(exc: BaseException) -> int:
-    """The exit status for an error that ends a command: a wrong argument value or type
-    is bad input (2), like a model mistake, even when the simulation layer finds it."""
-    if isinstance(exc, (BuildError, TemplateError)):
-        return EXIT["build"]
-    if isinstance(exc, (ArgumentTypeError, ArgumentValueError)):
-        return EXIT["input"]
-    if isinstance(exc, SimulationError):
-        return EXIT["simulation"]
-    if isinstance(exc, (ModelgenError, OSError)):
-        return EXIT["input"]
-    return EXIT["internal"]
-
-
-@contextlib.contextmanager
-def _terminate_as_interrupt():
-    """SIGTERM handled as Ctrl-C, in the main thread: a run stops within a step and its
-    results so far are written (the integrator's own SIGINT handler sees it), or a
-    KeyboardInterrupt is raised.  Yields a list of the SIGTERMs received."""
-    received = []
-    if threading.current_thread() is not threading.main_thread():
-        yield received
-        return
-
-    def on_sigterm(signum, frame):
-        received.append(signum)
-        if len(received) > 1:       # a second one stops at once
-            raise KeyboardInterrupt
-        handler = signal.getsignal(signal.SIGINT)
-        if callable(handler):       # the integrator's (sets its stop flag) or Python's
-            handler(signal.SIGINT, frame)
-        else:
-            raise KeyboardInterrupt
-    previous = signal.signal(signal.SIGTERM, on_sigterm)
-    try:
-        yield received
-    finally:
-        signal.signal(signal.SIGTERM, previous)
-
-
-def _os_error_text(exc: OSError) -> str:
-    """One line for an operating-system error: what failed, on which path, the fix."""
-    import errno
-    where = f": {exc.filename}" if exc.filename is not None else ""
-    if exc.errno == errno.ENOSPC:
-        return (f"no space left on the device{where} (the disk is full); fix: free space "
-                f"there or write elsewhere (-o)")
-    if exc.filename is None:
-        return f"{exc}; fix: check that what it names exists and is reachable"
-    return f"{exc.strerror or exc}{where}; fix: check the path and its permissions"
-
-
-def main(argv=None) -> int:
-    """Entry point; returns the exit status (see :data:`EXIT`)."""
-    parser = build_parser()
-    args, extra = parser.parse_known_args(argv)
-    if extra:     # the subcommand's own usage, not the top-level one
-        args.command_parser.error(f"unrecognized arguments: {' '.join(extra)}")
-    with _terminate_as_interrupt() as signals:
-        try:
-            status = args.func(args)
-        except KeyboardInterrupt:
-            print("modelgen: interrupted", file=sys.stderr)
-            status = EXIT["interrupted"]
-        except (ModelgenError, OSError) as exc:
-            text = str(exc) if isinstance(exc, ModelgenError) else _os_error_text(exc)
-            _debug_traceback(args)
-            print(f"modelgen: error: {text}", file=sys.stderr)
-            status = exit_status(exc)
-        except Exception as exc:            # a bug: say so, briefly, unless --debug
-            _debug_traceback(args)
-            print(f"modelgen: internal error: {type(exc).__name__}: {exc} (please report it; "
-                  f"--debug shows the traceback)", file=sys.stderr)
-            status = EXIT["internal"]
-    if status == EXIT["interrupted"] and signals:
-        return EXIT["terminated"]
-    return status
-
-
-def _debug_traceback(args) -> None:
-    """With --debug, the traceback of the error being handled (the status is kept)."""
-    if args.debug:
-        import traceback
-        traceback.print_exc()
-
-
-if __name__ == "__main__":   # pragma: no cover
-    sys.exit(main())
