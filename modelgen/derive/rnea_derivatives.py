@@ -39,9 +39,24 @@ from modelgen.derive.dynamics import Equations
 from modelgen.derive.graph import Graph, GraphBuilder
 from modelgen.derive.jacobian import accelerations, differentiate
 from modelgen.derive.joint_tree import JointTree
-from modelgen.derive.recursion import (action_force, joint_motion, joint_velocity, link_force,
-                                       link_velocities, to_parent_force)
-from modelgen.derive.spatial import ZERO, ZERO3, add, dot, is_zero_vec, name_vec, named, sub
+from modelgen.derive.recursion import (
+    action_force,
+    joint_motion,
+    joint_velocity,
+    link_force,
+    link_velocities,
+    to_parent_force,
+)
+from modelgen.derive.spatial import (
+    ZERO,
+    ZERO3,
+    add,
+    dot,
+    is_zero_vec,
+    name_vec,
+    named,
+    sub,
+)
 from modelgen.model.spec import CANONICAL_BASE, ModelSpec
 
 
