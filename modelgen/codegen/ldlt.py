@@ -169,13 +169,23 @@ def solve_code(n: int, tol: str, pattern=None) -> dict:
                                 f"zeros of A skipped: {products} products, "
                                 f"{len(plan.fill)} fill-ins */"] + unrolled_ldlt(n, tol, plan),
                 "solve_loop": None}
+    return {"solve_lines": [], "solve_loop": loop_tables(plan)}
+
+
+def loop_tables(plan: Elimination) -> dict:
+    """The tables of a loop over the non-zeros of L (for the template): the
+    elimination order, and per pivot the rows below it (``below[start[p]:start[p + 1]]``),
+    as C initialiser lists.
+
+    >>> loop_tables(elimination([[1, 1, 1], [1, 1, 0], [1, 0, 1]]))["below"]
+    '0, 2'
+    """
     below = [w for v in plan.order for w in plan.below[v]]
     start = [0]
     for v in plan.order:
         start.append(start[-1] + len(plan.below[v]))
-    return {"solve_lines": [],
-            "solve_loop": {"order": ", ".join(map(str, plan.order)),
-                           "start": ", ".join(map(str, start)),
-                           "below": ", ".join(map(str, below)) or "0",
-                           "nbelow": max(len(below), 1), "products": products,
-                           "fill": len(plan.fill)}}
+    return {"order": ", ".join(map(str, plan.order)),
+            "start": ", ".join(map(str, start)),
+            "below": ", ".join(map(str, below)) or "0",
+            "nbelow": max(len(below), 1), "products": plan.products(),
+            "fill": len(plan.fill)}

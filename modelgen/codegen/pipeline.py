@@ -22,6 +22,8 @@ from modelgen.derive.dynamics import Equations, derive_equations
 from modelgen.derive.graph import GraphBuilder
 from modelgen.derive.joint_tree import JointTree, extract_joint_tree
 from modelgen.derive.rnea import derive_inverse_dynamics, derive_velocity_terms
+from modelgen.derive.rnea_derivatives import (derive_inverse_dynamics_derivatives,
+                                              differentiate_inverse_dynamics)
 from modelgen.errors import ModelError
 from modelgen.codegen.emit import (ABI_VERSION, emit_sources, integrator_sources, print_routine,
                                    runtime_sources, template_context, templates_digest)
@@ -68,7 +70,7 @@ def model_hash(spec: ModelSpec, options: BuildOptions | None = None) -> str:
 
 #: The routines on the integration path (compiled as MG_PART 2, see model.c.j2).
 INTEGRATION_PATH = ("prepare", "rhs", "outputs", "jacobian_terms", "linearize_terms",
-                    "inverse_dynamics")
+                    "inverse_dynamics", "derivative_terms")
 
 def part_statements(statements: dict) -> dict:
     """Routine name -> statements, to part -> its largest routine's statements (what
@@ -133,7 +135,8 @@ def choose_formulation(spec: ModelSpec, formulation: str = BuildOptions.formulat
 
 
 def routines_for(eqs: Equations, output_exprs=(), jacobian=None,
-                 forward: ForwardDynamics | None = None, linearization=None, inverse=None):
+                 forward: ForwardDynamics | None = None, linearization=None, inverse=None,
+                 derivatives=None):
     """The C routines of a model: (name, inputs, outputs) for make_routines.
 
     With ``forward`` (the ABA program) the ``rhs`` routine writes q_ddot and
@@ -142,6 +145,8 @@ def routines_for(eqs: Equations, output_exprs=(), jacobian=None,
     (:class:`~modelgen.derive.linearize.LinearizationTerms`) ``linearize_terms``
     writes its R and Y (derivatives with respect to [x, u]).  ``inverse``:
     ``(qdd symbols, Q)`` of ``inverse_dynamics``, Q = A qdd + h - tau.
+    ``derivatives`` (:class:`~modelgen.derive.rnea_derivatives.InverseDynamicsDerivatives`):
+    ``derivative_terms`` writes dQ/dq, dQ/dv, dQ/du (with inputs) and M at ``a``.
     """
     n = len(eqs.qd)
     t = (("t", (eqs.t,)),)
@@ -179,7 +184,18 @@ def routines_for(eqs: Equations, output_exprs=(), jacobian=None,
            (("D", tuple(e for row in jacobian.D for e in row)),)
            + ((("K", tuple(e for row in jacobian.K for e in row)),) if jacobian.K else ()))]
          if jacobian else []) \
-      + lin
+      + lin \
+      + ([derivative_routine(t + (x, u, p), derivatives)] if derivatives else [])
+
+
+def derivative_routine(inputs, d) -> tuple:
+    """The ``derivative_terms`` routine: ``(name, inputs, outputs)`` of dQ/dq, dQ/dv,
+    dQ/du (when there are inputs) and M, row-major, at the accelerations ``a``."""
+    def flat(rows):
+        return tuple(e for row in rows for e in row)
+    du = (("dQ_du", flat(d.du)),) if d.du and d.du[0] else ()
+    return ("derivative_terms", inputs + (("a", d.a),),
+            (("dQ_dq", flat(d.dq)), ("dQ_dv", flat(d.dv))) + du + (("M", flat(d.M)),))
 
 
 def _hoisted(routines) -> tuple:
@@ -307,6 +323,8 @@ class Derived:
     linearization: object       # LinearizationTerms, or None
     terms: object               # the Jacobian's terms, or None
     graph: object = field(repr=False)
+    #: InverseDynamicsDerivatives (options.derivatives), or None
+    derivatives: object = None
 
     @property
     def output_exprs(self) -> tuple:
@@ -337,6 +355,12 @@ def _derive(spec: ModelSpec, options: BuildOptions, tree: JointTree | None) -> D
     else:       # minus the residual tau - h - A qdd of the composite-body equations
         qdd, r = residual(eqs)
         inverse = (qdd, tuple(-e for e in r))
+    derivatives = None
+    if options.derivatives:
+        derivatives = (derive_inverse_dynamics_derivatives(eqs, tree, spec, graph)
+                       if tree is not None and _time_free(tree)
+                       else differentiate_inverse_dynamics(graph, eqs, *inverse))
+        graph = derivatives.graph
     linearization = None
     if options.linearize:       # one pass for A, B, C, D; the Jacobian is its state columns
         linearization = derive_linearization_terms(
@@ -348,7 +372,7 @@ def _derive(spec: ModelSpec, options: BuildOptions, tree: JointTree | None) -> D
     else:
         terms = None
     graph = terms.graph if terms else graph
-    return Derived(eqs, columns, forward, inverse, linearization, terms, graph)
+    return Derived(eqs, columns, forward, inverse, linearization, terms, graph, derivatives)
 
 
 def _eliminate(derived: Derived) -> tuple:
@@ -356,8 +380,8 @@ def _eliminate(derived: Derived) -> tuple:
     dynamics are eliminated on their own, and the rhs's parameter-only part hoisted."""
     d = derived
     routines = make_routines(d.graph, routines_for(d.eqs, d.output_exprs, d.terms, d.forward,
-                                                   d.linearization, d.inverse),
-                             alone=("rhs", "inverse_dynamics"))
+                                                   d.linearization, d.inverse, d.derivatives),
+                             alone=("rhs", "inverse_dynamics", "derivative_terms"))
     return _hoisted(routines)
 
 
@@ -387,7 +411,9 @@ def _emit(spec: ModelSpec, options: BuildOptions, derived: Derived, routines: tu
         npd=next(len(r.outputs[0][1]) for r in routines if r.name == "prepare"),
         # the crba rhs's solve skips the entries of A that are structurally zero
         mass_pattern=None if forward else [[e != 0 for e in row] for row in eqs.A],
-        formulation=options.formulation, aba_inward=forward.inward if forward else ())
+        formulation=options.formulation, aba_inward=forward.inward if forward else (),
+        derivatives_pattern=([[e != 0 for e in row] for row in derived.derivatives.M]
+                             if derived.derivatives else None))
     return Emitted(functions, context, emit_sources(context))
 
 
@@ -417,6 +443,7 @@ def _manifest(spec: ModelSpec, options: BuildOptions, derived: Derived, emitted:
         "inputs": list(spec.inputs),
         "jacobian": options.jacobian,
         "linearize": options.linearize,
+        "derivatives": options.derivatives,
         "formulation": options.formulation,
         "bodies": list(derived.eqs.bodies),
         "outputs": [{"name": name, "columns": list(cols)}

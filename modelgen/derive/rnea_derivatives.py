@@ -147,25 +147,32 @@ def derive_inverse_dynamics_derivatives(eqs: Equations, tree: JointTree, spec: M
     >>> spec = spatial_chain(3).spec()
     >>> d = derive_inverse_dynamics_derivatives(derive_equations(derive_kinematics(spec)),
     ...                                         extract_joint_tree(spec), spec)
-    >>> len(d.dq), len(d.dq[0]), d.dq[2][0] == 0     # a chain's q_1 moves no link-2 force
-    (3, 3, False)
+    >>> len(d.dq), len(d.dq[0]), d.dq[2][0]    # the first joint turns about gravity's axis
+    (3, 3, 0)
     """
-    n, nq = len(eqs.qd), len(eqs.q)
     builder = GraphBuilder(graph or eqs.graph)
-    a = accelerations(n)
+    a = accelerations(len(eqs.qd))
     Q = rnea_with_loads(builder, eqs, tree, spec, a)
-    wrt = tuple(eqs.q) + tuple(eqs.qd) + tuple(eqs.u) + a
-    graph, rows = differentiate(builder.freeze(), Q, wrt)
-    nu = len(eqs.u)
-    dq_full = [row[:nq] for row in rows]
+    return differentiate_inverse_dynamics(builder.freeze(), eqs, a, Q)
+
+
+def differentiate_inverse_dynamics(graph: Graph, eqs: Equations, a, Q) -> InverseDynamicsDerivatives:
+    """The derivatives of any inverse-dynamics program ``Q(q, v, a, u)`` over
+    ``graph`` (the accelerations ``a`` are symbols of it), by forward mode along
+    q, v, u and a: RNEA's (:func:`rnea_with_loads`) for a joint tree, or the
+    composite-body ``A a + h - tau`` of any other model."""
+    n, nq, nu = len(eqs.qd), len(eqs.q), len(eqs.u)
+    wrt = tuple(eqs.q) + tuple(eqs.qd) + tuple(eqs.u) + tuple(a)
+    graph, rows = differentiate(graph, Q, wrt)
     dv = tuple(tuple(row[nq:nq + n]) for row in rows)
     du = tuple(tuple(row[nq + n:nq + n + nu]) for row in rows)
     M = tuple(tuple(row[nq + n + nu:]) for row in rows)
+    dq_full = [row[:nq] for row in rows]
     if nq == n:
         dq = tuple(tuple(row) for row in dq_full)
     else:
         graph, dq = _tangent(graph, eqs, dq_full)
-    return InverseDynamicsDerivatives(graph, a, Q, dq, dv, du, M)
+    return InverseDynamicsDerivatives(graph, tuple(a), tuple(Q), dq, dv, du, M)
 
 
 def _tangent(graph: Graph, eqs: Equations, dq_full) -> tuple:
@@ -186,4 +193,5 @@ def _tangent(graph: Graph, eqs: Equations, dq_full) -> tuple:
 
 
 __all__ = ["InverseDynamicsDerivatives", "derive_inverse_dynamics_derivatives",
+           "differentiate_inverse_dynamics",
            "ground_acceleration", "rnea_with_loads"]

@@ -26,7 +26,8 @@ def generate_model(source, out_dir=None, *, force: bool = False,
                    options: BuildOptions | None = None, progress=None,
                    jacobian: bool | None = None, formulation: str | None = None,
                    linearize: bool | None = None,
-                   floating_base: bool | None = None) -> Generated:
+                   floating_base: bool | None = None,
+                   derivatives: bool | None = None) -> Generated:
     """Generate and compile a model (or reuse the cache); returns the report.
 
     ``options`` and the shorthand keywords are those of :func:`load`.
@@ -35,7 +36,8 @@ def generate_model(source, out_dir=None, *, force: bool = False,
     ``progress(stage)`` is called as each stage of a build starts.
     """
     options = BuildOptions.of(options, jacobian=jacobian, formulation=formulation,
-                              linearize=linearize, floating_base=floating_base)
+                              linearize=linearize, floating_base=floating_base,
+                              derivatives=derivatives)
     generated = _generate(source, out_dir, force, options, progress)
     _loaded(generated)
     index.record(_fast_key(source, options, out_dir), generated.build, _runtime())
@@ -55,7 +57,8 @@ def _loaded(generated: Generated) -> CompiledModel:
 
 def load(source, out_dir=None, *, force: bool = False, options: BuildOptions | None = None,
          progress=None, jacobian: bool | None = None, formulation: str | None = None,
-         linearize: bool | None = None, floating_base: bool | None = None) -> CompiledModel:
+         linearize: bool | None = None, floating_base: bool | None = None,
+         derivatives: bool | None = None) -> CompiledModel:
     """Build (on first use) and import a model; returns a :class:`CompiledModel`.
 
     ``source`` is a YAML path, a :class:`modelgen.model.Model` or a ModelSpec.
@@ -72,6 +75,9 @@ def load(source, out_dir=None, *, force: bool = False, options: BuildOptions | N
     :meth:`CompiledModel.linearize` and :meth:`CompiledModel.equilibrium`.
     ``floating_base=True`` (a URDF path) makes the robot's root link a free
     body (a free joint ``root_joint``: position, unit quaternion, 6 speeds).
+    With ``derivatives=True`` the analytical derivatives ``<name>_derivatives`` and
+    ``<name>_inverse_dynamics_derivatives`` are generated too, for
+    :meth:`CompiledModel.derivatives` and :meth:`CompiledModel.inverse_dynamics_derivatives`.
 
     >>> cm = load("models/double_pendulum.yaml", jacobian=True)   # doctest: +SKIP
     >>> cm = load("models/double_pendulum.yaml",                  # doctest: +SKIP
@@ -79,7 +85,8 @@ def load(source, out_dir=None, *, force: bool = False, options: BuildOptions | N
     >>> cm.rhs(0.0, [0.1, 0.2, 0.0, 0.0])                    # doctest: +SKIP
     """
     options = BuildOptions.of(options, jacobian=jacobian, formulation=formulation,
-                              linearize=linearize, floating_base=floating_base)
+                              linearize=linearize, floating_base=floating_base,
+                              derivatives=derivatives)
     key = _fast_key(source, options, out_dir)
     hit = None if force else index.lookup(key)
     if hit is not None:
