@@ -31,6 +31,8 @@ def _program(graph, outputs, inputs):
 
 
 def _relative(a, b) -> float:
+    if np.size(b) == 0:
+        return 0.0 if np.size(a) == 0 else math.inf
     return float(np.max(np.abs(a - b)) / max(1.0, np.max(np.abs(b))))
 
 
@@ -192,3 +194,164 @@ def test_generated_derivatives_match_pinocchio_on_urdf_robots(robot, pin, tmp_pa
     q_of, jmap = _pinocchio_maps(model, imp)
     damping = np.array([j.damping for j in imp.joints if j.coordinate is not None])
     _check_against_pinocchio(pin, cm, model, P=jmap, q_pin=q_of, damping=damping)
+
+
+# -- floating base: a free joint in the tangent space ---------------------------------
+
+def _quaternion_matrix(w, x, y, z):
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                     [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                     [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+
+
+def _quaternion_product(a, b):
+    w1, x1, y1, z1 = a
+    w2, x2, y2, z2 = b
+    return np.array([w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2, w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
+                     w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2, w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2])
+
+
+def _free_joints(cm):
+    """Per free or ball joint: (its quaternion's 4 state indices, its position's 3 or
+    None, the speed indices of its linear velocity or None, of its angular velocity)."""
+    out = []
+    for quat in cm.quaternions:
+        name = cm.coordinates[quat[0]][:-len("_qw")]
+        position = [cm.coordinates.index(f"{name}_{s}") for s in "xyz"] \
+            if f"{name}_x" in cm.coordinates else None
+        linear = [cm.speeds.index(f"{name}_v{s}") for s in "xyz"] if position else None
+        angular = [cm.speeds.index(f"{name}_w{s}") for s in "xyz"]
+        out.append((list(quat), position, linear, angular))
+    return out
+
+
+def _step(cm, q, j, h):
+    """q moved by h along speed j (the exponential map for a joint's quaternion, R h e
+    for its position; + h for a simple coordinate)."""
+    q = np.array(q, dtype=float)
+    for quat, position, linear, angular in _free_joints(cm):
+        if j in angular:
+            axis = np.zeros(3)
+            axis[angular.index(j)] = 1.0
+            turn = np.concatenate([[math.cos(h / 2)], math.sin(h / 2) * axis])
+            q[quat] = _quaternion_product(q[quat], turn)
+            return q
+        if linear and j in linear:
+            q[position] += _quaternion_matrix(*q[quat])[:, linear.index(j)] * h
+            return q
+    q[cm.coordinates.index(cm.dof_names[j])] += h
+    return q
+
+
+def _central_differences(cm, x, u, h=1e-6):
+    """(dqdd/dq, dqdd/dv, dqdd/du) of the compiled rhs by central differences."""
+    nq, n = cm.nq, cm.n
+    q, v = x[:nq], x[nq:]
+
+    def qdd(q_, v_, u_):
+        return cm.rhs(0.0, np.concatenate([q_, v_]), u_)[nq:]
+    dq = np.column_stack([(qdd(_step(cm, q, j, h), v, u) - qdd(_step(cm, q, j, -h), v, u))
+                          / (2 * h) for j in range(n)])
+    dv = np.column_stack([(qdd(q, v + h * e, u) - qdd(q, v - h * e, u)) / (2 * h)
+                          for e in np.eye(n)])
+    du = np.column_stack([(qdd(q, v, u + h * e) - qdd(q, v, u - h * e)) / (2 * h)
+                          for e in np.eye(len(u))]) if len(u) else np.zeros((n, 0))
+    return dq, dv, du
+
+
+def _check_against_differences(cm, states=2, seed=0, tol=1e-6):
+    rng = np.random.default_rng(seed)
+    for _ in range(states):
+        x = np.concatenate([cm.project(rng.uniform(-1, 1, cm.nq)), rng.uniform(-1, 1, cm.n)])
+        u = rng.uniform(-1, 1, len(cm.inputs))
+        d = cm.derivatives(0.0, x, u)
+        for got, want in zip(d, _central_differences(cm, x, u), strict=True):
+            assert got.shape == want.shape
+            assert _relative(got, want) <= tol, _relative(got, want)
+
+
+def test_floating_solo12_matches_pinocchio_free_flyer_in_the_tangent_space(pin, tmp_path):
+    path = URDF / "solo12.urdf"
+    imp = import_urdf(path, floating_base=True)
+    cm = modelgen.load(imp.model, tmp_path / "build", derivatives=True)
+    model = pin.buildModelFromUrdf(str(path), pin.JointModelFreeFlyer())
+    ((quat, position, linear, angular),) = _free_joints(cm)
+    P = np.zeros((model.nv, cm.n))        # Pinocchio's v = P v_mg
+    order = []                            # Pinocchio's q from modelgen's
+    for jid in range(1, model.njoints):
+        jm, name = model.joints[jid], model.names[jid]
+        if name == "root_joint":
+            for k, s in enumerate(linear + angular):
+                P[jm.idx_v + k, s] = 1.0
+            order += position + quat[1:] + quat[:1]      # (x, y, z, qx, qy, qz, qw)
+        else:
+            coordinate = next(j.coordinate for j in imp.joints if j.name == name)
+            P[jm.idx_v, cm.speeds.index(coordinate + "_dot")] = 1.0
+            order.append(cm.coordinates.index(coordinate))
+    damping = np.array([next((j.damping for j in imp.joints
+                              if j.coordinate and j.coordinate + "_dot" == s), 0.0)
+                        for s in cm.speeds])
+    assert not damping.any() or len(cm.inputs) == 12
+    # the inputs are the 12 joint efforts: Pinocchio's tau has them on the joints
+    # and zeros on the free flyer; the forward check goes through M^-1 of the
+    # reduced map (P is square here, so computeABADerivatives is compared too)
+    B = np.zeros((cm.n, len(cm.inputs)))
+    for k, name in enumerate(cm.inputs):
+        coordinate = next(j.coordinate for j in imp.joints if j.input == name)
+        B[cm.speeds.index(coordinate + "_dot"), k] = 1.0
+    rng = np.random.default_rng(5)
+    data = model.createData()
+    C = np.diag(damping)
+    for _ in range(3):
+        q = cm.project(rng.uniform(-1, 1, cm.nq))
+        v, u = rng.uniform(-1.5, 1.5, cm.n), rng.uniform(-2, 2, len(cm.inputs))
+        x, qp = np.concatenate([q, v]), q[order]
+        d = cm.derivatives(0.0, x, u)
+        tau = P @ (B @ u - C @ v)
+        dq, dv, Minv = pin.computeABADerivatives(model, data, qp, P @ v, tau)
+        Minv = P.T @ _symmetric(Minv) @ P
+        assert _relative(cm.rhs(0.0, x, u)[cm.nq:], P.T @ data.ddq) <= TOL
+        assert _relative(d.dqdd_dq, P.T @ dq @ P) <= TOL
+        assert _relative(d.dqdd_dv, P.T @ dv @ P - Minv @ C) <= TOL
+        assert _relative(d.dqdd_du, Minv @ B) <= TOL
+        a = rng.uniform(-2, 2, cm.n)
+        i = cm.inverse_dynamics_derivatives(0.0, x, a, u)
+        rq, rv, M = pin.computeRNEADerivatives(model, data, qp, P @ v, P @ a)
+        assert _relative(i.dQ_dq, P.T @ rq @ P) <= TOL
+        assert _relative(i.dQ_dv, P.T @ rv @ P + C) <= TOL
+        assert _relative(i.M, P.T @ _symmetric(M) @ P) <= TOL
+    _check_against_differences(cm, states=1)
+
+
+# -- central differences of the generated rhs: effects, inputs, any formulation -------
+
+def test_derivatives_of_a_branched_tree_with_effects_match_central_differences(tmp_path):
+    from test_aba import branched_tree
+    cm = modelgen.load(branched_tree(), tmp_path / "build", derivatives=True)
+    assert cm.manifest["formulation"] == "aba" and cm.inputs == ("F",)
+    _check_against_differences(cm, seed=1)
+
+
+@pytest.mark.parametrize("model, formulation", [("cart_pole", "crba"), ("heavy_top", "auto"),
+                                                ("spring_chain", "auto")])
+def test_derivatives_match_central_differences_on_shipped_models(model, formulation, tmp_path):
+    cm = modelgen.load(REPO / "models" / f"{model}.yaml", tmp_path / "build",
+                       derivatives=True, formulation=formulation)
+    _check_against_differences(cm, seed=2)
+
+
+def test_without_the_option_there_are_no_derivatives(tmp_path):
+    from modelgen.errors import BuildError
+    cm = modelgen.load(spatial_chain(2), tmp_path / "build")
+    assert not any("derivatives" in f for f in cm.manifest["functions"])
+    with pytest.raises(BuildError, match="derivatives=True"):
+        cm.derivatives(0.0, np.zeros(4))
+
+
+@pytest.mark.parametrize("model", ["heavy_body_ball", "free_base_two_links"])
+def test_ball_and_free_joint_derivatives_match_differences_along_the_exponential_map(
+        model, tmp_path):
+    cm = modelgen.load(REPO / "tests" / "data" / "joints" / f"{model}.yaml", tmp_path / "build",
+                       derivatives=True)
+    assert cm.quaternions
+    _check_against_differences(cm, seed=3)

@@ -179,7 +179,10 @@ def _tangent(graph: Graph, eqs: Equations, dq_full) -> tuple:
     """``dQ/dq_full N`` with ``N = d(dq/dt)/dv`` (nq x n, sparse): the derivatives
     along the joints' tangent directions."""
     builder = GraphBuilder(graph)
-    N = [{j: d for j, s in enumerate(eqs.qd) if (d := diff(e, s)) != 0} for e in eqs.qdot]
+    # dq/dt is named in the graph (quat * (0, w) / 2, R v): its few statements
+    # expanded, it is linear in the speeds
+    qdot = [graph.expand(e) for e in eqs.qdot]
+    N = [{j: d for j, s in enumerate(eqs.qd) if (d := diff(e, s)) != 0} for e in qdot]
     rows = []
     for row in dq_full:
         out = [sympy.S.Zero] * len(eqs.qd)
