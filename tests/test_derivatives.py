@@ -355,3 +355,23 @@ def test_ball_and_free_joint_derivatives_match_differences_along_the_exponential
                        derivatives=True)
     assert cm.quaternions
     _check_against_differences(cm, seed=3)
+
+
+def test_the_looped_solve_of_large_models_gives_the_same_derivatives(tmp_path, monkeypatch):
+    # models past the unrolling limit solve with a loop over the non-zeros of L:
+    # the limit lowered, a small model takes that path
+    from test_aba import branched_tree
+    from modelgen.codegen import ldlt
+    unrolled = modelgen.load(branched_tree(), tmp_path / "unrolled", derivatives=True)
+    monkeypatch.setattr(ldlt, "UNROLL_SOLVE", 0)
+    monkeypatch.setattr(ldlt, "SPARSE_UNROLL_SIZE", 1)
+    looped = modelgen.load(branched_tree(), tmp_path / "looped", derivatives=True, force=True)
+    source = (Path(looped.path).parent / "branched.c").read_text()
+    assert "branched_derivatives_columns" in source
+    assert "branched_derivatives_columns" not in \
+        (Path(unrolled.path).parent / "branched.c").read_text()
+    rng = np.random.default_rng(9)
+    x = np.concatenate([rng.uniform(-1, 1, 5), rng.uniform(-1, 1, 5)])
+    for got, want in zip(looped.derivatives(0.0, x, [0.7]), unrolled.derivatives(0.0, x, [0.7]),
+                         strict=True):
+        assert _relative(got, want) <= 1e-12

@@ -23,7 +23,7 @@ import sympy
 from modelgen.version import __version__
 from modelgen.codegen import capi
 from modelgen.codegen.cse import Routine
-from modelgen.codegen.ldlt import elimination, loop_tables, solve_code
+from modelgen.codegen.ldlt import derivative_solve, solve_code
 from modelgen.errors import TemplateError
 from modelgen.codegen.printer import ModelPrinter
 
@@ -297,7 +297,8 @@ def template_context(*, name: str, description: str, model_hash: str, n: int,
         "formulation": formulation,
         "aba_inward": list(aba_inward),
         "has_derivatives": derivatives_pattern is not None,
-        "derivative_solve": (loop_tables(elimination(derivatives_pattern))
+        "derivative_solve": (derivative_solve(n, f"{name.upper()}_PIVOT_TOL",
+                                              derivatives_pattern, len(inputs))
                              if derivatives_pattern is not None else None),
         "capi": capi.context(),
     }
