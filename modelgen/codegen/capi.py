@@ -260,6 +260,11 @@ SIGNATURES = (
     Signature("t_x_u_p_void", "void", (*_RHS_ARGS, "double *out")),
     Signature("linearize", "int", (*_RHS_ARGS, "double *A", "double *B", "double *C",
                                    "double *D")),
+    Signature("derivatives", "int", (*_RHS_ARGS, "double *dqdd_dq", "double *dqdd_dv",
+                                     "double *dqdd_du")),
+    Signature("inverse_dynamics_derivatives", "void", (
+        "double t", "const double *x", "const double *qdd", "const double *u",
+        "const double *p", "double *dQ_dq", "double *dQ_dv", "double *M")),
     Signature("system", "void", ("mg_system *system",)),
     Signature("x_inplace", "void", ("double *x",)),
     Signature("integrate", "int", (

@@ -23,7 +23,7 @@ import sympy
 from modelgen.version import __version__
 from modelgen.codegen import capi
 from modelgen.codegen.cse import Routine
-from modelgen.codegen.ldlt import solve_code
+from modelgen.codegen.ldlt import derivative_solve, solve_code
 from modelgen.errors import TemplateError
 from modelgen.codegen.printer import ModelPrinter
 
@@ -249,7 +249,7 @@ def template_context(*, name: str, description: str, model_hash: str, n: int,
                      has_linearize=False, nq: int | None = None, speeds=None,
                      quaternions=(), npd: int = 0, mass_pattern=None,
                      formulation: str = "crba", aba_inward=(), frames=None,
-                     constraints=None) -> dict:
+                     constraints=None, derivatives_pattern=None) -> dict:
     """The plain dict every C template receives.
 
     ``mass_pattern`` (n x n booleans, default dense) marks the entries of the
@@ -257,6 +257,9 @@ def template_context(*, name: str, description: str, model_hash: str, n: int,
     (:func:`solve_code`).  ``formulation`` is the resolved one (``aba`` or
     ``crba``); ``aba_inward`` the coordinates of the ABA's D in inward order.
     ``constraints``: None, or the dict of :func:`constraint_context`.
+    ``derivatives_pattern`` (n x n booleans, the structure of the mass matrix of
+    ``derivative_terms``) asks for ``<name>_derivatives`` and
+    ``<name>_inverse_dynamics_derivatives``; their solve skips its zeros.
 
     ``n`` is the number of speeds (the size of A), ``nq`` that of the
     coordinates (default ``n``; more with ball or free joints, whose
@@ -298,7 +301,8 @@ def template_context(*, name: str, description: str, model_hash: str, n: int,
         "api": _before_integration(
             public_api(name, n, len(parameters), len(inputs), len(bodies),
                        len(output_columns), has_jacobian, has_linearize, nq,
-                       rhs_solve=_solve_words(formulation, solve)), kinematics, name),
+                       rhs_solve=_solve_words(formulation, solve),
+                       has_derivatives=derivatives_pattern is not None), kinematics, name),
         "kinematics": kinematics,
         "frames": list(frames.frames) if frames else [],
         "nframes": len(frames.frames) if frames else 0,
@@ -307,6 +311,10 @@ def template_context(*, name: str, description: str, model_hash: str, n: int,
         **solve,
         "formulation": formulation,
         "aba_inward": list(aba_inward),
+        "has_derivatives": derivatives_pattern is not None,
+        "derivative_solve": (derivative_solve(n, f"{name.upper()}_PIVOT_TOL",
+                                              derivatives_pattern, len(inputs))
+                             if derivatives_pattern is not None else None),
         "capi": capi.context(),
         "constraints": constraints,
     } | ({"api": constraint_api(name, n, nq, len(parameters), constraints)
@@ -339,7 +347,8 @@ def constraint_api(name: str, n: int, nq: int, n_p: int, c: dict) -> list:
 
 def public_api(name: str, n: int, n_p: int, n_u: int, n_b: int, n_y: int = 0,
                has_jacobian: bool = False, has_linearize: bool = False,
-               nq: int | None = None, rhs_solve: str = "") -> list:
+               nq: int | None = None, rhs_solve: str = "",
+               has_derivatives: bool = False) -> list:
     """Prototypes and documentation of every exported function.
 
     The header is rendered from this one list, and the manifest records each
@@ -363,6 +372,8 @@ def public_api(name: str, n: int, n_p: int, n_u: int, n_b: int, n_y: int = 0,
              "params": "double t, const double *x, const double *u, const double *p, double *J",
              "doc": [f"Jacobian J[{nx}*{nx}] = d xdot / d x, row-major, derived symbolically",
                      "(forward mode over the generated program). Returns the rhs status."]})
+    if has_derivatives:
+        extra.extend(_derivatives_api(name, n, nq, n_u))
     if has_linearize:
         extra.append(
             {"ret": "int", "name": f"{name}_linearize",
@@ -489,6 +500,31 @@ def kinematics_api(name: str, frames, n: int, nq: int, n_p: int) -> list:
         out.append({"ret": "void", "name": f"{name}_{routine}", "params": params, "doc": doc,
                     "routine": routine, "out": array})
     return out
+
+
+def _derivatives_api(name: str, n: int, nq: int, n_u: int) -> list:
+    """Prototypes and documentation of the analytical derivatives."""
+    nx = nq + n
+    tangent = ([] if nq == n else
+               ["d/dq in the tangent space: column j along speed j (a quaternion turned by",
+                "quat * (0, w) / 2, a free joint's position moved by R v), as Pinocchio's."])
+    return [
+        {"ret": "int", "name": f"{name}_derivatives",
+         "params": "double t, const double *x, const double *u, const double *p, "
+                   "double *dqdd_dq, double *dqdd_dv, double *dqdd_du",
+         "doc": [f"Derivatives of qdd = {name}_rhs's accelerations at (t, x[{nx}], u[{n_u}], p),",
+                 f"row-major: dqdd_dq[{n}*{n}], dqdd_dv[{n}*{n}], dqdd_du[{n}*{n_u}] (untouched,",
+                 "may be NULL, without inputs).", *tangent,
+                 "-M^-1 times the derivatives of inverse dynamics at a = qdd (Carpentier",
+                 "and Mansard 2018), M factorized once over its structural non-zeros.",
+                 "Returns the rhs status (0, or the failing pivot: the arrays are then undefined)."]},
+        {"ret": "void", "name": f"{name}_inverse_dynamics_derivatives",
+         "params": "double t, const double *x, const double *qdd, const double *u, "
+                   "const double *p, double *dQ_dq, double *dQ_dv, double *M",
+         "doc": [f"Derivatives of Q = {name}_inverse_dynamics(t, x, qdd, u, p), row-major:",
+                 f"dQ_dq[{n}*{n}] (tangent space as for {name}_derivatives), dQ_dv[{n}*{n}]",
+                 f"and the mass matrix M[{n}*{n}] = dQ/dqdd."]},
+    ]
 
 
 def _solve_words(formulation: str, solve: dict) -> str:

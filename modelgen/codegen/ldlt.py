@@ -114,6 +114,21 @@ def unrolled_ldlt(n: int, tol: str, plan: Elimination | None = None) -> list:
     """
     plan = plan or elimination([[True] * n for _ in range(n)])
     earlier = plan.earlier()
+    lines = unrolled_factor(n, tol, plan)
+    for i in plan.order:
+        terms = "".join(f" - L{i}_{k} * y{k}" for k in earlier[i])
+        lines.append(f"const double y{i} = b[{i}]{terms};")
+    for i in reversed(plan.order):
+        terms = "".join(f" - L{k}_{i} * b[{k}]" for k in plan.below[i])
+        lines.append(f"b[{i}] = y{i} * inv{i}{terms};")
+    return lines
+
+
+def unrolled_factor(n: int, tol: str, plan: Elimination) -> list:
+    """The factorization half of :func:`unrolled_ldlt`: locals ``d{j}``, ``inv{j}``
+    (1 / d) and ``L{i}_{j}`` from the lower triangle of ``A``; a failing pivot
+    returns its 1-based index."""
+    earlier = plan.earlier()
     earlier_sets = {v: set(ks) for v, ks in earlier.items()}
 
     def a(i, j):
@@ -134,12 +149,22 @@ def unrolled_ldlt(n: int, tol: str, plan: Elimination | None = None) -> list:
             # a fill-in entry: A is zero there, only the updates remain
             first = "" if frozenset((i, j)) in plan.fill else a(i, j)
             lines.append(f"const double L{i}_{j} = ({first}{terms}) * inv{j};")
+    return lines
+
+
+def unrolled_columns(plan: Elimination, array: str, stride: str) -> list:
+    """Straight-line C that overwrites column ``c`` of the row-major ``array`` (rows
+    ``stride`` apart, entry ``array[i * stride + c]``) with ``-A^-1`` times it,
+    using the factor of :func:`unrolled_factor`: one block of a loop over the
+    columns of many right-hand sides."""
+    earlier = plan.earlier()
+    lines = []
     for i in plan.order:
         terms = "".join(f" - L{i}_{k} * y{k}" for k in earlier[i])
-        lines.append(f"const double y{i} = b[{i}]{terms};")
+        lines.append(f"const double y{i} = {array}[{i} * {stride} + c]{terms};")
     for i in reversed(plan.order):
-        terms = "".join(f" - L{k}_{i} * b[{k}]" for k in plan.below[i])
-        lines.append(f"b[{i}] = y{i} * inv{i}{terms};")
+        terms = "".join(f" - L{k}_{i} * {array}[{k} * {stride} + c]" for k in plan.below[i])
+        lines.append(f"{array}[{i} * {stride} + c] = -y{i} * inv{i}{terms};")
     return lines
 
 
@@ -169,13 +194,40 @@ def solve_code(n: int, tol: str, pattern=None) -> dict:
                                 f"zeros of A skipped: {products} products, "
                                 f"{len(plan.fill)} fill-ins */"] + unrolled_ldlt(n, tol, plan),
                 "solve_loop": None}
+    return {"solve_lines": [], "solve_loop": loop_tables(plan)}
+
+
+def loop_tables(plan: Elimination) -> dict:
+    """The tables of a loop over the non-zeros of L (for the template): the
+    elimination order, and per pivot the rows below it (``below[start[p]:start[p + 1]]``),
+    as C initialiser lists.
+
+    >>> loop_tables(elimination([[1, 1, 1], [1, 1, 0], [1, 0, 1]]))["below"]
+    '0, 2'
+    """
     below = [w for v in plan.order for w in plan.below[v]]
     start = [0]
     for v in plan.order:
         start.append(start[-1] + len(plan.below[v]))
-    return {"solve_lines": [],
-            "solve_loop": {"order": ", ".join(map(str, plan.order)),
-                           "start": ", ".join(map(str, start)),
-                           "below": ", ".join(map(str, below)) or "0",
-                           "nbelow": max(len(below), 1), "products": products,
-                           "fill": len(plan.fill)}}
+    return {"order": ", ".join(map(str, plan.order)),
+            "start": ", ".join(map(str, start)),
+            "below": ", ".join(map(str, below)) or "0",
+            "nbelow": max(len(below), 1), "products": plan.products(),
+            "fill": len(plan.fill)}
+
+
+def derivative_solve(n: int, tol: str, pattern, nu: int) -> dict:
+    """How ``<name>_derivatives`` applies -M^-1 to its 2n + nu columns, for the
+    template: ``loop``, the tables of a loop over the non-zeros of L
+    (:func:`loop_tables`), and while the factorization is small enough to
+    unroll (as :func:`solve_code` decides for the rhs) ``unrolled``: the
+    straight-line factorization and one column's solve for each array (``X``
+    and ``Y`` with n columns, ``U`` with nu), run in a loop over the columns.
+    """
+    plan = elimination(pattern)
+    unrolled = None
+    if n <= UNROLL_SOLVE or plan.products() <= _dense_products(SPARSE_UNROLL_SIZE):
+        unrolled = {"factor": unrolled_factor(n, tol, plan),
+                    "X": unrolled_columns(plan, "X", "N"), "Y": unrolled_columns(plan, "Y", "N"),
+                    "U": unrolled_columns(plan, "U", str(nu)) if nu else []}
+    return {"loop": loop_tables(plan), "unrolled": unrolled}

@@ -24,6 +24,8 @@ from modelgen.derive.dynamics import Equations, derive_equations
 from modelgen.derive.graph import GraphBuilder
 from modelgen.derive.joint_tree import JointTree, extract_joint_tree
 from modelgen.derive.rnea import derive_inverse_dynamics, derive_velocity_terms
+from modelgen.derive.rnea_derivatives import (derive_inverse_dynamics_derivatives,
+                                              differentiate_inverse_dynamics)
 from modelgen.errors import ModelError
 from modelgen.codegen.emit import (ABI_VERSION, constraint_context, emit_sources,
                                    integrator_sources, print_routine, runtime_sources,
@@ -76,6 +78,7 @@ def model_hash(spec: ModelSpec, options: BuildOptions | None = None) -> str:
 #: The routines on the integration path (compiled as MG_PART 2, see model.c.j2).
 INTEGRATION_PATH = ("prepare", "rhs", "outputs", "jacobian_terms", "linearize_terms",
                     "inverse_dynamics", "constraint_residuals", "constraint_jacobian",
+                    "derivative_terms",
                     # what controllers call at every step (kinematics.c.j2 puts them in part 2)
                     "frame_poses", "frame_velocities", "frame_jacobians",
                     "frame_bias_accelerations", "com", "com_jacobian",
@@ -150,7 +153,7 @@ def choose_formulation(spec: ModelSpec, formulation: str = BuildOptions.formulat
 
 def routines_for(eqs: Equations, output_exprs=(), jacobian=None,
                  forward: ForwardDynamics | None = None, linearization=None, inverse=None,
-                 constraints=None):
+                 constraints=None, derivatives=None):
     """The C routines of a model: (name, inputs, outputs) for make_routines.
 
     With ``forward`` (the ABA program) the ``rhs`` routine writes q_ddot and
@@ -159,6 +162,8 @@ def routines_for(eqs: Equations, output_exprs=(), jacobian=None,
     (:class:`~modelgen.derive.linearize.LinearizationTerms`) ``linearize_terms``
     writes its R and Y (derivatives with respect to [x, u]).  ``inverse``:
     ``(qdd symbols, Q)`` of ``inverse_dynamics``, Q = A qdd + h - tau.
+    ``derivatives`` (:class:`~modelgen.derive.rnea_derivatives.InverseDynamicsDerivatives`):
+    ``derivative_terms`` writes dQ/dq, dQ/dv, dQ/du (with inputs) and M at ``a``.
     """
     n = len(eqs.qd)
     t = (("t", (eqs.t,)),)
@@ -203,7 +208,18 @@ def routines_for(eqs: Equations, output_exprs=(), jacobian=None,
            (("D", tuple(e for row in jacobian.D for e in row)),)
            + ((("K", tuple(e for row in jacobian.K for e in row)),) if jacobian.K else ()))]
          if jacobian else []) \
-      + lin
+      + lin \
+      + ([derivative_routine(t + (x, u, p), derivatives)] if derivatives else [])
+
+
+def derivative_routine(inputs, d) -> tuple:
+    """The ``derivative_terms`` routine: ``(name, inputs, outputs)`` of dQ/dq, dQ/dv,
+    dQ/du (when there are inputs) and M, row-major, at the accelerations ``a``."""
+    def flat(rows):
+        return tuple(e for row in rows for e in row)
+    du = (("dQ_du", flat(d.du)),) if d.du and d.du[0] else ()
+    return ("derivative_terms", inputs + (("a", d.a),),
+            (("dQ_dq", flat(d.dq)), ("dQ_dv", flat(d.dv))) + du + (("M", flat(d.M)),))
 
 
 def frame_routines(terms: FrameTerms | None, eqs: Equations) -> list:
@@ -387,6 +403,8 @@ class Derived:
     graph: object = field(repr=False)
     frames: FrameTerms | None = None    # the frame kinematics asked for, or None
     constraints: object = None  # ConstraintTerms of a constrained model, or None
+    #: InverseDynamicsDerivatives (options.derivatives), or None
+    derivatives: object = None
 
     @property
     def output_exprs(self) -> tuple:
@@ -417,6 +435,12 @@ def _derive(spec: ModelSpec, options: BuildOptions, tree: JointTree | None) -> D
     else:       # minus the residual tau - h - A qdd of the composite-body equations
         qdd, r = residual(eqs)
         inverse = (qdd, tuple(-e for e in r))
+    derivatives = None
+    if options.derivatives:
+        derivatives = (derive_inverse_dynamics_derivatives(eqs, tree, spec, graph)
+                       if tree is not None and _time_free(tree)
+                       else differentiate_inverse_dynamics(graph, eqs, *inverse))
+        graph = derivatives.graph
     linearization = None
     if options.linearize:       # one pass for A, B, C, D; the Jacobian is its state columns
         linearization = derive_linearization_terms(
@@ -436,7 +460,7 @@ def _derive(spec: ModelSpec, options: BuildOptions, tree: JointTree | None) -> D
     frames = _derive_frames(spec, options, kin, graph)
     graph = frames.graph if frames else graph
     return Derived(eqs, columns, forward, inverse, linearization, terms, graph, frames,
-                   constraints)
+                   constraints, derivatives)
 
 
 def _derive_frames(spec: ModelSpec, options: BuildOptions, kin, graph) -> FrameTerms | None:
@@ -454,9 +478,10 @@ def _eliminate(derived: Derived) -> tuple:
     dynamics are eliminated on their own, and the rhs's parameter-only part hoisted."""
     d = derived
     routines = make_routines(d.graph, routines_for(d.eqs, d.output_exprs, d.terms, d.forward,
-                                                   d.linearization, d.inverse, d.constraints)
+                                                   d.linearization, d.inverse, d.constraints,
+                                                   d.derivatives)
                              + frame_routines(d.frames, d.eqs),
-                             alone=("rhs", "inverse_dynamics"))
+                             alone=("rhs", "inverse_dynamics", "derivative_terms"))
     return _hoisted(routines)
 
 
@@ -488,7 +513,9 @@ def _emit(spec: ModelSpec, options: BuildOptions, derived: Derived, routines: tu
         mass_pattern=None if forward else [[e != 0 for e in row] for row in eqs.A],
         formulation=options.formulation, aba_inward=forward.inward if forward else (),
         frames=derived.frames,
-        constraints=_constraint_context(spec, derived.constraints))
+        constraints=_constraint_context(spec, derived.constraints),
+        derivatives_pattern=([[e != 0 for e in row] for row in derived.derivatives.M]
+                             if derived.derivatives else None))
     return Emitted(functions, context, emit_sources(context))
 
 
@@ -523,6 +550,7 @@ def _manifest(spec: ModelSpec, options: BuildOptions, derived: Derived, emitted:
         "inputs": list(spec.inputs),
         "jacobian": options.jacobian,
         "linearize": options.linearize,
+        "derivatives": options.derivatives,
         "formulation": options.formulation,
         **({"constraints": _constraint_manifest(spec, derived.constraints)}
            if derived.constraints else {}),

@@ -28,7 +28,8 @@ def generate_model(source, out_dir=None, *, force: bool = False,
                    linearize: bool | None = None, floating_base: bool | None = None,
                    inertia: str | None = None, min_mass: float | None = None,
                    min_inertia: float | None = None, kinematics=None,
-                   frames=None, max_operations: int | None = None) -> Generated:
+                   frames=None, max_operations: int | None = None,
+                   derivatives: bool | None = None) -> Generated:
     """Generate and compile a model (or reuse the cache); returns the report.
 
     ``options`` and the shorthand keywords are those of :func:`load`.
@@ -39,7 +40,7 @@ def generate_model(source, out_dir=None, *, force: bool = False,
     options = BuildOptions.of(options, jacobian=jacobian, formulation=formulation,
                               linearize=linearize, floating_base=floating_base,
                               inertia=inertia, min_mass=min_mass, min_inertia=min_inertia,
-                              kinematics=_kinematics(kinematics, frames))
+                              kinematics=_kinematics(kinematics, frames), derivatives=derivatives)
     generated = _generate(source, out_dir, force, options, progress, max_operations)
     _loaded(generated)
     index.record(_fast_key(source, options, out_dir), generated.build, _runtime())
@@ -62,7 +63,8 @@ def load(source, out_dir=None, *, force: bool = False, options: BuildOptions | N
          linearize: bool | None = None, floating_base: bool | None = None,
          inertia: str | None = None, min_mass: float | None = None,
          min_inertia: float | None = None, kinematics=None, frames=None,
-         max_operations: int | None = None) -> CompiledModel:
+         max_operations: int | None = None,
+         derivatives: bool | None = None) -> CompiledModel:
     """Build (on first use) and import a model; returns a :class:`CompiledModel`.
 
     ``source`` is a YAML path, a URDF (``.urdf``) or MJCF (``.xml``, compiled by
@@ -88,6 +90,9 @@ def load(source, out_dir=None, *, force: bool = False, options: BuildOptions | N
     accelerations, the centre of mass and the centroidal map
     (:mod:`modelgen.sim.kinematics`); ``frames=[...]`` is short for
     ``kinematics={"frames": [...]}``.
+    With ``derivatives=True`` the analytical derivatives ``<name>_derivatives`` and
+    ``<name>_inverse_dynamics_derivatives`` are generated too, for
+    :meth:`CompiledModel.derivatives` and :meth:`CompiledModel.inverse_dynamics_derivatives`.
 
     >>> cm = load("models/double_pendulum.yaml", jacobian=True)   # doctest: +SKIP
     >>> cm = load("models/double_pendulum.yaml",                  # doctest: +SKIP
@@ -97,7 +102,7 @@ def load(source, out_dir=None, *, force: bool = False, options: BuildOptions | N
     options = BuildOptions.of(options, jacobian=jacobian, formulation=formulation,
                               linearize=linearize, floating_base=floating_base,
                               inertia=inertia, min_mass=min_mass, min_inertia=min_inertia,
-                              kinematics=_kinematics(kinematics, frames))
+                              kinematics=_kinematics(kinematics, frames), derivatives=derivatives)
     key = _fast_key(source, options, out_dir)
     hit = None if force else index.lookup(key)
     if hit is not None:

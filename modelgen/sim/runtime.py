@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numbers
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -24,6 +25,22 @@ from modelgen.sim import linearize as linearization
 from modelgen.sim.conditioning import (PIVOT_TOL, failing_pivot, failure_kind,
                                        negligible_diagonal)
 from modelgen.sim.result import DenseOutput, Result
+
+
+class Derivatives(NamedTuple):
+    """:meth:`CompiledModel.derivatives`: d qdd / d q (tangent space), d qdd / d v and
+    d qdd / d u, shapes (n, n), (n, n), (n, nu)."""
+    dqdd_dq: np.ndarray
+    dqdd_dv: np.ndarray
+    dqdd_du: np.ndarray
+
+
+class InverseDynamicsDerivatives(NamedTuple):
+    """:meth:`CompiledModel.inverse_dynamics_derivatives`: dQ/dq (tangent space),
+    dQ/dv and the mass matrix M = dQ/dqdd, each (n, n)."""
+    dQ_dq: np.ndarray
+    dQ_dv: np.ndarray
+    M: np.ndarray
 
 
 class CompiledModel(FrameKinematics):
@@ -284,6 +301,50 @@ class CompiledModel(FrameKinematics):
         self._inverse_dynamics(self._time(t), self._ptr(x), self._ptr(qdd),
                                self._ptr(self.input_vector(u)), self._ptr(self.params(p)),
                                self._ptr(out))
+        return out
+
+    def _derivatives_function(self, suffix: str):
+        fn = getattr(self.lib, f"{self.name}_{suffix}", None)
+        if fn is None:
+            raise BuildError(f"{self.name}: built without the analytical derivatives; load "
+                             f"it with derivatives=True")
+        return fn
+
+    def derivatives(self, t, x, u=None, p=None) -> Derivatives:
+        """d qdd / d q, d qdd / d v, d qdd / d u of the rhs's accelerations at (t, x, u, p),
+        analytical (``<name>_derivatives``: -M^-1 times the derivatives of inverse
+        dynamics, Carpentier and Mansard 2018); d/dq of a ball or free joint in the
+        tangent space (along the speeds), as Pinocchio's ``computeABADerivatives``.
+        Load the model with ``derivatives=True``.
+
+        >>> d = modelgen.load(path, derivatives=True).derivatives(0.0, x)  # doctest: +SKIP
+        >>> d.dqdd_dq.shape                                                 # doctest: +SKIP
+        """
+        fn = self._derivatives_function("derivatives")
+        x = self._vector(x, self.nx, "x")
+        n, nu = self.n, len(self.inputs)
+        out = Derivatives(np.empty((n, n)), np.empty((n, n)), np.empty((n, nu)))
+        status = fn(self._time(t), self._ptr(x), self._ptr(self.input_vector(u)),
+                    self._ptr(self.params(p)), self._ptr(out.dqdd_dq), self._ptr(out.dqdd_dv),
+                    self._ptr(out.dqdd_du) if nu else self.ffi.NULL)
+        if status:
+            raise self._mass_matrix_error(status, t, x, p)
+        return out
+
+    def inverse_dynamics_derivatives(self, t, x, qdd, u=None, p=None) -> InverseDynamicsDerivatives:
+        """dQ/dq, dQ/dv and M = dQ/dqdd of :meth:`inverse_dynamics` at (t, x, qdd, u, p)
+        (``<name>_inverse_dynamics_derivatives``; Pinocchio's ``computeRNEADerivatives``
+        with the model's own forces taken off).  Load the model with ``derivatives=True``.
+
+        >>> d = cm.inverse_dynamics_derivatives(0.0, x, qdd)             # doctest: +SKIP
+        """
+        fn = self._derivatives_function("inverse_dynamics_derivatives")
+        x, qdd = self._vector(x, self.nx, "x"), self._vector(qdd, self.n, "qdd")
+        n = self.n
+        out = InverseDynamicsDerivatives(np.empty((n, n)), np.empty((n, n)), np.empty((n, n)))
+        fn(self._time(t), self._ptr(x), self._ptr(qdd), self._ptr(self.input_vector(u)),
+           self._ptr(self.params(p)), self._ptr(out.dQ_dq), self._ptr(out.dQ_dv),
+           self._ptr(out.M))
         return out
 
     def rhs(self, t, x, u=None, p=None) -> np.ndarray:
