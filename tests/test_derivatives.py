@@ -78,7 +78,6 @@ def test_entries_of_joints_on_different_branches_are_structurally_zero():
 
 # -- the generated C: <name>_derivatives and <name>_inverse_dynamics_derivatives -----
 
-import importlib.util  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import modelgen  # noqa: E402
