@@ -60,13 +60,13 @@ from modelgen.derive.dynamics import Equations
 from modelgen.derive.graph import Graph, GraphBuilder, free_symbols, operation_count
 from modelgen.derive.jacobian import JacobianTerms, differentiate
 from modelgen.derive.joint_tree import JointTree
-from modelgen.derive.recursion import (action_force, inward_place, joint_motion, link_force,
+from modelgen.derive.recursion import (inward_place, joint_motion, link_force, link_loads,
                                        link_velocities, outward_pass, outward_place,
                                        to_parent_force, to_parent_inertia)
-from modelgen.derive.spatial import (ONE, ZERO, ZERO3, add, dot, inertia_times, is_zero,
+from modelgen.derive.spatial import (ONE, ZERO, add, dot, inertia_times, is_zero,
                                      name_matrix, name_symmetric, name_vec, named, neg, skew, sub,
                                      symmetric, times, total)
-from modelgen.model.spec import CANONICAL_BASE, ModelSpec
+from modelgen.model.spec import ModelSpec
 
 @dataclass(frozen=True)
 class ForwardDynamics:
@@ -118,20 +118,6 @@ def _single(S):
 
 def _zero_row_col(M, j):
     return tuple(tuple(ZERO if j in (r, s) else M[r][s] for s in range(3)) for r in range(3))
-
-
-def _ground_acceleration(eqs_spec) -> tuple:
-    """(-g as a spatial acceleration in E, labels of the tau parts it replaces)."""
-    total = ZERO3
-    labels = []
-    if eqs_spec.gravity is not None:
-        total = add(total, eqs_spec.gravity)
-        labels.append("gravity")
-    for eff in eqs_spec.effects:
-        if eff.kind == "gravity" and eff.base == CANONICAL_BASE:
-            total = add(total, eff.vector)
-            labels.append(eff.name)
-    return ZERO3 + tuple(-x for x in total), labels
 
 
 #: where the velocity-product accelerations c_i enter the ABA (:func:`derive_aba`)
@@ -328,7 +314,7 @@ def _derive_aba(eqs, tree, spec, graph, velocity_products) -> ForwardDynamics:
     """The three passes of Table 7.1 (:func:`derive_aba`), built pass by pass."""
     builder = GraphBuilder(graph or eqs.graph)
     start = len(builder)
-    a0, tau, external = _loads(builder, eqs, tree, spec)
+    a0, tau, external = link_loads(builder, eqs, tree, spec)
     velocities = link_velocities(builder, tree, eqs.qd)
     inertias = _backward_inertias(builder, tree)
     builder.place = None
@@ -354,26 +340,6 @@ def _derive_aba(eqs, tree, spec, graph, velocity_products) -> ForwardDynamics:
     builder.place = None
     builder.arrange(start)
     return ForwardDynamics(builder.freeze(), tuple(qdd), tuple(D), inward, tuple(plan))
-
-
-def _loads(builder, eqs, tree, spec) -> tuple:
-    """``(a0, tau, external)``: the ground's acceleration (gravity in E), the
-    generalized forces of the other effects, and the actions as spatial forces
-    on their links ({joint index: force})."""
-    n = len(eqs.qd)
-    a0, gravity_labels = _ground_acceleration(spec)
-    actions = list(spec.actions) + [e for e in spec.effects if e.kind == "action"]
-    local = set(gravity_labels) | {a.name for a in actions}
-    others = [part for label, part in eqs.tau_parts if label not in local]
-    tau = [named(builder, sympy.Add(*[part[k] for part in others])) for k in range(n)]
-    link_of = dict(tree.body_links)
-    external: dict = {}
-    for act in actions:
-        i = link_of[act.body]
-        if i >= 0:
-            f = action_force(builder, spec, tree.joints[i], act)
-            external[i] = name_vec(builder, add(external[i], f)) if i in external else f
-    return a0, tau, external
 
 
 def _backward_inertias(builder, tree) -> _Inertias:

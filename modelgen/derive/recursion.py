@@ -32,7 +32,8 @@ from modelgen.derive.kinematics import quaternion_columns
 from modelgen.derive.spatial import (PAIRS, ZERO, ZERO3, add, axis_rot_T, cross, cross_motion,
                                      elementary, force_rot_T, force_xlt_T, inertia_rot_T,
                                      inertia_times, inertia_xlt_T, is_identity, is_zero, matvec,
-                                     motion_rot, motion_xlt, name_symmetric, name_vec, rotation,
+                                     motion_rot, motion_xlt, name_symmetric, name_vec, named,
+                                     rotation,
                                      signed, skew, sub, symmetric, times, total, transpose)
 from modelgen.model.spec import CANONICAL_BASE, CANONICAL_POINT
 
@@ -345,3 +346,37 @@ def action_force(builder, spec, joint, act) -> tuple:
         r = name_vec(builder, sub(_point_offset(builder, spec, act.point, point, L), correction))
         T = name_vec(builder, add(T, cross(r, F)))
     return T + F
+
+
+def ground_acceleration(eqs_spec) -> tuple:
+    """(-g as a spatial acceleration in E, labels of the tau parts it replaces)."""
+    total = ZERO3
+    labels = []
+    if eqs_spec.gravity is not None:
+        total = add(total, eqs_spec.gravity)
+        labels.append("gravity")
+    for eff in eqs_spec.effects:
+        if eff.kind == "gravity" and eff.base == CANONICAL_BASE:
+            total = add(total, eff.vector)
+            labels.append(eff.name)
+    return ZERO3 + tuple(-x for x in total), labels
+
+
+def link_loads(builder, eqs, tree, spec) -> tuple:
+    """``(a0, tau, external)``: the ground's acceleration (gravity in E), the
+    generalized forces of the other effects, and the actions as spatial forces
+    on their links ({joint index: force})."""
+    n = len(eqs.qd)
+    a0, gravity_labels = ground_acceleration(spec)
+    actions = list(spec.actions) + [e for e in spec.effects if e.kind == "action"]
+    local = set(gravity_labels) | {a.name for a in actions}
+    others = [part for label, part in eqs.tau_parts if label not in local]
+    tau = [named(builder, sympy.Add(*[part[k] for part in others])) for k in range(n)]
+    link_of = dict(tree.body_links)
+    external: dict = {}
+    for act in actions:
+        i = link_of[act.body]
+        if i >= 0:
+            f = action_force(builder, spec, tree.joints[i], act)
+            external[i] = name_vec(builder, add(external[i], f)) if i in external else f
+    return a0, tau, external

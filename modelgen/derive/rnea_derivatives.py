@@ -41,6 +41,7 @@ from modelgen.derive.jacobian import accelerations, differentiate
 from modelgen.derive.joint_tree import JointTree
 from modelgen.derive.recursion import (
     action_force,
+    ground_acceleration,
     joint_motion,
     joint_velocity,
     link_force,
@@ -57,7 +58,7 @@ from modelgen.derive.spatial import (
     named,
     sub,
 )
-from modelgen.model.spec import CANONICAL_BASE, ModelSpec
+from modelgen.model.spec import ModelSpec
 
 
 @dataclass(frozen=True)
@@ -80,20 +81,6 @@ class InverseDynamicsDerivatives:
         """Operations of the derivatives and of what they need (before CSE)."""
         flat = [e for rows in (self.dq, self.dv, self.du, self.M) for row in rows for e in row]
         return self.graph.operations(flat)
-
-
-def ground_acceleration(spec: ModelSpec) -> tuple:
-    """``(a0, labels)``: ``-g`` as a spatial acceleration of the ground in E (gravity
-    and the gravity effects in E), and the labels of the tau parts it replaces."""
-    g, labels = ZERO3, []
-    if spec.gravity is not None:
-        g = add(g, spec.gravity)
-        labels.append("gravity")
-    for eff in spec.effects:
-        if eff.kind == "gravity" and eff.base == CANONICAL_BASE:
-            g = add(g, eff.vector)
-            labels.append(eff.name)
-    return ZERO3 + tuple(-x for x in g), labels
 
 
 def rnea_with_loads(builder: GraphBuilder, eqs: Equations, tree: JointTree, spec: ModelSpec,
