@@ -40,7 +40,7 @@ def _relative(a, b) -> float:
 @pytest.mark.parametrize("n", [1, 4, 9])
 def test_rnea_derivatives_program_matches_pinocchio_on_spatial_chains(n):
     pin = pytest.importorskip("pinocchio")
-    from modelgen.bench.hardcase_models import chain_pinocchio
+    from modelgen.bench.peers import chain_pinocchio
     spec = spatial_chain(n).spec()
     eqs = derive_equations(derive_kinematics(spec))
     d = derive_inverse_dynamics_derivatives(eqs, extract_joint_tree(spec), spec)
@@ -162,7 +162,7 @@ def _check_against_pinocchio(pin, cm, model, states=3, seed=0, P=None, q_pin=Non
 
 @pytest.mark.parametrize("n", [2, 12])
 def test_generated_derivatives_match_pinocchio_on_spatial_chains(n, pin, tmp_path):
-    from modelgen.bench.hardcase_models import chain_pinocchio
+    from modelgen.bench.peers import chain_pinocchio
     cm = modelgen.load(spatial_chain(n), tmp_path / "build", derivatives=True)
     _check_against_pinocchio(pin, cm, chain_pinocchio(n, cm.parameters), seed=n)
 
