@@ -27,7 +27,7 @@ def generate_model(source, out_dir=None, *, force: bool = False,
                    jacobian: bool | None = None, formulation: str | None = None,
                    linearize: bool | None = None, floating_base: bool | None = None,
                    inertia: str | None = None, min_mass: float | None = None,
-                   min_inertia: float | None = None) -> Generated:
+                   min_inertia: float | None = None, mimic: str | None = None) -> Generated:
     """Generate and compile a model (or reuse the cache); returns the report.
 
     ``options`` and the shorthand keywords are those of :func:`load`.
@@ -37,7 +37,8 @@ def generate_model(source, out_dir=None, *, force: bool = False,
     """
     options = BuildOptions.of(options, jacobian=jacobian, formulation=formulation,
                               linearize=linearize, floating_base=floating_base,
-                              inertia=inertia, min_mass=min_mass, min_inertia=min_inertia)
+                              inertia=inertia, min_mass=min_mass, min_inertia=min_inertia,
+                              mimic=mimic)
     generated = _generate(source, out_dir, force, options, progress)
     _loaded(generated)
     index.record(_fast_key(source, options, out_dir), generated.build, _runtime())
@@ -59,7 +60,7 @@ def load(source, out_dir=None, *, force: bool = False, options: BuildOptions | N
          progress=None, jacobian: bool | None = None, formulation: str | None = None,
          linearize: bool | None = None, floating_base: bool | None = None,
          inertia: str | None = None, min_mass: float | None = None,
-         min_inertia: float | None = None) -> CompiledModel:
+         min_inertia: float | None = None, mimic: str | None = None) -> CompiledModel:
     """Build (on first use) and import a model; returns a :class:`CompiledModel`.
 
     ``source`` is a YAML path, a URDF (``.urdf``) or MJCF (``.xml``, compiled by
@@ -79,7 +80,8 @@ def load(source, out_dir=None, *, force: bool = False, options: BuildOptions | N
     ``floating_base=True`` (a URDF path) makes the robot's root link a free
     body (a free joint ``root_joint``: position, unit quaternion, 6 speeds);
     ``inertia``, ``min_mass`` and ``min_inertia`` (a URDF path) read bodies that no
-    rigid body matches (see :func:`modelgen.model.urdf.import_urdf_text`).
+    rigid body matches, ``mimic="ignore"`` reads its mimic joints as joints of their
+    own (see :func:`modelgen.model.urdf.import_urdf_text`).
 
     >>> cm = load("models/double_pendulum.yaml", jacobian=True)   # doctest: +SKIP
     >>> cm = load("models/double_pendulum.yaml",                  # doctest: +SKIP
@@ -88,7 +90,8 @@ def load(source, out_dir=None, *, force: bool = False, options: BuildOptions | N
     """
     options = BuildOptions.of(options, jacobian=jacobian, formulation=formulation,
                               linearize=linearize, floating_base=floating_base,
-                              inertia=inertia, min_mass=min_mass, min_inertia=min_inertia)
+                              inertia=inertia, min_mass=min_mass, min_inertia=min_inertia,
+                              mimic=mimic)
     key = _fast_key(source, options, out_dir)
     hit = None if force else index.lookup(key)
     if hit is not None:
