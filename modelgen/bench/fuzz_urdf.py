@@ -362,6 +362,9 @@ def mutate(text: str, rng: random.Random):
     except ET.ParseError:
         return _text_mutation(text, rng)
     done = [rng.choice(TREE_MUTATIONS)(root, rng) for _ in range(rng.choice([1, 1, 2, 3]))]
+    for e in root.iter():       # an attribute copied from one a mutation deleted
+        for name in [n for n, v in e.attrib.items() if v is None]:
+            del e.attrib[name]
     return ET.tostring(root, encoding="unicode"), "; ".join(done)
 
 
