@@ -770,8 +770,11 @@ def test_drakes_rotor_inertia_and_gear_ratio_are_the_joints_armature(tmp_path):
     """Drake reflects a rotor as rotor_inertia * gear_ratio^2 on the joint's diagonal
     of A; the compiled model's A differs from the one without the rotor by exactly that."""
     text = _with_rotor('<drake:rotor_inertia value="0.001"/><drake:gear_ratio value="50"/>')
-    spec = import_urdf_text(text, "rotor.urdf").model.spec()
+    imp = import_urdf_text(text, "rotor.urdf")
+    spec = imp.model.spec()
     assert spec.armature == (("j", sympy.Rational(5, 2)),)
+    from modelgen.model import parse_model
+    assert parse_model(urdf_to_yaml(imp)) == spec       # modelgen import keeps it
     bare = import_urdf_text(_one_joint("0 0 1"), "rotor.urdf").model.spec()
     q = [0.4]
     a_rotor = load(spec, tmp_path / "r").mass_matrix(q)
