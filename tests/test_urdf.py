@@ -808,3 +808,18 @@ def test_a_rotor_on_a_joint_without_a_coordinate_is_refused():
                     '<drake:rotor_inertia value="1"/></actuator></transmission>')
     with pytest.raises(ModelError, match="a rotor on joint 'j', which has no coordinate"):
         import_urdf_text(text, "rotor.urdf")
+
+
+def test_an_inertia_the_model_refuses_names_the_urdf_file_and_line():
+    """Moments (-1, 1, 3) pass the import's noise test against m |c|^2 = 1e300, but
+    the model's own check refused them as '<api>', without file or line (fuzz)."""
+    heavy = ('<inertial><origin xyz="1 0 0"/><mass value="1e300"/>\n'
+             '<inertia ixx="1" ixy="2" ixz="0" iyy="1" iyz="0" izz="1"/></inertial>')
+    with pytest.raises(ModelError, match="negative principal moment") as err:
+        import_urdf_text(_one_joint("0 0 1", inertia=heavy), "heavy.urdf")
+    e = err.value
+    assert (e.file, e.line, e.key) == ("heavy.urdf", 5, "link[b].inertial.inertia")
+    assert 'inertia="as_is"' in e.fix
+    spec = import_urdf_text(_one_joint("0 0 1", inertia=heavy), "heavy.urdf",
+                            inertia="as_is").model.spec()         # the way through
+    assert spec.bodies[0].inertia[0][1] == 2 and not spec.physical_inertia

@@ -406,21 +406,36 @@ class _Builder:
                                   (0, 2, "xz"), (1, 2, "yz")):
                     inertia[i][j] = inertia[j][i] = self.parameter(f"I_{name}_{tag}",
                                                                    inertia[i][j])
-            self.model.add_body(name, mass=mass, G=point, base=base, inertia=inertia)
+            try:
+                self.model.add_body(name, mass=mass, G=point, base=base, inertia=inertia)
+            except ModelError as exc:
+                # the model's own rigid-body check (relative to the largest entry) may
+                # refuse what passed as noise against a huge m |c|^2 here: name the file
+                line, key, _ = self.located(head, links)
+                raise ModelError(exc.problem, file=self.robot.file, line=line,
+                                 key=f"{key}.inertia",
+                                 fix=f"{exc.fix}; or load the file's values as Pinocchio "
+                                     "does with inertia=\"as_is\" (command line: "
+                                     "--inertia as-is)") from None
         return body_of
+
+    def located(self, head: str, links: list) -> tuple:
+        """(line, key, description) of the body of group ``head`` for messages: the
+        first of its links with an inertial."""
+        link = self.robot.links[head]
+        where = next((x for x in links if x.inertial is not None), link)
+        line = where.inertial.inertia_line if where.inertial is not None else where.line
+        merged = [x.name for x in links if x.inertial is not None]
+        what = f"link '{head}'" + (f" (merged with the links welded to it: "
+                                   f"{', '.join(n for n in merged if n != head)})"
+                                   if len(merged) > 1 or merged[:1] not in ([], [head]) else "")
+        return line, f"link[{where.name}].inertial", what
 
     def physical(self, head: str, links: list, mass: float, com: np.ndarray,
                  inertia: np.ndarray) -> tuple:
         """The merged body of group ``head``, checked as a rigid body, with the bounds
         and the ``inertia`` option applied (each change recorded in ``self.changes``)."""
-        link = self.robot.links[head]
-        where = next((x for x in links if x.inertial is not None), link)
-        line = where.inertial.inertia_line if where.inertial is not None else where.line
-        key = f"link[{where.name}].inertial"
-        merged = [x.name for x in links if x.inertial is not None]
-        what = f"link '{head}'" + (f" (merged with the links welded to it: "
-                                   f"{', '.join(n for n in merged if n != head)})"
-                                   if len(merged) > 1 or merged[:1] not in ([], [head]) else "")
+        line, key, what = self.located(head, links)
         if not (math.isfinite(mass) and np.all(np.isfinite(com))
                 and np.all(np.isfinite(inertia))):
             raise ModelError(f"the mass, centre of mass or inertia of {what} is too large "
