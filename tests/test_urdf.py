@@ -823,3 +823,15 @@ def test_an_inertia_the_model_refuses_names_the_urdf_file_and_line():
     spec = import_urdf_text(_one_joint("0 0 1", inertia=heavy), "heavy.urdf",
                             inertia="as_is").model.spec()         # the way through
     assert spec.bodies[0].inertia[0][1] == 2 and not spec.physical_inertia
+
+
+@pytest.mark.parametrize("name", ["1e308", "int", "lambda"])
+def test_a_floating_joint_with_an_invalid_name_is_refused_at_its_line(name):
+    """As a revolute joint's: a floating joint '1e308' was refused as '<api>' (fuzz)."""
+    text = _robot(LINKS + f'\n<link name="c">{BODY}</link>\n'
+                  + _joint(kind="revolute", child="b", extra='<axis xyz="0 0 1"/>') + "\n"
+                  + _joint(name, kind="floating", parent="b", child="c"))
+    with pytest.raises(ModelError) as err:
+        import_urdf_text(text, "free.urdf")
+    assert (err.value.file, err.value.line, err.value.key) == ("free.urdf", 7,
+                                                               f"joint[{name}]")

@@ -300,6 +300,9 @@ class _Builder:
                    line: int) -> None:
         """A free joint from (parent_point, parent_base) to ``link``'s own base and point."""
         name = sanitize(wanted)
+        # as a joint's coordinate: an invalid name is refused at the joint's line
+        check_name(name, file=self.robot.file, line=line, key=f"joint[{wanted}]",
+                   what="free joint name (the sanitized joint name)")
         taken = [name] + [f"{name}_{s}" for kind in ("free",)
                           for part in JOINT_KINDS[kind] for s in part]
         clash = [t for t in taken if t in self.taken]
