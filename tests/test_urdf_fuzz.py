@@ -19,7 +19,6 @@ import time
 import warnings
 from pathlib import Path
 
-
 from modelgen.bench.fuzz_urdf import TINY, check_accepted, mutate
 from modelgen.errors import ModelError, ModelgenError
 from modelgen.model.urdf import import_urdf_text
