@@ -1,9 +1,11 @@
-"""Fuzz the model loader's expressions with thousands of generated inputs.
+"""Fuzz the model loader's expressions with thousands of generated inputs, or the URDF
+importer with mutated real robots (``--urdf``).
 
 Run from the repository root::
 
     .venv/bin/python bench/fuzz.py                 # 3000 cases, compile 10 models
     .venv/bin/python bench/fuzz.py --cases 500 --compile 0 --seed 1
+    .venv/bin/python bench/fuzz.py --urdf --cases 20000 --workers 2 --compile 5
 
 Method
     The cases come from the generators of ``modelgen/bench/fuzz_cases.py``
@@ -17,6 +19,18 @@ Method
     The first ``--compile`` models that validate are also built with
     ``modelgen.load``: a BuildError there means the compiler, not validation,
     refused a model.
+
+URDF mode (``--urdf``)
+    Real URDFs (``tests/data/urdf/*.urdf`` and, when example-robot-data is
+    installed, a few small robots of it) are mutated by
+    ``modelgen/bench/fuzz_urdf.py`` (numbers, axes, structure, names, XML
+    attacks), written to a ``.urdf`` file and read by
+    ``modelgen.model.as_spec`` (a fifth of them with ``floating_base=True``),
+    in ``--workers`` worker processes.  An accepted file is checked against an
+    independent reading of the same XML (``check_accepted``: joint axes, the
+    moving links' total mass, centre of mass and inertia); a mismatch is a
+    *wrong acceptance*.  A ModelError must name the file and a line.  The first
+    ``--compile`` accepted files are also built with ``modelgen.load``.
 
 Output
     One table: cases tried, models that validated, clean errors (ModelgenError
@@ -39,7 +53,6 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from modelgen.bench.fuzz_cases import draw_cases  # noqa: E402
 
 WORKER = r"""
 import json, sys, tempfile, time, traceback
@@ -76,12 +89,65 @@ for line in sys.stdin:
 """
 
 
+URDF_WORKER = r"""
+import base64, json, os, shutil, sys, tempfile, time, traceback, warnings
+warnings.simplefilter("ignore")
+from modelgen.errors import BuildError, ModelError, ModelgenError
+from modelgen.model import as_spec
+from modelgen.bench.fuzz_urdf import check_accepted
+import modelgen
+
+folder = tempfile.mkdtemp(prefix="mgfuzz_urdf")
+path = os.path.join(folder, "fuzz.urdf")
+for line in sys.stdin:
+    case = json.loads(line)
+    data = base64.b64decode(case["data"])
+    with open(path, "wb") as f:
+        f.write(data)
+    start = time.perf_counter()
+    out = {"kind": "ok"}
+    try:
+        spec = as_spec(path, floating_base=case["floating_base"])
+        out["seconds"] = time.perf_counter() - start
+        try:
+            problems = check_accepted(spec, data, case["floating_base"])
+        except Exception as exc:
+            problems = [f"the check failed: {type(exc).__name__}: {exc}"[:200]]
+        if problems:
+            out = {"kind": "wrong", "site": problems[0][:200]}
+        elif case["compile"]:
+            out["kind"] = "compiled"
+            try:
+                modelgen.load(spec, os.path.join(folder, "build"))
+            except BuildError as exc:
+                out = {"kind": "build_error", "site": str(exc).splitlines()[0][:100]}
+            except ModelgenError as exc:
+                reason = str(exc).split(": ", 1)[-1][:40]
+                out = {"kind": "after_validation", "site": f"{type(exc).__name__}: {reason}"}
+    except ModelError as exc:
+        if exc.line and exc.file == path:
+            out = {"kind": "clean", "site": "ModelError"}
+        else:
+            out = {"kind": "noline", "site": str(exc)[:120]}
+    except ModelgenError as exc:
+        out = {"kind": "clean", "site": type(exc).__name__}
+    except BaseException as exc:
+        frame = traceback.extract_tb(exc.__traceback__)[-1]
+        out = {"kind": "other",
+               "site": f"{type(exc).__name__} at {frame.filename.split('site-packages/')[-1]}"
+                       f":{frame.lineno}"}
+    out.setdefault("seconds", time.perf_counter() - start)    # reading only, not the check
+    print(json.dumps(out), flush=True)
+shutil.rmtree(folder, ignore_errors=True)
+"""
+
+
 class Worker:
     """A child process that loads one model per line of JSON."""
 
-    def __init__(self):
+    def __init__(self, script: str = WORKER):
         env = dict(os.environ, PYTHONPATH=str(ROOT))
-        self.proc = subprocess.Popen([sys.executable, "-c", WORKER], stdin=subprocess.PIPE,
+        self.proc = subprocess.Popen([sys.executable, "-c", script], stdin=subprocess.PIPE,
                                      stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
                                      text=True, cwd=ROOT, env=env)
 
@@ -100,14 +166,167 @@ class Worker:
                     "seconds": 0.0}
         return json.loads(line)
 
+    def send(self, case: dict) -> None:
+        self.proc.stdin.write(json.dumps(case) + "\n")
+        self.proc.stdin.flush()
+
+    def answer(self):
+        """The worker's answer to the case sent, or a crash."""
+        line = self.proc.stdout.readline()
+        if not line:
+            return {"kind": "crash", "site": f"exit status {self.proc.wait()}", "seconds": 0.0}
+        return json.loads(line)
+
+    def kill(self):
+        self.proc.kill()
+        self.proc.wait()
+
     def close(self):
         if self.proc.poll() is None:
             self.proc.stdin.close()
             self.proc.wait()
 
 
+def urdf_cases(n: int, seed: int):
+    """``n`` mutated URDFs (as worker cases), reproducibly."""
+    import base64
+    import random
+    from modelgen.bench.fuzz_urdf import base_texts, mutate
+    paths = sorted((ROOT / "tests" / "data" / "urdf").glob("*.urdf"))
+    try:
+        from modelgen.bench.robots import robots_directory
+        directory = robots_directory()
+    except ImportError:
+        directory = None
+    if directory is not None:
+        paths += [directory / p for p in (
+            "asr_twodof_description/urdf/TwoDofs.urdf", "finger_edu_description/robots/finger_edu.urdf",
+            "quadruped_description/urdf/quadruped.urdf", "hector_description/robots/quadrotor_base.urdf",
+            "z1_description/urdf/z1.urdf", "bolt_description/robots/bolt.urdf",
+            "romeo_description/urdf/romeo_small.urdf", "panda_description/urdf/panda.urdf")]
+    texts = base_texts(paths)
+    # small robots more often: a case's cost grows with the file, the bugs do not
+    weights = [1 / len(text) for _, text in texts]
+    rng = random.Random(seed)
+    for _ in range(n):
+        name, text = rng.choices(texts, weights)[0]
+        data, what = mutate(text, rng)
+        data = data.encode() if isinstance(data, str) else data
+        yield {"data": base64.b64encode(data).decode(), "floating_base": rng.random() < 0.2,
+               "compile": False, "what": f"{name}: {what}"}
+
+
+def _pool(args, cases, workers, busy, counts, sites, examples, slow):
+    """Run the cases on the workers, one case each at a time; (tried, compiled)."""
+    t0 = time.perf_counter()
+    tried = compiled = 0
+    done = False
+    while busy or not done:
+        for w in range(len(workers)):
+            if w in busy or done:
+                continue
+            case = next(cases, None)
+            if case is None:
+                done = True
+                break
+            case["compile"] = compiled < args.compile
+            budget = args.hang * (30 if case["compile"] else 1)
+            workers[w].send({k: case[k] for k in ("data", "floating_base", "compile")})
+            busy[w] = (case, time.monotonic() + budget)
+        if not busy:
+            break
+        now = time.monotonic()
+        wait = max(0.0, min(deadline for _, deadline in busy.values()) - now)
+        ready, _, _ = select.select([workers[w].proc.stdout for w in busy], [], [], wait)
+        finished = []
+        for w, (case, deadline) in busy.items():
+            if workers[w].proc.stdout in ready:
+                out = workers[w].answer()
+            elif time.monotonic() >= deadline:
+                workers[w].kill()
+                out = {"kind": "hang", "seconds": args.hang}
+            else:
+                continue
+            finished.append(w)
+            tried += 1
+            kind = out["kind"]
+            counts[kind] += 1
+            compiled += kind == "compiled"
+            if kind in ("ok", "compiled"):
+                pass
+            elif kind in ("clean", "after_validation"):
+                sites[(kind, out["site"])] += 1
+            else:
+                sites[(kind, out.get("site", "")[:60])] += 1
+                examples.setdefault((kind, out.get("site", "")[:60]), case["what"])
+                print(f"{kind}: {out.get('site', '')}: {case['what']}"[:400], flush=True)
+            if kind in ("hang", "crash"):
+                workers[w].close()
+                workers[w] = Worker(URDF_WORKER)
+            if kind not in ("compiled", "after_validation", "build_error") \
+                    and out["seconds"] > args.budget:
+                slow.append((out["seconds"], case["what"]))
+            if tried % 1000 == 0:
+                print(f"{tried} cases, {tried / (time.perf_counter() - t0):.1f} cases/s",
+                      flush=True)
+        for w in finished:
+            del busy[w]
+    for worker in workers:
+        worker.close()
+    return tried, compiled
+
+
+def run_urdf(args) -> int:
+    """The URDF mode: a pool of workers, one case each at a time."""
+    t0 = time.perf_counter()
+    counts = collections.Counter()
+    sites = collections.Counter()
+    examples = {}
+    slow = []
+    cases = urdf_cases(args.cases, args.seed)
+    workers = [Worker(URDF_WORKER) for _ in range(args.workers)]
+    busy = {}                      # worker index -> (case, deadline)
+    try:
+        tried, compiled = _pool(args, cases, workers, busy, counts, sites, examples, slow)
+    finally:
+        for worker in workers:
+            if worker.proc.poll() is None:
+                worker.kill()
+    total = time.perf_counter() - t0
+    labels = {"clean": "clean error", "after_validation": "  refused after validation",
+              "build_error": "BUILD ERROR (compiler refused)", "other": "RAW EXCEPTION",
+              "hang": "HANG", "crash": "CRASH", "wrong": "WRONG ACCEPTANCE",
+              "noline": "MODELERROR WITHOUT FILE AND LINE"}
+    print()
+    print(f"| {'outcome':58} | {'cases':>7} |")
+    print(f"|{'-' * 60}|{'-' * 8}:|")
+    rows = [("tried", tried),
+            ("accepted (a ModelSpec that says what the file says)",
+             counts["ok"] + counts["compiled"]),
+            ("  of which built and loaded by modelgen.load", counts["compiled"])]
+    rows += [(labels[kind] + ": " + site, k) for (kind, site), k in sorted(sites.items())]
+    rows += [("ModelError with file and line", counts["clean"]),
+             ("raw exceptions (not ModelgenError)", counts["other"]),
+             ("ModelErrors without file and line", counts["noline"]),
+             ("wrong acceptances (axis or inertia differs from the file)", counts["wrong"]),
+             (f"hangs (> {args.hang:g} s)", counts["hang"]), ("crashes", counts["crash"]),
+             (f"slower than the {args.budget:g} s budget", len(slow))]
+    for label, k in rows:
+        print(f"| {label[:58]:58} | {k:7d} |")
+    if slow:
+        seconds, what = max(slow)
+        print(f"slowest: {seconds:.2f} s: {what}"[:300])
+    print(f"total {total:.0f} s, {tried / total:.1f} cases/s with {args.workers} workers")
+    bad = sum(counts[k] for k in ("other", "hang", "crash", "build_error", "wrong", "noline"))
+    return 1 if bad else 0
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--urdf", action="store_true",
+                        help="fuzz the URDF importer with mutated real robots")
+    parser.add_argument("--workers", type=int, default=1,
+                        help="(--urdf) worker processes run in parallel")
     parser.add_argument("--cases", type=int, default=3000)
     parser.add_argument("--compile", type=int, default=10,
                         help="build this many of the models that validate")
@@ -116,7 +335,10 @@ def main(argv=None) -> int:
                         help="seconds after which a case counts as a hang")
     parser.add_argument("--budget", type=float, default=2.0)
     args = parser.parse_args(argv)
+    if args.urdf:
+        return run_urdf(args)
 
+    from modelgen.bench.fuzz_cases import draw_cases
     t0 = time.perf_counter()
     cases = draw_cases(args.cases, args.seed)
     print(f"drew {len(cases)} cases in {time.perf_counter() - t0:.1f} s", flush=True)

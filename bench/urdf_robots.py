@@ -72,7 +72,10 @@ def main(argv=None) -> int:
              f"fresh directory on a shared 2-core machine (load average {load:.1f} at the "
              "end); *rhs ops* the operations of the rhs after CSE and its formulation.  "
              "*options* are the reading options the robot needs: the ones its refusal "
-             "names (see docs/urdf.md, \"Inertias\").", "",
+             "names (see docs/urdf.md, \"Inertias\" and \"Mimic joints\").  "
+             f"{len(files) - len(set(files) & set(NOT_LOADED))} files load"
+             + "".join(f"; `{Path(f).name}` does not: {NOT_LOADED[f]}"
+                       for f in files if f in NOT_LOADED) + ".", "",
              f"Worst agreement: {worst[0]:.1e} ({worst[1]}).", "",
              "| robot | base | dof | seconds | rhs ops | agreement | options |",
              "|---|---|---:|---:|---:|---:|---|"] + rows

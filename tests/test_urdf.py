@@ -664,3 +664,174 @@ def test_physical_inertia_false_in_a_model_file_takes_inertias_as_given():
     with pytest.raises(ModelError, match="expected true or false") as err:
         parse_model("name: m\nphysical_inertia: 3\n", "m.yaml")
     assert (err.value.line, err.value.key) == (2, "physical_inertia")
+
+
+# -- found by the URDF fuzz (bench/fuzz.py --urdf), issue 24 ---------------------------
+
+@pytest.mark.parametrize("kind", ["fixed", "floating"])
+@pytest.mark.parametrize("axis", ["nan 0 1", "inf 0 0", "0 0 1e999", "1 x 0"])
+def test_a_non_finite_axis_of_a_joint_without_one_is_refused_not_skipped(kind, axis):
+    """A fixed joint's axis is unused, but a NaN in it was accepted silently."""
+    text = _robot(LINKS + f'\n<link name="c">{BODY}</link>\n'
+                  + _joint(kind=kind, extra=f'<axis xyz="{axis}"/>') + "\n"
+                  + _joint("k", parent="b", child="c", extra='<axis xyz="0 0 1"/>'))
+    with pytest.raises(ModelError, match="malformed number") as err:
+        import_urdf_text(text, "axis.urdf")
+    assert (err.value.file, err.value.line, err.value.key) == ("axis.urdf", 6, "joint[j].axis")
+
+
+@pytest.mark.parametrize("name, model", [("True", "True_robot"), ("lambda", "lambda_robot"),
+                                         ("int", "int_robot"), ("None", "None_robot"),
+                                         ("9lives", "robot_9lives")])
+def test_a_robot_named_by_a_keyword_gets_a_valid_model_name(name, model):
+    """<robot name="True"> raised a ModelError naming '<api>' and no line."""
+    text = _one_joint("0 0 1").replace('<robot name="r">', f'<robot name="{name}">')
+    assert import_urdf_text(text, "kw.urdf").model.spec().name == model
+
+
+def test_an_empty_robot_is_refused_with_its_line_and_a_fix_naming_xacro():
+    """example-robot-data's ur3.urdf: a <robot> without name, links or joints."""
+    text = ('<?xml version="1.0"?>\n<!-- made by xacro -->\n'
+            '<robot xmlns:xacro="http://wiki.ros.org/xacro">\n  <!-- only macros -->\n</robot>\n')
+    with pytest.raises(ModelError, match="the <robot> element is empty") as err:
+        import_urdf_text(text, "ur3.urdf")
+    e = err.value
+    assert (e.file, e.line, e.key) == ("ur3.urdf", 3, "robot") and "xacro" in e.fix
+
+
+# -- mimic="ignore" (issue 23: alex_psyonic_hands) -----------------------------------------
+
+MIMIC_OF_A_GHOST = _robot(LINKS + f'\n<link name="c">{BODY}</link>\n<link name="d">{BODY}</link>\n'
+                          + _joint(child="c", extra='<axis xyz="0 0 1"/>') + "\n"
+                          + _joint("k", parent="c", child="d",
+                                   extra='<axis xyz="0 1 0"/><mimic joint="ghost_q1" '
+                                         'multiplier="2" offset="0.5"/>')
+                          + '\n' + _joint("w", kind="fixed", child="b"))
+
+
+def test_a_mimic_of_a_missing_joint_is_refused_and_the_fix_names_mimic_ignore():
+    with pytest.raises(ModelError, match="mimic of unknown joint 'ghost_q1'") as err:
+        import_urdf_text(MIMIC_OF_A_GHOST, "hand.urdf")
+    assert (err.value.line, err.value.key) == (8, "joint[k].mimic")
+    assert 'mimic="ignore"' in err.value.fix and "--mimic ignore" in err.value.fix
+
+
+def test_mimic_ignore_gives_every_joint_a_coordinate_as_pinocchio_mimic_false():
+    with pytest.warns(UserWarning, match=r"mimic=\"ignore\".*joint 'k' \(of 'ghost_q1'\)"):
+        imp = import_urdf_text(MIMIC_OF_A_GHOST, "hand.urdf", mimic="ignore")
+    spec = imp.model.spec()
+    assert spec.coordinates == ("j", "k") and spec.inputs == ("tau_j", "tau_k")
+    # the same robot written without the mimic tag
+    plain = import_urdf_text(MIMIC_OF_A_GHOST.replace(
+        '<mimic joint="ghost_q1" multiplier="2" offset="0.5"/>', ""), "hand.urdf")
+    assert spec.bases == plain.model.spec().bases and spec.bodies == plain.model.spec().bodies
+    assert 'Read with mimic="ignore"' in urdf_to_yaml(imp)
+    # a file whose mimics are all valid: ignore makes the mimic joint a joint of its own
+    with pytest.warns(UserWarning, match="mimic"):
+        assert import_urdf_text(EXOTIC, "x.urdf", mimic="ignore").model.spec().n == 5
+    assert import_urdf_text(EXOTIC, "x.urdf").model.spec().n == 4
+    with pytest.raises(ValueError, match="mimic='loose'"):
+        import_urdf_text(EXOTIC, "x.urdf", mimic="loose")
+
+
+def test_mimic_ignore_reaches_as_spec_load_and_the_command_line(tmp_path, capsys):
+    path = tmp_path / "hand.urdf"
+    path.write_text(MIMIC_OF_A_GHOST)
+    with pytest.warns(UserWarning):
+        spec = as_spec(path, mimic="ignore")
+    assert spec.n == 2
+    with pytest.raises(TypeError, match="apply to a URDF"):
+        as_spec(DATA.parent / "models" / "x.yaml", mimic="ignore")
+    with pytest.warns(UserWarning):
+        assert load(path, tmp_path / "b", mimic="ignore").mass_matrix([0.3, 0.1]).shape \
+            == (2, 2)
+    out = tmp_path / "hand.yaml"
+    assert main(["import", str(path), "-o", str(out)]) != 0
+    assert "--mimic ignore" in capsys.readouterr().err
+    with pytest.warns(UserWarning):
+        assert main(["import", str(path), "-o", str(out), "--mimic", "ignore"]) == 0
+    assert load_model(out) == spec and '# Read with mimic="ignore"' in out.read_text()
+    from modelgen.codegen.options import BuildOptions
+    assert BuildOptions(mimic="ignore").reading()["mimic"] == "ignore"
+    assert "mimic='ignore'" in BuildOptions(mimic="ignore").key_text()
+
+
+# -- armature from Drake's rotor extension ---------------------------------------------
+
+def _with_rotor(actuator: str, joint: str = "j") -> str:
+    return _one_joint("0 0 1").replace("</robot>", (
+        f'<transmission name="t"><type>transmission_interface/SimpleTransmission</type>'
+        f'<joint name="{joint}"><hardwareInterface>EffortJointInterface</hardwareInterface>'
+        f'</joint>\n<actuator name="m"><mechanicalReduction>50</mechanicalReduction>'
+        f'{actuator}</actuator></transmission>\n</robot>'))
+
+
+def test_drakes_rotor_inertia_and_gear_ratio_are_the_joints_armature(tmp_path):
+    """Drake reflects a rotor as rotor_inertia * gear_ratio^2 on the joint's diagonal
+    of A; the compiled model's A differs from the one without the rotor by exactly that."""
+    text = _with_rotor('<drake:rotor_inertia value="0.001"/><drake:gear_ratio value="50"/>')
+    imp = import_urdf_text(text, "rotor.urdf")
+    spec = imp.model.spec()
+    assert spec.armature == (("j", sympy.Rational(5, 2)),)
+    from modelgen.model import parse_model
+    assert parse_model(urdf_to_yaml(imp)) == spec       # modelgen import keeps it
+    bare = import_urdf_text(_one_joint("0 0 1"), "rotor.urdf").model.spec()
+    q = [0.4]
+    a_rotor = load(spec, tmp_path / "r").mass_matrix(q)
+    a_bare = load(bare, tmp_path / "b").mass_matrix(q)
+    assert a_rotor[0, 0] - a_bare[0, 0] == pytest.approx(0.001 * 50 ** 2, rel=1e-13)
+    # the gear ratio defaults to 1, as Drake's; a transmission without the extension,
+    # or with mechanicalReduction only, adds nothing (nothing says what the rotor weighs)
+    only = import_urdf_text(_with_rotor('<drake:rotor_inertia value="0.25"/>'), "r.urdf")
+    assert only.model.spec().armature == (("j", sympy.Rational(1, 4)),)
+    assert import_urdf_text(_with_rotor(""), "r.urdf").model.spec().armature == ()
+
+
+@pytest.mark.parametrize("actuator, joint, words", [
+    ('<drake:rotor_inertia value="nan"/>', "j", "malformed number"),
+    ('<drake:rotor_inertia value="-1"/>', "j", "negative rotor inertia"),
+    ('<drake:rotor_inertia/>', "j", "missing attribute 'value'"),
+    ('<drake:rotor_inertia value="1"/><drake:gear_ratio value="1e200"/>', "j",
+     "too large for a double"),
+    ('<drake:rotor_inertia value="1"/>', "ghost", "transmission of unknown joint 'ghost'"),
+])
+def test_bad_rotor_extensions_are_model_errors_with_a_line(actuator, joint, words):
+    with pytest.raises(ModelError, match=words) as err:
+        import_urdf_text(_with_rotor(actuator, joint), "rotor.urdf")
+    assert err.value.file == "rotor.urdf" and err.value.line and err.value.fix
+
+
+def test_a_rotor_on_a_joint_without_a_coordinate_is_refused():
+    text = _robot(LINKS + f'\n<link name="c">{BODY}</link>\n' + _joint(kind="fixed") + "\n"
+                  + _joint("k", parent="b", child="c", extra='<axis xyz="0 0 1"/>')
+                  + '<transmission name="t"><joint name="j"/><actuator name="m">'
+                    '<drake:rotor_inertia value="1"/></actuator></transmission>')
+    with pytest.raises(ModelError, match="a rotor on joint 'j', which has no coordinate"):
+        import_urdf_text(text, "rotor.urdf")
+
+
+def test_an_inertia_the_model_refuses_names_the_urdf_file_and_line():
+    """Moments (-1, 1, 3) pass the import's noise test against m |c|^2 = 1e300, but
+    the model's own check refused them as '<api>', without file or line (fuzz)."""
+    heavy = ('<inertial><origin xyz="1 0 0"/><mass value="1e300"/>\n'
+             '<inertia ixx="1" ixy="2" ixz="0" iyy="1" iyz="0" izz="1"/></inertial>')
+    with pytest.raises(ModelError, match="negative principal moment") as err:
+        import_urdf_text(_one_joint("0 0 1", inertia=heavy), "heavy.urdf")
+    e = err.value
+    assert (e.file, e.line, e.key) == ("heavy.urdf", 5, "link[b].inertial.inertia")
+    assert 'inertia="as_is"' in e.fix
+    spec = import_urdf_text(_one_joint("0 0 1", inertia=heavy), "heavy.urdf",
+                            inertia="as_is").model.spec()         # the way through
+    assert spec.bodies[0].inertia[0][1] == 2 and not spec.physical_inertia
+
+
+@pytest.mark.parametrize("name", ["1e308", "int", "lambda"])
+def test_a_floating_joint_with_an_invalid_name_is_refused_at_its_line(name):
+    """As a revolute joint's: a floating joint '1e308' was refused as '<api>' (fuzz)."""
+    text = _robot(LINKS + f'\n<link name="c">{BODY}</link>\n'
+                  + _joint(kind="revolute", child="b", extra='<axis xyz="0 0 1"/>') + "\n"
+                  + _joint(name, kind="floating", parent="b", child="c"))
+    with pytest.raises(ModelError) as err:
+        import_urdf_text(text, "free.urdf")
+    assert (err.value.file, err.value.line, err.value.key) == ("free.urdf", 7,
+                                                               f"joint[{name}]")

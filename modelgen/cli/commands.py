@@ -112,6 +112,8 @@ def _reading(args) -> dict:
     for key in ("min_mass", "min_inertia"):
         if getattr(args, key):
             out[key] = getattr(args, key)
+    if args.mimic != "strict":
+        out["mimic"] = args.mimic
     return out
 
 

@@ -36,6 +36,10 @@ def _add_reading_options(parser) -> None:
     parser.add_argument("--min-inertia", type=_bound, default=0.0, metavar="KG_M2",
                         help="(a URDF) lower bound on each body's principal moments of "
                              "inertia, as MuJoCo's boundinertia")
+    parser.add_argument("--mimic", choices=("strict", "ignore"), default="strict",
+                        help="(a URDF) follow the <mimic> tags (strict, default) or ignore "
+                             "them, each joint a coordinate of its own, as Pinocchio's "
+                             "mimic=False (ignore)")
 
 
 class _Parser(argparse.ArgumentParser):

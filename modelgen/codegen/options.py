@@ -117,6 +117,9 @@ class BuildOptions:
     #: MuJoCo's boundmass and boundinertia for a URDF's moving links
     min_mass: float = field(default=0.0, metadata={"read": True})
     min_inertia: float = field(default=0.0, metadata={"read": True})
+    #: ``ignore``: a URDF's ``<mimic>`` tags are dropped, each joint its own
+    #: coordinate (Pinocchio's mimic=False); ``strict`` follows them
+    mimic: str = field(default="strict", metadata={"read": True})
 
     def reading(self) -> dict:
         """The fields that act when the model file is read, as ``as_spec`` keywords."""

@@ -28,26 +28,29 @@ __all__ = ["Model", "ModelSpec", "SceneSpec", "load_model", "parse_model", "spec
 
 
 def as_spec(source, *, floating_base: bool = False, inertia: str = "physical",
-            min_mass: float = 0.0, min_inertia: float = 0.0) -> ModelSpec:
+            min_mass: float = 0.0, min_inertia: float = 0.0,
+            mimic: str = "strict") -> ModelSpec:
     """A :class:`ModelSpec` from a path (YAML, URDF by its ``.urdf`` suffix, MJCF by
     ``.xml``: compiled by MuJoCo, see :mod:`modelgen.model.mjcf`), a
     :class:`Model` or a spec.  ``floating_base=True`` (URDF only) makes the
     root link a free body; ``inertia="as_is"`` or ``"balance"``, ``min_mass`` and
-    ``min_inertia`` (URDF only) read bodies that no rigid body matches (see
+    ``min_inertia`` (URDF only) read bodies that no rigid body matches, and
+    ``mimic="ignore"`` (URDF only) reads mimic joints as joints of their own (see
     :mod:`modelgen.model.urdf`)."""
     urdf = isinstance(source, (str, Path)) and Path(source).suffix.lower() == ".urdf"
     if floating_base and not urdf:
         raise TypeError("floating_base=True applies to a URDF file (a .urdf path); in a "
                         "model file, declare a free joint under 'joints:'")
-    if (inertia != "physical" or min_mass or min_inertia) and not urdf:
-        raise TypeError("inertia=, min_mass= and min_inertia= apply to a URDF file (a .urdf "
+    if (inertia != "physical" or min_mass or min_inertia or mimic != "strict") and not urdf:
+        raise TypeError("inertia=, min_mass=, min_inertia= and mimic= apply to a URDF file "
+                        "(a .urdf "
                         "path); a model file gives its bodies' values itself")
     if isinstance(source, ModelSpec):
         return source
     if isinstance(source, (str, Path)):
         if Path(source).suffix.lower() == ".urdf":
             return load_urdf(source, floating_base=floating_base, inertia=inertia,
-                             min_mass=min_mass, min_inertia=min_inertia).spec()
+                             min_mass=min_mass, min_inertia=min_inertia, mimic=mimic).spec()
         if Path(source).suffix.lower() == ".xml":
             return load_mjcf(source).spec()
         return load_model(source)

@@ -23,7 +23,9 @@ applies.  What becomes what:
   ``[A-Za-z0-9_]`` replaced by ``_``, in depth-first order from the root
   (children in file order).  A ``mimic`` joint has no coordinate: its
   position is ``multiplier * q + offset`` of the joint it mimics, and it has
-  no input or effects.
+  no input or effects.  A mimic of a joint the file does not have is
+  refused unless ``mimic="ignore"``, which drops every ``<mimic>`` tag (each
+  joint its own coordinate, as Pinocchio's ``mimic=False``; a warning).
 * A ``fixed`` joint welds its child to the parent: the child keeps its
   frames (bases and points, so outputs can use them) and its mass, centre of
   mass and inertia are merged exactly into the parent's body (the body of a
@@ -36,6 +38,10 @@ applies.  What becomes what:
   body, with the reaction on the parent's body (actions ``motor_<joint>``
   and ``motor_<joint>_reaction``), so ``tau_<joint>`` is exactly the
   generalized force of the joint's coordinate.
+* Drake's rotor extension of a ``<transmission>`` (``<actuator>`` with
+  ``<drake:rotor_inertia value=...>`` and ``<drake:gear_ratio value=...>``,
+  default ratio 1) is the joint's armature, rotor_inertia * gear_ratio^2
+  (the model's ``armature:``), as Drake's MultibodyPlant reflects it.
 * ``<dynamics damping=...>`` > 0 is an effect ``damping_<joint>`` (type
   ``joint_damping``) and ``friction`` > 0 an effect ``friction_<joint>``
   (type ``friction``, Coulomb level = the URDF value); ``<limit>`` values are
@@ -90,7 +96,8 @@ from modelgen.model.api import Model, check_name
 from modelgen.model.spec import CANONICAL_BASE, CANONICAL_POINT, JOINT_KINDS, symbol
 from modelgen.model.urdf_read import Joint, Limit, Robot, parse_robot, rpy_matrix
 
-__all__ = ["UrdfImport", "JointInfo", "ReadingOptions", "INERTIA_OPTIONS", "reading_options",
+__all__ = ["UrdfImport", "JointInfo", "ReadingOptions", "INERTIA_OPTIONS", "MIMIC_OPTIONS",
+           "reading_options",
            "load_urdf", "import_urdf", "import_urdf_text", "urdf_to_yaml", "sanitize"]
 
 _MOVING = ("revolute", "continuous", "prismatic")
@@ -112,6 +119,11 @@ class JointInfo(NamedTuple):
 #: file's values as Pinocchio does, or apply MuJoCo's ``balanceinertia`` rule
 INERTIA_OPTIONS = ("physical", "as_is", "balance")
 
+#: values of the ``mimic`` option: a ``<mimic>`` joint follows the joint it names
+#: (default; a mimic of a missing joint is refused), or every ``<mimic>`` tag is
+#: ignored and each joint has a coordinate of its own (Pinocchio's ``mimic=False``)
+MIMIC_OPTIONS = ("strict", "ignore")
+
 
 class ReadingOptions(NamedTuple):
     """How non-physical or massless bodies are read (MuJoCo's compiler options
@@ -119,31 +131,38 @@ class ReadingOptions(NamedTuple):
     inertia: str = "physical"   # one of INERTIA_OPTIONS
     min_mass: float = 0.0       # lower bound on each moving body's mass [kg]
     min_inertia: float = 0.0    # lower bound on each principal moment [kg m^2]
+    mimic: str = "strict"       # one of MIMIC_OPTIONS
 
     def text(self) -> str:
         """The options as keyword arguments ('' for the defaults).
 
         >>> ReadingOptions("balance", 0.0, 1e-6).text()
         'inertia="balance", min_inertia=1e-06'
+        >>> ReadingOptions(mimic="ignore").text()
+        'mimic="ignore"'
         """
         parts = [f'inertia="{self.inertia}"'] if self.inertia != "physical" else []
         parts += [f"{k}={v!r}" for k, v in (("min_mass", self.min_mass),
                                               ("min_inertia", self.min_inertia)) if v > 0]
+        parts += [f'mimic="{self.mimic}"'] if self.mimic != "strict" else []
         return ", ".join(parts)
 
 
 def reading_options(inertia: str = "physical", min_mass: float = 0.0,
-                    min_inertia: float = 0.0) -> ReadingOptions:
+                    min_inertia: float = 0.0, mimic: str = "strict") -> ReadingOptions:
     """Checked :class:`ReadingOptions` ("as-is" is accepted for "as_is")."""
     inertia = "as_is" if inertia == "as-is" else inertia
     if inertia not in INERTIA_OPTIONS:
         raise ValueError(f"inertia={inertia!r}: use one of "
                          + ", ".join(repr(o) for o in INERTIA_OPTIONS))
+    if mimic not in MIMIC_OPTIONS:
+        raise ValueError(f"mimic={mimic!r}: use one of "
+                         + ", ".join(repr(o) for o in MIMIC_OPTIONS))
     for name, value in (("min_mass", min_mass), ("min_inertia", min_inertia)):
         if isinstance(value, bool) or not isinstance(value, (int, float)) \
                 or not (math.isfinite(value) and value >= 0):
             raise ValueError(f"{name}={value!r}: give a finite number >= 0")
-    return ReadingOptions(inertia, float(min_mass), float(min_inertia))
+    return ReadingOptions(inertia, float(min_mass), float(min_inertia), mimic)
 
 
 class UrdfImport(NamedTuple):
@@ -202,16 +221,27 @@ class _Builder:
         self.placement = {robot.root: (np.eye(3), np.zeros(3))}   # link in its group's frame
         self.coordinate: dict = {}                    # joint -> coordinate name
         self.infos: list = []
+        if robot.ignored_mimics:
+            self.changes.append("the <mimic> tags of " + ", ".join(
+                f"joint '{joint}' (of '{target}')" for joint, target in robot.ignored_mimics)
+                + " were ignored: each of these joints has a coordinate of its own (mimic)")
 
     def error(self, problem, joint: Joint, key: str, fix: str) -> ModelError:
         return ModelError(problem, file=self.robot.file, line=joint.line,
                           key=f"joint[{joint.name}].{key}", fix=fix)
 
     def model_name(self) -> str:
+        """The robot's name made a valid model name (a keyword such as 'True' or 'int'
+        gets the suffix '_robot': the name is a C prefix and a Python identifier)."""
         name = sanitize(self.robot.name)
         if not re.match(r"[A-Za-z]", name):
             name = "robot_" + name
-        return name[:63]
+        name = name[:63]
+        try:
+            check_name(name, modelgen_reserved=False)
+        except ModelError:
+            name = name[:57] + "_robot"
+        return name
 
     def unique(self, wanted: str) -> str:
         """A fresh valid name close to ``wanted`` (suffix _2, _3... on a clash)."""
@@ -272,8 +302,9 @@ class _Builder:
                    line: int) -> None:
         """A free joint from (parent_point, parent_base) to ``link``'s own base and point."""
         name = sanitize(wanted)
+        # as a joint's coordinate: an invalid name is refused at the joint's line
         check_name(name, file=self.robot.file, line=line, key=f"joint[{wanted}]",
-                   what="joint name (the sanitized URDF joint name)")
+                   what="free joint name (the sanitized joint name)")
         taken = [name] + [f"{name}_{s}" for kind in ("free",)
                           for part in JOINT_KINDS[kind] for s in part]
         clash = [t for t in taken if t in self.taken]
@@ -380,21 +411,36 @@ class _Builder:
                                   (0, 2, "xz"), (1, 2, "yz")):
                     inertia[i][j] = inertia[j][i] = self.parameter(f"I_{name}_{tag}",
                                                                    inertia[i][j])
-            self.model.add_body(name, mass=mass, G=point, base=base, inertia=inertia)
+            try:
+                self.model.add_body(name, mass=mass, G=point, base=base, inertia=inertia)
+            except ModelError as exc:
+                # the model's own rigid-body check (relative to the largest entry) may
+                # refuse what passed as noise against a huge m |c|^2 here: name the file
+                line, key, _ = self.located(head, links)
+                raise ModelError(exc.problem, file=self.robot.file, line=line,
+                                 key=f"{key}.inertia",
+                                 fix=f"{exc.fix}; or load the file's values as Pinocchio "
+                                     "does with inertia=\"as_is\" (command line: "
+                                     "--inertia as-is)") from None
         return body_of
+
+    def located(self, head: str, links: list) -> tuple:
+        """(line, key, description) of the body of group ``head`` for messages: the
+        first of its links with an inertial."""
+        link = self.robot.links[head]
+        where = next((x for x in links if x.inertial is not None), link)
+        line = where.inertial.inertia_line if where.inertial is not None else where.line
+        merged = [x.name for x in links if x.inertial is not None]
+        what = f"link '{head}'" + (f" (merged with the links welded to it: "
+                                   f"{', '.join(n for n in merged if n != head)})"
+                                   if len(merged) > 1 or merged[:1] not in ([], [head]) else "")
+        return line, f"link[{where.name}].inertial", what
 
     def physical(self, head: str, links: list, mass: float, com: np.ndarray,
                  inertia: np.ndarray) -> tuple:
         """The merged body of group ``head``, checked as a rigid body, with the bounds
         and the ``inertia`` option applied (each change recorded in ``self.changes``)."""
-        link = self.robot.links[head]
-        where = next((x for x in links if x.inertial is not None), link)
-        line = where.inertial.inertia_line if where.inertial is not None else where.line
-        key = f"link[{where.name}].inertial"
-        merged = [x.name for x in links if x.inertial is not None]
-        what = f"link '{head}'" + (f" (merged with the links welded to it: "
-                                   f"{', '.join(n for n in merged if n != head)})"
-                                   if len(merged) > 1 or merged[:1] not in ([], [head]) else "")
+        line, key, what = self.located(head, links)
         if not (math.isfinite(mass) and np.all(np.isfinite(com))
                 and np.all(np.isfinite(inertia))):
             raise ModelError(f"the mass, centre of mass or inertia of {what} is too large "
@@ -560,6 +606,10 @@ class _Builder:
             self.joint(joint)
         body_of = self.bodies()
         self.inputs_and_effects(body_of)
+        armature = {self.coordinate[r.joint]: _num(r.armature)
+                    for r in self.robot.rotors if r.armature > 0}
+        if armature:
+            self.model.set_armature(armature)
         self.link_frames()
         self.model.set_gravity([0, 0, -symbol("g")])
         if self.changes:
@@ -645,15 +695,17 @@ def _merge(links, placement) -> tuple:
 def import_urdf_text(text, source: str = "<string>", *, fix_floating_root: bool = False,
                      inertial_parameters: bool = False, floating_base: bool = False,
                      inertia: str = "physical", min_mass: float = 0.0,
-                     min_inertia: float = 0.0) -> UrdfImport:
+                     min_inertia: float = 0.0, mimic: str = "strict") -> UrdfImport:
     """Import URDF text (str or bytes); see the module docstring.
 
     ``inertia``, ``min_mass`` and ``min_inertia`` say how bodies that no rigid body
     matches are read (the default refuses them; see "Inertias" in the module
     docstring); every change they make is a warning and a note of the import.
+    ``mimic="ignore"`` reads every ``<mimic>`` joint as a joint of its own (as
+    Pinocchio's ``mimic=False``), also a warning and a note.
     """
-    options = reading_options(inertia, min_mass, min_inertia)
-    robot = parse_robot(text, source)
+    options = reading_options(inertia, min_mass, min_inertia, mimic)
+    robot = parse_robot(text, source, ignore_mimic=options.mimic == "ignore")
     notes = tuple(f"The floating joint '{j.name}' at the root was imported as fixed."
                   for j in robot.order if j.type == "floating" and fix_floating_root
                   and j.parent == robot.root)

@@ -4,8 +4,11 @@ The XML is read with :mod:`xml.parsers.expat` directly, recording the line of
 every element.  Entity declarations are refused (this stops "billion laughs"
 expansion and external entities, as ``defusedxml`` does), so no dependency is
 needed.  Tags the importer does not use (``visual``, ``collision`` with their
-meshes, ``material``, ``gazebo``, ``transmission``...) are skipped: no mesh
-file is ever opened.
+meshes, ``material``, ``gazebo``...) are skipped: no mesh file is ever
+opened.  Of a ``<transmission>``, only Drake's rotor extension is read
+(``<actuator>`` with ``<drake:rotor_inertia value=...>`` and
+``<drake:gear_ratio value=...>``): the joint's armature is
+rotor_inertia * gear_ratio^2, the reflected inertia of its rotor.
 
 Errors are :class:`~modelgen.errors.ModelError` with the URDF file, line and a
 key such as ``joint[shoulder].axis``.
@@ -26,7 +29,8 @@ import numpy as np
 
 from modelgen.errors import ModelError
 
-__all__ = ["JOINT_TYPES", "Inertial", "Link", "Limit", "Joint", "Robot", "parse_robot",
+__all__ = ["JOINT_TYPES", "Inertial", "Link", "Limit", "Joint", "Rotor", "Robot",
+           "parse_robot",
            "rpy_matrix", "unit_vector"]
 
 #: joint types the importer builds (``floating`` only as a fixed root, on request)
@@ -70,6 +74,15 @@ class Joint(NamedTuple):
     line: int
 
 
+class Rotor(NamedTuple):
+    """Drake's URDF rotor extension of one joint's transmission."""
+    joint: str
+    rotor_inertia: float   # kg m^2 (revolute) or kg (prismatic), on the motor side
+    gear_ratio: float      # motor speed / joint speed (Drake's default 1)
+    armature: float        # rotor_inertia * gear_ratio^2: added to the joint's A_ii
+    line: int
+
+
 class Robot(NamedTuple):
     name: str
     file: str
@@ -77,6 +90,8 @@ class Robot(NamedTuple):
     joints: dict          # name -> Joint, file order
     root: str
     order: tuple          # joints in depth-first order from the root, children in file order
+    ignored_mimics: tuple = ()   # (joint, the joint its ignored <mimic> named), file order
+    rotors: tuple = ()           # Rotor per joint with Drake's rotor extension, file order
 
 
 class _Node(NamedTuple):
@@ -121,8 +136,10 @@ def rpy_matrix(rpy) -> np.ndarray:
 
 
 class _Reader:
-    def __init__(self, file: str):
+    def __init__(self, file: str, ignore_mimic: bool = False):
         self.file = file
+        self.ignore_mimic = ignore_mimic
+        self.ignored_mimics: list = []
 
     def error(self, problem: str, line: Optional[int], key: Optional[str], fix: str):
         return ModelError(problem, file=self.file, line=line, key=key, fix=fix)
@@ -267,9 +284,10 @@ class _Reader:
         xyz = self.numbers(origin, "xyz", f"{key}.origin.xyz", (0.0, 0.0, 0.0))
         rpy = self.numbers(origin, "rpy", f"{key}.origin.rpy", (0.0, 0.0, 0.0))
         axis_node = self.child(node, "axis")
-        axis = (1.0, 0.0, 0.0)
+        # read for every joint type: a fixed joint's axis is unused, but a malformed or
+        # non-finite number anywhere in the file is refused, not skipped
+        axis = self.numbers(axis_node, "xyz", f"{key}.axis", (1.0, 0.0, 0.0))
         if kind in ("revolute", "continuous", "prismatic"):
-            axis = self.numbers(axis_node, "xyz", f"{key}.axis", axis)
             axis = unit_vector(axis)
             if axis is None:
                 raise self.error("the joint axis is zero", (axis_node or node).line,
@@ -284,6 +302,9 @@ class _Reader:
             offset = self.optional(mim, "offset", f"{key}.mimic")
             mimic = (self.attr(mim, "joint", f"{key}.mimic"),
                      1.0 if multiplier is None else multiplier, offset or 0.0)
+            if self.ignore_mimic:       # read (its numbers checked), then dropped
+                self.ignored_mimics.append((name, mimic[0]))
+                mimic = None
         dyn = self.child(node, "dynamics")
         damping = self.optional(dyn, "damping", f"{key}.dynamics") or 0.0
         friction = self.optional(dyn, "friction", f"{key}.dynamics") or 0.0
@@ -294,9 +315,61 @@ class _Reader:
         return Joint(name, kind, ends[0], ends[1], xyz, rpy, axis, limit, mimic, damping,
                      friction, node.line)
 
+    def rotor(self, node: _Node, joints: dict) -> Optional[Rotor]:
+        """A ``<transmission>``'s Drake rotor (None when it has none): Drake reads
+        ``<drake:rotor_inertia>`` and ``<drake:gear_ratio>`` in its ``<actuator>``."""
+        actuator = self.child(node, "actuator")
+        if actuator is None:
+            return None
+        inertia = self.child(actuator, "drake:rotor_inertia")
+        ratio = self.child(actuator, "drake:gear_ratio")
+        if inertia is None and ratio is None:
+            return None
+        name = node.attrib.get("name", "")
+        key = f"transmission[{name}]"
+        joint = self.child(node, "joint")
+        if joint is None:
+            raise self.error("a transmission with a rotor names no <joint>", node.line, key,
+                             'add <joint name="..."/>')
+        target = self.attr(joint, "name", f"{key}.joint")
+        if target not in joints:
+            raise self.error(f"transmission of unknown joint '{target}'", joint.line,
+                             f"{key}.joint", "name an existing joint")
+        values = []
+        for sub, tag, default in ((inertia, "rotor_inertia", 0.0), (ratio, "gear_ratio", 1.0)):
+            if sub is None:
+                values.append(default)
+                continue
+            values.append(self.number(self.attr(sub, "value", f"{key}.{tag}"), sub.line,
+                                      f"{key}.{tag}"))
+        rotor_inertia, gear_ratio = values
+        if rotor_inertia < 0:
+            raise self.error(f"negative rotor inertia {rotor_inertia!r}", inertia.line,
+                             f"{key}.rotor_inertia", "give a rotor inertia >= 0")
+        # one rounding (the square first) unless the square overflows where the product
+        # would not (a huge ratio, a tiny rotor)
+        with np.errstate(over="ignore"):
+            square = np.float64(gear_ratio) * np.float64(gear_ratio)
+            armature = 0.0 if not rotor_inertia else float(
+                rotor_inertia * square if math.isfinite(square) else
+                np.float64(rotor_inertia) * np.float64(gear_ratio) * np.float64(gear_ratio))
+        if not math.isfinite(armature):
+            raise self.error(f"the armature rotor_inertia * gear_ratio^2 = {rotor_inertia!r}"
+                             f" * {gear_ratio!r}^2 is too large for a double", node.line, key,
+                             "give the rotor inertia in kg m^2 and the gear ratio as motor "
+                             "turns per joint turn")
+        return Rotor(target, rotor_inertia, gear_ratio, armature, node.line)
+
     # -- the tree -------------------------------------------------------------
     def robot(self, data) -> Robot:
         top = self.xml(data)
+        if not any(node.tag in ("link", "joint") for node in top.children):
+            raise self.error("the <robot> element is empty: no <link> and no <joint>",
+                             top.line, "robot",
+                             "a URDF describes at least one link; if the file was made by "
+                             "xacro from a file that only defines macros (ur3.urdf of "
+                             "example-robot-data), generate it from the file that calls "
+                             "them (ur3_robot.urdf.xacro)")
         robot_name = self.name(top)
 
         links: dict = {}
@@ -354,7 +427,27 @@ class _Reader:
                              "a URDF is a tree: remove the joint that closes the loop")
         for joint in order:
             self.check_joint_use(joint, joints, root)
-        return Robot(robot_name, self.file, links, joints, root, tuple(order))
+        rotors: dict = {}
+        for node in top.children:
+            rotor = self.rotor(node, joints) if node.tag == "transmission" else None
+            if rotor is None:
+                continue
+            joint = joints[rotor.joint]
+            key = f"joint[{joint.name}]"
+            if rotor.joint in rotors:
+                raise self.error(f"joint '{rotor.joint}' has two rotors (the first on line "
+                                 f"{rotors[rotor.joint].line})", rotor.line, key,
+                                 "give each joint one transmission with a rotor")
+            if joint.type not in ("revolute", "continuous", "prismatic") \
+                    or joint.mimic is not None:
+                raise self.error(f"a rotor on joint '{joint.name}', which has no coordinate "
+                                 f"of its own ({joint.type}"
+                                 f"{', mimic' if joint.mimic else ''})", rotor.line, key,
+                                 "put the rotor on a revolute, continuous or prismatic joint "
+                                 "that is not a mimic")
+            rotors[rotor.joint] = rotor
+        return Robot(robot_name, self.file, links, joints, root, tuple(order),
+                     tuple(self.ignored_mimics), tuple(rotors.values()))
 
     def check_joint_use(self, joint: Joint, joints: dict, root: str):
         key = f"joint[{joint.name}]"
@@ -366,17 +459,25 @@ class _Reader:
         target = joints.get(joint.mimic[0])
         if target is None:
             raise self.error(f"mimic of unknown joint '{joint.mimic[0]}'", joint.line,
-                             f"{key}.mimic", "name an existing joint")
+                             f"{key}.mimic", "name an existing joint; or read every joint "
+                             "as a joint of its own, ignoring the file's <mimic> tags as "
+                             "Pinocchio's mimic=False does, with mimic=\"ignore\" (command "
+                             "line: --mimic ignore)")
         if target.mimic is not None or target.type not in ("revolute", "continuous",
                                                            "prismatic"):
             raise self.error(f"mimic of joint '{target.name}', which has no coordinate of its "
                              f"own ({target.type}{', mimic' if target.mimic else ''})",
                              joint.line, f"{key}.mimic",
                              "mimic a revolute, continuous or prismatic joint that is not "
-                             "itself a mimic")
+                             "itself a mimic; or ignore the file's <mimic> tags with "
+                             "mimic=\"ignore\" (command line: --mimic ignore)")
 
 
-def parse_robot(data, source: str = "<string>") -> Robot:
+def parse_robot(data, source: str = "<string>", *, ignore_mimic: bool = False) -> Robot:
     """Read URDF text (str or bytes) into a checked :class:`Robot` (what becomes of a
-    ``floating`` joint is the importer's choice: :mod:`modelgen.model.urdf`)."""
-    return _Reader(source).robot(data)
+    ``floating`` joint is the importer's choice: :mod:`modelgen.model.urdf`).
+
+    ``ignore_mimic`` drops every ``<mimic>`` (each joint then has a coordinate
+    of its own) and lists them in :attr:`Robot.ignored_mimics`.
+    """
+    return _Reader(source, ignore_mimic).robot(data)

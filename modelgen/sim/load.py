@@ -27,7 +27,8 @@ def generate_model(source, out_dir=None, *, force: bool = False,
                    jacobian: bool | None = None, formulation: str | None = None,
                    linearize: bool | None = None, floating_base: bool | None = None,
                    inertia: str | None = None, min_mass: float | None = None,
-                   min_inertia: float | None = None, kinematics=None,
+                   min_inertia: float | None = None, mimic: str | None = None,
+                   kinematics=None,
                    frames=None, max_operations: int | None = None,
                    derivatives: bool | None = None) -> Generated:
     """Generate and compile a model (or reuse the cache); returns the report.
@@ -40,7 +41,8 @@ def generate_model(source, out_dir=None, *, force: bool = False,
     options = BuildOptions.of(options, jacobian=jacobian, formulation=formulation,
                               linearize=linearize, floating_base=floating_base,
                               inertia=inertia, min_mass=min_mass, min_inertia=min_inertia,
-                              kinematics=_kinematics(kinematics, frames), derivatives=derivatives)
+                              mimic=mimic, kinematics=_kinematics(kinematics, frames),
+                              derivatives=derivatives)
     generated = _generate(source, out_dir, force, options, progress, max_operations)
     _loaded(generated)
     index.record(_fast_key(source, options, out_dir), generated.build, _runtime())
@@ -62,7 +64,8 @@ def load(source, out_dir=None, *, force: bool = False, options: BuildOptions | N
          progress=None, jacobian: bool | None = None, formulation: str | None = None,
          linearize: bool | None = None, floating_base: bool | None = None,
          inertia: str | None = None, min_mass: float | None = None,
-         min_inertia: float | None = None, kinematics=None, frames=None,
+         min_inertia: float | None = None, mimic: str | None = None, kinematics=None,
+         frames=None,
          max_operations: int | None = None,
          derivatives: bool | None = None) -> CompiledModel:
     """Build (on first use) and import a model; returns a :class:`CompiledModel`.
@@ -84,7 +87,8 @@ def load(source, out_dir=None, *, force: bool = False, options: BuildOptions | N
     ``floating_base=True`` (a URDF path) makes the robot's root link a free
     body (a free joint ``root_joint``: position, unit quaternion, 6 speeds);
     ``inertia``, ``min_mass`` and ``min_inertia`` (a URDF path) read bodies that no
-    rigid body matches (see :func:`modelgen.model.urdf.import_urdf_text`).
+    rigid body matches, ``mimic="ignore"`` reads its mimic joints as joints of their
+    own (see :func:`modelgen.model.urdf.import_urdf_text`).
     ``kinematics`` (a :class:`~modelgen.codegen.options.KinematicsOptions` or a dict
     of its fields) generates frame poses, velocities, Jacobians and bias
     accelerations, the centre of mass and the centroidal map
@@ -102,7 +106,8 @@ def load(source, out_dir=None, *, force: bool = False, options: BuildOptions | N
     options = BuildOptions.of(options, jacobian=jacobian, formulation=formulation,
                               linearize=linearize, floating_base=floating_base,
                               inertia=inertia, min_mass=min_mass, min_inertia=min_inertia,
-                              kinematics=_kinematics(kinematics, frames), derivatives=derivatives)
+                              mimic=mimic, kinematics=_kinematics(kinematics, frames),
+                              derivatives=derivatives)
     key = _fast_key(source, options, out_dir)
     hit = None if force else index.lookup(key)
     if hit is not None:
