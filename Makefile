@@ -2,7 +2,8 @@
 #   make demo   -- venv, install, generate the double pendulum and run its scene: out/dp_free.{csv,npz,png,gif,html}
 #   make test   -- venv, install, run the everyday subset of the tests (not those marked slow)
 # and what CI runs:
-#   make test-all -- every test, the slow ones too (bash .ci/run: lint, docs, then this)
+#   make test-all -- every test, the slow ones too (bash .ci/run: lint, docs, then this);
+#                    make test-collections checks every robot of the collections
 #   make lint     -- ruff (configured in pyproject.toml)
 # and the documentation:
 #   make docs   -- the docs extra; docs/ and the API reference as HTML, warnings as errors
@@ -11,7 +12,7 @@ PYTHON ?= python3
 VENV   ?= .venv
 BIN    := $(VENV)/bin
 
-.PHONY: demo test test-all lint install bench docs clean
+.PHONY: demo test test-all test-collections lint install bench docs clean
 
 $(BIN)/activate:
 	$(PYTHON) -m venv $(VENV)
@@ -34,6 +35,11 @@ test: install
 
 test-all: install
 	$(BIN)/python -m pytest -q
+
+# every robot of example-robot-data and every model of MuJoCo's suites (test-all
+# runs every fourth of them): over a hundred builds
+test-collections: install
+	MODELGEN_COLLECTION=all $(BIN)/python -m pytest -q tests/test_urdf_robots.py tests/test_mjcf.py
 
 lint: install
 	$(BIN)/python -c 'import ruff' 2>/dev/null || $(BIN)/python -m pip install --quiet -e '.[lint]'

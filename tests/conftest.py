@@ -1,6 +1,7 @@
 """Shared fixtures: one build directory per test session, models by name."""
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import pytest
@@ -64,8 +65,35 @@ SLOW = (
 )
 
 
+#: The whole-collection cross-checks: every robot of example-robot-data against
+#: Pinocchio and every model of MuJoCo's suites against MuJoCo, over a hundred
+#: builds (``bench/urdf_robots.py`` and the docs' tables run them all).  Unless
+#: ``MODELGEN_COLLECTION=all`` (``make test-collections``), every
+#: :data:`COLLECTION_STRIDE`-th case runs, so every run still checks robots of
+#: each kind without making the suite an hour long.
+COLLECTION = ("tests/test_urdf_robots.py::test_robot_matches_pinocchio",
+              "tests/test_mjcf.py::test_suite_model_matches_mujoco")
+COLLECTION_STRIDE = 4
+
+
 def pytest_collection_modifyitems(config, items):
     slow = pytest.mark.slow
+    every = os.environ.get("MODELGEN_COLLECTION", "") == "all"
+    seen: dict = {}
+    kept, dropped = [], []
     for item in items:
         if item.nodeid.startswith(SLOW):
             item.add_marker(slow)
+        prefix = next((c for c in COLLECTION if item.nodeid.startswith(c)), None)
+        if prefix is not None and not every:
+            k = seen[prefix] = seen.get(prefix, -1) + 1
+            if k % COLLECTION_STRIDE:
+                dropped.append(item)
+                continue
+        kept.append(item)
+    if dropped:
+        config.hook.pytest_deselected(items=dropped)
+        items[:] = kept
+        SUMMARY.append(f"collections: {len(dropped)} of the robots' and suites' cases left "
+                       f"out (every {COLLECTION_STRIDE}th runs); MODELGEN_COLLECTION=all "
+                       "(make test-collections) runs them all")
