@@ -327,3 +327,38 @@ def test_frictionloss_is_a_smoothed_friction_effect_or_left_out_with_a_note():
     left_out = import_mjcf_text(text, "f.xml", frictionloss="ignore")
     assert not [e for e in left_out.model.spec().effects if e.kind == "friction"]
     assert any("frictionloss (left out as asked) of wrist" in n for n in left_out.notes)
+
+
+def test_bodies_and_sites_are_frames_at_mujocos_poses(tmp_path):
+    """Every body and site is a frame whose pose is MuJoCo's xpos/xmat and
+    site_xpos/site_xmat, at random states of every joint kind."""
+    xml = SYNTHETIC.replace(
+        '<body name="hand" pos="0.3 0.1 -0.2">',
+        '<body name="hand" pos="0.3 0.1 -0.2">\n'
+        '          <site name="tip" pos="0.2 0.01 -0.03" euler="10 -20 30"/>')
+    imp = import_mjcf_text(xml, "sites.xml")
+    spec = imp.model.spec()
+    mjmodel = mujoco.MjModel.from_xml_string(xml)
+    data = mujoco.MjData(mjmodel)
+    names = [f.name for f in spec.frames]
+    bodies = {mujoco.mj_id2name(mjmodel, mujoco.mjtObj.mjOBJ_BODY, b): b
+              for b in range(1, mjmodel.nbody)}
+    assert len(names) == len(bodies) + 1 and "tip" in names
+    cm = modelgen.load(spec, tmp_path, frames=names)
+    rng = np.random.default_rng(11)
+    worst = 0.0
+    for _ in range(3):
+        data.qpos[:] = rng.normal(size=mjmodel.nq)
+        mujoco.mj_normalizeQuat(mjmodel, data.qpos)
+        mujoco.mj_kinematics(mjmodel, data)
+        q = qpos_from_mujoco(imp, data.qpos)
+        for name in names:
+            T = cm.frame_pose(q, name)
+            if name == "tip":
+                expected = data.site_xpos[0], data.site_xmat[0].reshape(3, 3)
+            else:
+                b = bodies[name.removesuffix("_frame")]
+                expected = data.xpos[b], data.xmat[b].reshape(3, 3)
+            worst = max(worst, np.max(np.abs(T[:3, 3] - expected[0])),
+                        np.max(np.abs(T[:3, :3] - expected[1])))
+    assert worst <= 1e-12, worst

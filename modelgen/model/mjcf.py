@@ -339,6 +339,26 @@ class _Builder:
                                 inertia=[[_num(inertia[r][c]) for c in range(3)]
                                          for r in range(3)])
 
+    def frames(self, frames) -> None:
+        """A frame per body (its origin and axes after its joints: MuJoCo's ``xpos``,
+        ``xmat``) and per site (``site_xpos``, ``site_xmat``), named after it, or
+        ``<name>_frame`` when a body or another name has it."""
+        m, mujoco = self.m, _mujoco()
+
+        def name(label: str) -> str:
+            wanted = sanitize(label)
+            return self.unique(wanted if wanted not in self.taken else f"{wanted}_frame")
+        for b in range(1, m.nbody):
+            base, point, _ = frames[b]
+            self.model.add_frame(name(self.name_of(mujoco.mjtObj.mjOBJ_BODY, b) or f"body{b}"),
+                                 point=point, base=base)
+        for s in range(m.nsite):
+            base, point, _ = frames[m.site_bodyid[s]]
+            label = self.name_of(mujoco.mjtObj.mjOBJ_SITE, s) or f"site{s}"
+            point = self.offset(point, base, m.site_pos[s], f"S_{sanitize(label)}")
+            base = self.rotate(base, _quat_matrix(m.site_quat[s]), f"S_{sanitize(label)}")
+            self.model.add_frame(name(label), point=point, base=base)
+
     def effects(self) -> None:
         mujoco, m = _mujoco(), self.m
         flags = m.opt.disableflags
@@ -402,8 +422,7 @@ class _Builder:
         """Notes for what MuJoCo simulates and the model leaves out."""
         m = self.m
         counts = (("geoms (contacts)", m.ngeom), ("tendons", m.ntendon),
-                  ("actuators", m.nu), ("sensors", m.nsensor), ("sites", m.nsite),
-                  ("flexes", m.nflex))
+                  ("actuators", m.nu), ("sensors", m.nsensor), ("flexes", m.nflex))
         listed = [f"{n} {what}" for what, n in counts if n]
         if listed:
             self.notes.append("Ignored: " + ", ".join(listed) + " (the model is the rigid "
@@ -432,6 +451,7 @@ class _Builder:
         self.gravity()
         frames = self.body_frames()
         self.bodies(frames)
+        self.frames(frames)
         self.ignored()
         self.effects()
         # the notes are known only now; the description goes first in the file
