@@ -1,262 +1,212 @@
 """Analytical derivatives in C: modelgen's ``<name>_derivatives`` against Pinocchio's
 ``computeABADerivatives``.
 
-Run from the repository root (needs the ``bench`` extra: ``pin`` and ``cmeel-eigen``)::
+Run from the repository root (needs the ``bench`` extra: ``pin`` and ``cmeel-eigen``;
+valgrind for the instruction counts)::
 
-    .venv/bin/python bench/derivatives.py                 # n = 7 20 50 and arm7
-    .venv/bin/python bench/derivatives.py --n 7 --no-arm --rounds 1
+    .venv/bin/python bench/derivatives.py                  # chain n = 7 and arm7
+    .venv/bin/python bench/derivatives.py --n 7 20 50 --rounds 5
+    .venv/bin/python bench/derivatives.py --quick          # n = 7, no arm7, one round
 
 Method
-    The models and the Pinocchio harness's model reader are those of
-    ``bench/codegen_scaling.py`` (the spatial chain of ``spatial_chain(n)`` and
-    ``models/arm7.yaml``, built in C++ from the same definition, compiled
-    ``-O3 -march=native``), at that script's state x0 and zero inputs.  Both
-    compute d qdd / d q and d qdd / d v of forward dynamics (modelgen also
-    d qdd / d u when the model has inputs): ``<name>_derivatives`` (rhs for
-    qdd, the RNEA derivatives at a = qdd, M^-1 by a sparse LDL^T on all
-    columns) and Pinocchio's ``computeABADerivatives(q, v, tau)``.  *agree*:
-    the largest difference over the largest entry, of both matrices.  Time:
-    each harness calls its function in a loop, perturbing one entry of x from
-    the previous output (a dependency chain), minimum over 5 repeats of >= 0.2 s,
-    run alternately ``--rounds`` times, minimum kept.  Instructions: callgrind,
-    K = 200 calls minus none (``codegen_scaling.instructions_per_call``);
-    Pinocchio counted in its build without AVX-512.  Generation: wall and CPU
-    seconds (this process and the compilers) and peak memory of
-    ``modelgen.load(..., derivatives=True, force=True)`` in a fresh process.
-    *ops*: operations after CSE of the ``derivative_terms`` routine (dQ/dq,
-    dQ/dv, dQ/du, M) over n^2.
+    The models are the spatial chain of ``spatial_chain(n)`` and ``models/arm7.yaml``,
+    written for Pinocchio by ``modelgen.bench.peers.write_peer_models`` (as
+    ``bench/codegen_scaling.py`` does), at the state x0 of that script (seed
+    1000 + n) and zero inputs.  Both compute d qdd / d q and d qdd / d v of forward
+    dynamics (modelgen also d qdd / d u when the model has inputs):
+    ``<name>_derivatives`` through ``harness/model_bench.c -DMG_DERIVATIVES``, and
+    ``computeABADerivatives(q, v, tau)`` through ``harness/pinocchio_bench.cpp``'s
+    mode 3 (C++ ``-O3 -march=native``).  Time: each harness calls its function in a
+    loop, perturbing one entry of x from the previous call's derivatives (a
+    dependency chain), minimum over 5 repeats of >= 0.2 s; the two harnesses run
+    alternately ``--rounds`` times and the minimum is kept.  Instructions: callgrind,
+    K = 200 calls minus K = 0 (``harnesses.instructions_per_call``), Pinocchio in
+    its build without AVX-512.  *agree*: the largest difference over the largest
+    entry, of both matrices, ``cm.derivatives`` at x0 against Pinocchio's.
+    Generation: wall and CPU seconds (the process and its compilers) and peak RSS of
+    ``modelgen.load(..., derivatives=True, force=True)`` in a fresh process, started
+    before this one imports numpy or the library, so that its ``ru_maxrss`` is its
+    own.  *ops / n^2*: operations after CSE of the ``derivative_terms`` routine
+    (dQ/dq, dQ/dv, dQ/du, M) over n^2.  Prints the table, then the issue's targets
+    (issue 25) with met / NOT met.
 """
 from __future__ import annotations
 
 import argparse
-import importlib.util
 import json
+import os
+import resource
+import shutil
 import subprocess
 import sys
 import tempfile
+import time
 from pathlib import Path
-
-import numpy as np
 
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
-_spec = importlib.util.spec_from_file_location("codegen_scaling", REPO / "bench" / "codegen_scaling.py")
-cs = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(cs)
+# numpy and modelgen are imported inside the functions: the generation children
+# are started before the parent has loaded them (see the docstring).
 
-import modelgen  # noqa: E402
-from modelgen.model.api import load_model  # noqa: E402
-from modelgen.model.chains import spatial_chain  # noqa: E402
-
-#: the issue's targets: instructions ratio Pinocchio / modelgen, generation seconds
-TARGET_RATIO = 2.0
+ARM = REPO / "models" / "arm7.yaml"
+GENERATE_MARK = "@@derivatives@@ "
+#: the issue's targets: instructions and time, Pinocchio / modelgen; generation s
+TARGET_INSTR = 2.0
+TARGET_TIME = 1.5
 TARGET_SECONDS = {20: 3.0, 100: 30.0}
 
-# Pinocchio's computeABADerivatives in the harness of codegen_scaling (its model
-# reader and timing loop), with a main of its own.
-_PIN_DERIVATIVES = cs._PIN_HARNESS.split("int main(")[0].replace(
-    "#include <pinocchio/algorithm/cholesky.hpp>",
-    "#include <pinocchio/algorithm/cholesky.hpp>\n"
-    "#include <pinocchio/algorithm/aba-derivatives.hpp>") + r"""
-static double run_derivatives(pinocchio::Data &data, long loops, double &sink) {
-    const int n = model.nv;
-    Eigen::VectorXd q = Eigen::Map<const Eigen::VectorXd>(x0, n);
-    Eigen::VectorXd v = Eigen::Map<const Eigen::VectorXd>(x0 + n, n);
-    Eigen::VectorXd tau = Eigen::VectorXd::Zero(n);
-    const double start = now();
-    for (long k = 0; k < loops; ++k) {
-        const int j = (int)(k %% n);
-        q[j] = x0[j] + 1e-9 * data.ddq_dq(n - 1, j);
-        pinocchio::computeABADerivatives(model, data, q, v, tau);
-        sink += data.ddq_dv(n - 1, n - 1);
-    }
-    return now() - start;
-}
 
-int main(int argc, char **argv) {
-    if (argc < 2 || argc > 3 || !read_chain(argv[1])) {
-        std::fprintf(stderr, "usage: pin_derivatives tree.txt [K]\n");
-        return 2;
-    }
-    pinocchio::Data data(model);
-    const int n = model.nv;
-    double sink = 0.0;
-    data.ddq_dq.setZero();
-    if (argc == 3) {
-        run_derivatives(data, std::atol(argv[2]), sink);
-        std::printf("%%.17g\n", sink);
-        return 0;
-    }
-    long loops = 1;
-    while (run_derivatives(data, loops, sink) < %(min_seconds)s) loops *= 2;
-    double b = 1e300;
-    for (int r = 0; r < %(repeats)d; ++r) {
-        const double t = run_derivatives(data, loops, sink) / (double)loops;
-        if (t < b) b = t;
-    }
-    std::printf("%%.9e %%.3g\n", b, sink * 0.0);
-    Eigen::VectorXd q = Eigen::Map<const Eigen::VectorXd>(x0, n);
-    Eigen::VectorXd v = Eigen::Map<const Eigen::VectorXd>(x0 + n, n);
-    pinocchio::computeABADerivatives(model, data, q, v, Eigen::VectorXd::Zero(n));
-    for (int i = 0; i < n; ++i)
-        for (int j = 0; j < n; ++j) std::printf("%%.17g ", data.ddq_dq(i, j));
-    std::printf("\n");
-    for (int i = 0; i < n; ++i)
-        for (int j = 0; j < n; ++j) std::printf("%%.17g ", data.ddq_dv(i, j));
-    std::printf("\n");
-    return 0;
-}
-"""
+def model_spec(arg: str):
+    """The chain ``spatial_chain(int(arg))`` or the model file ``arg``."""
+    from modelgen.model.api import load_model
+    from modelgen.model.chains import spatial_chain
+    return load_model(arg) if arg.endswith(".yaml") else spatial_chain(int(arg)).spec()
 
 
-def build_pinocchio(work: Path, count: bool = False):
-    """The computeABADerivatives harness, like codegen_scaling's build_pinocchio_harness."""
-    import os
-    import shlex
-    paths = cs.pinocchio_paths()
-    if paths is None:
-        return None
-    include, lib = paths
-    work.mkdir(parents=True, exist_ok=True)
-    src = work / "pin_derivatives.cpp"
-    src.write_text(_PIN_DERIVATIVES % {"min_seconds": cs.MIN_SECONDS, "repeats": cs.REPEATS})
-    exe = work / ("pin_derivatives_count" if count else "pin_derivatives")
-    arch = ["-march=native", "-mno-avx512f"] if count else ["-march=native"]
-    cs._run_checked([*shlex.split(os.environ.get("CXX", "c++")), "-O3", *arch, "-DNDEBUG",
-                     "-std=c++17", "-DBOOST_MPL_LIMIT_LIST_SIZE=30",
-                     "-DBOOST_MPL_LIMIT_VECTOR_SIZE=30",
-                     "-DBOOST_MPL_CFG_NO_PREPROCESSED_HEADERS",
-                     "-DBOOST_FUSION_INVOKE_MAX_ARITY=12", f"-I{include}",
-                     f"-I{include / 'eigen3'}", str(src), "-o", str(exe), f"-L{lib}",
-                     "-lpinocchio_default", f"-Wl,-rpath,{lib}"])
-    return exe
-
-
-def build_model(cm, x0, work: Path) -> Path:
-    """The harness of ``<name>_derivatives`` (codegen_scaling's C harness and build)."""
-    from modelgen.codegen.build import compiler
-    name, n, nu = cm.name, cm.n, len(cm.inputs)
-    cs.compile_model(cm, work)
-    du = f"out + {2 * n * n}" if nu else "NULL"
-    harness = work / "derivatives_bench.c"
-    harness.write_text(cs._MG_HARNESS.format(
-        what=f"Harness of {name}_derivatives", name=name, NAME=name.upper(), nx=cm.nx,
-        nout=2 * n * n + n * nu, call=f"{name}_derivatives(0.0, x, u, p, out, out + {n * n}, {du})",
-        x0=cs._c_array(x0), np_=max(len(cm.parameters), 1), p=cs._c_array(cm.params()) or "0.0",
-        nu_=max(nu, 1), min_seconds=cs.MIN_SECONDS, repeats=cs.REPEATS))
-    exe = work / "derivatives_bench"
-    src_dir = Path(cm.path).parent
-    cs._run_checked([*compiler(), "-O2", "-std=c99", f"-I{src_dir}", str(harness),
-                     str(work / "model_rhs.o"), str(src_dir / "mg_integrate.c"), "-o", str(exe),
-                     "-lm"])
-    return exe
-
-
-_GENERATE = r"""
-import json, resource, sys, time
-sys.path.insert(0, {repo!r})
-import modelgen
-from modelgen.model.api import load_model
-from modelgen.model.chains import spatial_chain
-arg = {arg!r}
-spec = load_model(arg) if arg.endswith(".yaml") else spatial_chain(int(arg)).spec()
-t0 = time.perf_counter()
-cm = modelgen.load(spec, {out!r}, derivatives=True, force=True)
-wall = time.perf_counter() - t0
-me, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
-print(json.dumps(dict(wall=wall, cpu=me.ru_utime + me.ru_stime + kids.ru_utime + kids.ru_stime,
-                      mb=max(me.ru_maxrss, kids.ru_maxrss) / 1024,
-                      ops=cm.manifest["ops"]["derivative_terms"]["after_cse"])))
-"""
+def generate_child(arg: str, out: str) -> None:
+    """The fresh process: generate ``arg`` with its derivatives into ``out`` and print
+    the figures of the docstring's *Generation* as a marked JSON line."""
+    import modelgen
+    spec = model_spec(arg)
+    wall, cpu = time.perf_counter(), time.process_time()
+    cm = modelgen.load(spec, out, derivatives=True, force=True)
+    wall = time.perf_counter() - wall
+    kids = resource.getrusage(resource.RUSAGE_CHILDREN)
+    mb = max(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss, kids.ru_maxrss) / 1024
+    print(GENERATE_MARK + json.dumps({
+        "wall": wall, "cpu": time.process_time() - cpu + kids.ru_utime + kids.ru_stime,
+        "mb": mb, "ops": cm.manifest["ops"]["derivative_terms"]["after_cse"]}))
 
 
 def generate(arg: str, out: Path) -> dict:
-    """Generation of the model with its derivatives in a fresh process (figures above)."""
-    code = _GENERATE.format(repo=str(REPO), arg=arg, out=str(out))
-    text = subprocess.run([sys.executable, "-c", code], check=True, capture_output=True,
-                          text=True).stdout
-    return json.loads(text.strip().splitlines()[-1])
+    """Run :func:`generate_child` in a fresh interpreter; its figures."""
+    proc = subprocess.run([sys.executable, str(Path(__file__).resolve()), "--generate", arg,
+                           str(out)], capture_output=True, text=True)
+    for line in proc.stdout.splitlines():
+        if line.startswith(GENERATE_MARK):
+            return json.loads(line[len(GENERATE_MARK):])
+    raise RuntimeError(f"generating {arg} failed (exit {proc.returncode}):\n"
+                       f"{proc.stdout}{proc.stderr}")
 
 
-def measure(arg: str, work: Path, pin, pin_count, rounds: int) -> dict:
-    gen = generate(arg, work / "model")
-    spec = load_model(arg) if arg.endswith(".yaml") else spatial_chain(int(arg)).spec()
-    cm = modelgen.load(spec, work / "model", derivatives=True)
+def measure(arg: str, gen: dict, work: Path, pin, pin_count, rounds: int,
+            count: bool) -> dict:
+    """One model: time, count and compare both sides (the row of the table).  ``pin``,
+    ``pin_count``: Pinocchio's harness and its build for callgrind, or None."""
+    import numpy as np
+
+    import modelgen
+    from modelgen.bench import harnesses as hn
+    from modelgen.bench import peers
+    spec = model_spec(arg)
+    cm = modelgen.load(spec, work / "model", derivatives=True)    # generate()'s build
     n = cm.n
-    rng = np.random.default_rng(1000 + n)                # codegen_scaling's state
+    rng = np.random.default_rng(1000 + n)                 # codegen_scaling's x0
     x0 = np.concatenate([rng.uniform(-np.pi, np.pi, n), rng.uniform(-2, 2, n)])
-    if arg.endswith(".yaml"):
-        tree = cs.pinocchio_tree_file(cs.tree_links(spec, cm.parameters),
-                                      float(cm.parameters["g"]), x0, work / "pin.txt")
-    else:
-        tree = cs.pinocchio_chain_file(n, cm.parameters, x0, work / "pin.txt")
-    exe = build_model(cm, x0, work / "harness")
-    mg_t, pin_t = [], []
-    for _ in range(rounds):
-        mg_t.append(cs.run_rhs_harness(exe))
-        pin_t.append(float(cs._run_checked([str(pin), str(tree)]).split()[0]) * 1e6)
-    lines = cs._run_checked([str(pin), str(tree)]).splitlines()
-    d = cm.derivatives(0.0, x0)
-    agree = max(float(np.max(np.abs(got - np.array(line.split(), float).reshape(n, n)))
-                      / np.max(np.abs(got)))
-                for got, line in ((d.dqdd_dq, lines[1]), (d.dqdd_dv, lines[2])))
-    mg_i = cs.instructions_per_call([str(exe)])
-    pin_i = cs.instructions_per_call([str(pin_count), str(tree)]) if pin_count else None
-    return {"model": cm.name, "n": n, "gen": gen, "ops_n2": gen["ops"] / n / n,
-            "mg_us": min(mg_t), "pin_us": min(pin_t), "mg_i": mg_i, "pin_i": pin_i,
-            "agree": agree}
+    exe, _ = hn.build_model_harness(cm, x0, work / "harness", "derivatives")
+    files = peers.write_peer_models(spec, cm, x0, work / "peers", not arg.endswith(".yaml"))
+    tree = files[1] if files else None
+    runs = {"mg": lambda: hn.run_model_harness(exe)}
+    if pin and tree:
+        runs["pin"] = lambda: hn.run_pinocchio_derivatives(pin, tree)
+    times = hn.alternate(rounds, runs)
+    row = {"model": cm.name, "n": n, "gen": gen, "ops_n2": gen["ops"] / n / n,
+           "mg_us": min(times["mg"]), "pin_us": None, "agree": None,
+           "mg_i": hn.instructions_per_call([str(exe)]) if count else None, "pin_i": None}
+    if "pin" in times:
+        d = cm.derivatives(0.0, x0)
+        _, pin_dq, pin_dv = times["pin"][-1]
+        row["pin_us"] = min(t for t, _, _ in times["pin"])
+        row["agree"] = max(float(np.max(np.abs(got - want)) / np.max(np.abs(got)))
+                           for got, want in ((d.dqdd_dq, pin_dq), (d.dqdd_dv, pin_dv)))
+        if count and pin_count:
+            row["pin_i"] = hn.instructions_per_call([str(pin_count), str(tree), "3"])
+    return row
+
+
+def ratio(a, b):
+    return a / b if a and b else None
 
 
 def table(rows) -> str:
+    from modelgen.bench.tables import fmt, markdown
     head = ["model", "n", "generate s (wall / CPU)", "peak MB", "ops / n^2",
             "modelgen instr.", "Pinocchio instr.", "Pinocchio / modelgen (instr.)",
             "modelgen µs", "Pinocchio µs", "Pinocchio / modelgen (time)", "agree"]
-    out = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
-    for r in rows:
-        ratio = r["pin_i"] / r["mg_i"] if r["mg_i"] and r["pin_i"] else None
-        out.append("| " + " | ".join([
-            r["model"], str(r["n"]), f"{r['gen']['wall']:.1f} / {r['gen']['cpu']:.1f}",
-            f"{r['gen']['mb']:.0f}", f"{r['ops_n2']:.0f}", cs.fmt(r["mg_i"], ",.0f"),
-            cs.fmt(r["pin_i"], ",.0f"), cs.fmt(ratio, ".2f"), f"{r['mg_us']:.2f}",
-            f"{r['pin_us']:.2f}", f"{r['pin_us'] / r['mg_us']:.2f}", f"{r['agree']:.1e}"]) + " |")
-    return "\n".join(out)
+    body = [[r["model"], r["n"], f"{r['gen']['wall']:.1f} / {r['gen']['cpu']:.1f}",
+             f"{r['gen']['mb']:.0f}", f"{r['ops_n2']:.0f}", fmt(r["mg_i"], ",.0f"),
+             fmt(r["pin_i"], ",.0f"), fmt(ratio(r["pin_i"], r["mg_i"]), ".2f"),
+             f"{r['mg_us']:.2f}", fmt(r["pin_us"], ".2f"),
+             fmt(ratio(r["pin_us"], r["mg_us"]), ".2f"), fmt(r["agree"], ".1e")]
+            for r in rows]
+    return markdown(head, body)
 
 
 def goals(rows) -> list:
+    """The issue's targets against this run's rows, each with met / NOT met."""
+    def verdict(ok):
+        return "met" if ok else "NOT met"
     lines = []
     for r in rows:
-        if r["mg_i"] and r["pin_i"]:
-            ratio = r["pin_i"] / r["mg_i"]
-            lines.append(f"{r['model']}: {ratio:.2f}x fewer instructions than "
-                         f"computeABADerivatives (target >= {TARGET_RATIO}): "
-                         + ("met" if ratio >= TARGET_RATIO else "NOT met"))
+        instr, speed = ratio(r["pin_i"], r["mg_i"]), ratio(r["pin_us"], r["mg_us"])
+        if instr is not None:
+            lines.append(f"{r['model']}: {instr:.2f}x fewer instructions than "
+                         f"computeABADerivatives (target >= {TARGET_INSTR}): "
+                         + verdict(instr >= TARGET_INSTR))
+        if speed is not None:
+            lines.append(f"{r['model']}: {speed:.2f}x faster than computeABADerivatives "
+                         f"(target >= {TARGET_TIME}): " + verdict(speed >= TARGET_TIME))
+        if r["agree"] is not None:
+            lines.append(f"{r['model']}: agreement {r['agree']:.1e} (target <= 1e-9): "
+                         + verdict(r["agree"] <= 1e-9))
         if r["n"] in TARGET_SECONDS and r["model"].startswith("spatial_chain"):
             limit = TARGET_SECONDS[r["n"]]
             lines.append(f"{r['model']}: generation {r['gen']['cpu']:.1f} s CPU (target <= "
-                         f"{limit} s): " + ("met" if r["gen"]["cpu"] <= limit else "NOT met"))
+                         f"{limit} s): " + verdict(r["gen"]["cpu"] <= limit))
     return lines
 
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--n", type=int, nargs="+", default=[7, 20, 50])
-    parser.add_argument("--arm", default=str(REPO / "models" / "arm7.yaml"))
+    parser.add_argument("--n", type=int, nargs="+", default=[7], help="chain sizes")
+    parser.add_argument("--arm", default=str(ARM), help="a model file measured as well")
     parser.add_argument("--no-arm", action="store_true")
-    parser.add_argument("--rounds", type=int, default=3)
+    parser.add_argument("--rounds", type=int, default=3, help="alternated timing rounds")
+    parser.add_argument("--no-count", action="store_true", help="skip callgrind")
+    parser.add_argument("--quick", action="store_true", help="n = 7 only, one round")
+    parser.add_argument("--generate", nargs=2, metavar=("MODEL", "OUT"),
+                        help=argparse.SUPPRESS)     # the fresh process of generate()
     args = parser.parse_args(argv)
+    if args.generate:
+        generate_child(*args.generate)
+        return 0
+    if args.quick:
+        args.n, args.no_arm, args.rounds = [7], True, 1
+    cases = [str(n) for n in args.n] + ([] if args.no_arm else [args.arm])
+    loadavg = os.getloadavg()[0]
     with tempfile.TemporaryDirectory() as tmp:
         root = Path(tmp)
-        pin = build_pinocchio(root / "pin")
-        if pin is None:
-            print("Pinocchio is not installed (pip install '.[bench]')")
-            return 1
-        pin_count = build_pinocchio(root / "pin", count=True)
-        cases = [str(n) for n in args.n] + ([] if args.no_arm else [args.arm])
-        rows = [measure(arg, root / f"case{k}", pin, pin_count, args.rounds)
-                for k, arg in enumerate(cases)]
+        # every generation first, while this process is still small
+        gens = [generate(arg, root / f"case{k}" / "model") for k, arg in enumerate(cases)]
+        from modelgen.bench import harnesses as hn
+        pin, why = hn.build_pinocchio_harness(root / "pin")
+        notes = [f"Pinocchio not measured: {why}"] if pin is None else []
+        count = not args.no_count and shutil.which("valgrind") is not None
+        if not args.no_count and not count:
+            notes.append("valgrind not found: no instruction counts")
+        pin_count = None
+        if count and pin is not None:
+            pin_count, why = hn.build_pinocchio_harness(root / "pin", count=True)
+            if pin_count is None:
+                notes.append(f"Pinocchio's instructions not counted: {why}")
+        rows = [measure(arg, gen, root / f"case{k}", pin, pin_count, args.rounds, count)
+                for k, (arg, gen) in enumerate(zip(cases, gens, strict=True))]
+    env = hn.environment()
+    print(f"{env['cpu']}, {env['cores']} cores, {env['compiler']}; load average "
+          f"{loadavg:.2f} at start\n")
     print(table(rows))
     print()
-    for line in goals(rows):
+    for line in [*goals(rows), *notes]:
         print("- " + line)
     return 0
 

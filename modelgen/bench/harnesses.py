@@ -1,6 +1,6 @@
-"""Build, run and count the C/C++ harnesses of ``harness/``: modelgen's rhs or
-inverse dynamics, MuJoCo's mj_forward / mj_step / mj_inverse, Pinocchio's ABA,
-CRBA + Cholesky and rnea.
+"""Build, run and count the C/C++ harnesses of ``harness/``: modelgen's rhs,
+inverse dynamics or derivatives, MuJoCo's mj_forward / mj_step / mj_inverse,
+Pinocchio's ABA, CRBA + Cholesky, rnea and computeABADerivatives.
 
 Every harness calls its function in a loop, perturbing one entry of the state
 from the previous output (so consecutive calls form a dependency chain), and
@@ -121,26 +121,36 @@ def compile_model(cm, work: Path):
     return shlex.join(cmd)
 
 
+#: the functions model_bench.c can time: name -> (its -D macros, the output's length)
+_MODEL_FUNCTIONS = {
+    "rhs_prepared": lambda cm: ([], cm.nx),
+    "inverse_dynamics": lambda cm: (["-DMG_INVERSE"], cm.n),
+    # dqdd_dq, dqdd_dv, then dqdd_du (n x nu) when the model has inputs
+    "derivatives": lambda cm: (["-DMG_DERIVATIVES", f"-DMG_N={cm.n}"],
+                               2 * cm.n * cm.n + cm.n * len(cm.inputs)),
+}
+
+
 def build_model_harness(cm, x0, work: Path, function: str = "rhs_prepared"):
-    """Compile ``harness/model_bench.c`` for ``<name>_rhs_prepared`` or for
-    ``<name>_inverse_dynamics`` (at the accelerations 0.3 (i mod 3) - 0.2); returns
+    """Compile ``harness/model_bench.c`` for ``<name>_rhs_prepared``, for
+    ``<name>_inverse_dynamics`` (at the accelerations 0.3 (i mod 3) - 0.2) or for
+    ``<name>_derivatives`` (the model built with ``derivatives=True``); returns
     (executable, the command that compiled the model's C).  The harness itself is
     compiled at -O2.  It times the function, or with an argument K calls it K times
     for :func:`instructions_per_call`.
     """
-    if function not in ("rhs_prepared", "inverse_dynamics"):
+    if function not in _MODEL_FUNCTIONS:
         raise ValueError(f"no harness for {function!r}")
     name = cm.name
     src_dir = Path(cm.path).parent
     command = compile_model(cm, work)
-    inverse = function == "inverse_dynamics"
+    mode, nout = _MODEL_FUNCTIONS[function](cm)
     defines = [f'-DMG_HEADER="{name}.h"', f"-DMG_MODEL={name}",
                f"-DMG_NPD_ALLOC={name.upper()}_NPD_ALLOC", f"-DMG_NX={cm.nx}",
-               f"-DMG_NOUT={cm.n if inverse else cm.nx}",
+               f"-DMG_NOUT={nout}",
                f"-DMG_NP={max(len(cm.parameters), 1)}", f"-DMG_NU={max(len(cm.inputs), 1)}",
                f"-DMG_X0={_c_array(x0)}", f"-DMG_P={_c_array(cm.params()) or '0.0'}",
-               f"-DMIN_SECONDS={MIN_SECONDS}", f"-DREPEATS={REPEATS}",
-               *(["-DMG_INVERSE"] if inverse else [])]
+               f"-DMIN_SECONDS={MIN_SECONDS}", f"-DREPEATS={REPEATS}", *mode]
     exe = work / f"{function}_bench"
     # the model's integrate wrappers call the shared integrators, copied beside it
     run_checked([*compiler(), "-O2", "-std=c99", *defines, f"-I{src_dir}",
@@ -284,6 +294,15 @@ def build_pinocchio_harness(work: Path, count: bool = False):
     except RuntimeError as exc:
         return None, f"Pinocchio harness did not build: {exc}"
     return exe, None
+
+
+def run_pinocchio_derivatives(exe: Path, tree_file: Path) -> tuple:
+    """One run of computeABADerivatives at tau = 0 (the harness's mode 3): (µs per call,
+    d q_ddot / d q, d q_ddot / d v at x0, each n x n)."""
+    lines = run_checked([str(exe), str(tree_file), "3"]).splitlines()
+    dq, dv = (np.array(line.split(), float) for line in lines[1:3])
+    n = int(round(np.sqrt(dq.size)))
+    return float(lines[0].split()[0]) * 1e6, dq.reshape(n, n), dv.reshape(n, n)
 
 
 def run_pinocchio_harness(exe: Path, tree_file: Path) -> tuple:

@@ -1,6 +1,7 @@
 /* Harness of a generated model's <name>_rhs_prepared (or, with -DMG_INVERSE,
- * <name>_inverse_dynamics at the accelerations 0.3 (i mod 3) - 0.2), built by
- * modelgen.bench.harnesses.build_model_harness.
+ * <name>_inverse_dynamics at the accelerations 0.3 (i mod 3) - 0.2; with
+ * -DMG_DERIVATIVES, <name>_derivatives into dqdd_dq, dqdd_dv, dqdd_du one after
+ * the other in the output), built by modelgen.bench.harnesses.build_model_harness.
  * No argument: prints the best time per call, the loops, the status and a sink.
  * K: K calls untimed, then the status and the sink (for callgrind).
  *
@@ -10,6 +11,8 @@
  *   MG_NPD_ALLOC   the header's <NAME>_NPD_ALLOC
  *   MG_NX, MG_NOUT the lengths of x and of the output
  *   MG_NP, MG_NU   the lengths of p and u (at least 1)
+ *   MG_N           the number of coordinates (MG_DERIVATIVES only; the output
+ *                  holds dqdd_du when it is longer than 2 MG_N^2)
  *   MG_X0, MG_P    x0 and p as comma-separated numbers
  *   MIN_SECONDS, REPEATS   the timing rule (min over REPEATS runs of >= MIN_SECONDS) */
 #define _POSIX_C_SOURCE 199309L
@@ -25,8 +28,15 @@
 #define NX MG_NX
 #define NOUT MG_NOUT
 
-#ifdef MG_INVERSE
+#if defined(MG_INVERSE)
 #define CALL() (MG_FN(inverse_dynamics)(0.0, x, a, u, p, out), 0)
+#elif defined(MG_DERIVATIVES)
+#if NOUT > 2 * MG_N * MG_N
+#define MG_DU (out + 2 * MG_N * MG_N)
+#else
+#define MG_DU NULL      /* no inputs: the model leaves dqdd_du untouched */
+#endif
+#define CALL() MG_FN(derivatives)(0.0, x, u, p, out, out + MG_N * MG_N, MG_DU)
 #else
 #define CALL() MG_FN(rhs_prepared)(0.0, x, u, p, pd, out)
 #endif

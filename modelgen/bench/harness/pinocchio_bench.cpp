@@ -1,4 +1,5 @@
-// Timing harness for Pinocchio's ABA and CRBA + Cholesky, built by
+// Timing harness for Pinocchio's ABA, CRBA + Cholesky, rnea and
+// computeABADerivatives, built by
 // modelgen.bench.harnesses.build_pinocchio_harness with -DMIN_SECONDS and -DREPEATS.
 // Usage: pin_bench tree.txt, the file holding n,
 // then per joint (parents first) "parent(0 = ground, else 1-based) axis(0 = z,
@@ -6,8 +7,9 @@
 // Ixx Iyy Izz Ixy Ixz Iyz (about c)", then g, then x0 (2n numbers).
 // Prints: aba_s crba_s, then q_ddot at x0 by each, then rnea's tau at x0 and the
 // accelerations ACC(i).  pin_bench tree.txt WHICH prints the time of ABA (WHICH 0),
-// the CRBA path (1) or rnea (2) alone; pin_bench tree.txt WHICH K instead calls it
-// K times untimed (for callgrind).
+// the CRBA path (1), rnea (2) or computeABADerivatives at tau = 0 (3) alone, and for
+// WHICH 3 then d q_ddot / d q and d q_ddot / d v at x0 (row-major, a line each);
+// pin_bench tree.txt WHICH K instead calls it K times untimed (for callgrind).
 #include <cstdlib>
 #include <cstdio>
 #include <ctime>
@@ -17,6 +19,7 @@
 #include <pinocchio/algorithm/crba.hpp>
 #include <pinocchio/algorithm/rnea.hpp>
 #include <pinocchio/algorithm/cholesky.hpp>
+#include <pinocchio/algorithm/aba-derivatives.hpp>
 
 static double now() {
     timespec ts;
@@ -55,9 +58,14 @@ template <int WHICH> static double run(pinocchio::Data &data, long loops, double
             qdd = data.ddq;
         } else if (WHICH == 1) {
             crba_path(data, q, v, tau, qdd);
-        } else {
+        } else if (WHICH == 2) {
             pinocchio::rnea(model, data, q, v, acc);
             qdd = data.tau;
+        } else {
+            // the next call depends on the derivatives, as in modelgen's harness
+            pinocchio::computeABADerivatives(model, data, q, v, tau);
+            const int next = (int)((k + 1) % n);     // the entry the next call reads
+            qdd[n - 1 - next] = data.ddq_dq(n - 1, next);
         }
         sink += qdd[n - 1];
     }
@@ -112,6 +120,21 @@ static int read_chain(const char *path) {
     return n;
 }
 
+// d q_ddot / d q, then d q_ddot / d v, at x0 and tau = 0, row-major, a line each
+static void print_aba_derivatives(pinocchio::Data &data) {
+    const int n = model.nv;
+    const Eigen::VectorXd q = Eigen::Map<const Eigen::VectorXd>(x0, n);
+    const Eigen::VectorXd v = Eigen::Map<const Eigen::VectorXd>(x0 + n, n);
+    pinocchio::computeABADerivatives(model, data, q, v, Eigen::VectorXd::Zero(n));
+    const auto print = [n](const auto &m) {
+        for (int i = 0; i < n; ++i)
+            for (int j = 0; j < n; ++j) std::printf("%.17g ", m(i, j));
+        std::printf("\n");
+    };
+    print(data.ddq_dq);
+    print(data.ddq_dv);
+}
+
 int main(int argc, char **argv) {
     if (argc < 2 || argc > 4 || !read_chain(argv[1])) {
         std::fprintf(stderr, "usage: pin_bench chain.txt (see the source)\n");
@@ -122,9 +145,12 @@ int main(int argc, char **argv) {
     if (argc >= 3) {
         const int which = std::atoi(argv[2]);
         if (argc == 3) {
-            const double t = which == 0 ? best<0>(data, sink) : which == 1 ? best<1>(data, sink)
-                                                                           : best<2>(data, sink);
+            const double t = which == 0   ? best<0>(data, sink)
+                             : which == 1 ? best<1>(data, sink)
+                             : which == 2 ? best<2>(data, sink)
+                                          : best<3>(data, sink);
             std::printf("%.9e %.3g\n", t, sink * 0.0);
+            if (which == 3) print_aba_derivatives(data);
             return 0;
         }
         const long loops = std::atol(argv[3]);
@@ -132,8 +158,10 @@ int main(int argc, char **argv) {
             run<0>(data, loops, sink);
         else if (which == 1)
             run<1>(data, loops, sink);
-        else
+        else if (which == 2)
             run<2>(data, loops, sink);
+        else
+            run<3>(data, loops, sink);
         std::printf("%.17g\n", sink);
         return 0;
     }
