@@ -31,7 +31,6 @@ Method
 from __future__ import annotations
 
 import argparse
-import importlib.util
 import os
 import shlex
 import shutil
@@ -43,13 +42,12 @@ import numpy as np
 
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
-_spec = importlib.util.spec_from_file_location("codegen_scaling", REPO / "bench" / "codegen_scaling.py")
-cs = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(cs)
-
 import modelgen  # noqa: E402
+from modelgen.bench import harnesses as cs  # noqa: E402
+from modelgen.bench.tables import fmt, markdown  # noqa: E402
 
 DATA = REPO / "tests" / "data" / "urdf"
+HARNESS = Path(cs.__file__).resolve().parent / "harness"
 #: (label, URDF, floating base, modelgen frame or None for the centroidal map,
 #: Pinocchio's frame)
 CASES = (("ur5 tool0 Jacobian", "ur5_robot.urdf", False, "tool0", "tool0"),
@@ -97,13 +95,13 @@ def build_mg_harness(cm, routine: str, q0, work: Path) -> Path:
     (work / "kin_case.h").write_text(
         f'#include "{cm.name}.h"\n#define NQ {cm.nq}\n#define NV {cm.n}\n#define NOUT {nout}\n'
         f"#define CALL(q, p, out) {cm.name}_{routine}(q, p, out)\n"
-        f"static const double q0[NQ] = {{{cs._c_array(q0)}}};\n"
+        f"static const double q0[NQ] = {{{cs.c_array(q0)}}};\n"
         f"static const double p[{max(len(cm.parameters), 1)}] = "
-        f"{{{cs._c_array(cm.params()) or '0.0'}}};\n")
+        f"{{{cs.c_array(cm.params()) or '0.0'}}};\n")
     exe = work / "kinematics_mg"
     src_dir = Path(cm.path).parent
-    cs._run_checked([*compiler(), "-O2", "-std=c99", f"-I{src_dir}", f"-I{work}",
-                     str(REPO / "bench" / "kinematics_mg.c"), str(work / "model_rhs.o"),
+    cs.run_checked([*compiler(), "-O2", "-std=c99", f"-I{src_dir}", f"-I{work}",
+                     str(HARNESS / "kinematics_mg.c"), str(work / "model_rhs.o"),
                      str(src_dir / "mg_integrate.c"), "-o", str(exe), "-lm"])
     return exe
 
@@ -112,12 +110,12 @@ def build_pin_harness(work: Path, count: bool) -> Path:
     include, lib = cs.pinocchio_paths()
     exe = work / ("kinematics_pin_count" if count else "kinematics_pin")
     arch = ["-march=native", "-mno-avx512f"] if count else ["-march=native"]
-    cs._run_checked([*shlex.split(os.environ.get("CXX", "c++")), "-O3", *arch, "-DNDEBUG",
+    cs.run_checked([*shlex.split(os.environ.get("CXX", "c++")), "-O3", *arch, "-DNDEBUG",
                      "-std=c++17", "-DBOOST_MPL_LIMIT_LIST_SIZE=30",
                      "-DBOOST_MPL_LIMIT_VECTOR_SIZE=30",
                      "-DBOOST_MPL_CFG_NO_PREPROCESSED_HEADERS",
                      "-DBOOST_FUSION_INVOKE_MAX_ARITY=12", "-w", f"-I{include}",
-                     f"-I{include / 'eigen3'}", str(REPO / "bench" / "kinematics_pin.cpp"),
+                     f"-I{include / 'eigen3'}", str(HARNESS / "kinematics_pin.cpp"),
                      "-o", str(exe), f"-L{lib}", "-lpinocchio_default", f"-Wl,-rpath,{lib}"])
     return exe
 
@@ -162,8 +160,8 @@ def measure(case, pin, pin_exe, pin_count, work: Path, rounds: int) -> dict:
     text.write_text(pinocchio_text(pin, model, pin_frame, q_pin))
     mg_t, pin_t = [], []
     for _ in range(rounds):
-        mg_t.append(float(cs._run_checked([str(exe)]).split()[0]) * 1e6)
-        pin_t.append(float(cs._run_checked([str(pin_exe), str(text)]).split()[0]) * 1e6)
+        mg_t.append(float(cs.run_checked([str(exe)]).split()[0]) * 1e6)
+        pin_t.append(float(cs.run_checked([str(pin_exe), str(text)]).split()[0]) * 1e6)
     ops = cm.manifest["ops"][routine]["after_cse"]
     return {"case": label, "nv": cm.n, "ops": ops, "mg_us": min(mg_t), "pin_us": min(pin_t),
             "mg_instr": cs.instructions_per_call([str(exe)]),
@@ -196,12 +194,12 @@ def main(argv=None) -> int:
           "computeCentroidalMap)\n")
 
     def ratio(peer, mine):
-        return f"**{cs.fmt(peer / mine if peer and mine else None)}**"
-    body = [[r["case"], r["nv"], r["ops"], cs.fmt(r["mg_us"]), cs.fmt(r["pin_us"]),
-             ratio(r["pin_us"], r["mg_us"]), cs.fmt(r["mg_instr"], ",.0f"),
-             cs.fmt(r["pin_instr"], ",.0f"), ratio(r["pin_instr"], r["mg_instr"]),
+        return f"**{fmt(peer / mine if peer and mine else None)}**"
+    body = [[r["case"], r["nv"], r["ops"], fmt(r["mg_us"]), fmt(r["pin_us"]),
+             ratio(r["pin_us"], r["mg_us"]), fmt(r["mg_instr"], ",.0f"),
+             fmt(r["pin_instr"], ",.0f"), ratio(r["pin_instr"], r["mg_instr"]),
              f"{r['agree']:.1e}"] for r in rows]
-    print(cs.markdown(["case", "nv", "modelgen ops", "modelgen µs", "Pinocchio µs",
+    print(markdown(["case", "nv", "modelgen ops", "modelgen µs", "Pinocchio µs",
                        "time: pin / mg", "modelgen instr", "Pinocchio instr",
                        "instr: pin / mg", "agree"], body))
     jac = [r for r in rows if "Jacobian" in r["case"] and r["pin_instr"] and r["mg_instr"]]

@@ -94,7 +94,7 @@ def environment() -> dict:
             "compiler": cc_version, "MODELGEN_CFLAGS": os.environ.get("MODELGEN_CFLAGS", "")}
 
 
-def _c_array(values) -> str:
+def c_array(values) -> str:
     return ",".join(repr(float(v)) for v in values)
 
 
@@ -149,7 +149,7 @@ def build_model_harness(cm, x0, work: Path, function: str = "rhs_prepared"):
                f"-DMG_NPD_ALLOC={name.upper()}_NPD_ALLOC", f"-DMG_NX={cm.nx}",
                f"-DMG_NOUT={nout}",
                f"-DMG_NP={max(len(cm.parameters), 1)}", f"-DMG_NU={max(len(cm.inputs), 1)}",
-               f"-DMG_X0={_c_array(x0)}", f"-DMG_P={_c_array(cm.params()) or '0.0'}",
+               f"-DMG_X0={c_array(x0)}", f"-DMG_P={c_array(cm.params()) or '0.0'}",
                f"-DMIN_SECONDS={MIN_SECONDS}", f"-DREPEATS={REPEATS}", *mode]
     exe = work / f"{function}_bench"
     # the model's integrate wrappers call the shared integrators, copied beside it
