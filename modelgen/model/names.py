@@ -115,3 +115,33 @@ def check_name(name, *, file: Optional[str] = API_FILE, line: Optional[int] = No
             fail(f"'{name}' is a {language} keyword", f"rename it, e.g. '{name}1'")
     return name
 
+
+def sanitize(name: str) -> str:
+    """A foreign name (URDF, MJCF) with every character outside ``[A-Za-z0-9_]``
+    replaced by ``_``.
+
+    >>> sanitize("r-arm.joint 1")
+    'r_arm_joint_1'
+    """
+    return re.sub(r"[^A-Za-z0-9_]", "_", name)
+
+
+def fresh_name(wanted: str, taken: set) -> str:
+    """A valid name close to ``wanted`` that is not in ``taken`` (suffix _2, _3...
+    on a clash), added to ``taken``: what an importer names a robot's parts."""
+    stem = sanitize(wanted)[:56]
+    if not re.match(r"[A-Za-z]", stem):
+        stem = "L_" + stem
+    name, k = stem, 1
+    while True:
+        try:
+            check_name(name)
+            ok = (name not in taken and not name.endswith("_dot")
+                  and f"{name}_dot" not in taken)
+        except ModelError:
+            ok = False
+        if ok:
+            taken.add(name)
+            return name
+        k += 1
+        name = f"{stem}_{k}"

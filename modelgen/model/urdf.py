@@ -93,6 +93,7 @@ import sympy
 
 from modelgen.errors import ModelError
 from modelgen.model.api import Model, check_name
+from modelgen.model.names import fresh_name, sanitize
 from modelgen.model.spec import CANONICAL_BASE, CANONICAL_POINT, JOINT_KINDS, symbol
 from modelgen.model.urdf_read import Joint, Limit, Robot, parse_robot, rpy_matrix
 
@@ -174,15 +175,6 @@ class UrdfImport(NamedTuple):
     options: ReadingOptions = ReadingOptions()
 
 
-def sanitize(name: str) -> str:
-    """The URDF name with every character outside ``[A-Za-z0-9_]`` replaced by ``_``.
-
-    >>> sanitize("r-arm.joint 1")
-    'r_arm_joint_1'
-    """
-    return re.sub(r"[^A-Za-z0-9_]", "_", name)
-
-
 def _num(x: float):
     """A float as an exact sympy number of its shortest decimal (ints stay ints)."""
     if x == int(x) and abs(x) < 2 ** 53:
@@ -245,21 +237,7 @@ class _Builder:
 
     def unique(self, wanted: str) -> str:
         """A fresh valid name close to ``wanted`` (suffix _2, _3... on a clash)."""
-        stem = sanitize(wanted)[:56]
-        if not re.match(r"[A-Za-z]", stem):
-            stem = "L_" + stem
-        name, k = stem, 1
-        while True:
-            try:
-                check_name(name)
-                ok = name not in self.taken and not name.endswith("_dot")
-            except ModelError:
-                ok = False
-            if ok:
-                self.taken.add(name)
-                return name
-            k += 1
-            name = f"{stem}_{k}"
+        return fresh_name(wanted, self.taken)
 
     # -- declarations ---------------------------------------------------------
     def coordinates(self) -> None:
