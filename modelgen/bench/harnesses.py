@@ -11,7 +11,7 @@ timing rule and the model reach the harnesses as ``-D`` macros and files, so
 the sources are plain C/C++ that ship with the package.
 
 >>> sorted(p.name for p in HARNESS_DIR.iterdir())
-['model_bench.c', 'mujoco_bench.c', 'pinocchio_bench.cpp']
+['kinematics_mg.c', 'kinematics_pin.cpp', 'model_bench.c', 'mujoco_bench.c', 'pinocchio_bench.cpp']
 """
 from __future__ import annotations
 

@@ -19,7 +19,7 @@ reading options that change bodies (``inertia="balance"``, ``min_mass``,
 reference is independent of modelgen's implementation of them.
 
 >>> sorted(OPTIONS)[:1]
-['hector_description/robots/quadrotor_base.urdf']
+['alex_description/urdf/alex_psyonic_hands.urdf']
 """
 from __future__ import annotations
 
