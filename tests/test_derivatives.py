@@ -7,8 +7,6 @@ import math
 
 import numpy as np
 import pytest
-import sympy
-from sympy.printing.pycode import pycode
 
 from modelgen.derive.dynamics import derive_equations
 from modelgen.derive.joint_tree import extract_joint_tree
@@ -20,15 +18,7 @@ from modelgen.model.chains import spatial_chain
 TOL = 1e-9
 
 
-def _program(graph, outputs, inputs):
-    """A Python function evaluating ``outputs`` of a straight-line program."""
-    lines = ["def f(" + ", ".join(str(s) for s in inputs) + "):"]
-    for sym, expr in graph.closure(outputs):
-        lines.append(f"    {sym} = {pycode(expr)}")
-    lines.append("    return [" + ", ".join(pycode(sympy.sympify(e)) for e in outputs) + "]")
-    namespace = {"math": math}
-    exec("\n".join(lines), namespace)     # noqa: S102 - our own generated program
-    return namespace["f"]
+from test_aba import _program  # noqa: E402 (the one evaluator of a program)
 
 
 def _relative(a, b) -> float:
