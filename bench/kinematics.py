@@ -88,9 +88,9 @@ def pinocchio_text(pin, model, frame, q) -> str:
 
 
 def build_mg_harness(cm, routine: str, q0, work: Path) -> Path:
-    """kinematics_mg.c on ``<name>_<routine>``, linked with the model's part 2."""
+    """kinematics_mg.c on ``<name>_<routine>``, linked with the model's parts 2 and 3."""
     from modelgen.codegen.build import compiler
-    cs.compile_model(cm, work)
+    objects, _ = cs.compile_model(cm, work)
     nout = (len(cm.frames) * 6 if routine == "frame_jacobians" else 6) * cm.n
     (work / "kin_case.h").write_text(
         f'#include "{cm.name}.h"\n#define NQ {cm.nq}\n#define NV {cm.n}\n#define NOUT {nout}\n'
@@ -101,7 +101,7 @@ def build_mg_harness(cm, routine: str, q0, work: Path) -> Path:
     exe = work / "kinematics_mg"
     src_dir = Path(cm.path).parent
     cs.run_checked([*compiler(), "-O2", "-std=c99", f"-I{src_dir}", f"-I{work}",
-                     str(HARNESS / "kinematics_mg.c"), str(work / "model_rhs.o"),
+                     str(HARNESS / "kinematics_mg.c"), *objects,
                      str(src_dir / "mg_integrate.c"), "-o", str(exe), "-lm"])
     return exe
 

@@ -407,16 +407,20 @@ def _defined_globals(obj: Path) -> list:
     return sorted(line.split()[-1] for line in r.stdout.splitlines() if line.strip())
 
 
+#: The MG_PART values a build compiles (model.c.j2).
+PARTS = (1, 2, 3)
+
+
 def test_generated_c_compiles_warning_free_as_c99_and_cxx(generated, tmp_path):
-    """Strict C99 (-pedantic) and C++11, whole and per MG_PART half; nothing missing.
+    """Strict C99 (-pedantic) and C++11, whole and per MG_PART; nothing missing.
 
     Unoptimised compiles, to keep this fast: the shared builds already passed
     the build's own ``-O2 -Wall -Wextra -Werror``, which covers the warnings
     that need optimisation.  Each model links three ways (C main + C object,
-    C++ main + the C halves, C main + the C++-compiled halves), always with the
+    C++ main + the C parts, C main + the C++-compiled parts), always with the
     ``mg_integrate.c`` of its output directory (compiled the same way), each
     program calls every function of the header, and ``nm`` shows that the
-    model object defines exactly the prefixed functions and the halves split
+    model object defines exactly the prefixed functions and the parts split
     them, and that mg_integrate defines only ``mg_`` functions.
     """
     large = f"spatial_chain_{LARGE_CHAIN}"
@@ -436,19 +440,20 @@ def test_generated_c_compiles_warning_free_as_c99_and_cxx(generated, tmp_path):
             sorted([f"{name}.c", f"{name}.h", *INTEGRATOR]), "the output directory is not self-contained"
         assert sorted(f"{INTEGRATOR_DIR}/{p.name}" for p in (src / INTEGRATOR_DIR).iterdir()) == \
             [f for f in integrator_files() if f.startswith(f"{INTEGRATOR_DIR}/")]
-        for tag, flags in (("all", []), ("1", ["-DMG_PART=1"]), ("2", ["-DMG_PART=2"])):
+        for tag, flags in (("all", []), *((str(k), [f"-DMG_PART={k}"]) for k in PARTS)):
             compiles.append(([*C99, *flags, "-c", src / f"{name}.c", "-o", f"c_{tag}.o"], out))
             compiles.append(([*CXX11, *flags, "-c", src / f"{name}.c", "-o", f"cxx_{tag}.o"], out))
         compiles.append(([*C99, "-c", src / "mg_integrate.c", "-o", "c_mg.o"], out))
         compiles.append(([*CXX11, "-c", src / "mg_integrate.c", "-o", "cxx_mg.o"], out))
         compiles.append(([*C99, inc, "-c", "main.c", "-o", "main_c.o"], out))
         compiles.append(([*CXX11, "-pedantic", inc, "-c", "main.c", "-o", "main_cxx.o"], out))
-        # C main + whole C file; C++ main + the two C parts (extern "C");
-        # C main + the two C++-compiled parts
+        # C main + whole C file; C++ main + the C parts (extern "C");
+        # C main + the C++-compiled parts
         for exe, cmd in (("c_all", ["cc", "main_c.o", "c_all.o", "c_mg.o"]),
-                         ("cxx_main_c_parts", ["c++", "main_cxx.o", "c_1.o", "c_2.o", "c_mg.o"]),
-                         ("c_main_cxx_parts", ["c++", "main_c.o", "cxx_1.o", "cxx_2.o",
-                                               "cxx_mg.o"])):
+                         ("cxx_main_c_parts", ["c++", "main_cxx.o",
+                                               *(f"c_{k}.o" for k in PARTS), "c_mg.o"]),
+                         ("c_main_cxx_parts", ["c++", "main_c.o",
+                                               *(f"cxx_{k}.o" for k in PARTS), "cxx_mg.o"])):
             links.append(([*cmd, "-o", exe, "-lm"], out))
             binaries[(name, exe)] = out / exe
 
@@ -466,7 +471,7 @@ def test_generated_c_compiles_warning_free_as_c99_and_cxx(generated, tmp_path):
         out = tmp_path / name
         exported = sorted(f"{name}_{s}" for s in _exported(models[name]))
         assert _defined_globals(out / "c_all.o") == exported, name
-        parts = [g for k in (1, 2) for g in _defined_globals(out / f"c_{k}.o")]
+        parts = [g for k in PARTS for g in _defined_globals(out / f"c_{k}.o")]
         assert sorted(parts) == exported, f"{name}: MG_PART parts overlap or miss symbols"
         assert all(g.startswith("mg_") for g in _defined_globals(out / "c_mg.o"))
 

@@ -100,25 +100,31 @@ def c_array(values) -> str:
 
 # -- modelgen -----------------------------------------------------------------------
 
-def compile_model(cm, work: Path):
-    """``<name>.c``'s integration path (part 2: the rhs, inverse dynamics...) compiled
-    by the exact command modelgen's build used (from the manifest) into
-    ``work/model_rhs.o``; returns that command."""
+def compile_model(cm, work: Path) -> tuple:
+    """``<name>.c``'s integration path (part 2: the rhs) and what a controller calls
+    (part 3: the inverse dynamics, derivatives, frame kinematics), each compiled by
+    the exact command modelgen's build used (from the manifest) into ``work``;
+    returns (the object files, the commands as one text)."""
     name, manifest = cm.name, cm.manifest
     src_dir = Path(cm.path).parent
     work.mkdir(parents=True, exist_ok=True)
     commands = [shlex.split(c) for c in manifest.get("compile_commands", [])]
-    part2 = [c for c in commands if "-DMG_PART=2" in c]
-    if part2:
-        cmd = list(part2[0])
-        cmd[cmd.index("-o") + 1] = str(work / "model_rhs.o")
-        cmd[cmd.index(f"{name}.c")] = str(src_dir / f"{name}.c")
-    else:   # no compile_commands in the manifest: rebuild them from compile_flags
-        statements = max(r["statements"] for r in manifest["ops"].values())
-        cmd = [*compiler(), *compile_flags(statements, 2), "-DMG_PART=2", "-c",
-               str(src_dir / f"{name}.c"), "-o", str(work / "model_rhs.o")]
-    run_checked(cmd)
-    return shlex.join(cmd)
+    objects, texts = [], []
+    for part in (2, 3):
+        built = [c for c in commands if f"-DMG_PART={part}" in c]
+        obj = work / f"model_part{part}.o"
+        if built:
+            cmd = list(built[0])
+            cmd[cmd.index("-o") + 1] = str(obj)
+            cmd[cmd.index(f"{name}.c")] = str(src_dir / f"{name}.c")
+        else:   # no compile_commands in the manifest: rebuild them from compile_flags
+            statements = max(r["statements"] for r in manifest["ops"].values())
+            cmd = [*compiler(), *compile_flags(statements, part), f"-DMG_PART={part}", "-c",
+                   str(src_dir / f"{name}.c"), "-o", str(obj)]
+        run_checked(cmd)
+        objects.append(str(obj))
+        texts.append(shlex.join(cmd))
+    return objects, "; ".join(texts)
 
 
 #: the functions model_bench.c can time: name -> (its -D macros, the output's length)
@@ -143,7 +149,7 @@ def build_model_harness(cm, x0, work: Path, function: str = "rhs_prepared"):
         raise ValueError(f"no harness for {function!r}")
     name = cm.name
     src_dir = Path(cm.path).parent
-    command = compile_model(cm, work)
+    objects, command = compile_model(cm, work)
     mode, nout = _MODEL_FUNCTIONS[function](cm)
     defines = [f'-DMG_HEADER="{name}.h"', f"-DMG_MODEL={name}",
                f"-DMG_NPD_ALLOC={name.upper()}_NPD_ALLOC", f"-DMG_NX={cm.nx}",
@@ -154,7 +160,7 @@ def build_model_harness(cm, x0, work: Path, function: str = "rhs_prepared"):
     exe = work / f"{function}_bench"
     # the model's integrate wrappers call the shared integrators, copied beside it
     run_checked([*compiler(), "-O2", "-std=c99", *defines, f"-I{src_dir}",
-                 str(HARNESS_DIR / "model_bench.c"), str(work / "model_rhs.o"),
+                 str(HARNESS_DIR / "model_bench.c"), *objects,
                  str(src_dir / "mg_integrate.c"), "-o", str(exe), "-lm"])
     return exe, command
 

@@ -62,15 +62,10 @@ import functools
 import hashlib
 import json
 import os
-import platform
 import re
 import shlex
-import shutil
-import socket
-import subprocess
 import sys
 import sysconfig
-import tempfile
 import time
 import warnings
 from dataclasses import dataclass
@@ -83,6 +78,9 @@ except ImportError:   # not POSIX: builds are not serialised
 
 from modelgen.errors import BuildError
 
+# shutil, socket, subprocess and tempfile are imported where a build needs them:
+# a cached load (modelgen.codegen.index) imports this module and needs none.
+
 #: -O2 without gcc's basic-block (SLP) vectorizer, which gcc 12 enables at -O2:
 #: on the straight-line code of a rhs it packs pairs of scalar operations into
 #: vector ones, which costs time at run time as well as at compile time (the
@@ -92,18 +90,19 @@ O2 = ("-O2", "-fno-tree-slp-vectorize")
 #: part, (flags, above this many statements) rows, first match wins, else
 #: :data:`O2`.  gcc's time grows faster than linearly with code size.
 #:
-#: Part 2 (the integration path) is at :data:`O2` up to 4,000 statements, -O1
-#: above.  Part 1 (A, h, tau, energies, poses: never called by an integrator,
-#: only from Python through the runtime, where a call costs about a
-#: microsecond anyway, or from a user's C, compiled by the user) is at -O0 at
-#: every size, so it compiles beside part 2 without becoming the critical path.
-#: Part 0 is the whole file in one process (one core, and the FMU): -O1 above
-#: 400 statements, else :data:`O2`.
-OPT_LEVELS = {0: ((("-O1",), 400),), 1: ((("-O0",), -1),), 2: ((("-O1",), 4000),)}
-#: A model's C is compiled as two parts in parallel (MG_PART 1: the model
-#: functions no integrator calls, 2: the integration path) when the machine has
-#: two cores, at every size (even the double pendulum gains); on one core, as
-#: one part (0: the whole file).
+#: Parts 2 (the integration path) and 3 (what a controller calls at every step:
+#: inverse dynamics, derivatives, frame kinematics) are at :data:`O2` up to
+#: 4,000 statements, -O1 above.  Part 1 (A, h, tau, energies, poses: never
+#: called by an integrator, only from Python through the runtime, where a call
+#: costs about a microsecond anyway, or from a user's C, compiled by the user)
+#: is at -O0 at every size, so it compiles beside the others without becoming
+#: the critical path.  Part 0 is the whole file in one process (one core, and
+#: the FMU): -O1 above 400 statements, else :data:`O2`.
+OPT_LEVELS = {0: ((("-O1",), 400),), 1: ((("-O0",), -1),), 2: ((("-O1",), 4000),),
+              3: ((("-O1",), 4000),)}
+#: A model's C is compiled as three parts in parallel (MG_PART 1, 2 and 3) when
+#: the machine has two cores or more, at every size (even the double pendulum
+#: gains); on one core, as one part (0: the whole file).
 BASE_FLAGS = ("-std=c99", "-fPIC", "-Wall", "-Wextra")
 #: Flags of mg_integrate.c (compiled once, on the integration hot path).
 INTEGRATOR_FLAGS = ("-O2", *BASE_FLAGS, "-Werror")
@@ -218,7 +217,7 @@ def host_flags() -> tuple:
 
 @functools.lru_cache(maxsize=1)
 def _cpu_has_avx() -> tuple:
-    if sys.platform != "linux" or platform.machine() not in ("x86_64", "AMD64"):
+    if sys.platform != "linux" or os.uname().machine not in ("x86_64", "AMD64"):
         return ()
     try:
         with open("/proc/cpuinfo", encoding="ascii", errors="replace") as f:
@@ -275,6 +274,7 @@ def integrator_object(sources: dict) -> tuple:
     warning naming it.  Compiled in a private temporary directory and moved into
     the cache with ``os.replace``, so concurrent builds never see a partial object.
     """
+    import shutil
     directory = cache_dir()
     target = directory / f"mg_integrate-{integrator_hash(sources)[:20]}.o"
     remove_stale_builds(directory, ".mg-")
@@ -311,6 +311,7 @@ def record_path(path: Path) -> Path:
 
 def record_file(path: Path) -> None:
     """Record the size and SHA-256 of ``path`` (just built) beside it, atomically."""
+    import tempfile
     path = Path(path)
     text = json.dumps({"file": path.name, "size": path.stat().st_size,
                        "sha256": file_sha256(path)})
@@ -464,6 +465,7 @@ def cache_lookup(directory: Path, build_hash: str) -> tuple:
 def host_tag() -> str:
     """8 hex digits naming this machine, in a temporary directory's name beside its
     process id (a cache may be shared between machines, whose pids differ)."""
+    import socket
     return hashlib.sha256(socket.gethostname().encode()).hexdigest()[:8]
 
 
@@ -471,6 +473,7 @@ def _private_dir(directory: Path, prefix: str) -> Path:
     """A new private temporary directory in ``directory`` (created with its parents),
     named ``<prefix><pid>-<host tag>-...`` so a later build can tell when its
     owner is gone; BuildError naming the path if it cannot be written."""
+    import tempfile
     directory = Path(directory)
     try:
         directory.mkdir(parents=True, exist_ok=True)
@@ -504,6 +507,7 @@ def remove_stale_builds(directory: Path, prefix: str = ".build-",
     """Remove the ``prefix*`` temporary directories of killed builds: those whose
     name records a process of this machine that is gone (:func:`_private_dir`),
     and any older than ``age`` seconds; returns their paths."""
+    import shutil
     removed, now = [], time.time()
     owner = re.compile(rf"{re.escape(prefix)}(\d+)-([0-9a-f]{{8}})-")
     for path in Path(directory).glob(prefix + "*"):
@@ -556,6 +560,7 @@ def _remove_old_builds(directory: Path, name: str, keep: str) -> None:
 def run_commands(commands: list, cwd: Path, what: str = "C compiler failed") -> None:
     """Run compiler commands in parallel; raise BuildError (``what``, the command, its
     full output and exit status) on the first failure."""
+    import subprocess
     procs = []
     try:
         for cmd in commands:
@@ -632,6 +637,7 @@ def runtime_module(integrator: dict, runtime: dict, *, rebuild: bool = False) ->
     the process; else it is rebuilt, with a warning naming it.  ``rebuild``:
     build it again even so (its import failed); a failed rebuild names it.
     """
+    import shutil
     directory = cache_dir() / "runtime"
     module_name = f"_mg_runtime_{runtime_hash(integrator, runtime)[:16]}"
     suffix = sysconfig.get_config_var("EXT_SUFFIX") or ".so"
@@ -727,10 +733,12 @@ def build_module(directory: Path, name: str, sources: dict, manifest: dict,
 
     ``manifest`` must hold ``build_hash``; the library is named after it so a
     changed model never collides with an already loaded one.  ``statements`` maps
-    each part (1: the model functions, 2: the integration path) to its largest
+    each part (1: the model functions, 2: the integration path, 3: what a
+    controller calls) to its largest
     routine's statement count, which chooses its optimisation level
     (:data:`OPT_LEVELS`; see :func:`modelgen.codegen.pipeline.part_statements`).
     """
+    import shutil
     start = time.perf_counter()
     directory = Path(directory)
     module_name = f"lib_mg_{name}_{manifest['build_hash'][:16]}"
@@ -746,7 +754,7 @@ def build_module(directory: Path, name: str, sources: dict, manifest: dict,
         (tmp / "mg_integrate.h").write_text(integrator["mg_integrate.h"])
         cc = compiler()
         by_part = {**statements, 0: max(statements.values())}
-        parts = (1, 2) if (os.cpu_count() or 1) > 1 else (0,)
+        parts = (1, 2, 3) if (os.cpu_count() or 1) > 1 else (0,)
         model_objs = [[*cc, *compile_flags(by_part[part], part, host=True), "-Werror",
                        *([f"-DMG_PART={part}"] if part else []), "-c", f"{name}.c",
                        "-o", f"{name}_{part}.o"] for part in parts]

@@ -12,8 +12,10 @@ stay ``const double`` locals.
 """
 from __future__ import annotations
 
+import contextlib
 import functools
 import hashlib
+import sys
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -22,6 +24,7 @@ import sympy
 
 from modelgen.version import __version__
 from modelgen.codegen import capi
+from modelgen.codegen.build import cache_dir
 from modelgen.codegen.cse import Routine
 from modelgen.codegen.ldlt import derivative_solve, solve_code
 from modelgen.errors import TemplateError
@@ -52,13 +55,47 @@ def templates_dir() -> Path:
     raise TemplateError(f"modelgen templates not found next to {here}")
 
 
+#: How the templates are read (part of where their compiled form is cached).
+ENVIRONMENT_OPTIONS = dict(trim_blocks=True, lstrip_blocks=True, keep_trailing_newline=True,
+                           undefined=jinja2.StrictUndefined, autoescape=False)
+
+
+class _TemplateCache(jinja2.FileSystemBytecodeCache):
+    """The templates compiled to Python bytecode, in the build cache.
+
+    Compiling the templates is most of the emit stage of a small model; jinja2
+    keys each entry by the template's name and checks the checksum of its
+    source on load, so an edited template is compiled afresh.  The directory
+    is named after jinja2's version, Python's and :data:`ENVIRONMENT_OPTIONS`
+    (which change the compiled code but not the key).  Best effort: a cache
+    that cannot be read or written only costs the compile.
+    """
+
+    def load_bytecode(self, bucket) -> None:
+        with contextlib.suppress(OSError):
+            super().load_bytecode(bucket)
+
+    def dump_bytecode(self, bucket) -> None:
+        with contextlib.suppress(OSError):
+            super().dump_bytecode(bucket)
+
+
+def _template_cache() -> _TemplateCache | None:
+    key = hashlib.sha256(repr((jinja2.__version__, sys.version,
+                               sorted(map(str, ENVIRONMENT_OPTIONS.items())))).encode())
+    directory = cache_dir() / "templates" / key.hexdigest()[:16]
+    try:
+        directory.mkdir(parents=True, exist_ok=True)
+    except OSError:
+        return None
+    return _TemplateCache(str(directory))
+
+
 @functools.lru_cache(maxsize=None)
 def environment() -> jinja2.Environment:
-    """The one cached jinja2 environment."""
-    return jinja2.Environment(
-        loader=jinja2.FileSystemLoader(str(templates_dir())),
-        trim_blocks=True, lstrip_blocks=True, keep_trailing_newline=True,
-        undefined=jinja2.StrictUndefined, autoescape=False)
+    """The one cached jinja2 environment (its compiled templates cached on disk)."""
+    return jinja2.Environment(loader=jinja2.FileSystemLoader(str(templates_dir())),
+                              bytecode_cache=_template_cache(), **ENVIRONMENT_OPTIONS)
 
 
 def templates_digest(kinematics: bool = False) -> str:

@@ -27,13 +27,13 @@ records the entry again.  This module imports nothing symbolic.
 """
 from __future__ import annotations
 
+import contextlib
 import functools
 import hashlib
 import json
 import os
 import sys
 import sysconfig
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -58,19 +58,52 @@ class Hit:
     runtime: tuple          # (module name, path) of the runtime module
 
 
+def _build_files() -> list:
+    """(relative path, path) of every file of :data:`BUILD_PACKAGES` that counts, sorted."""
+    root = Path(__file__).resolve().parent.parent
+    found = []
+    stack = [root / package for package in BUILD_PACKAGES]
+    while stack:
+        with os.scandir(stack.pop()) as entries:
+            for entry in entries:
+                if entry.is_dir(follow_symlinks=False):
+                    if entry.name != "__pycache__":
+                        stack.append(Path(entry.path))
+                elif os.path.splitext(entry.name)[1] in BUILD_SUFFIXES:
+                    path = Path(entry.path)
+                    found.append((path.relative_to(root).as_posix(), path))
+    return sorted(found)
+
+
 @functools.lru_cache(maxsize=1)
 def code_digest() -> str:
-    """SHA-256 of the files of :data:`BUILD_PACKAGES` (paths and bytes), read once
-    per process."""
-    root = Path(__file__).resolve().parent.parent
+    """SHA-256 of the files of :data:`BUILD_PACKAGES` (paths and bytes), once per
+    process.
+
+    Reading and hashing them all is most of a cached load's own time, so the
+    digest is remembered in the cache under a key of every file's path, size,
+    modification time and inode (what a package upgrade or an edit changes);
+    a memo that is missing or unreadable means reading the files again."""
+    files = _build_files()
+    stamp = hashlib.sha256()
+    for relative, path in files:
+        st = path.stat()
+        stamp.update(f"{relative}\0{st.st_size}\0{st.st_mtime_ns}\0{st.st_ino}\0".encode())
+    memo = cache_dir() / "index" / f"code-{stamp.hexdigest()[:32]}.txt"
+    try:
+        text = memo.read_text()
+        if len(text) == 64 and all(c in "0123456789abcdef" for c in text):
+            return text
+    except OSError:
+        pass
     h = hashlib.sha256()
-    for package in BUILD_PACKAGES:
-        for path in sorted((root / package).rglob("*")):
-            if path.suffix in BUILD_SUFFIXES and "__pycache__" not in path.parts:
-                h.update(path.relative_to(root).as_posix().encode() + b"\0")
-                h.update(path.read_bytes())
-                h.update(b"\0")
-    return h.hexdigest()
+    for relative, path in files:
+        h.update(relative.encode() + b"\0")
+        h.update(path.read_bytes())
+        h.update(b"\0")
+    digest = h.hexdigest()
+    _write_best_effort(memo, digest)
+    return digest
 
 
 def _cffi_version() -> str:
@@ -142,12 +175,17 @@ def record(key: str | None, build: BuildResult, runtime: tuple) -> None:
     entry = {"key": key, "directory": str(Path(build.directory).resolve()),
              "build_hash": build.manifest["build_hash"],
              "runtime": [runtime[0], str(Path(runtime[1]).resolve())]}
-    path = _entry_path(key)
+    _write_best_effort(_entry_path(key), json.dumps(entry))
+
+
+def _write_best_effort(path: Path, text: str) -> None:
+    """Replace ``path`` with ``text`` atomically (a reader sees the old file or the
+    new one, never a part); an error is ignored: the index is only a shortcut."""
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=".entry-", dir=path.parent)
-        with os.fdopen(fd, "w") as f:
-            json.dump(entry, f)
+        tmp.write_text(text)
         os.replace(tmp, path)
     except OSError:
-        pass
+        with contextlib.suppress(OSError):
+            tmp.unlink()

@@ -77,19 +77,24 @@ def model_hash(spec: ModelSpec, options: BuildOptions | None = None) -> str:
 
 #: The routines on the integration path (compiled as MG_PART 2, see model.c.j2).
 INTEGRATION_PATH = ("prepare", "rhs", "outputs", "jacobian_terms", "linearize_terms",
-                    "inverse_dynamics", "constraint_residuals", "constraint_jacobian",
-                    "derivative_terms",
-                    # what controllers call at every step (kinematics.c.j2 puts them in part 2)
-                    "frame_poses", "frame_velocities", "frame_jacobians",
-                    "frame_bias_accelerations", "com", "com_jacobian",
-                    "centroidal_momentum_matrix")
+                    "constraint_residuals", "constraint_jacobian")
+#: What a controller calls at every step (MG_PART 3; kinematics.c.j2's are there too).
+CONTROL_PATH = ("inverse_dynamics", "derivative_terms", "frame_poses", "frame_velocities",
+                "frame_jacobians", "frame_bias_accelerations", "com", "com_jacobian",
+                "centroidal_momentum_matrix")
+
+
+def routine_part(name: str) -> int:
+    """The MG_PART a routine is compiled in: 2, 3, else 1 (the model functions)."""
+    return 2 if name in INTEGRATION_PATH else 3 if name in CONTROL_PATH else 1
+
 
 def part_statements(statements: dict) -> dict:
     """Routine name -> statements, to part -> its largest routine's statements (what
     :func:`modelgen.codegen.build.build_module` chooses optimisation levels by)."""
     return {part: max((count for name, count in statements.items()
-                       if (name in INTEGRATION_PATH) == (part == 2)), default=0)
-            for part in (1, 2)}
+                       if routine_part(name) == part), default=0)
+            for part in (1, 2, 3)}
 
 
 #: How a model is built and loaded (part of the cache key): a plain shared library

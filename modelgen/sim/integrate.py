@@ -26,7 +26,6 @@ its); :func:`c_constants` reads the same constants back from a compiled model.
 """
 from __future__ import annotations
 
-import concurrent.futures
 import signal
 import threading
 import warnings
@@ -555,6 +554,7 @@ def simulate_batch(cm, X0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol
     if threads == 1:
         run(0, n_runs)
     else:
+        import concurrent.futures      # only batches use it; a cached load does not
         with concurrent.futures.ThreadPoolExecutor(threads) as pool:
             list(pool.map(run, bounds[:-1], bounds[1:]))
     for r in range(n_runs):    # rows after a failure stay NaN

@@ -21,7 +21,6 @@ time of the failure and ``message`` says why.
 from __future__ import annotations
 
 import contextlib
-import csv
 import errno
 import os
 from dataclasses import dataclass, field
@@ -203,6 +202,7 @@ class Result:
     def to_csv(self, path) -> Path:
         """Write :meth:`table` with a header line; floats round-trip exactly.  The file
         appears under ``path`` only once it is complete (see :func:`replacing`)."""
+        import csv      # here: a load that writes no CSV does not import it
         path = Path(path)
         table = self.table()
         # one format string per row over Python floats (tolist) spares a csv.writer call
