@@ -13,6 +13,7 @@ from sympy.printing.c import C99CodePrinter
 from sympy.printing.codeprinter import PrintMethodNotImplementedError
 from sympy.printing.precedence import precedence
 
+from modelgen.derive.spatial import negative_number
 from modelgen.errors import DerivationError
 
 
@@ -146,7 +147,7 @@ class ModelPrinter(C99CodePrinter):
         # and S.Half are singletons): sympy's rich comparisons sympify their
         # other operand, which took a fifth of the printing
         coeff, rest = e.as_coeff_Mul()
-        negative = coeff.is_negative
+        negative = negative_number(coeff)
         sign = "-" if negative else ""
         coeff = -coeff if negative else coeff
         num, den = [], []
@@ -276,7 +277,7 @@ def _c_ops(e) -> tuple:
         return sum(n for n, _ in terms) + len(terms) - 1 + first[1], 0
     if e.is_Mul:
         coeff, rest = e.as_coeff_Mul()
-        negative = coeff.is_negative
+        negative = negative_number(coeff)
         coeff = -coeff if negative else coeff
         count, factors, den = 0, (0 if coeff is _ONE else 1), 0
         for factor in sympy.Mul.make_args(rest):
@@ -307,9 +308,9 @@ def _c_ops(e) -> tuple:
 def _negative_text(e) -> bool:
     """True if the printer prints ``e`` with a leading minus (precedence _NEG)."""
     if e.is_Number:
-        return bool(e.is_negative)
+        return negative_number(e)
     if e.is_Mul:
-        return bool(e.as_coeff_Mul()[0].is_negative)
+        return negative_number(e.as_coeff_Mul()[0])
     return False
 
 

@@ -155,7 +155,7 @@ def is_zero_vec(v) -> bool:
 def named(builder, e):
     """``builder.name(e)``, with a negative numeric factor, or a sum of mostly negative
     terms, kept outside the name."""
-    if isinstance(e, sympy.Mul) and _negative_number(e.args[0]):
+    if isinstance(e, sympy.Mul) and negative_number(e.args[0]):
         return -builder.name(-e)
     if isinstance(e, sympy.Add):
         negative = sum(1 for t in e.args if _leading_minus(t))
@@ -164,11 +164,11 @@ def named(builder, e):
     return builder.name(e)
 
 
-def _negative_number(c) -> bool:
-    """``c.is_Number and c.is_negative`` for the numbers of a model (rationals and
-    finite floats), read from the value: sympy's assumptions system deduces
-    every fact of each new number first, the largest cost of deriving a model
-    with many constants (a URDF's)."""
+def negative_number(c) -> bool:
+    """``c.is_Number and c.is_extended_negative``, read from the value for the
+    numbers of a model (rationals and finite floats): sympy's assumptions
+    system deduces every fact of each new number first, the largest cost of
+    deriving and printing a model with many constants (a URDF's)."""
     if isinstance(c, sympy.Rational):
         return c.p < 0
     if isinstance(c, sympy.Float) and c._mpf_[1]:     # (sign, mantissa, ...): nonzero
@@ -180,7 +180,7 @@ def _leading_minus(term) -> bool:
     """``term.could_extract_minus_sign()`` for a term of a sum (a number, or a product
     whose leading factor is its number), without building ``-term`` as sympy's
     test does."""
-    return _negative_number(term.args[0] if term.is_Mul else term)
+    return negative_number(term.args[0] if term.is_Mul else term)
 
 
 def signed(namer, e):
