@@ -267,12 +267,12 @@ def test_stiffness_verdict_comes_from_the_jacobian_not_the_effect_kind(scene):
     soft = scene("spring_chain")
     assert "not stiff for rk4" in soft.summary()
     block = scene("block_friction")
-    lam, spec = block.stiffness(), block.spec
+    lam, card = block.stiffness(), block.card
     try:
-        block.spec = replace(spec, step=4.0 / lam)
+        block.card = replace(card, step=4.0 / lam)
         summary = block.summary()
     finally:
-        block.spec = spec
+        block.card = card
     assert "WARNING the step" in summary and "beyond rk4's stability limit" in summary
 
 

@@ -137,3 +137,67 @@ def test_an_edited_model_file_misses_and_builds_the_edit(built, tmp_path):
     edited.write_text(text.replace("m2: 1.0", "m2: 2.5", 1))
     other = modelgen.load(edited, tmp_path / "build")
     assert other.parameters["m2"] == 2.5 and cm.parameters["m2"] != 2.5
+
+
+# -- scenes: a scene run before runs from its card, without reading its model ---------
+
+SCENES = sorted((REPO / "models" / "scenes").glob("*.yaml"))
+
+
+@pytest.fixture(scope="module")
+def scene_copy(tmp_path_factory):
+    """dp_damped (inputs off, a damper: work outputs) and its model, copied; its build."""
+    root = tmp_path_factory.mktemp("scene")
+    (root / "scenes").mkdir()
+    shutil.copy(REPO / "models" / "scenes" / "dp_damped.yaml", root / "scenes")
+    shutil.copy(MODEL, root)
+    return root / "scenes" / "dp_damped.yaml", root / "build"
+
+
+@pytest.mark.parametrize("scene", SCENES, ids=lambda p: p.stem)
+def test_every_scene_card_survives_its_json(scene):
+    from modelgen.model.scene import load_scene
+    from modelgen.sim.scene import SceneCard
+    card = SceneCard.of(load_scene(scene))
+    again = SceneCard.from_json(json.loads(json.dumps(card.to_json())))
+    assert again == card            # so the build options, and the fast key, are equal
+    assert again.outputs == card.outputs and again.inputs == card.inputs
+
+
+def test_a_cached_scene_runs_without_symbolic_packages_and_gives_the_same_run(scene_copy):
+    path, out = scene_copy
+    first = modelgen.load_scene(path, out).run()
+    code = (f"import modelgen\nres = modelgen.load_scene({str(path)!r}, {str(out)!r}).run()\n"
+            "import json\nprint(json.dumps([res.y[:, -1].tolist(), "
+            "res.energy[-1].tolist(), {k: w[-1] for k, w in res.work.items()}]))")
+    assert _fresh(code) == []
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          cwd=REPO, env=dict(os.environ, PYTHONPATH=str(REPO)), timeout=600)
+    y, energy, work = json.loads(proc.stdout.strip().splitlines()[0])
+    assert np.array_equal(y, first.y[:, -1]) and np.array_equal(energy, first.energy[-1])
+    assert work == {k: w[-1] for k, w in first.work.items()} and work
+
+
+def test_the_cli_simulates_a_cached_scene_without_symbolic_packages(scene_copy, tmp_path):
+    path, out = scene_copy
+    modelgen.load_scene(path, out)
+    code = ("from modelgen.cli import main\n"
+            f"assert main(['simulate', {str(path)!r}, '--build-dir', {str(out)!r}, "
+            f"'-o', {str(tmp_path)!r}, '--no-plot', '-q']) == 0")
+    assert _fresh(code) == []
+    assert (tmp_path / "dp_damped.csv").is_file()
+
+
+def test_an_edited_model_makes_the_card_stale(scene_copy):
+    from modelgen.sim.scene import read_card
+    path, out = scene_copy
+    modelgen.load_scene(path, out)
+    assert read_card(path, out)[1] is None              # the card, nothing read
+    model = path.parent.parent / "double_pendulum.yaml"
+    text = model.read_text()
+    try:
+        model.write_text(text + "\n# edited\n")
+        card, spec = read_card(path, out)
+        assert spec is not None and card == read_card(path, out)[0]
+    finally:
+        model.write_text(text)

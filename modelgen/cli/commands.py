@@ -297,8 +297,8 @@ def _samples(t0: float, t1: float, dt: float) -> float:
 def _report(result, out: Path, name: str, args, title: str, conservative,
             animation=None) -> int:
     """Write CSV, NPZ and PNG of a result (and with ``--animate`` the animation and the
-    HTML viewer, from ``animation`` = (model spec, compiled model, p)); print the
-    energy balance; the exit status."""
+    HTML viewer, from ``animation`` = (model spec or a function giving it, compiled
+    model, p)); print the energy balance; the exit status."""
     import numpy as np
     out.mkdir(parents=True, exist_ok=True)
     partial = "" if result.success else \
@@ -315,6 +315,7 @@ def _report(result, out: Path, name: str, args, title: str, conservative,
     if args.animate and animation is not None:
         from modelgen.sim.animate import animate_files
         spec, compiled, p = animation
+        spec = spec() if callable(spec) else spec   # a scene's model is read only now
         for path in animate_files(result, spec, out / name, compiled=compiled, p=p,
                                   trace=args.trace, movie=args.animate_format):
             print(f"wrote {path}")
@@ -348,43 +349,42 @@ def _method(name):
 def _simulate_scene(args) -> int:
     from dataclasses import replace
 
-    from modelgen.model.scene import load_scene
-    from modelgen.sim.scene import Scene
+    from modelgen.sim.scene import Scene, read_card
 
     def progress(message):
         if not args.quiet:
             print(message, file=sys.stderr, flush=True)
     t0 = time.perf_counter()
-    spec = load_scene(args.model)
+    # a scene run before: its card from the cache, nothing symbolic imported
+    card, spec = read_card(args.model, args.build_dir)
     # every override is checked before anything is built
-    states = list(spec.model.coordinates) + list(spec.model.speeds)
-    init = _state_overrides(states, args.init)
-    p = _parameter_overrides([name for name, _ in spec.model.parameters], args.set) or None
+    init = _state_overrides(list(card.coordinates) + list(card.speeds), args.init)
+    p = _parameter_overrides(list(card.parameters), args.set) or None
     changes = {k: v for k, v in (("t_end", args.t_end), ("step", args.dt),
                                  ("sample_dt", args.sample)) if v is not None}
     if args.method is not None:
         method = _method(args.method)
         changes["method"] = method.name
-        if not method.adaptive and args.dt is None and spec.step is None:
+        if not method.adaptive and args.dt is None and card.step is None:
             raise ModelgenError(f"--method {method.name} has a fixed step; fix: give --dt")
-    if changes.get("t_end", spec.t_end) <= spec.t_start:
-        raise ModelgenError(f"--t-end must be after the scene's start {spec.t_start:g} s")
-    spec = replace(spec, **changes)
-    _check_output_size(args, _samples(spec.t_start, spec.t_end, spec.sample_dt),
-                       _columns_of(spec.model, spec.outputs))
-    with _generation_progress(args, spec.name) as stages:
+    if changes.get("t_end", card.t_end) <= card.t_start:
+        raise ModelgenError(f"--t-end must be after the scene's start {card.t_start:g} s")
+    card = replace(card, **changes)
+    _check_output_size(args, _samples(card.t_start, card.t_end, card.sample_dt),
+                       _columns_of(card, card.outputs))
+    with _generation_progress(args, card.name) as stages:
         # the run settings changed above do not change the build: the files still say it
-        scene = Scene(spec, args.build_dir, progress=progress, stages=stages,
-                      files=(spec.source, spec.full_model.source),
-                      max_operations=args.max_operations)
+        scene = Scene(card, args.build_dir, progress=progress, stages=stages,
+                      files=(card.source, card.model_source),
+                      max_operations=args.max_operations, scene_spec=spec)
     x0 = scene.initial_state(init)
     print(scene.summary())
-    progress(f"{spec.name}: integrating (after {time.perf_counter() - t0:.2f} s of "
+    progress(f"{card.name}: integrating (after {time.perf_counter() - t0:.2f} s of "
              f"set-up)")
-    with _simulation_progress(args, spec.name, spec.t_start, spec.t_end) as advance:
+    with _simulation_progress(args, card.name, card.t_start, card.t_end) as advance:
         result = _quietly(scene.run, p=p, x0=x0, max_steps=args.max_steps, progress=advance)
-    return _report(result, Path(args.output), spec.name, args, f"scene {spec.name}",
-                   scene.conservative, animation=(spec.model, scene.model, p))
+    return _report(result, Path(args.output), card.name, args, f"scene {card.name}",
+                   scene.conservative, animation=(lambda: scene.spec.model, scene.model, p))
 
 
 def _check_output_dir(path) -> None:

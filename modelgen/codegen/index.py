@@ -102,7 +102,7 @@ def code_digest() -> str:
         h.update(path.read_bytes())
         h.update(b"\0")
     digest = h.hexdigest()
-    _write_best_effort(memo, digest)
+    write_best_effort(memo, digest)
     return digest
 
 
@@ -175,10 +175,10 @@ def record(key: str | None, build: BuildResult, runtime: tuple) -> None:
     entry = {"key": key, "directory": str(Path(build.directory).resolve()),
              "build_hash": build.manifest["build_hash"],
              "runtime": [runtime[0], str(Path(runtime[1]).resolve())]}
-    _write_best_effort(_entry_path(key), json.dumps(entry))
+    write_best_effort(_entry_path(key), json.dumps(entry))
 
 
-def _write_best_effort(path: Path, text: str) -> None:
+def write_best_effort(path: Path, text: str) -> None:
     """Replace ``path`` with ``text`` atomically (a reader sees the old file or the
     new one, never a part); an error is ignored: the index is only a shortcut."""
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")

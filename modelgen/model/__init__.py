@@ -8,23 +8,40 @@ an effect kind, an output kind or a top-level key, in ``README.md`` here.
 """
 from __future__ import annotations
 
+import importlib
 import re
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from modelgen.model.api import Model, load_model, parse_model
-from modelgen.model.messages import API_FILE
-from modelgen.model.names import check_name
-from modelgen.model.scene import load_scene, parse_scene
-from modelgen.model.spec import (CONSERVATIVE_KINDS, EFFECT_FIELD_ROLES, EFFECT_KINDS,
-                                 EFFECT_TYPES, STIFF_KINDS, ModelSpec, SceneSpec)
-from modelgen.model.mjcf import load_mjcf
-from modelgen.model.urdf import load_urdf
-from modelgen.model.writer import spec_to_yaml
+if TYPE_CHECKING:
+    from modelgen.model.spec import ModelSpec
+
+#: Public name -> the module defining it, imported on first use (PEP 562): the
+#: readers need sympy (about a second of imports), and a cached load or scene
+#: imports this package without reading a model.
+_LAZY = {"Model": "api", "load_model": "api", "parse_model": "api", "API_FILE": "messages",
+         "check_name": "names", "load_scene": "scene", "parse_scene": "scene",
+         "CONSERVATIVE_KINDS": "spec", "EFFECT_FIELD_ROLES": "spec", "EFFECT_KINDS": "spec",
+         "EFFECT_TYPES": "spec", "STIFF_KINDS": "spec", "ModelSpec": "spec",
+         "SceneSpec": "spec", "load_mjcf": "mjcf", "load_urdf": "urdf",
+         "spec_to_yaml": "writer"}
 
 __all__ = ["Model", "ModelSpec", "SceneSpec", "load_model", "parse_model", "spec_to_yaml",
            "check_name", "load_scene", "parse_scene", "as_spec", "is_scene_file", "API_FILE",
            "EFFECT_TYPES", "EFFECT_KINDS", "EFFECT_FIELD_ROLES", "STIFF_KINDS",
            "CONSERVATIVE_KINDS", "load_urdf", "load_mjcf"]
+
+
+def __getattr__(name: str):
+    if name not in _LAZY:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(f"{__name__}.{_LAZY[name]}"), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list:
+    return sorted(set(globals()) | set(__all__))
 
 
 def as_spec(source, *, floating_base: bool = False, inertia: str = "physical",
@@ -37,6 +54,10 @@ def as_spec(source, *, floating_base: bool = False, inertia: str = "physical",
     ``min_inertia`` (URDF only) read bodies that no rigid body matches, and
     ``mimic="ignore"`` (URDF only) reads mimic joints as joints of their own (see
     :mod:`modelgen.model.urdf`)."""
+    from modelgen.model.api import Model, load_model
+    from modelgen.model.mjcf import load_mjcf
+    from modelgen.model.spec import ModelSpec
+    from modelgen.model.urdf import load_urdf
     urdf = isinstance(source, (str, Path)) and Path(source).suffix.lower() == ".urdf"
     if floating_base and not urdf:
         raise TypeError("floating_base=True applies to a URDF file (a .urdf path); in a "

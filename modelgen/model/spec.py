@@ -29,6 +29,8 @@ from typing import ClassVar, Optional
 
 import sympy
 
+from modelgen.model.records import InputSignal, OutputSpec  # noqa: F401 (re-exported)
+
 #: Name of the canonical base and the canonical point.
 CANONICAL_BASE = "E"
 CANONICAL_POINT = "O"
@@ -551,32 +553,6 @@ OUTPUT_KINDS = {
     "power": ("effect",),                         # its power tau . q_dot (1 value, W)
     "pose": ("body",),                            # 4x4 pose, row-major
 }
-
-
-@dataclass(frozen=True)
-class OutputSpec:
-    """One recorded output of a scene: ``kind`` with its resolved arguments."""
-    name: str
-    kind: str               # a key of OUTPUT_KINDS
-    args: tuple             # ((key, value), ...) with every key of the kind, defaults filled
-
-    def arg(self, key):
-        return dict(self.args)[key]
-
-
-@dataclass(frozen=True)
-class InputSignal:
-    """An input's value at run time: a constant, or samples in time.
-
-    ``times``/``values`` are increasing sample times and the values there;
-    ``interpolation`` is ``"linear"`` or ``"hold"`` (zero-order hold); before
-    the first and after the last sample the end values are held.
-    """
-    name: str
-    constant: Optional[float] = None
-    times: tuple = ()
-    values: tuple = ()
-    interpolation: str = "linear"
 
 
 @dataclass(frozen=True)

@@ -171,11 +171,10 @@ def load_scene(path, out_dir=None, *, force: bool = False, progress=None,
 
     >>> res = load_scene("models/scenes/dp_damped.yaml").run()   # doctest: +SKIP
     """
-    # imported here: a scene needs the model reader (sympy) and the scene module;
-    # a plain model's load needs neither
-    from modelgen.model.scene import load_scene as load_scene_spec
-    from modelgen.sim.scene import Scene
+    # imported here: a plain model's load does not need the scene module
+    from modelgen.sim.scene import Scene, read_card
     options = BuildOptions.of(options, linearize=linearize)
-    spec = load_scene_spec(path)
-    return Scene(spec, out_dir, force=force, progress=progress, options=options,
-                 files=(spec.source, spec.full_model.source), max_operations=max_operations)
+    card, spec = read_card(path, out_dir, force=force)
+    return Scene(card, out_dir, force=force, progress=progress, options=options,
+                 files=(card.source, card.model_source), max_operations=max_operations,
+                 scene_spec=spec)

@@ -1,19 +1,29 @@
 """Scenes: a scene's reduced model built with exactly its effects and outputs, and run.
 
-Input: a :class:`~modelgen.model.spec.SceneSpec`.  Output: a compiled model
-(through :func:`modelgen.codegen.pipeline.generate`) and its trajectories.
+Input: a :class:`~modelgen.model.spec.SceneSpec`, or the :class:`SceneCard`
+made from one.  Output: a compiled model (through
+:func:`modelgen.codegen.pipeline.generate`) and its trajectories.
+
+A scene run from the command line or :func:`modelgen.load_scene` a second time
+reads neither its model nor sympy: its card (what the run needs, as plain
+values) is kept in the build cache under a key of the scene file's bytes, with
+the model file's SHA-256 checked on every use (:func:`read_card`), and the
+build is then found through the cache's fast index.
 """
 from __future__ import annotations
 
-from dataclasses import replace
+import hashlib
+import json
+from dataclasses import asdict, dataclass, replace
+from pathlib import Path
 
 import numpy as np
 
 from modelgen.codegen import index
-from modelgen.codegen.build import Generated
+from modelgen.codegen.build import Generated, cache_dir
 from modelgen.codegen.options import BuildOptions
 from modelgen.errors import SimulationError
-from modelgen.model.spec import CANONICAL_BASE, CONSERVATIVE_KINDS, OutputSpec
+from modelgen.model.records import InputSignal, OutputSpec
 from modelgen.sim.integrate import method_of
 from modelgen.sim.result import Result
 from modelgen.sim.runtime import STABILITY_LIMIT, CompiledModel, check_mass_matrix
@@ -22,6 +32,130 @@ from modelgen.sim.mechanical_work import PER, energy_balance, quadrature_times
 
 #: a run needing more steps than this for stability alone is called stiff
 STIFF_STEPS = 1e4
+#: Changes when a card's fields change meaning (old cards are then misses).
+CARD_FORMAT = "modelgen-scene-card-1"
+
+
+@dataclass(frozen=True)
+class SceneCard:
+    """What running a scene needs, as plain values: the scene's settings (the fields
+    of :class:`~modelgen.model.spec.SceneSpec` of the same names) and the few facts
+    of its model that the run, its summary and the command line use."""
+    name: str
+    effects: tuple                  # names switched on, in model order
+    initial: tuple                  # full state in [q, q_dot] order
+    t_start: float
+    t_end: float
+    sample_dt: float
+    method: str
+    step: float
+    rtol: float
+    atol: float
+    inputs: tuple                   # InputSignal, in model input order
+    outputs: tuple                  # OutputSpec
+    stiff_effects: tuple
+    kinematics: tuple               # ((key, value), ...)
+    source: str | None              # the scene file
+    model_source: str | None        # its model file
+    model_name: str                 # the full model's name
+    coordinates: tuple              # of the scene's reduced model
+    speeds: tuple
+    parameters: tuple               # names of the reduced model's parameters
+    nq: int
+    n: int
+    effects_off: tuple              # the full model's effects left out (not generated)
+    powers: tuple                   # (effect, OutputSpec): work of effects outside the energy
+
+    @classmethod
+    def of(cls, spec) -> SceneCard:
+        """The card of a :class:`~modelgen.model.spec.SceneSpec`."""
+        on = set(spec.effects)
+        return cls(
+            name=spec.name, effects=tuple(spec.effects),
+            initial=tuple(float(v) for v in spec.initial), t_start=float(spec.t_start),
+            t_end=float(spec.t_end), sample_dt=float(spec.sample_dt), method=spec.method,
+            step=float(spec.step), rtol=float(spec.rtol), atol=float(spec.atol),
+            inputs=tuple(spec.inputs), outputs=tuple(spec.outputs),
+            stiff_effects=tuple(spec.stiff_effects), kinematics=tuple(spec.kinematics),
+            source=spec.source, model_source=spec.full_model.source,
+            model_name=spec.full_model.name, coordinates=tuple(spec.model.coordinates),
+            speeds=tuple(spec.model.speeds),
+            parameters=tuple(name for name, _ in spec.model.parameters),
+            nq=spec.model.nq, n=spec.model.n,
+            effects_off=tuple(e for e in _effect_names(spec.full_model) if e not in on),
+            powers=tuple(_power_outputs(spec).items()))
+
+    def to_json(self) -> dict:
+        return asdict(self)
+
+    @classmethod
+    def from_json(cls, data: dict) -> SceneCard:
+        """The card :meth:`to_json` wrote (lists back to tuples, the records rebuilt)."""
+        d = {k: _tuples(v) for k, v in data.items()}
+        d["inputs"] = tuple(InputSignal(**dict(_pairs(sig))) for sig in data["inputs"])
+        d["outputs"] = tuple(_output(o) for o in data["outputs"])
+        d["powers"] = tuple((effect, _output(o)) for effect, o in data["powers"])
+        return cls(**d)
+
+
+def _tuples(value):
+    """JSON's lists back to the tuples a spec holds."""
+    return tuple(_tuples(v) for v in value) if isinstance(value, list) else value
+
+
+def _pairs(record: dict) -> list:
+    return [(k, _tuples(v)) for k, v in record.items()]
+
+
+def _output(data: dict) -> OutputSpec:
+    return OutputSpec(data["name"], data["kind"], _tuples(data["args"]))
+
+
+def _card_key(path: Path, out_dir) -> str:
+    h = hashlib.sha256(f"{CARD_FORMAT}\0{index.environment_text()}\0".encode())
+    h.update(str(path.resolve()).encode() + b"\0" + path.read_bytes())
+    h.update(b"\0" + (str(Path(out_dir).resolve()) if out_dir is not None else "").encode())
+    return h.hexdigest()
+
+
+def _card_path(key: str) -> Path:
+    return cache_dir() / "index" / f"scene-{key[:32]}.json"
+
+
+def _file_digest(path) -> str:
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+
+
+def read_card(path, out_dir=None, *, force: bool = False) -> tuple:
+    """(card, spec) of the scene file ``path``: the card kept in the cache, spec None
+    (nothing symbolic imported), when the scene file and its model file are
+    unchanged since it was made; else the file read (the model reader, sympy),
+    its card made and kept (best effort), and its :class:`SceneSpec`."""
+    path = Path(path)
+    try:
+        key = _card_key(path, out_dir)
+    except OSError:
+        key = None      # the reader says what is wrong with the file
+    if key is not None and not force:
+        try:
+            entry = json.loads(_card_path(key).read_text())
+            if entry["key"] == key and all(_file_digest(f) == digest
+                                           for f, digest in entry["files"]):
+                return SceneCard.from_json(entry["card"]), None
+        except (OSError, ValueError, KeyError, TypeError):
+            pass
+    from modelgen.model.scene import load_scene     # imported here: it needs sympy
+    spec = load_scene(path)
+    card = SceneCard.of(spec)
+    if key is not None:
+        try:
+            files = [[str(f), _file_digest(f)] for f in (spec.full_model.source,)
+                     if f is not None]
+            index.write_best_effort(_card_path(key), json.dumps(
+                {"key": key, "files": files, "card": card.to_json()}))
+        except OSError:
+            pass
+    return card, spec
 
 
 class Scene:
@@ -35,8 +169,11 @@ class Scene:
     def __init__(self, spec, out_dir=None, *, force: bool = False, progress=None,
                  stages=None, linearize: bool | None = None,
                  options: BuildOptions | None = None, files=(),
-                 max_operations: int | None = None):
-        """``progress(message)`` hears what is being done; ``stages(stage)`` is
+                 max_operations: int | None = None, scene_spec=None):
+        """``spec``: a :class:`~modelgen.model.spec.SceneSpec`, or a :class:`SceneCard`
+        (then ``scene_spec``, the SceneSpec it was made from, if at hand, saves
+        reading the file again when the model must be built).
+        ``progress(message)`` hears what is being done; ``stages(stage)`` is
         called as each stage of a build starts (see :func:`generate`).
         ``options`` (:class:`~modelgen.codegen.options.BuildOptions`; ``linearize``
         is shorthand) get the scene's outputs and, for stiff effects, the Jacobian.
@@ -44,18 +181,22 @@ class Scene:
         its model's), which let the build cache's fast index find a build
         without the symbolic pipeline (:mod:`modelgen.codegen.index`).
         ``max_operations``: the build budget (:mod:`modelgen.codegen.budget`)."""
-        self.spec = spec
+        if isinstance(spec, SceneCard):
+            self.card, self._spec = spec, scene_spec
+        else:
+            self.card, self._spec = SceneCard.of(spec), spec
+        card = self.card
         if progress:
-            progress(f"{spec.name}: generating (or reusing) the model")
+            progress(f"{card.name}: generating (or reusing) the model")
         # the power of every effect outside the energy, for the energy balance
-        self.powers = _power_outputs(spec)
-        extra = tuple(out for out in self.powers.values() if out not in spec.outputs)
+        self.powers = dict(card.powers)
+        extra = tuple(out for out in self.powers.values() if out not in card.outputs)
         options = BuildOptions.of(options, linearize=linearize)
         # stiff scenes get the symbolic Jacobian, for implicit integrators
-        options = replace(options, outputs=spec.outputs + extra, jacobian=options.jacobian or (
-            bool(spec.stiff_effects) and spec.model.n <= 12))
-        if spec.kinematics:
-            options = replace(options, kinematics=dict(spec.kinematics))
+        options = replace(options, outputs=card.outputs + extra, jacobian=options.jacobian or (
+            bool(card.stiff_effects) and card.n <= 12))
+        if card.kinematics:
+            options = replace(options, kinematics=dict(card.kinematics))
         key = index.fast_key(files, options, out_dir) if files else None
         hit = None if force else index.lookup(key)
         if hit is not None:
@@ -64,13 +205,23 @@ class Scene:
             # imported here, not at the top: the symbolic pipeline (about a second
             # of imports) is needed only when the fast index has no build
             from modelgen.codegen.pipeline import generate, runtime as runtime_location
-            generated = generate(spec.model, out_dir, force=force, options=options,
+            generated = generate(self.spec.model, out_dir, force=force, options=options,
                                  progress=stages, max_operations=max_operations)
             runtime = runtime_location()
             index.record(key, generated.build, runtime)
         self.generated = generated
         self.model = CompiledModel(generated.manifest, generated.build.module_path, runtime)
         check_mass_matrix(self.model)          # on every load: the cache hides nothing
+
+    @property
+    def spec(self):
+        """The scene's :class:`~modelgen.model.spec.SceneSpec`; for a scene run from its
+        cached card, read from the scene file on first use (so with the file's
+        settings, whatever the card's were changed to)."""
+        if self._spec is None:
+            from modelgen.model.scene import load_scene     # imported here: it needs sympy
+            self._spec = load_scene(self.card.source)
+        return self._spec
 
     @property
     def conservative(self) -> bool:
@@ -80,11 +231,10 @@ class Scene:
 
     def summary(self) -> str:
         """What the scene simulates: effects, stiff ones flagged, outputs, ops."""
-        s = self.spec
-        lines = [f"scene {s.name}: model {s.full_model.name}, n = {s.model.n}",
-                 f"effects on: {', '.join(s.effects) or 'none'}"]
-        off = [name for name in _effect_names(s.full_model) if name not in s.effects]
-        lines.append(f"effects off (not generated): {', '.join(off) or 'none'}")
+        s = self.card
+        lines = [f"scene {s.name}: model {s.model_name}, n = {s.n}",
+                 f"effects on: {', '.join(s.effects) or 'none'}",
+                 f"effects off (not generated): {', '.join(s.effects_off) or 'none'}"]
         if s.stiff_effects:
             lines.append(self._stiffness_line())
         lines.append(f"outputs: {', '.join(o.name for o in s.outputs) or 'none'}")
@@ -103,7 +253,7 @@ class Scene:
         Explicit methods need steps below about ``3/|lambda|max`` (their stability
         limit); a run whose span holds many such steps is stiff.
         """
-        s, cm = self.spec, self.model
+        s, cm = self.card, self.model
         x = self.initial_state(x0)
         rest = np.concatenate([x[:cm.nq], np.zeros(cm.n)])
         u = self._constant_inputs()
@@ -116,7 +266,7 @@ class Scene:
 
     def _stiffness_line(self) -> str:
         """The summary's verdict on the stiff-prone effects, from |lambda|max."""
-        s = self.spec
+        s = self.card
         method = method_of(s.method)
         lam = self.stiffness()
         span = s.t_end - s.t_start
@@ -139,7 +289,7 @@ class Scene:
         return f"{head}: not stiff for {method.name} over {span:g} s"
 
     def _inputs(self):
-        s = self.spec
+        s = self.card
         signals = {sig.name: sig for sig in s.inputs}
         names = self.model.inputs
         if not signals:
@@ -170,7 +320,7 @@ class Scene:
         """The scene's inputs at time ``t`` by name (a sampled input interpolated as the
         integrators do, its end values held outside the samples; missing inputs 0)."""
         out = dict.fromkeys(self.model.inputs, 0.0)
-        for sig in self.spec.inputs:
+        for sig in self.card.inputs:
             if sig.constant is not None:
                 out[sig.name] = float(sig.constant)
             elif sig.interpolation == "hold":
@@ -187,7 +337,7 @@ class Scene:
 
     def times(self) -> np.ndarray:
         """The scene's sample times, start to end every ``sample`` seconds (the end included)."""
-        s = self.spec
+        s = self.card
         return _scene_times(s.t_start, s.t_end, s.sample_dt)
 
     def run(self, p=None, x0=None, u=None, max_steps=None, progress=None) -> Result:
@@ -201,7 +351,7 @@ class Scene:
         :meth:`CompiledModel.simulate`; ``progress(t)`` hears the time reached while
         the C runs (see :func:`modelgen.sim.integrate.simulate`).  Returns a :class:`~modelgen.sim.result.Result`.
         """
-        s, cm = self.spec, self.model
+        s, cm = self.card, self.model
         x0 = self.initial_state(x0)
         u = self._inputs() if u is None else u
         fixed = not method_of(s.method).adaptive
@@ -242,7 +392,7 @@ class Scene:
 
     def initial_state(self, x0=None) -> np.ndarray:
         """The scene's initial state, or ``x0`` (an array, or names -> values over it)."""
-        s, cm = self.spec, self.model
+        s, cm = self.card, self.model
         if x0 is None:
             return np.array(s.initial, dtype=float)
         return cm.state_vector(x0, "x0", base=s.initial)
@@ -259,6 +409,7 @@ def _power_outputs(spec) -> dict:
     """effect -> the ``power`` output recording it, for every switched-on effect whose
     energy the total energy leaves out (non-conservative ones, gravity in a base
     other than E); a ``power`` output the scene already asks for is reused."""
+    from modelgen.model.spec import CANONICAL_BASE, CONSERVATIVE_KINDS   # a spec is read
     kinds = {e.name: e for e in spec.model.effects}
     kinds.update({a.name: a for a in spec.model.actions})
     taken = {out.name for out in spec.outputs}
