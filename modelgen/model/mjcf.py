@@ -36,10 +36,19 @@ applies.  What becomes what (``docs/mjcf.md`` has the table and the checks):
   Coulomb ``friction_<joint>`` (MuJoCo's is a constraint; see
   ``frictionloss=``).  MuJoCo's ``disableflag`` for gravity, springs and
   dampers is honoured.
+* Active equality constraints become exact position constraints, one
+  equation per row of MuJoCo's ``efc_pos`` and the same function of the
+  configuration (``mj_instantiateEquality``): a joint or fixed-tendon
+  coupling an expression with MuJoCo's ``polycoef`` about ``qpos0`` /
+  ``tendon_length0``; ``connect`` a ``coincide`` of the two anchors; ``weld``
+  that and the orientation error ``torquescale * vec(conj(q1) q0 relpose)``
+  as three expressions in the half-angle cosines and sines of the hinges
+  between the bodies (a mocap body stays at its model pose).  Inactive ones
+  are skipped with a note, ``solref``/``solimp`` ignored; spatial tendons and
+  models with ball or free joints are refused.
 * Contacts, geoms, tendons, actuators, sensors, joint limits, fluid forces
   and everything else that is not rigid-body dynamics are ignored and listed
-  in :attr:`MjcfImport.notes`; equality constraints are refused until modelgen
-  has constrained mechanisms.
+  in :attr:`MjcfImport.notes`.
 
 Conventions against MuJoCo's: ``qpos`` maps one to one (quaternions are
 ``(w, x, y, z)`` in both), only the order differs (modelgen lists the hinge
