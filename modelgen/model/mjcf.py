@@ -78,6 +78,7 @@ import sympy
 
 from modelgen.errors import ModelError
 from modelgen.model.api import Model, check_name
+from modelgen.model.halfangle import POLY_NOISE, quat_conj, quat_const, quat_mul
 from modelgen.model.names import fresh_name, sanitize
 from modelgen.model.spec import CANONICAL_BASE, CANONICAL_POINT, JOINT_KINDS, symbol
 
@@ -156,56 +157,9 @@ def _euler_zyx(R) -> tuple:
     return math.atan2(R[1, 0], R[0, 0]), pitch, math.atan2(R[2, 1], R[2, 2])
 
 
-# -- quaternions as polynomials in the half-angle cosines and sines ---------------
-# A body's orientation quaternion (MuJoCo's xquat: the product along the tree of
-# body_quat and each hinge's (cos(a/2), sin(a/2) axis), a = qpos - qpos0) is, per
-# component, a polynomial in c_j = cos(a_j/2) and s_j = sin(a_j/2), each hinge to
-# the first power: at most 2^k terms for k hinges.  Multiplying in this form keeps
-# a weld's orientation residual a flat sum that can be written as one expression.
-# A polynomial is a dict: monomial (sorted tuple of (joint id, "c" or "s")) -> float.
-
 #: hinges between two welded bodies (from their common ancestor) beyond which the
-#: orientation residual (up to 2^k terms per row) is refused as too large
+#: orientation residual (up to 2^k terms per equation) is refused as too large
 WELD_MAX_HINGES = 12
-
-#: coefficients below this fraction of a row's largest are the rounding of
-#: terms that cancel (a turn and its inverse), and are left out
-_POLY_NOISE = 1e-15
-
-
-def _poly_mul(a: dict, b: dict) -> dict:
-    out: dict = {}
-    for ma, ca in a.items():
-        for mb, cb in b.items():
-            key = tuple(sorted(ma + mb))
-            out[key] = out.get(key, 0.0) + ca * cb
-    return out
-
-
-def _poly_add(*terms) -> dict:
-    """Sum of (sign, polynomial) pairs."""
-    out: dict = {}
-    for sign, poly in terms:
-        for mono, c in poly.items():
-            out[mono] = out.get(mono, 0.0) + sign * c
-    return out
-
-
-def _quat_mul(p, q) -> tuple:
-    """Hamilton product of quaternions of polynomials (w, x, y, z)."""
-    m = lambda i, j: _poly_mul(p[i], q[j])
-    return (_poly_add((1, m(0, 0)), (-1, m(1, 1)), (-1, m(2, 2)), (-1, m(3, 3))),
-            _poly_add((1, m(0, 1)), (1, m(1, 0)), (1, m(2, 3)), (-1, m(3, 2))),
-            _poly_add((1, m(0, 2)), (-1, m(1, 3)), (1, m(2, 0)), (1, m(3, 1))),
-            _poly_add((1, m(0, 3)), (1, m(1, 2)), (-1, m(2, 1)), (1, m(3, 0))))
-
-
-def _quat_const(q) -> tuple:
-    return tuple({(): float(x)} if x else {} for x in q)
-
-
-def _quat_conj(q) -> tuple:
-    return (q[0],) + tuple({k: -c for k, c in part.items()} for part in q[1:])
 
 
 class _Builder:
@@ -565,11 +519,11 @@ class _Builder:
             top = self.common_ancestor(*bodies)
             q0, q1 = (self.body_quaternion(b, top, key) for b in bodies)
             if sites:
-                q0 = _quat_mul(q0, _quat_const(m.site_quat[ids[0]]))
-                q1 = _quat_mul(q1, _quat_const(m.site_quat[ids[1]]))
+                q0 = quat_mul(q0, quat_const(m.site_quat[ids[0]]))
+                q1 = quat_mul(q1, quat_const(m.site_quat[ids[1]]))
             else:
-                q0 = _quat_mul(q0, _quat_const(data[6:10]))
-            error = _quat_mul(_quat_conj(q1), q0)
+                q0 = quat_mul(q0, quat_const(data[6:10]))
+            error = quat_mul(quat_conj(q1), q0)
             rows += [(3 + k, {"expression": self.polynomial(error[1 + k], data[10])})
                      for k in range(3)]
         self.constrain(name, e, rows, key)
@@ -593,10 +547,10 @@ class _Builder:
         while b != top:
             chain.append(b)
             b = int(m.body_parentid[b])
-        quat = _quat_const((1.0, 0.0, 0.0, 0.0))
+        quat = quat_const((1.0, 0.0, 0.0, 0.0))
         hinges = 0
         for b in reversed(chain):
-            quat = _quat_mul(quat, _quat_const(m.body_quat[b]))
+            quat = quat_mul(quat, quat_const(m.body_quat[b]))
             for j in range(m.body_jntadr[b], m.body_jntadr[b] + m.body_jntnum[b]):
                 if m.jnt_type[j] != _HINGE:
                     continue
@@ -604,7 +558,7 @@ class _Builder:
                 axis = m.jnt_axis[j]
                 turn = ({((j, "c"),): 1.0},) + tuple(
                     {((j, "s"),): float(a)} if a else {} for a in axis)
-                quat = _quat_mul(quat, turn)
+                quat = quat_mul(quat, turn)
         if hinges > WELD_MAX_HINGES:
             raise self.error(f"a weld's orientation error through {hinges} hinges would be "
                              f"a sum of up to 2^{hinges} terms per equation", key,
@@ -620,7 +574,7 @@ class _Builder:
         out = sympy.S.Zero
         for mono in sorted(poly):
             c = poly[mono] * scale
-            if abs(poly[mono]) <= _POLY_NOISE * big:
+            if abs(poly[mono]) <= POLY_NOISE * big:
                 continue
             term = _num(c)
             for j, f in mono:
