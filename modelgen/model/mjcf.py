@@ -464,7 +464,8 @@ class _Builder:
         the row: its violation is then zero at every configuration)."""
         kept = [(r, f) for r, f in rows if "point_a" in f or f["expression"] != 0]
         for i, (row, fields) in enumerate(kept):
-            label = name if i == 0 else self.unique(f"{name}_{row}")
+            # a weld's orientation rows 3-5 are about x, y, z
+            label = name if i == 0 else self.unique(f"{name}_r{'xyz'[row - 3]}")
             if "point_a" in fields:
                 self.model.add_constraint(label, "coincide", **fields)
                 self.equality_rows += [(e, row + k) for k in range(3)]
