@@ -36,10 +36,19 @@ applies.  What becomes what (``docs/mjcf.md`` has the table and the checks):
   Coulomb ``friction_<joint>`` (MuJoCo's is a constraint; see
   ``frictionloss=``).  MuJoCo's ``disableflag`` for gravity, springs and
   dampers is honoured.
+* Active equality constraints become exact position constraints, one
+  equation per row of MuJoCo's ``efc_pos`` and the same function of the
+  configuration (``mj_instantiateEquality``): a joint or fixed-tendon
+  coupling an expression with MuJoCo's ``polycoef`` about ``qpos0`` /
+  ``tendon_length0``; ``connect`` a ``coincide`` of the two anchors; ``weld``
+  that and the orientation error ``torquescale * vec(conj(q1) q0 relpose)``
+  as three expressions in the half-angle cosines and sines of the hinges
+  between the bodies (a mocap body stays at its model pose).  Inactive ones
+  are skipped with a note, ``solref``/``solimp`` ignored; spatial tendons and
+  models with ball or free joints are refused.
 * Contacts, geoms, tendons, actuators, sensors, joint limits, fluid forces
   and everything else that is not rigid-body dynamics are ignored and listed
-  in :attr:`MjcfImport.notes`; equality constraints are refused until modelgen
-  has constrained mechanisms.
+  in :attr:`MjcfImport.notes`.
 
 Conventions against MuJoCo's: ``qpos`` maps one to one (quaternions are
 ``(w, x, y, z)`` in both), only the order differs (modelgen lists the hinge
@@ -69,6 +78,7 @@ import sympy
 
 from modelgen.errors import ModelError
 from modelgen.model.api import Model, check_name
+from modelgen.model.halfangle import POLY_NOISE, quat_conj, quat_const, quat_mul
 from modelgen.model.names import fresh_name, sanitize
 from modelgen.model.spec import CANONICAL_BASE, CANONICAL_POINT, JOINT_KINDS, symbol
 
@@ -107,6 +117,10 @@ class MjcfImport(NamedTuple):
     dof_index: tuple
     #: per free joint: (modelgen index of its qw, modelgen dof index of its vx)
     free: tuple
+    #: per position-constraint equation of the model, in order: (MuJoCo equality id,
+    #: row of that equality's ``efc_pos`` block), so ``cm.constraint_residuals(q)[i]``
+    #: is the violation MuJoCo computes in that row
+    equality_rows: tuple = ()
 
 
 def _mujoco():
@@ -143,6 +157,11 @@ def _euler_zyx(R) -> tuple:
     return math.atan2(R[1, 0], R[0, 0]), pitch, math.atan2(R[2, 1], R[2, 2])
 
 
+#: hinges between two welded bodies (from their common ancestor) beyond which the
+#: orientation residual (up to 2^k terms per equation) is refused as too large
+WELD_MAX_HINGES = 12
+
+
 class _Builder:
     def __init__(self, m, name: str, source: str, frictionloss: str):
         self.m = m
@@ -154,6 +173,7 @@ class _Builder:
         self.joints: list = []
         self.coordinates: list = []       # simple coordinates, MuJoCo order
         self.quaternion_joints: list = [] # (MjcfJoint) ball and free, MuJoCo order
+        self.equality_rows: list = []     # (equality id, row) per constraint equation
 
     def error(self, problem: str, key: str, fix: str) -> ModelError:
         return ModelError(problem, file=self.source, key=key, fix=fix)
@@ -384,6 +404,186 @@ class _Builder:
             self.notes.append("Ignored: " + "; ".join(
                 f"{what} {', '.join(names)}" for what, names in skipped.items()) + ".")
 
+    # -- equality constraints -----------------------------------------------------
+    def equalities(self, frames) -> None:
+        """MuJoCo's active equality constraints as the model's exact position
+        constraints, one equation per row of MuJoCo's ``efc_pos``, the same
+        function of the configuration (``mj_instantiateEquality``)."""
+        mujoco, m = _mujoco(), self.m
+        label = lambda e: self.name_of(mujoco.mjtObj.mjOBJ_EQUALITY, e) or f"equality {e}"
+        inactive = [label(e) for e in range(m.neq) if not m.eq_active0[e]]
+        if inactive:
+            self.notes.append(f"Skipped: {len(inactive)} inactive equality constraints "
+                              f"(active=\"false\"): {', '.join(inactive)}.")
+        active = [e for e in range(m.neq) if m.eq_active0[e]]
+        if not active:
+            return
+        if self.quaternion_joints:
+            joints = ", ".join(f"{j.type} joint '{j.name or j.id}'"
+                               for j in self.quaternion_joints)
+            raise self.error(f"the model has {len(active)} active equality constraints "
+                             f"({self.eq_kinds(active)}) and {joints}: modelgen's constraints "
+                             "need a model without ball or free joints", "equality",
+                             "remove the <equality> section (or set active=\"false\"), or "
+                             "replace the ball or free joints by hinges and slides")
+        coordinate = {jt.id: jt.coordinates[0] for jt in self.coordinates}
+        for e in active:
+            kind = mujoco.mjtEq(int(m.eq_type[e])).name.removeprefix("mjEQ_").lower()
+            name = self.unique(sanitize(self.name_of(mujoco.mjtObj.mjOBJ_EQUALITY, e))
+                               or f"equality{e}")
+            key = f"equality[{e}]"
+            data = m.eq_data[e]
+            if kind in ("joint", "tendon"):
+                value = self.joint_value if kind == "joint" else self.tendon_length
+                first = value(int(m.eq_obj1id[e]), coordinate, key)
+                residual = first[0] - first[1] - _num(data[0])
+                if m.eq_obj2id[e] >= 0:
+                    second = value(int(m.eq_obj2id[e]), coordinate, key)
+                    d = second[0] - second[1]
+                    residual -= sum(_num(data[k]) * d ** k for k in range(1, 5) if data[k])
+                self.constrain(name, e, [(0, {"expression": residual})], key)
+            elif kind in ("connect", "weld"):
+                self.body_equality(e, kind, name, frames, key)
+            else:
+                raise self.error(f"equality constraint '{label(e)}' is of kind '{kind}', "
+                                 "which modelgen cannot import", key,
+                                 "remove it; joint, fixed-tendon, connect and weld "
+                                 "equalities import")
+        self.notes.append(f"Equality constraints ({self.eq_kinds(active)}) are exact "
+                          "position constraints (MuJoCo's solref and solimp softness is "
+                          "ignored).")
+
+    def eq_kinds(self, ids) -> str:
+        kinds = [_mujoco().mjtEq(int(self.m.eq_type[e])).name.removeprefix("mjEQ_").lower()
+                 for e in ids]
+        return ", ".join(f"{kinds.count(k)} {k}" for k in sorted(set(kinds)))
+
+    def constrain(self, name: str, e: int, rows: list, key: str) -> None:
+        """Add one equality's equations: ``rows`` of (efc row, fields) in order; a
+        ``position`` expression that is identically zero is left out (MuJoCo keeps
+        the row: its violation is then zero at every configuration)."""
+        kept = [(r, f) for r, f in rows if "point_a" in f or f["expression"] != 0]
+        for i, (row, fields) in enumerate(kept):
+            # a weld's orientation rows 3-5 are about x, y, z
+            label = name if i == 0 else self.unique(f"{name}_r{'xyz'[row - 3]}")
+            if "point_a" in fields:
+                self.model.add_constraint(label, "coincide", **fields)
+                self.equality_rows += [(e, row + k) for k in range(3)]
+            else:
+                self.model.add_constraint(label, "position", **fields)
+                self.equality_rows.append((e, row))
+
+    def joint_value(self, j: int, coordinate: dict, key: str) -> tuple:
+        """(qpos, qpos0) of a hinge or slide joint."""
+        if j not in coordinate:
+            raise self.error(f"an equality constraint couples joint '{self.joint_name(j)}', "
+                             "which is not a hinge or slide", key, "couple hinges or slides")
+        return symbol(coordinate[j]), _num(self.m.qpos0[self.m.jnt_qposadr[j]])
+
+    def tendon_length(self, t: int, coordinate: dict, key: str) -> tuple:
+        """(length, length at qpos0) of a fixed tendon: sum of coef * qpos."""
+        mujoco, m = _mujoco(), self.m
+        name = self.name_of(mujoco.mjtObj.mjOBJ_TENDON, t) or f"tendon {t}"
+        length = sympy.S.Zero
+        for w in range(m.tendon_adr[t], m.tendon_adr[t] + m.tendon_num[t]):
+            if m.wrap_type[w] != mujoco.mjtWrap.mjWRAP_JOINT:
+                raise self.error(f"an equality constraint couples the spatial tendon "
+                                 f"'{name}', whose length follows sites and wrapping geoms "
+                                 "(not an expression of the coordinates modelgen can write)",
+                                 key, "remove the equality, or couple the joints with a "
+                                 "fixed tendon or a joint equality")
+            q, _ = self.joint_value(int(m.wrap_objid[w]), coordinate, key)
+            length += _num(m.wrap_prm[w]) * q
+        return length, _num(m.tendon_length0[t])
+
+    def body_equality(self, e: int, kind: str, name: str, frames, key: str) -> None:
+        """connect: the two anchors coincide (3 rows); weld: the anchors coincide and
+        the orientation error ``torquescale * vec(conj(q1) q0 relpose)`` is zero (3
+        more rows), as ``mj_instantiateEquality``, with body or site semantics."""
+        mujoco, m = _mujoco(), self.m
+        data = m.eq_data[e]
+        ids = (int(m.eq_obj1id[e]), int(m.eq_obj2id[e]))
+        sites = m.eq_objtype[e] == mujoco.mjtObj.mjOBJ_SITE
+        bodies = tuple(int(m.site_bodyid[i]) for i in ids) if sites else ids
+        points = []
+        for j, (obj, body) in enumerate(zip(ids, bodies)):
+            base, point, _ = frames[body]
+            # connect: anchor j is data[3j:3j+3]; weld: body 1 takes relpose's position
+            offset = m.site_pos[obj] if sites else \
+                data[3 * j:3 * j + 3] if kind == "connect" else data[3 * (1 - j):6 - 3 * j]
+            points.append(self.offset(point, base, offset, f"{name}_anchor{j + 1}"))
+        if points[0] == points[1]:
+            raise self.error(f"equality constraint '{name}' ties a point to itself", key,
+                             "remove it")
+        rows = [(0, {"point_a": points[0], "point_b": points[1]})]
+        if kind == "weld" and data[10] != 0:
+            top = self.common_ancestor(*bodies)
+            q0, q1 = (self.body_quaternion(b, top, key) for b in bodies)
+            if sites:
+                q0 = quat_mul(q0, quat_const(m.site_quat[ids[0]]))
+                q1 = quat_mul(q1, quat_const(m.site_quat[ids[1]]))
+            else:
+                q0 = quat_mul(q0, quat_const(data[6:10]))
+            error = quat_mul(quat_conj(q1), q0)
+            rows += [(3 + k, {"expression": self.polynomial(error[1 + k], data[10])})
+                     for k in range(3)]
+        self.constrain(name, e, rows, key)
+
+    def common_ancestor(self, a: int, b: int) -> int:
+        m = self.m
+        above = set()
+        while True:
+            above.add(a)
+            if a == 0:
+                break
+            a = int(m.body_parentid[a])
+        while b not in above:
+            b = int(m.body_parentid[b])
+        return b
+
+    def body_quaternion(self, b: int, top: int, key: str) -> tuple:
+        """The orientation of body ``b`` relative to its ancestor ``top`` (MuJoCo's
+        ``conj(xquat[top]) xquat[b]``) as polynomials in half-angle cosines and sines."""
+        m, chain = self.m, []
+        while b != top:
+            chain.append(b)
+            b = int(m.body_parentid[b])
+        quat = quat_const((1.0, 0.0, 0.0, 0.0))
+        hinges = 0
+        for b in reversed(chain):
+            quat = quat_mul(quat, quat_const(m.body_quat[b]))
+            for j in range(m.body_jntadr[b], m.body_jntadr[b] + m.body_jntnum[b]):
+                if m.jnt_type[j] != _HINGE:
+                    continue
+                hinges += 1
+                axis = m.jnt_axis[j]
+                turn = ({((j, "c"),): 1.0},) + tuple(
+                    {((j, "s"),): float(a)} if a else {} for a in axis)
+                quat = quat_mul(quat, turn)
+        if hinges > WELD_MAX_HINGES:
+            raise self.error(f"a weld's orientation error through {hinges} hinges would be "
+                             f"a sum of up to 2^{hinges} terms per equation", key,
+                             f"weld bodies fewer than {WELD_MAX_HINGES} hinges apart")
+        return quat
+
+    def polynomial(self, poly: dict, scale: float) -> sympy.Expr:
+        """A polynomial in half-angle cosines and sines, times ``scale``, as an
+        expression of the coordinates (terms at rounding level left out)."""
+        m = self.m
+        big = max((abs(c) for c in poly.values()), default=0.0)
+        names = {jt.id: jt.coordinates[0] for jt in self.coordinates}
+        out = sympy.S.Zero
+        for mono in sorted(poly):
+            c = poly[mono] * scale
+            if abs(poly[mono]) <= POLY_NOISE * big:
+                continue
+            term = _num(c)
+            for j, f in mono:
+                half = (symbol(names[j]) - _num(m.qpos0[m.jnt_qposadr[j]])) / 2
+                term *= sympy.cos(half) if f == "c" else sympy.sin(half)
+            out += term
+        return out
+
     def gravity(self) -> None:
         mujoco, m = _mujoco(), self.m
         if m.opt.disableflags & mujoco.mjtDisableBit.mjDSBL_GRAVITY or not np.any(m.opt.gravity):
@@ -416,19 +616,11 @@ class _Builder:
             self.notes.append("Tendon stiffness, damping and armature are ignored.")
 
     def build(self) -> MjcfImport:
-        m = self.m
-        if m.neq:
-            kinds = sorted({_mujoco().mjtEq(int(t)).name.removeprefix("mjEQ_").lower()
-                            for t in m.eq_type})
-            raise self.error(f"the model has {m.neq} equality constraints "
-                             f"({', '.join(kinds)}), which modelgen cannot import yet (it "
-                             "has no constrained mechanisms)",
-                             "equality", "remove the <equality> section, or replace the "
-                             "constraint by a joint (a weld by no joint)")
         self.gravity()
         frames = self.body_frames()
         self.bodies(frames)
         self.frames(frames)
+        self.equalities(frames)
         self.ignored()
         self.effects()
         # the notes are known only now; the description goes first in the file
@@ -444,7 +636,7 @@ class _Builder:
         free = tuple((spec.coordinates.index(jt.coordinates[3]), spec.dof_names.index(jt.speeds[0]))
                      for jt in self.quaternion_joints if jt.type == "free")
         return MjcfImport(model, tuple(joints), self.source, tuple(self.notes),
-                          qpos_index, dof_index, free)
+                          qpos_index, dof_index, free, tuple(self.equality_rows))
 
     def description(self) -> tuple:
         m = self.m
