@@ -55,9 +55,7 @@ def as_spec(source, *, floating_base: bool = False, inertia: str = "physical",
     ``mimic="ignore"`` (URDF only) reads mimic joints as joints of their own (see
     :mod:`modelgen.model.urdf`)."""
     from modelgen.model.api import Model, load_model
-    from modelgen.model.mjcf import load_mjcf
     from modelgen.model.spec import ModelSpec
-    from modelgen.model.urdf import load_urdf
     urdf = isinstance(source, (str, Path)) and Path(source).suffix.lower() == ".urdf"
     if floating_base and not urdf:
         raise TypeError("floating_base=True applies to a URDF file (a .urdf path); in a "
@@ -70,9 +68,11 @@ def as_spec(source, *, floating_base: bool = False, inertia: str = "physical",
         return source
     if isinstance(source, (str, Path)):
         if Path(source).suffix.lower() == ".urdf":
+            from modelgen.model.urdf import load_urdf
             return load_urdf(source, floating_base=floating_base, inertia=inertia,
                              min_mass=min_mass, min_inertia=min_inertia, mimic=mimic).spec()
         if Path(source).suffix.lower() == ".xml":
+            from modelgen.model.mjcf import load_mjcf
             return load_mjcf(source).spec()
         return load_model(source)
     if isinstance(source, Model):
