@@ -129,6 +129,29 @@ def test_a_full_disk_names_the_file_and_leaves_no_cut_npz(tmp_path, monkeypatch,
     assert sorted(p.name for p in out.iterdir()) == ["simple_pendulum.csv"]
 
 
+def test_an_import_that_fails_midway_leaves_the_previous_model_file(tmp_path, monkeypatch,
+                                                                   capsys):
+    """`modelgen import` writes the model file beside and renames it: a full disk
+    midway leaves the earlier file as it was and no cut YAML under its name."""
+    from pathlib import Path
+    out = tmp_path / "robot.yaml"
+    out.write_text("# the previous complete model\n")
+    real = Path.write_text
+
+    def half_then_full_disk(path, text, *args, **kwargs):
+        real(path, text[:len(text) // 2], *args, **kwargs)
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+    monkeypatch.setattr(Path, "write_text", half_then_full_disk)
+    urdf = ROOT / "tests" / "data" / "urdf" / "double_pendulum.urdf"
+    assert main(["import", str(urdf), "-o", str(out)]) == EXIT["input"]
+    assert f"{out} (the disk is full)" in capsys.readouterr().err
+    assert out.read_text() == "# the previous complete model\n"
+    assert [p.name for p in tmp_path.iterdir()] == ["robot.yaml"]
+    monkeypatch.setattr(Path, "write_text", real)
+    assert main(["import", str(urdf), "-o", str(out)]) == 0
+    assert "joint1" in out.read_text() and [p.name for p in tmp_path.iterdir()] == ["robot.yaml"]
+
+
 def test_csv_round_trips_every_value_and_keeps_its_layout(tmp_path):
     rng = np.random.default_rng(24)
     y = rng.normal(size=(2, 500)) * 10.0 ** rng.integers(-300, 300, size=(2, 500))
