@@ -2,6 +2,7 @@
 poses, the HTML viewer's escaping, and the viewer playing in a real headless browser."""
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import re
@@ -247,3 +248,67 @@ def test_viewer_plays_in_headless_chromium_without_errors(dp, tmp_path):
             assert all(url.startswith("file://") for url in requests), requests
         finally:
             browser.close()
+
+
+# -- whole files or none ---------------------------------------------------------------
+
+def _half_then_full_disk(real):
+    """A writer that writes half of its output, then finds the disk full."""
+    import errno
+
+    def write(target, data, *args, **kwargs):
+        real(target, data[:len(data) // 2], *args, **kwargs)
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+    return write
+
+
+@pytest.mark.parametrize("suffix", [".gif", ".mp4", ".html"])
+def test_an_animation_that_fails_midway_leaves_the_previous_file_alone(tmp_path, monkeypatch,
+                                                                       suffix):
+    """Animations appear only once complete (written beside, then renamed): a writer
+    failing midway leaves no cut file under the final name, and an earlier file
+    there is kept as it was."""
+    from pathlib import Path
+
+    import matplotlib.animation
+    from PIL import Image
+    path = tmp_path / f"run{suffix}"
+    path.write_bytes(b"the previous complete animation")
+    if suffix == ".gif":
+        def save(image, fp, *args, **kwargs):
+            Path(fp).write_bytes(b"GIF89a half a movie")
+            raise OSError(28, "No space left on device")
+        monkeypatch.setattr(Image.Image, "save", save)
+    elif suffix == ".mp4":              # ffmpeg stood in for: one frame, then a failure
+        class Writer:
+            def __init__(self, **options):
+                pass
+
+            def saving(self, fig, outfile, dpi):
+                self.outfile = Path(outfile)
+                return contextlib.nullcontext()
+
+            def grab_frame(self):
+                self.outfile.write_bytes(b"\x00\x00\x00\x18ftypmp42 one frame")
+                raise RuntimeError("ffmpeg died")
+        monkeypatch.setattr(anim.shutil, "which", lambda name: "/usr/bin/ffmpeg")
+        monkeypatch.setattr(matplotlib.animation, "FFMpegWriter", Writer)
+    else:
+        monkeypatch.setattr(Path, "write_text", _half_then_full_disk(Path.write_text))
+    with pytest.raises((OSError, RuntimeError)):
+        if suffix == ".html":
+            anim.write_html(_hostile_motion(), path)
+        else:
+            anim.write_movie(_hostile_motion(), path)
+    assert path.read_bytes() == b"the previous complete animation"
+    assert [p.name for p in tmp_path.iterdir()] == [path.name]
+
+
+def test_an_animation_written_whole_replaces_the_previous_file(tmp_path):
+    from PIL import Image
+    path = tmp_path / "run.gif"
+    path.write_bytes(b"the previous animation")
+    assert anim.write_movie(_hostile_motion(), path) == path
+    with Image.open(path) as im:
+        assert im.n_frames == 11
+    assert [p.name for p in tmp_path.iterdir()] == ["run.gif"]

@@ -237,6 +237,38 @@ def test_a_raising_feedback_u_in_a_batch_re_raises(cp):
     assert np.all(info.value.partial_result.status == INPUT_ERROR)
 
 
+def test_a_raising_event_function_re_raises_with_the_run_so_far(sp):
+    """An exception in g(t, x) used to end the run with status -6 and no exception;
+    solve_ivp propagates it.  It is re-raised like a raising u(t, x), the run up to
+    it attached, and that run is the one without the event up to there."""
+    class Broken(Exception):
+        pass
+
+    def broken(t, x):
+        if t > 0.5:
+            raise Broken("event function broke")
+        return 1.0
+    with pytest.raises(Broken, match="event function broke") as info:
+        sp.simulate([1.0, 0.0], (0, 2), events=broken)
+    partial = info.value.partial_result
+    assert isinstance(partial, Result) and not partial.success
+    assert partial.status == capi.STATUS_BY_NAME["EVENT_ERROR"].code
+    assert partial.t[0] == 0.0 and 0.3 < partial.t[-1] <= 0.6
+    if hasattr(info.value, "add_note"):          # Python 3.11+
+        assert any("event function" in note and ".partial_result" in note
+                   for note in info.value.__notes__)
+    plain = sp.simulate([1.0, 0.0], (0, 2), t_eval=partial.t)
+    assert np.allclose(partial.y, plain.y, atol=1e-8)
+
+
+def test_an_event_function_returning_no_number_is_a_type_error(sp):
+    def q_none(t, x):
+        return None
+    with pytest.raises(ArgumentTypeError, match=r"event function 0 \(q_none\) returned "
+                                                r"None at t=0.0; it must return a number"):
+        sp.simulate([1.0, 0.0], (0, 2), events=q_none)
+
+
 def test_ctrl_c_inside_a_feedback_u_is_an_interrupt(cp):
     """KeyboardInterrupt keeps the behaviour of any Ctrl-C during a run: the result so
     far with status INTERRUPTED, not an exception (here from a thread, where the C

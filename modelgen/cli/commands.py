@@ -164,13 +164,16 @@ def import_command(args) -> int:
     if Path(args.urdf).suffix.lower() == ".xml":
         return _import_mjcf(args)
     from modelgen.model.urdf import import_urdf, urdf_to_yaml
+    from modelgen.sim.result import replacing
     imported = import_urdf(args.urdf, fix_floating_root=args.fix_floating_root,
                            inertial_parameters=args.inertial_parameters,
                            floating_base=args.floating_base, **_reading(args))
     spec = imported.model.spec()
     out = Path(args.output) if args.output else Path(args.urdf).with_suffix(".yaml")
+    text = urdf_to_yaml(imported)
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(urdf_to_yaml(imported))
+    with replacing(out) as part:        # no cut model file under the final name
+        part.write_text(text)
     print(f"model      {spec.name}  ({args.urdf})")
     sizes = f"{spec.n} coordinates" if spec.nq == spec.n else \
         f"{spec.nq} coordinates, {spec.n} speeds"
@@ -185,6 +188,7 @@ def import_command(args) -> int:
 def _import_mjcf(args) -> int:
     """``modelgen import robot.xml``: an MJCF file compiled by MuJoCo (docs/mjcf.md)."""
     from modelgen.model.mjcf import import_mjcf, mjcf_to_yaml
+    from modelgen.sim.result import replacing
     if args.fix_floating_root or args.floating_base or args.inertial_parameters:
         print("error: --fix-floating-root, --floating-base and --inertial-parameters apply "
               "to a URDF file; an MJCF model declares its free joints itself", file=sys.stderr)
@@ -192,8 +196,10 @@ def _import_mjcf(args) -> int:
     imported = import_mjcf(args.urdf)
     spec = imported.model.spec()
     out = Path(args.output) if args.output else Path(args.urdf).with_suffix(".yaml")
+    text = mjcf_to_yaml(imported)
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(mjcf_to_yaml(imported))
+    with replacing(out) as part:        # no cut model file under the final name
+        part.write_text(text)
     print(f"model      {spec.name}  ({args.urdf})")
     sizes = f"{spec.n} coordinates" if spec.nq == spec.n else \
         f"{spec.nq} coordinates, {spec.n} speeds"

@@ -142,10 +142,33 @@ def _centre(h, m):
     that may be 0 at run time), else None."""
     if is_zero(m):
         return None
-    c = tuple(sympy.cancel(x / m) if not is_zero(x) else ZERO for x in h)
+    c = tuple(_quotient(x, m) if not is_zero(x) else ZERO for x in h)
     if any(p.exp.is_negative for x in c if not is_zero(x) for p in x.atoms(sympy.Pow)):
         return None
     return c
+
+
+def _quotient(x, m):
+    """``cancel(x / m)``; when the division already cancelled to a sum of
+    monomials with rational coefficients (``h = m c`` as the spec writes it),
+    that sum, which is what ``cancel`` returns for it, without converting it
+    to a polynomial in every parameter it names."""
+    q = x / m
+    return q if _expanded_polynomial(q) else sympy.cancel(q)
+
+
+def _expanded_polynomial(x) -> bool:
+    """Whether ``x`` is a sum of products of rationals, symbols and their
+    positive integer powers."""
+    for term in sympy.Add.make_args(x):
+        for factor in sympy.Mul.make_args(term):
+            if factor.is_Pow:
+                if not (factor.base.is_Symbol and factor.exp.is_Integer
+                        and factor.exp > 0):
+                    return False
+            elif not (factor.is_Symbol or factor.is_Rational):
+                return False
+    return True
 
 
 def _com_force(builder, I_O, h, m, c, v, a):

@@ -51,6 +51,7 @@ from markupsafe import Markup
 from modelgen.derive.kinematics import derive_kinematics
 from modelgen.errors import ModelError, ModelgenError, TemplateError
 from modelgen.model.spec import CANONICAL_BASE, CANONICAL_POINT, ModelSpec, symbol
+from modelgen.sim.result import replacing
 from modelgen.version import __version__
 
 #: default cap on the number of frames of an animation
@@ -371,7 +372,8 @@ def write_movie(m: Motion, path, *, dpi: int = 80) -> Path:
     if mp4:
         from matplotlib.animation import FFMpegWriter
         writer = FFMpegWriter(fps=fps, codec="libx264", extra_args=["-pix_fmt", "yuv420p"])
-        with writer.saving(fig, str(path), dpi):
+        # the file appears only once complete: an interrupt leaves no cut movie
+        with replacing(path) as part, writer.saving(fig, str(part), dpi):
             for _ in frames():
                 writer.grab_frame()
         return path
@@ -386,8 +388,9 @@ def write_movie(m: Motion, path, *, dpi: int = 80) -> Path:
         strip.paste(images[k], (0, i * images[0].height))
     palette = strip.quantize(64, dither=Image.Dither.NONE)
     frames_p = [im.quantize(palette=palette, dither=Image.Dither.NONE) for im in images]
-    frames_p[0].save(path, save_all=True, append_images=frames_p[1:], loop=0,
-                     duration=max(20, int(round(1000 * m.interval))), optimize=False)
+    with replacing(path) as part:
+        frames_p[0].save(part, save_all=True, append_images=frames_p[1:], loop=0,
+                         duration=max(20, int(round(1000 * m.interval))), optimize=False)
     return path
 
 
@@ -490,5 +493,6 @@ def write_html(m: Motion, path) -> Path:
     except jinja2.TemplateError as exc:
         raise TemplateError(f"template viewer.html.j2 failed: {exc}") from exc
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(text, encoding="utf-8")
+    with replacing(path) as part:
+        part.write_text(text, encoding="utf-8")
     return path

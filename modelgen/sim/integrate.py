@@ -34,7 +34,8 @@ import numpy as np
 
 from modelgen.codegen.capi import (ALIASES, METHODS, STAT_NAMES, STATUS, STATUS_BY_NAME, STOP_X,
                                    Method, define_values, work_size)
-from modelgen.errors import ArgumentValueError, MassMatrixError, SimulationError
+from modelgen.errors import (ArgumentTypeError, ArgumentValueError, MassMatrixError,
+                             SimulationError)
 from modelgen.sim.arguments import (LONG, MIN_ATOL, MIN_RTOL, Inputs, c_options,
                                      check_step_count, crossing_direction, event_functions,
                                      method_of, run_options, sample_times, span,
@@ -53,6 +54,7 @@ BUFFER_FULL = STATUS_BY_NAME["BUFFER_FULL"].code
 MAX_STEPS = STATUS_BY_NAME["MAX_STEPS"].code
 INTERRUPTED = STATUS_BY_NAME["INTERRUPTED"].code
 INPUT_ERROR = STATUS_BY_NAME["INPUT_ERROR"].code
+EVENT_ERROR = STATUS_BY_NAME["EVENT_ERROR"].code
 #: the step budget of a run when max_steps is not given (fixed-step runs get at
 #: least the steps they need)
 DEFAULT_MAX_STEPS = 100_000
@@ -159,8 +161,9 @@ def simulate(cm, x0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10
     computed up to it, with ``status < 0`` and a message naming the time (and
     the state).  An exception raised by a feedback ``u(t, x)`` (a typo's
     NameError...) is re-raised, as solve_ivp would, with the result up to it
-    (status INPUT_ERROR) attached as ``exc.partial_result``; an exception in an
-    event function ends the run with status EVENT_ERROR (``res.info["exception"]``).
+    (status INPUT_ERROR) attached as ``exc.partial_result``; so is an exception
+    raised by an event function ``g(t, x)`` (status EVENT_ERROR), while an event
+    function returning NaN or Inf ends the run with status EVENT_ERROR.
     Arguments of the wrong type or value raise :class:`~modelgen.errors.ArgumentTypeError`
     or :class:`~modelgen.errors.ArgumentValueError` (a ``TypeError``/``ValueError``
     too) or :class:`~modelgen.errors.SimulationError`.
@@ -222,10 +225,17 @@ def _event_callback(cm, opt, events, sign, terminal, direction, errors):
     def call_events(ctx, t, x_ptr, g_ptr):
         xs = np.frombuffer(ffi.buffer(x_ptr, 8 * nx), dtype=float).copy()
         for i, ev in enumerate(events):
-            value = float(ev(sign * t, xs))
+            value = ev(sign * t, xs)
+            try:
+                value = float(value)
+            except (TypeError, ValueError):
+                raise ArgumentTypeError(
+                    f"event function {i} ({_name(ev)}) returned {value!r} at t={sign * t!r}; "
+                    "it must return a number") from None
             if not np.isfinite(value):   # a NaN never changes sign: it would never fire
-                raise ValueError(f"event function {i} ({getattr(ev, '__name__', ev)!s}) "
-                                 f"returned {value!r}")
+                errors.append(_NonFiniteEvent(f"event function {i} ({_name(ev)}) "
+                                              f"returned {value!r}"))
+                return 1
             g_ptr[i] = value
         return 0
 
@@ -239,6 +249,15 @@ def _event_callback(cm, opt, events, sign, terminal, direction, errors):
     opt.direction = ffi.from_buffer("int[]", direction)
     opt.terminal = ffi.from_buffer("int[]", terminal)
     return callback
+
+
+class _NonFiniteEvent(ValueError):
+    """An event function returned NaN or Inf: the run's status, not an exception of
+    the user's to re-raise."""
+
+
+def _name(fn) -> str:
+    return str(getattr(fn, "__name__", fn))
 
 
 class _Run:
@@ -329,9 +348,9 @@ def _finish(cm, m, run: _Run, errors, inputs, sign, p_vec, x_start, max_steps, t
     nx, stop, status = cm.nx, run.stop, run.status
     pivot = int(run.stats["pivot"])
     failure = errors[0] if errors else inputs.error()
-    if isinstance(failure, KeyboardInterrupt) and status == INPUT_ERROR:
-        # Ctrl-C raised inside u(t, x) (a plain call: no worker thread took the
-        # signal): an interrupt like any other, the trajectory so far kept
+    if isinstance(failure, KeyboardInterrupt) and status in (INPUT_ERROR, EVENT_ERROR):
+        # Ctrl-C raised inside u(t, x) or g(t, x) (a plain call: no worker thread
+        # took the signal): an interrupt like any other, the trajectory so far kept
         status, failure = INTERRUPTED, None
     t_reached, t_fail = sign * float(stop[0]), sign * float(stop[2])
     message = status_message(
@@ -367,8 +386,10 @@ def _finish(cm, m, run: _Run, errors, inputs, sign, p_vec, x_start, max_steps, t
         res.output_columns = dict(cm.outputs)
     if failure is not None:
         res.info["exception"] = failure
-        if status == INPUT_ERROR and isinstance(failure, Exception):
-            _reraise(failure, res, f"near t={t_reached!r}")
+        if (status in (INPUT_ERROR, EVENT_ERROR) and isinstance(failure, Exception)
+                and not isinstance(failure, _NonFiniteEvent)):
+            source = "the feedback u(t, x)" if status == INPUT_ERROR else "an event function"
+            _reraise(failure, res, f"by {source} near t={t_reached!r}")
     return res
 
 
@@ -385,15 +406,15 @@ def _result_arrays(cm, shapes, what: str, fill=None) -> list:
 
 
 def _reraise(exc: Exception, res: Result, where: str):
-    """Re-raise the exception of a feedback ``u(t, x)``, as solve_ivp would, with the
-    result up to it attached as ``exc.partial_result``."""
+    """Re-raise the exception of a feedback ``u(t, x)`` or an event function, as
+    solve_ivp would, with the result up to it attached as ``exc.partial_result``."""
     try:
         exc.partial_result = res
     except AttributeError:          # an exception type with __slots__: not attachable
         pass
     else:
         if hasattr(exc, "add_note"):        # Python 3.11+
-            exc.add_note(f"modelgen: raised by the feedback u(t, x) {where}; the run "
+            exc.add_note(f"modelgen: raised {where}; the run "
                          "up to there is this exception's .partial_result")
     raise exc
 
@@ -590,5 +611,6 @@ def simulate_batch(cm, X0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol
         res.info["exception"] = failure
         if isinstance(failure, Exception):
             r = int(np.argmax(status == INPUT_ERROR))
-            _reraise(failure, res, f"in run {r} near t={sign * float(stop[r, 0])!r}")
+            _reraise(failure, res, f"by the feedback u(t, x) in run {r} near "
+                     f"t={sign * float(stop[r, 0])!r}")
     return res

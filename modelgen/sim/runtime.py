@@ -501,8 +501,8 @@ class CompiledModel(FrameKinematics):
         ``u`` is None (zeros), a vector or dict of constant inputs (a number for a
         one-input model), a tuple ``(times, values, "linear" | "hold")`` of
         samples, or a callable ``u(t, x)`` (feedback) returning a constant form;
-        an exception it raises is re-raised with the run up to it as
-        ``exc.partial_result``.
+        an exception it or an event function raises is re-raised with the run up
+        to it as ``exc.partial_result``.
         ``p`` overrides parameters.  ``max_steps`` defaults to 100,000, or for a
         fixed ``step`` to the steps the span needs if that is more (a run that
         hits it stops with status -1, warns and says how to raise it).  ``dense_output=True``
