@@ -312,8 +312,10 @@ def _report(result, out: Path, name: str, args, title: str, conservative,
     if not args.quiet:
         print(f"{name}: writing {len(result.t)} samples{partial} (Ctrl-C again stops "
               f"at once)", file=sys.stderr, flush=True)
-    print(f"wrote {result.to_csv(out / f'{name}.csv')}{partial}")
+    # the NPZ first: it takes a fraction of a second where the CSV's exact text of
+    # every float takes seconds, so a second Ctrl-C during the CSV still leaves it
     print(f"wrote {result.to_npz(out / f'{name}.npz')}{partial}")
+    print(f"wrote {result.to_csv(out / f'{name}.csv')}{partial}")
     if not args.no_plot:
         png = out / f"{name}.png"
         result.plot(png, title=title, conservative=conservative)
