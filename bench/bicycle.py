@@ -95,15 +95,17 @@ def plot(path: Path, speeds, eigenvalues) -> None:
     import matplotlib.pyplot as plt
     fig, ax = plt.subplots(figsize=(7, 4.5))
     lam = np.array(eigenvalues)
-    ax.plot(speeds, lam.real, "-", color="C0", lw=1.2)
-    ax.plot(speeds, np.abs(lam.imag), "--", color="C1", lw=1.2)
+    # dots, not lines: sorted eigenvalues swap places where modes meet
+    v = np.repeat(np.asarray(speeds, dtype=float), lam.shape[1])
+    ax.plot(v, lam.real.ravel(), ".", color="C0", ms=2)
+    ax.plot(v, np.abs(lam.imag).ravel(), ".", color="C1", ms=2)
     paper = np.array([TABLE_2[v] for v in TABLE_2])
     v_paper = np.array(list(TABLE_2), dtype=float)
     ax.plot(np.repeat(v_paper, 4), paper.real.ravel(), "o", mfc="none", color="k", ms=5,
             label="Meijaard et al. 2007, Table 2")
     ax.plot(np.repeat(v_paper, 4), np.abs(paper.imag).ravel(), "s", mfc="none", color="k", ms=4)
-    ax.plot([], [], "-", color="C0", label="Re(λ), modelgen cm.linearize")
-    ax.plot([], [], "--", color="C1", label="|Im(λ)|, modelgen cm.linearize")
+    ax.plot([], [], ".", color="C0", label="Re(λ), modelgen cm.linearize")
+    ax.plot([], [], ".", color="C1", label="|Im(λ)|, modelgen cm.linearize")
     for v, name in ((WEAVE_SPEED, "weave"), (CAPSIZE_SPEED, "capsize")):
         ax.axvline(v, color="0.6", lw=0.8)
         ax.text(v, 8.5, f" {name}\n {v:.4f}", fontsize=8, color="0.3")
@@ -165,7 +167,7 @@ def main(argv=None) -> int:
                              <= TARGETS["generation_seconds"],
                              "rhs_us": rhs_us <= TARGETS["rhs_us"]}}
     if args.plot:
-        dense = np.linspace(0.0, 10.0, 201)
+        dense = np.linspace(0.0, 10.0, 401)
         plot(args.plot, dense, [lean_steer_eigenvalues(cm, v, p) for v in dense])
     if args.json:
         print(json.dumps(result, indent=1))
