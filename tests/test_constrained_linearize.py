@@ -165,3 +165,33 @@ def test_constrained_jacobian_matches_central_differences(disc, four_bar):
 def test_linearize_refuses_a_state_off_the_constraints(four_bar):
     with pytest.raises(SimulationError, match="off the position constraints"):
         four_bar.linearize(np.array([0.3, 1.0, 2.0, 0.0, 0.0, 0.0]))
+
+
+def test_outputs_of_a_constrained_scene_are_linearized_in_the_minimal_states():
+    """C = dy / d(minimal states) of the rolling disc's scene (contact position,
+    energy) against central differences of the outputs along the independent
+    coordinates and speeds, the dependent speeds recomputed from them."""
+    scene = modelgen.load_scene(ROOT / "models" / "scenes" / "rolling_disc_coast.yaml",
+                                linearize=True)
+    cm = scene.model
+    rng = np.random.default_rng(263)
+    q = np.concatenate([rng.uniform(-1, 1, 3), rng.normal(size=2)])
+    qd = cm.consistent_speeds(q, np.concatenate([rng.uniform(-3, 3, 3), [0.0, 0.0]]))
+    lin = cm.linearize(np.concatenate([q, qd]))
+    assert lin.C.shape == (len(cm.output_columns), 8)
+    ind = cm.manifest["constraints"]["independent_speeds"]
+
+    def outputs(z):
+        speeds = np.zeros(cm.n)
+        speeds[ind] = z[5:]
+        return cm.output_values(0.0, np.concatenate([z[:5], cm.consistent_speeds(z[:5],
+                                                                                  speeds)]))
+    z0, h = np.concatenate([q, qd[ind]]), 1e-6
+    fd = np.column_stack([(outputs(z0 + h * e) - outputs(z0 - h * e)) / (2 * h)
+                          for e in np.eye(8)])
+    assert np.max(np.abs(lin.C - fd)) <= 1e-7 * max(1.0, np.max(np.abs(fd)))
+
+
+def test_equilibrium_refuses_a_constrained_model(four_bar):
+    with pytest.raises(SimulationError, match="cm.assemble"):
+        four_bar.equilibrium([0.3, 1.0, 2.0])

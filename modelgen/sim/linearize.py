@@ -292,6 +292,13 @@ def equilibrium(cm, q_guess, u=None, p=None, t=0.0, *, tol=1e-10, max_iter=50) -
     :class:`SimulationError` with the residual when it does not converge.
     """
     n = cm.n
+    if cm.manifest.get("constraints"):
+        # Newton on all of q would leave the constraints; a rest point on them needs
+        # the reduced equations, which this search does not form
+        raise SimulationError(f"{cm.name}: equilibrium does not search a constrained "
+                              f"model's rest points; fix: put the configuration on the "
+                              f"constraints with cm.assemble(q_guess, keep=[...]) and "
+                              f"linearize there")
     if jacobian_source(cm) != "symbolic":
         raise SimulationError(f"{cm.name}: equilibrium needs the symbolic Jacobian; fix: "
                               f"load the model with linearize=True (or jacobian=True)")
