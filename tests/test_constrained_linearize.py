@@ -195,3 +195,28 @@ def test_outputs_of_a_constrained_scene_are_linearized_in_the_minimal_states():
 def test_equilibrium_refuses_a_constrained_model(four_bar):
     with pytest.raises(SimulationError, match="cm.assemble"):
         four_bar.equilibrium([0.3, 1.0, 2.0])
+
+
+def test_inputs_of_a_constrained_model_give_b(tmp_path):
+    """B of the rolling disc driven by an axle torque and a lean torque against central
+    differences of the rhs in the inputs, on the rows of the minimal states."""
+    text = (ROOT / "models" / "rolling_disc.yaml").read_text()
+    text = text.replace("name: rolling_disc", "name: driven_disc").replace(
+        "parameters:", "inputs: [T_spin, T_lean]\nparameters:").replace(
+        "constraints:", "actions:\n  drive: {body: disc, point: Gd, base: L, force: [0, 0, 0], "
+        "torque: [T_lean, T_spin, 0]}\nconstraints:")
+    path = tmp_path / "driven_disc.yaml"
+    path.write_text(text)
+    cm = modelgen.load(path, linearize=True)
+    rng = np.random.default_rng(264)
+    q = np.concatenate([rng.uniform(-1, 1, 3), rng.normal(size=2)])
+    x = np.concatenate([q, cm.consistent_speeds(q, np.concatenate([rng.uniform(-3, 3, 3),
+                                                                    [0.0, 0.0]]))])
+    u = np.array([0.3, -0.2])
+    lin = cm.linearize(x, u)
+    rows = [cm.state_names.index(s) for s in lin.states]
+    h = 1e-6
+    fd = np.column_stack([(cm.rhs(0.0, x, u + h * e) - cm.rhs(0.0, x, u - h * e))[rows] / (2 * h)
+                          for e in np.eye(2)])
+    assert lin.B.shape == (8, 2) and np.any(lin.B)
+    assert np.max(np.abs(lin.B - fd)) <= 1e-7 * np.max(np.abs(fd))
