@@ -52,7 +52,9 @@ class Linearization:
 
     Shapes: A (nx, nx), B (nx, nu), C (ny, nx), D (ny, nu); ``states``,
     ``inputs``, ``outputs`` name the rows and columns (outputs: the scene's
-    output columns, e.g. ``tip.x``; none for a bare model).
+    output columns, e.g. ``tip.x``; none for a bare model).  For a constrained model
+    the states (and ``x``) are the minimal ones: the independent coordinates and
+    speeds (see :func:`linearize`).
 
     >>> lin = cm.linearize({"q": np.pi})                  # doctest: +SKIP
     >>> lin.eigenvalues()                                 # doctest: +SKIP
@@ -216,6 +218,9 @@ def linearize(cm, x, u=None, t=0.0, p=None, outputs=None) -> Linearization:
     ``x``: the state x[2n], or q[n] (speeds zero), or a dict of state names;
     ``u``: None (zeros), a vector or a dict; ``outputs``: names of outputs or
     output columns to keep as rows of C and D (default: all of the scene's).
+    A constrained model's linearization is the minimal one, in its independent
+    coordinates and speeds, about an ``x`` on the position constraints (its
+    dependent speeds are recomputed from the independent ones; docs/constraints.md).
     """
     x = state_at(cm, x)
     t = cm._time(t)
