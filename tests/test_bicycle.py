@@ -157,3 +157,19 @@ def test_lean_steer_block_of_a_state_space_model(bicycle):
                      [-Mi @ (BENCHMARK["g"] * K0 + v**2 * K2), -Mi @ (v * C1)]])
     got = lean_steer_block(bicycle, v)
     assert np.max(np.abs(got - want)) <= 1e-10 * np.max(np.abs(want))
+
+
+def test_the_coasting_scene_weaves_down_and_conserves_energy():
+    """models/scenes/whipple_bicycle_coast.yaml: at 4.6 m/s (inside the stable range)
+    a push's lean oscillation dies out, rolling without slip does no work, and the
+    projection keeps the contacts on the ground."""
+    scene = modelgen.load_scene(ROOT / "models" / "scenes" / "whipple_bicycle_coast.yaml")
+    res = scene.run()
+    assert res.success, res.message
+    cm = scene.model
+    roll = res.y[cm.state_names.index("roll")]
+    first, last = np.abs(roll[res.t <= 1.0]).max(), np.abs(roll[res.t >= 9.0]).max()
+    assert first > 0.05 and last < 0.05 * first, (first, last)
+    energy = res.outputs["energy"].ravel()
+    assert np.max(np.abs(energy - energy[0])) <= 1e-9 * abs(energy[0])
+    assert max(np.max(np.abs(cm.constraint_residuals(x[:cm.n]))) for x in res.y.T) <= 1e-12
