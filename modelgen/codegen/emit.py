@@ -173,7 +173,8 @@ def render(template: str, context: dict) -> str:
 #: C parameter declaration of every input array name
 _PARAM = {"t": "double t", "q": "const double *q", "qd": "const double *qd",
           "x": "const double *x", "u": "const double *u", "p": "const double *p",
-          "a": "const double *a", "pd": "const double *pd", "qdd": "const double *qdd"}
+          "a": "const double *a", "pd": "const double *pd", "qdd": "const double *qdd",
+          "lam": "const double *lam"}
 
 
 def _input_slots(routine: Routine) -> dict:

@@ -33,6 +33,7 @@ from modelgen.codegen.emit import (ABI_VERSION, constraint_context, emit_sources
 from modelgen.derive.constraints import check_constraints, derive_constraints
 from modelgen.codegen.options import FORMULATIONS, REFERENCES, BuildOptions
 from modelgen.derive.jacobian import accelerations, derive_jacobian_terms, residual
+from modelgen.derive.constrained_linearize import derive_constrained_linearization_terms
 from modelgen.derive.linearize import derive_linearization_terms
 from modelgen.derive.kinematics import derive_kinematics
 from modelgen.derive.outputs import derive_outputs
@@ -188,7 +189,8 @@ def routines_for(eqs: Equations, output_exprs=(), jacobian=None,
         jac_inputs = t + (x, u, p, ("a", jacobian.a)) if jacobian else ()
     lin = []
     if linearization is not None:
-        lin_inputs = t + (x, u, p) + ((("a", linearization.a),) if linearization.a else ())
+        lin_inputs = t + (x, u, p) + ((("a", linearization.a),) if linearization.a else ()) \
+            + ((("lam", linearization.lam),) if linearization.lam else ())
         lin = [("linearize_terms", lin_inputs,
                 (("R", tuple(e for row in linearization.R for e in row)),)
                 + ((("Y", tuple(e for row in linearization.Y for e in row)),)
@@ -364,12 +366,6 @@ def _check_options(spec: ModelSpec, options: BuildOptions) -> None:
     k = options.kinematics
     if k is not None:
         _check_kinematics(spec, k)
-    if spec.constraints and (options.jacobian or options.linearize):
-        raise ModelError("the symbolic Jacobian and linearization of a model with "
-                         "constraints are not generated yet", file=spec.source,
-                         key="linearize" if options.linearize else "jacobian",
-                         fix="build without them (implicit methods then use central "
-                             "differences)")
     if options.linearize and spec.joints:
         raise ModelError("linearization of a model with ball or free joints is not supported: "
                          "its state holds unit quaternions, whose four components cannot "
@@ -446,8 +442,19 @@ def _derive(spec: ModelSpec, options: BuildOptions, tree: JointTree | None) -> D
                        if tree is not None and _time_free(tree)
                        else differentiate_inverse_dynamics(graph, eqs, *inverse))
         graph = derivatives.graph
+    constraints = None
+    if spec.constraints:
+        constraints = derive_constraints(kin, graph)
+        check_constraints(constraints, spec)
+        graph = constraints.graph
     linearization = None
-    if options.linearize:       # one pass for A, B, C, D; the Jacobian is its state columns
+    if constraints is not None and options.jacobian:
+        # the rhs's three sets of equations, differentiated for the C code to solve
+        # for the total derivatives (the Jacobian is the state columns of its A)
+        linearization = derive_constrained_linearization_terms(
+            eqs, constraints, columns.exprs if columns and options.linearize else ())
+        terms = None
+    elif options.linearize:     # one pass for A, B, C, D; the Jacobian is its state columns
         linearization = derive_linearization_terms(
             eqs, graph, columns.exprs if columns else (), forward.qdd if forward else None)
         terms = linearization.jacobian_terms()
@@ -456,12 +463,7 @@ def _derive(spec: ModelSpec, options: BuildOptions, tree: JointTree | None) -> D
                  derive_jacobian_terms(eqs, graph))
     else:
         terms = None
-    graph = terms.graph if terms else graph
-    constraints = None
-    if spec.constraints:
-        constraints = derive_constraints(kin, graph)
-        check_constraints(constraints, spec)
-        graph = constraints.graph
+    graph = linearization.graph if linearization else terms.graph if terms else graph
     frames = _derive_frames(spec, options, kin, graph)
     graph = frames.graph if frames else graph
     return Derived(eqs, columns, forward, inverse, linearization, terms, graph, frames,

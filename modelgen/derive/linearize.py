@@ -30,12 +30,15 @@ class LinearizationTerms:
 
     ``R[k][j]``: of the residual (crba: solve with A to get d qdd) or of
     ``qdd`` itself (aba, ``a == ()``); ``Y[i][j]``: of output column i.
+    ``lam``: the multiplier symbols a constrained model's rows take as a
+    further input (:mod:`modelgen.derive.constrained_linearize`; empty otherwise).
     """
     graph: Graph
     a: tuple
     R: tuple
     Y: tuple
     nx: int
+    lam: tuple = ()
 
     def jacobian_terms(self) -> JacobianTerms:
         """The state columns of ``R``: what ``<name>_jacobian`` needs, no second pass."""

@@ -16,6 +16,8 @@ from pathlib import Path
 import numpy as np
 
 from modelgen.errors import ArgumentValueError, MassMatrixError, SimulationError
+from modelgen.sim.assemble import (check_initial_state, consistent_speeds, constraint_jacobian,
+                                   singular_message)
 from modelgen.sim.conditioning import failure_kind
 from modelgen.sim.integrate import jacobian_source
 
@@ -50,7 +52,9 @@ class Linearization:
 
     Shapes: A (nx, nx), B (nx, nu), C (ny, nx), D (ny, nu); ``states``,
     ``inputs``, ``outputs`` name the rows and columns (outputs: the scene's
-    output columns, e.g. ``tip.x``; none for a bare model).
+    output columns, e.g. ``tip.x``; none for a bare model).  For a constrained model
+    the states (and ``x``) are the minimal ones: the independent coordinates and
+    speeds (see :func:`linearize`).
 
     >>> lin = cm.linearize({"q": np.pi})                  # doctest: +SKIP
     >>> lin.eigenvalues()                                 # doctest: +SKIP
@@ -214,6 +218,9 @@ def linearize(cm, x, u=None, t=0.0, p=None, outputs=None) -> Linearization:
     ``x``: the state x[2n], or q[n] (speeds zero), or a dict of state names;
     ``u``: None (zeros), a vector or a dict; ``outputs``: names of outputs or
     output columns to keep as rows of C and D (default: all of the scene's).
+    A constrained model's linearization is the minimal one, in its independent
+    coordinates and speeds, about an ``x`` on the position constraints (its
+    dependent speeds are recomputed from the independent ones; docs/constraints.md).
     """
     x = state_at(cm, x)
     t = cm._time(t)
@@ -224,6 +231,9 @@ def linearize(cm, x, u=None, t=0.0, p=None, outputs=None) -> Linearization:
             f"{cm.name}: this build has no {cm.name}_linearize; fix: load it with "
             f"modelgen.load(..., linearize=True) or modelgen.load_scene(..., linearize=True)")
     status, A, B, C, D = got
+    info = cm.manifest.get("constraints")
+    if info and status > cm.n:
+        raise SimulationError(singular_message(cm, status, t, x))
     if status:
         raise MassMatrixError(status, cm.dof_names[status - 1], t, x,
                               failure_kind(cm.mass_matrix(x[:cm.nq], p_vec), status - 1))
@@ -236,10 +246,46 @@ def linearize(cm, x, u=None, t=0.0, p=None, outputs=None) -> Linearization:
                 f"of {', '.join(bad)} (the model is not differentiable there, e.g. a spring "
                 f"or damper of zero length); fix: linearize at another state")
     rows = _rows(cm, outputs)
-    return Linearization(A, B, C[rows], D[rows], t, x, u_vec.copy(), p_vec.copy(),
-                         cm.state_names, cm.inputs,
+    states = cm.state_names
+    if info:
+        A, B, C, x_min, states = _minimal(cm, info, A, B, C, x, p_vec)
+    else:
+        x_min = x
+    return Linearization(A, B, C[rows], D[rows], t, x_min, u_vec.copy(), p_vec.copy(),
+                         states, cm.inputs,
                          tuple(cm.output_columns[i] for i in rows),
                          tuple(cm.parameters), cm.name)
+
+
+def _minimal(cm, info, A, B, C, x, p) -> tuple:
+    """The minimal linearization of a constrained model from the derivatives of its rhs
+    in the full state: ``(A, B, C, x, names)`` in the independent coordinates (every
+    coordinate but the dependent ones of the position constraints) and the
+    independent speeds.
+
+    On the constraints, the dependent coordinates follow the independent ones:
+    ``G_h,d dq_d = -G_h,i dq_i`` (G_h: the position rows of G), so a change of the
+    independent states maps to one of x by ``P = [[Q, 0], [0, E]]``, ``Q = [I; -G_h,d^-1
+    G_h,i]`` (rows in the coordinates' order) and ``E`` the independent speeds'
+    columns; the reduced model is ``S A P``, ``S B``, ``C P`` with ``S`` the rows of the
+    independent states (sympy's ``KanesMethod.linearize`` does the same with its
+    constraint matrices).  ``x`` must be on the constraints (:func:`check_initial_state`).
+    """
+    n = cm.n
+    check_initial_state(cm, np.concatenate([x[:n], consistent_speeds(cm, x[:n], x[n:], p)]), p)
+    dep_q = list(info["dependent_coordinates"])
+    ind_q = [k for k in range(n) if k not in dep_q]
+    ind_u = list(info["independent_speeds"])
+    Q = np.zeros((n, len(ind_q)))
+    Q[ind_q, range(len(ind_q))] = 1.0
+    if dep_q:
+        Gh = constraint_jacobian(cm, x[:n], p)[:info["holonomic"]]
+        Q[dep_q] = np.linalg.solve(Gh[:, dep_q], -Gh[:, ind_q])
+    P = np.zeros((2 * n, len(ind_q) + len(ind_u)))
+    P[:n, :len(ind_q)] = Q
+    P[[n + k for k in ind_u], range(len(ind_q), len(ind_q) + len(ind_u))] = 1.0
+    S = ind_q + [n + k for k in ind_u]
+    return (A[S] @ P, B[S], C @ P, x[S], tuple(cm.state_names[k] for k in S))
 
 
 def equilibrium(cm, q_guess, u=None, p=None, t=0.0, *, tol=1e-10, max_iter=50) -> np.ndarray:
@@ -251,6 +297,13 @@ def equilibrium(cm, q_guess, u=None, p=None, t=0.0, *, tol=1e-10, max_iter=50) -
     :class:`SimulationError` with the residual when it does not converge.
     """
     n = cm.n
+    if cm.manifest.get("constraints"):
+        # Newton on all of q would leave the constraints; a rest point on them needs
+        # the reduced equations, which this search does not form
+        raise SimulationError(f"{cm.name}: equilibrium does not search a constrained "
+                              f"model's rest points; fix: put the configuration on the "
+                              f"constraints with cm.assemble(q_guess, keep=[...]) and "
+                              f"linearize there")
     if jacobian_source(cm) != "symbolic":
         raise SimulationError(f"{cm.name}: equilibrium needs the symbolic Jacobian; fix: "
                               f"load the model with linearize=True (or jacobian=True)")
