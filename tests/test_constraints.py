@@ -613,3 +613,13 @@ def test_jacobian_and_linearization_with_a_free_joint_are_refused(tmp_path):
         modelgen.load(path, jacobian=True)
     with pytest.raises(ModelError, match="linearization of a model with ball or free"):
         modelgen.load(path, linearize=True)
+
+
+def test_a_dead_point_beside_a_free_joint_is_an_error_naming_the_speed(floating_pair):
+    # every angle zero: coupler and rocker along B0's x axis, G_d singular
+    free, _ = floating_pair
+    x = free.neutral_state()
+    x[free.nq] = 1.0
+    with pytest.raises(modelgen.errors.SimulationError, match="dead point") as info:
+        free.rhs(0.0, x)
+    assert "pivot of q3_dot" in str(info.value)
