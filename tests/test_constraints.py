@@ -386,3 +386,240 @@ def test_rolling_helper_moves_as_the_written_out_disc(tmp_path, rolling_disc):
                                                                   for _, b in pairs)
         worst = max(worst, err)
     assert worst <= 1e-12, worst
+
+
+# -- constraints beside ball and free joints ---------------------------------------------
+#
+# A four-bar whose ground link is a free body (no gravity): the free joint's
+# quaternion and position stay independent, the loop closes through the plain
+# angles.  Its twin writes the ground link's attitude with ZYX angles and its
+# position with three lengths (every coordinate plain, the path checked against
+# KanesMethod above), so the two must give the same motion at matching states.
+
+FLOATING_FOUR_BAR = """
+name: floating_four_bar
+coordinates: [q1, q2, q3]
+parameters: {a: 1.0, b: 2.0, c: 2.0, d: 2.5, m0: 3.0, m1: 1.0, m2: 2.0, m3: 2.0}
+joints:
+  J: {type: free, parent: E, base: B0, point: P0}
+bases:
+  B1: {parent: B0, axis: 3, angle: q1}
+  B2: {parent: B0, axis: 3, angle: q2}
+  B3: {parent: B0, axis: 3, angle: q3}
+points:
+  G0: {from: P0, base: B0, coordinates: [d/2, 0.1, 0.2]}
+  D:  {from: P0, base: B0, coordinates: [d, 0, 0]}
+  P1: {from: P0, base: B1, coordinates: [a, 0, 0]}
+  G1: {from: P0, base: B1, coordinates: [a/2, 0, 0]}
+  P2: {from: P1, base: B2, coordinates: [b, 0, 0]}
+  G2: {from: P1, base: B2, coordinates: [b/2, 0, 0]}
+  P3: {from: D, base: B3, coordinates: [c, 0, 0]}
+  G3: {from: D, base: B3, coordinates: [c/2, 0, 0]}
+bodies:
+  ground:  {mass: m0, G: G0, base: B0, inertia: [0.4, 1.2, 1.5]}
+  crank:   {mass: m1, G: G1, base: B1, inertia: [0.01, m1*a**2/12, m1*a**2/12]}
+  coupler: {mass: m2, G: G2, base: B2, inertia: [0.02, m2*b**2/12, m2*b**2/12]}
+  rocker:  {mass: m3, G: G3, base: B3, inertia: [0.02, m3*c**2/12, m3*c**2/12]}
+constraints:
+  loop: {type: coincide, point_a: P2, point_b: P3, base: B0, axes: [1, 2]}
+dependent: {coordinates: [q2, q3], speeds: [q2_dot, q3_dot]}
+"""
+
+EULER_FOUR_BAR = FLOATING_FOUR_BAR.replace("name: floating_four_bar", "name: euler_four_bar") \
+    .replace("coordinates: [q1, q2, q3]\n",
+             "coordinates: [q1, q2, q3, x, y, z, yaw, pitch, roll]\n") \
+    .replace("joints:\n  J: {type: free, parent: E, base: B0, point: P0}\n", "") \
+    .replace("bases:\n", "bases:\n  Y1: {parent: E, axis: 3, angle: yaw}\n"
+             "  Y2: {parent: Y1, axis: 2, angle: pitch}\n"
+             "  B0: {parent: Y2, axis: 1, angle: roll}\n") \
+    .replace("points:\n", "points:\n  P0: {coordinates: [x, y, z]}\n")
+
+
+def _yaml_model(tmp_path_factory, text, name):
+    path = tmp_path_factory.mktemp(name) / f"{name}.yaml"
+    path.write_text(text)
+    return modelgen.load(path)
+
+
+@pytest.fixture(scope="module")
+def floating_pair(tmp_path_factory):
+    return (_yaml_model(tmp_path_factory, FLOATING_FOUR_BAR, "floating_four_bar"),
+            _yaml_model(tmp_path_factory, EULER_FOUR_BAR, "euler_four_bar"))
+
+
+def _rot(axis, angle):
+    c, s = np.cos(angle), np.sin(angle)
+    i, j = [(1, 2), (2, 0), (0, 1)][axis]
+    R = np.eye(3)
+    R[i, i], R[i, j], R[j, i], R[j, j] = c, -s, s, c
+    return R
+
+
+def _quaternion(R):
+    """The unit quaternion (w, x, y, z) of rotation matrix R (Shepperd's method)."""
+    w = np.sqrt(max(0.0, 1.0 + np.trace(R))) / 2
+    x = np.copysign(np.sqrt(max(0.0, 1.0 + R[0, 0] - R[1, 1] - R[2, 2])) / 2, R[2, 1] - R[1, 2])
+    y = np.copysign(np.sqrt(max(0.0, 1.0 - R[0, 0] + R[1, 1] - R[2, 2])) / 2, R[0, 2] - R[2, 0])
+    z = np.copysign(np.sqrt(max(0.0, 1.0 - R[0, 0] - R[1, 1] + R[2, 2])) / 2, R[1, 0] - R[0, 1])
+    return np.array([w, x, y, z])
+
+
+def _euler_state(euler, rng):
+    """An assembled state of the Euler twin with random angles and speeds."""
+    q = np.concatenate([[rng.uniform(-np.pi, np.pi)], [1.0, 2.0], rng.normal(size=3),
+                        rng.uniform(-1.2, 1.2, 3)])
+    q = euler.assemble(q, keep=["q1", "x", "y", "z", "yaw", "pitch", "roll"])
+    qd = np.concatenate([[rng.normal()], [0.0, 0.0], rng.normal(size=6)])
+    return q, euler.consistent_speeds(q, qd)
+
+
+def _floating_state(q, qd):
+    """The free model's state at the twin's (q, qd): the quaternion of
+    R = Rz(yaw) Ry(pitch) Rx(roll), and the point's velocity and the angular
+    velocity in components of the ground link's base (the free joint's speeds)."""
+    yaw, pitch, roll = q[6:9]
+    Rz, Ry, Rx = _rot(2, yaw), _rot(1, pitch), _rot(0, roll)
+    R = Rz @ Ry @ Rx
+    omega = qd[6] * np.array([0, 0, 1.0]) + qd[7] * Rz[:, 1] + qd[8] * (Rz @ Ry)[:, 0]
+    xf = np.concatenate([q[:3], q[3:6], _quaternion(R), qd[:3], R.T @ qd[3:6], R.T @ omega])
+    return xf, R, omega
+
+
+def test_floating_four_bar_matches_its_euler_angle_twin(floating_pair):
+    """The rhs with a free joint beside the loop (dependent speeds and Kane's
+    projection in speed space, dq/dt = N(q) v for the joint) against the same
+    system with every coordinate plain: the loop's accelerations, the point's
+    acceleration r'' = R (v' + w x v) and the angular acceleration R w', to 1e-12."""
+    free, euler = floating_pair
+    info = free.manifest["constraints"]
+    assert info["dependent"] == ["q2_dot", "q3_dot", "q2", "q3"]
+    rng = np.random.default_rng(2026)
+    worst = 0.0
+    for _ in range(20):
+        q, qd = _euler_state(euler, rng)
+        xe = np.concatenate([q, qd])
+        xf, R, omega = _floating_state(q, qd)
+        assert np.max(np.abs(free.constraint_residuals(xf[:free.nq]))) <= 1e-12
+        # the free model's dependent speeds come from the independent ones
+        xf_noisy = xf.copy()
+        xf_noisy[free.nq + np.array(info["dependent_speeds"])] = rng.normal(size=2)
+        fe, ff = euler.rhs(0.0, xe), free.rhs(0.0, xf_noisy)
+        v, w = xf[free.nq + 3:free.nq + 6], xf[free.nq + 6:]
+        vdot, wdot = ff[free.nq + 3:free.nq + 6], ff[free.nq + 6:]
+        # Euler twin: omega' = yaw'' e_z + pitch'' Rz e_y + roll'' Rz Ry e_x + the
+        # turning of the last two axes (each frame's angular velocity crossed in)
+        Rz, Ry = _rot(2, q[6]), _rot(1, q[7])
+        ey, ex = Rz[:, 1], (Rz @ Ry)[:, 0]
+        w1, w2 = qd[6] * np.array([0, 0, 1.0]), qd[6] * np.array([0, 0, 1.0]) + qd[7] * ey
+        alpha = (fe[9 + 6] * np.array([0, 0, 1.0]) + fe[9 + 7] * ey + fe[9 + 8] * ex
+                 + qd[7] * np.cross(w1, ey) + qd[8] * np.cross(w2, ex))
+        pairs = [(ff[:3], fe[:3]),                       # q1..q3 rates (dependent: solved)
+                 (ff[3:6], fe[3:6]),                     # dr/dt = R v
+                 (ff[free.nq:free.nq + 3], fe[9:12]),    # loop accelerations
+                 (R @ (vdot + np.cross(w, v)), fe[12:15]),
+                 (R @ wdot, alpha)]
+        scale = sum(np.linalg.norm(b) for _, b in pairs)
+        worst = max(worst, sum(np.linalg.norm(a - b) for a, b in pairs) / scale)
+        assert np.allclose(R @ w, omega, rtol=0, atol=1e-14)
+    assert worst <= 1e-12, worst
+
+
+def test_floating_four_bar_conserves_energy_and_momentum_on_the_constraints(floating_pair):
+    """100 s of free flight (dop853, rtol 1e-12): the projection keeps the loop
+    closed to 1e-12 and the quaternion's norm 1; the energy stays constant and the
+    centre of mass moves on a straight line at constant speed (no external force)."""
+    free, euler = floating_pair
+    q, qd = _euler_state(euler, np.random.default_rng(7))
+    x0, _, _ = _floating_state(q, qd)
+    times = np.linspace(0.0, 100.0, 401)
+    res = free.simulate(x0, (0.0, 100.0), t_eval=times, rtol=1e-12, atol=1e-12)
+    assert res.success, res.message
+    nq = free.nq
+    Q, V = res.y[:nq], res.y[nq:]
+    residual = max(np.max(np.abs(free.constraint_residuals(Q[:, k]))) for k in range(len(times)))
+    velocity = max(np.max(np.abs(free.constraint_jacobian(Q[:, k]) @ V[:, k]))
+                   for k in range(len(times)))
+    norm = np.max(np.abs(np.linalg.norm(Q[6:10], axis=0) - 1.0))
+    energy = np.array([free.energy(Q[:, k], V[:, k]).sum() for k in range(len(times))])
+    masses = np.array([3.0, 1.0, 2.0, 2.0])
+    centre = np.array([masses @ free.body_poses(Q[:, k])[:, :3, 3] / masses.sum()
+                       for k in range(len(times))])
+    line = centre[0] + np.outer(times / times[-1], centre[-1] - centre[0])
+    assert residual <= 1e-12, residual
+    assert velocity <= 1e-10, velocity
+    assert norm <= 1e-14, norm
+    assert np.ptp(energy) / abs(energy[0]) <= 1e-9, np.ptp(energy) / abs(energy[0])
+    assert np.max(np.abs(centre - line)) <= 1e-8 * max(1.0, np.max(np.abs(centre))), \
+        np.max(np.abs(centre - line))
+
+
+def test_the_projection_closes_the_loop_and_normalises_the_quaternion(floating_pair):
+    """A start a little off the loop (within simulate's check) and off the unit
+    sphere: the integrator's projection hook puts both back; ``assemble`` keeps
+    the joint's coordinates (the quaternion scaled to unit length)."""
+    free, euler = floating_pair
+    q, qd = _euler_state(euler, np.random.default_rng(8))
+    x0, _, _ = _floating_state(q, qd)
+    x0[2] += 2e-10
+    x0[6:10] *= 1.3
+    assert np.max(np.abs(free.constraint_residuals(free.project(x0)[:free.nq]))) > 1e-11
+    res = free.simulate(x0, (0.0, 1e-2), t_eval=[1e-2], rtol=1e-10)
+    assert res.success, res.message
+    y = res.y[:, -1]
+    assert np.max(np.abs(free.constraint_residuals(y[:free.nq]))) <= 1e-13
+    assert np.max(np.abs(free.constraint_jacobian(y[:free.nq]) @ y[free.nq:])) <= 1e-12
+    assert abs(np.linalg.norm(y[6:10]) - 1.0) <= 1e-15
+    x0[2] += 1e-3
+    with pytest.raises(modelgen.errors.SimulationError, match="assemble it first"):
+        free.simulate(x0, (0.0, 0.1))
+    q = free.assemble(x0[:free.nq], keep=["q1"])
+    assert np.max(np.abs(free.constraint_residuals(q))) <= 1e-13
+    assert abs(np.linalg.norm(q[6:10]) - 1.0) <= 1e-15
+    assert np.array_equal(q[3:6], x0[3:6])          # the joint's coordinates are kept
+    assert np.allclose(q[6:10], x0[6:10] / 1.3, rtol=0, atol=1e-15)
+
+
+def test_a_quaternion_component_cannot_be_a_dependent_coordinate():
+    text = FLOATING_FOUR_BAR.replace("coordinates: [q2, q3], speeds",
+                                     "coordinates: [q2, J_qz], speeds")
+    with pytest.raises(ModelError, match="belongs to a ball or free joint") as info:
+        parse_model(text, "floating.yaml")
+    err = info.value
+    assert err.key == "dependent.coordinates[1]" and err.line is not None and err.fix
+    assert "q1, q2, q3" in err.fix
+    text = FLOATING_FOUR_BAR.replace("speeds: [q2_dot, q3_dot]", "speeds: [q2_dot, J_wz]")
+    with pytest.raises(ModelError, match="belongs to a ball or free joint") as info:
+        parse_model(text, "floating.yaml")
+    assert info.value.key == "dependent.speeds[1]"
+
+
+def test_constraints_on_a_joint_alone_cannot_be_solved_for_plain_coordinates(tmp_path):
+    # the free body's point held on a line: only the joint's coordinates could move
+    text = FLOATING_FOUR_BAR.replace(
+        "dependent: {coordinates: [q2, q3], speeds: [q2_dot, q3_dot]}\n", "") + \
+        "  rail: {type: coincide, point_a: P0, point_b: O, axes: [3]}\n"
+    text = text.replace("name: floating_four_bar", "name: floating_rail")
+    path = tmp_path / "floating_rail.yaml"
+    path.write_text(text)
+    with pytest.raises(ModelError, match="cannot be solved") as info:
+        modelgen.load(path)
+    assert "plain" in str(info.value) and info.value.fix
+
+
+def test_jacobian_and_linearization_with_a_free_joint_are_refused(tmp_path):
+    path = tmp_path / "floating_four_bar.yaml"
+    path.write_text(FLOATING_FOUR_BAR)
+    with pytest.raises(ModelError, match="Jacobian of a constrained model with ball or free"):
+        modelgen.load(path, jacobian=True)
+    with pytest.raises(ModelError, match="linearization of a model with ball or free"):
+        modelgen.load(path, linearize=True)
+
+
+def test_a_dead_point_beside_a_free_joint_is_an_error_naming_the_speed(floating_pair):
+    # every angle zero: coupler and rocker along B0's x axis, G_d singular
+    free, _ = floating_pair
+    x = free.neutral_state()
+    x[free.nq] = 1.0
+    with pytest.raises(modelgen.errors.SimulationError, match="dead point") as info:
+        free.rhs(0.0, x)
+    assert "pivot of q3_dot" in str(info.value)

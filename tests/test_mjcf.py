@@ -246,13 +246,10 @@ def suite_models():
     return out
 
 
-#: models refused for a real reason: label -> the reason (the ModelError must say so):
-#: equality constraints on a model with a free joint (the quadruped's root, the
-#: Fetch tasks' object, the kitchen's kettle), which modelgen's constraints refuse
-REFUSED = {label: "equality constraints .* free joint" for label in (
-    "dm_control/quadruped", "gymnasium_robotics/fetch/pick_and_place",
-    "gymnasium_robotics/fetch/push", "gymnasium_robotics/fetch/slide",
-    "gymnasium_robotics/kitchen_franka/kitchen_assets/kitchen_env_model")}
+#: models refused for a real reason: label -> the reason (the ModelError must say so);
+#: none since constraints beside free joints import (the quadruped's root, the
+#: Fetch tasks' object, the kitchen's kettle: their equalities couple plain joints)
+REFUSED: dict = {}
 
 
 @pytest.mark.slow
@@ -337,13 +334,30 @@ def test_state_conversions_round_trip():
     assert np.allclose(R @ v[k:k + 3], qvel[mjmodel.jnt_dofadr[-1]:][:3], atol=1e-14)
 
 
-def test_equality_constraints_with_a_free_joint_are_refused():
-    text = SYNTHETIC.replace("</worldbody>", "</worldbody><equality><joint joint1='rail' "
-                                             "joint2='wrist'/></equality>")
-    with pytest.raises(ModelError, match="equality constraints .* free joint 'puck'") as info:
+@pytest.mark.parametrize("equality", [
+    "<joint joint1='rail' joint2='wrist' polycoef='0.1 -0.5 0.2 0 0'/>",
+    "<connect body1='hand' body2='puck' anchor='0.1 0.05 0'/>"])
+def test_equality_constraints_beside_ball_and_free_joints_match_mujoco(equality):
+    """A coupling of two hinges, or a connect from the ball joint's body to the
+    free body, on a model with both: the residuals against MuJoCo's violations and
+    the tree dynamics (equalities off) as for the suites' models; the dependent
+    coordinates are plain ones, chosen by modelgen."""
+    text = SYNTHETIC.replace("</worldbody>", f"</worldbody><equality>{equality}</equality>")
+    imp = import_mjcf_text(text, "eq.xml")
+    result = check(mujoco.MjModel.from_xml_string(text), "synthetic_eq")
+    assert result["worst"]["f"] <= EQUALITY_TOL
+    chosen = modelgen.generate_model(imp.model).manifest["constraints"]["dependent"]
+    plain = set(imp.model.spec().simple_coordinates)
+    assert chosen and {name.removesuffix("_dot") for name in chosen} <= plain, chosen
+
+
+def test_a_weld_through_a_ball_joint_is_refused():
+    text = SYNTHETIC.replace("</worldbody>", "</worldbody><equality><weld body1='hand' "
+                                             "body2='arm'/></equality>")
+    with pytest.raises(ModelError, match="passes through the ball joint 'shoulder'") as info:
         import_mjcf_text(text, "eq.xml")
-    assert info.value.key == "equality" and info.value.file == "eq.xml"
-    assert "replace the ball or free joints" in info.value.fix
+    assert info.value.key == "equality[0]" and info.value.file == "eq.xml"
+    assert "connect" in info.value.fix
 
 
 # -- equality constraints ------------------------------------------------------------

@@ -362,10 +362,13 @@ def template_context(*, name: str, description: str, model_hash: str, n: int,
          if constraints else {})
 
 
-def constraint_context(m: int, mh: int, dependent, independent, n: int) -> dict:
+def constraint_context(m: int, mh: int, dependent, independent, n: int,
+                       ns: int | None = None) -> dict:
     """What ``constraints.c.j2`` needs: ``m`` equations (``mh`` holonomic, first),
-    the speed indices of the dependent and independent speeds."""
-    return {"m": m, "mh": mh, "ni": n - m, "dep": list(dependent), "ind": list(independent)}
+    the speed indices of the dependent and independent speeds, and ``ns`` the
+    number of plain coordinates (default ``n``: no ball or free joints)."""
+    return {"m": m, "mh": mh, "ni": n - m, "dep": list(dependent), "ind": list(independent),
+            "ns": n if ns is None else ns}
 
 
 def constraint_api(name: str, n: int, nq: int, n_p: int, c: dict) -> list:

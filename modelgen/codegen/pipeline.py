@@ -371,6 +371,14 @@ def _check_options(spec: ModelSpec, options: BuildOptions) -> None:
                          "its state holds unit quaternions, whose four components cannot "
                          "move independently", file=spec.source, key="linearize",
                          fix="linearize a model whose rotations are simple ones (angles)")
+    if options.jacobian and spec.joints and spec.constraints:
+        raise ModelError("the Jacobian of a constrained model with ball or free joints is "
+                         "not supported: its derivatives are taken in the coordinates, "
+                         "and a quaternion's four components cannot move independently",
+                         file=spec.source, key="jacobian",
+                         fix="build without jacobian=True (the implicit integrators then "
+                             "difference the rhs), or write the rotations as simple bases "
+                             "(angles)")
 
 
 def _check_kinematics(spec: ModelSpec, k) -> None:
@@ -528,7 +536,8 @@ def _emit(spec: ModelSpec, options: BuildOptions, derived: Derived, routines: tu
 
 def _constraint_context(spec: ModelSpec, terms) -> dict | None:
     return None if terms is None else constraint_context(
-        terms.m, len(terms.residuals), terms.dependent, terms.independent, spec.n)
+        terms.m, len(terms.residuals), terms.dependent, terms.independent, spec.n,
+        len(spec.simple_coordinates))
 
 
 def _quaternions(spec: ModelSpec) -> list:

@@ -97,6 +97,9 @@ def derive_constraints(kin: Kinematics, graph: Graph | None = None) -> Constrain
     spec = kin.spec
     builder = GraphBuilder(graph if graph is not None else kin.graph)
     n = spec.n
+    # expressions use plain coordinates only (a joint's may not appear in them),
+    # whose speeds have the same index
+    ns = len(spec.simple_coordinates)
     q, qd = kin.q, kin.qd
     residuals, G, gamma, rows = [], [], [], []
     # the position equations first: each wheel's contact, then the others' (a
@@ -120,19 +123,19 @@ def derive_constraints(kin: Kinematics, graph: Graph | None = None) -> Constrain
             continue
         if c.kind == "position":
             f = c.expression
-            grad = [diff(f, qk) for qk in q]
+            grad = [diff(f, q[k]) for k in range(ns)] + [sympy.S.Zero] * (n - ns)
             residuals.append(builder.name(f))
             G.append(builder.vec(grad))
             gamma.append(builder.name(sympy.Add(*[
-                diff(grad[k], q[l]) * qd[l] * qd[k] for k in range(n) for l in range(n)
+                diff(grad[k], q[l]) * qd[l] * qd[k] for k in range(ns) for l in range(ns)
                 if grad[k] != 0])))
             rows.append((c.name, 0))
             continue
         if c.kind == "speeds":
             g = c.expression
             G.append(builder.vec([diff(g, v) for v in qd]))
-            gamma.append(builder.name(sympy.Add(*[diff(g, qk) * qd[k]
-                                                  for k, qk in enumerate(q)])))
+            gamma.append(builder.name(sympy.Add(*[diff(g, q[k]) * qd[k]
+                                                  for k in range(ns)])))
             rows.append((c.name, 0))
             continue
         D = kin.bases[c.base]
@@ -188,13 +191,26 @@ def choose_dependent(graph: Graph, G, m_h: int, spec, seed: int = 0) -> tuple:
     declares none: the columns of G (and of its position rows) picked by
     complete pivoting at the parameter defaults and a seeded random
     configuration (the coordinates' zero is often a singular one: a four-bar
-    with every angle zero)."""
+    with every angle zero).  Only plain coordinates and their speeds are
+    candidates (the first columns; a ball or free joint's are not, see
+    :func:`modelgen.model.resolve.build_spec`)."""
     rng = np.random.default_rng(seed)
     values = {symbol(p): v for p, v in zip(spec.parameter_names, spec.parameter_defaults)}
-    values.update({symbol(c): rng.uniform(-np.pi, np.pi) for c in spec.coordinates})
-    m, n = len(G), spec.n
-    Gv = _evaluate(graph, [e for row in G for e in row], values).reshape(m, n)
+    values.update(_configuration(spec, rng))
+    m, n, ns = len(G), spec.n, len(spec.simple_coordinates)
+    Gv = _evaluate(graph, [e for row in G for e in row], values).reshape(m, n)[:, :ns]
     return _pivots(Gv, m), _pivots(Gv[:m_h], m_h) if m_h else ()
+
+
+def _configuration(spec, rng) -> dict:
+    """Seeded random coordinates in [-pi, pi], each joint's quaternion then scaled
+    to unit length (a rotation; the draws are those of a model without joints)."""
+    values = {symbol(c): rng.uniform(-np.pi, np.pi) for c in spec.coordinates}
+    for j in spec.joints:
+        quat = [symbol(c) for c in j.quaternion]
+        norm = float(np.sqrt(sum(values[c] ** 2 for c in quat)))
+        values.update({c: values[c] / norm for c in quat})
+    return values
 
 
 class _Wheel:
@@ -265,16 +281,19 @@ def check_constraints(terms: ConstraintTerms, spec, samples: int = RANK_SAMPLES,
     flat = [e for row in terms.G for e in row]
     rng = np.random.default_rng(seed)
     params = {symbol(p): v for p, v in zip(spec.parameter_names, spec.parameter_defaults)}
-    ranks, dep_ranks = [], []
+    ranks, dep_ranks, coord_ranks = [], [], []
+    m_h, dep_q = len(terms.residuals), list(terms.dependent_coordinates)
     for _ in range(samples):
         values = dict(params)
-        values.update({qk: rng.uniform(-np.pi, np.pi) for qk in (symbol(c) for c in
-                                                                  spec.coordinates)})
+        values.update(_configuration(spec, rng))
         Gv = _evaluate(terms.graph, flat, values).reshape(m, n)
         scale_ = max(1.0, float(np.abs(Gv).max()))
         tol = 1e-9 * scale_
         ranks.append(np.linalg.matrix_rank(Gv, tol))
         dep_ranks.append(np.linalg.matrix_rank(Gv[:, list(terms.dependent)], tol))
+        # plain dependent coordinates: their columns of the position rows (speed
+        # index = coordinate index) are what the projection's Newton steps solve
+        coord_ranks.append(np.linalg.matrix_rank(Gv[:m_h, dep_q], tol) if m_h else 0)
     where = spec.line_of(f"constraints.{terms.rows[0][0]}")
     if max(ranks) < m:
         raise ModelError(
@@ -292,4 +311,18 @@ def check_constraints(terms: ConstraintTerms, spec, samples: int = RANK_SAMPLES,
             "for: their columns of the constraint Jacobian are singular at "
             f"{samples} random configurations", file=spec.source,
             line=spec.line_of("dependent"), key="dependent.speeds",
-            fix="choose speeds the constraints actually involve, one per equation")
+            fix="choose speeds the constraints actually involve, one per equation"
+                + (" (with ball or free joints, plain coordinates' speeds: a constraint "
+                   "that only a joint's speeds could satisfy cannot be imported)"
+                   if spec.joints else ""))
+    if spec.joints and m_h and max(coord_ranks) < m_h:
+        raise ModelError(
+            "the position constraints cannot be solved for the dependent coordinates "
+            + ", ".join(spec.coordinates[k] for k in dep_q) + ": their columns of the "
+            f"constraint Jacobian are singular at {samples} random configurations, and "
+            "on a model with ball or free joints only plain coordinates (angles or "
+            "lengths) can be dependent", file=spec.source,
+            line=spec.line_of("dependent") or where,
+            key="dependent.coordinates" if spec.dependent_coordinates else "constraints",
+            fix="choose plain coordinates the position constraints involve, one per "
+                "equation, or write the joint's motion with simple bases and points")

@@ -170,6 +170,17 @@ def dependent_decl(ctx, value, key: str = "dependent") -> tuple:
                             f"{key}.{field}", example)
         for i, item in enumerate(items):
             where = f"{key}.{field}[{i}]"
+            if isinstance(item, str) and ctx.kind_of(item) == f"joint {kind}":
+                raise ctx.error(f"{kind} '{item}' belongs to a ball or free joint: a "
+                                f"constraint can only make a plain {kind} dependent (an angle "
+                                "or a length, whose speed is its time derivative; a "
+                                "quaternion or a free joint's position moves with the joint's "
+                                "speeds)", where,
+                                f"name plain {field} instead (here: "
+                                + (", ".join(ctx.coordinates if kind == "coordinate" else
+                                             [speed_name(c) for c in ctx.coordinates])
+                                   or "none") + "), or write the joint's rotation as simple "
+                                "bases (angles)")
             if not isinstance(item, str) or ctx.kind_of(item) != kind:
                 known = [c for c in ctx.coordinates] if kind == "coordinate" else \
                     [speed_name(c) for c in ctx.coordinates]

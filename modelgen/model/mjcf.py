@@ -418,14 +418,6 @@ class _Builder:
         active = [e for e in range(m.neq) if m.eq_active0[e]]
         if not active:
             return
-        if self.quaternion_joints:
-            joints = ", ".join(f"{j.type} joint '{j.name or j.id}'"
-                               for j in self.quaternion_joints)
-            raise self.error(f"the model has {len(active)} active equality constraints "
-                             f"({self.eq_kinds(active)}) and {joints}: modelgen's constraints "
-                             "need a model without ball or free joints", "equality",
-                             "remove the <equality> section (or set active=\"false\"), or "
-                             "replace the ball or free joints by hinges and slides")
         coordinate = {jt.id: jt.coordinates[0] for jt in self.coordinates}
         for e in active:
             kind = mujoco.mjtEq(int(m.eq_type[e])).name.removeprefix("mjEQ_").lower()
@@ -553,6 +545,13 @@ class _Builder:
         for b in reversed(chain):
             quat = quat_mul(quat, quat_const(m.body_quat[b]))
             for j in range(m.body_jntadr[b], m.body_jntadr[b] + m.body_jntnum[b]):
+                if m.jnt_type[j] in (_BALL, _FREE):
+                    raise self.error(
+                        f"a weld's orientation error passes through the "
+                        f"{_TYPE_NAMES[int(m.jnt_type[j])]} joint '{self.joint_name(j)}', "
+                        "whose quaternion a position constraint's expression cannot use",
+                        key, "weld bodies joined by hinges and slides only, or use a "
+                        "connect (the anchors coincide; it takes any joints)")
                 if m.jnt_type[j] != _HINGE:
                     continue
                 hinges += 1

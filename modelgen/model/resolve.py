@@ -179,16 +179,15 @@ def _resolve_constraints(builder) -> tuple:
     m = sum(c.size for c in out)
     m_h = sum(c.holonomic_size for c in out)
     first = builder.constraints[0].key
-    if builder.joints:
-        raise builder.error("constraints on a model with ball or free joints are not "
-                            "supported", first, "write the rotations as simple bases "
-                            "(angles), or remove the constraints")
-    n = len(builder.coordinates)
+    n = len(builder.coordinates) + sum(len(j.speeds) for j in builder.joints)
     if m >= n:
-        raise builder.error(f"{m} constraint equations for {n} coordinates: nothing could "
+        dofs = "degrees of freedom" if builder.joints else "coordinates"
+        raise builder.error(f"{m} constraint equations for {n} {dofs}: nothing could "
                             "move", first, "remove constraints (each coincide axis is one "
                             "equation), or add coordinates; there must be fewer equations "
                             "than coordinates")
+    if builder.joints:
+        _plain_dependent(builder, m, m_h, first)
     if not coords and not speeds:
         return tuple(out)      # chosen when the model is generated (largest pivots)
     if len(speeds) != m:
@@ -201,6 +200,26 @@ def _resolve_constraints(builder) -> tuple:
                             f"name {m_h} dependent coordinates (one per position equation; "
                             "velocity constraints make no coordinate dependent)")
     return tuple(out)
+
+
+def _plain_dependent(builder, m: int, m_h: int, first: str) -> None:
+    """With ball or free joints, the constraints are solved for plain coordinates
+    and their speeds (angles or lengths whose speed is their time derivative; a
+    joint's coordinate or speed declared dependent is refused by
+    ``dependent_decl``): a quaternion's component or a free joint's position moves
+    with the joint's speeds through N(q), which neither the projection's Newton
+    steps nor the dependent speeds' solve could invert.  There must be a plain
+    coordinate for every equation."""
+    plain = len(builder.coordinates)
+    if m > plain:
+        what = "position " if m_h > plain else ""
+        count = m_h if m_h > plain else m
+        raise builder.error(f"{count} {what}constraint equations but {plain} plain "
+                            "coordinates: on a model with ball or free joints, constraints "
+                            "are solved for plain coordinates (angles or lengths) and their "
+                            "speeds, one per equation", first,
+                            "add plain coordinates for the constraints to move (e.g. hinges "
+                            "instead of a ball joint), or remove constraints")
 
 
 def resolve_effect(builder, e, frames: dict):

@@ -78,7 +78,10 @@ def constraint_jacobian(cm, q, p=None) -> np.ndarray:
 def assemble(cm, q_guess, keep=(), p=None, tol: float = ASSEMBLY_TOL,
              max_iterations: int = 50) -> np.ndarray:
     """q near ``q_guess`` with f(q) = 0, by Newton (minimum-norm steps) on the
-    coordinates not named in ``keep``, which stay as given.
+    coordinates not named in ``keep``, which stay as given.  A ball or free
+    joint's coordinates are always kept (its quaternion scaled to unit length):
+    the constraints are solved for plain coordinates, whose columns of G are
+    their speeds'.
 
     Raises :class:`SimulationError` naming the residuals when it does not
     converge (the kept coordinates may leave no solution: a four-bar's crank
@@ -91,7 +94,15 @@ def assemble(cm, q_guess, keep=(), p=None, tol: float = ASSEMBLY_TOL,
         if name not in cm.coordinates:
             raise SimulationError(f"{cm.name}: keep names {name!r}, not a coordinate; "
                                   f"coordinates are {', '.join(cm.coordinates)}")
-    free = [k for k, c in enumerate(cm.coordinates) if c not in keep]
+    n_plain = cm.manifest.get("n_simple", cm.nq)
+    free = [k for k, c in enumerate(cm.coordinates[:n_plain]) if c not in keep]
+    for quat in map(list, cm.quaternions):
+        norm = np.linalg.norm(q[quat])
+        if not norm > 0:
+            names = ", ".join(cm.coordinates[k] for k in quat)
+            raise SimulationError(f"{cm.name}: the quaternion ({names}) of q_guess is zero; "
+                                  "give a rotation, e.g. (1, 0, 0, 0)")
+        q[quat] /= norm
     mh = info["holonomic"]
     if mh == 0:
         return q
@@ -136,7 +147,8 @@ def check_initial_state(cm, x0, p=None, tol: float = STATE_TOL) -> None:
     """Refuse an initial state off the constraints (position or velocity), naming
     the worst row and the fix."""
     info = _info(cm)
-    x0 = np.asarray(x0, dtype=float)
+    # the integrators normalise the quaternions first, so the check does too
+    x0 = cm.project(x0) if cm.quaternions else np.asarray(x0, dtype=float)
     q, qd = x0[:cm.nq], x0[cm.nq:]
     f = residuals(cm, q, p)
     g = constraint_jacobian(cm, q, p) @ qd
