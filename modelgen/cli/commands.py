@@ -39,7 +39,8 @@ MAX_OUTPUT_MB = 1000.0
 
 #: the columns an output of each kind adds to a result (n: one per speed)
 _OUTPUT_COLUMNS = {"position": 3, "velocity": 3, "orientation": 9, "angular_velocity": 3,
-                   "energy": 1, "generalized_force": "n", "power": 1, "pose": 16}
+                   "energy": 1, "generalized_force": "n", "power": 1, "pose": 16,
+                   "constraint_force": 3}
 
 
 #: a progress bar appears only once its task has run this long [s]

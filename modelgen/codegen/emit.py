@@ -362,10 +362,14 @@ def template_context(*, name: str, description: str, model_hash: str, n: int,
          if constraints else {})
 
 
-def constraint_context(m: int, mh: int, dependent, independent, n: int) -> dict:
+def constraint_context(m: int, mh: int, dependent, independent, n: int,
+                       output_lam=()) -> dict:
     """What ``constraints.c.j2`` needs: ``m`` equations (``mh`` holonomic, first),
-    the speed indices of the dependent and independent speeds."""
-    return {"m": m, "mh": mh, "ni": n - m, "dep": list(dependent), "ind": list(independent)}
+    the speed indices of the dependent and independent speeds; ``output_lam``,
+    when the outputs record constraint forces: per output column, the index of
+    the multiplier it is (-1: another output)."""
+    return {"m": m, "mh": mh, "ni": n - m, "dep": list(dependent), "ind": list(independent),
+            "forces": bool(output_lam), "out_lam": list(output_lam)}
 
 
 def constraint_api(name: str, n: int, nq: int, n_p: int, c: dict) -> list:
