@@ -6,6 +6,7 @@ import csv
 import numpy as np
 import pytest
 
+import modelgen
 from modelgen.cli import main
 
 from conftest import MODELS
@@ -238,3 +239,40 @@ def test_an_output_path_that_is_a_file_is_refused_before_anything_runs(tmp_path)
         assert proc.returncode == 2, proc.stderr
         assert "is a file, not a directory; fix:" in proc.stderr
         assert "integrating" not in proc.stderr and "generating" not in proc.stderr
+
+
+def test_generate_prints_the_dependent_coordinates_and_speeds(tmp_path, capsys):
+    """Declared in the model (the four-bar's q2, q3), and chosen by modelgen when the
+    model declares none: then the names printed are the manifest's and their
+    columns of the constraint Jacobian are regular at an assembled configuration."""
+    assert main(["generate", str(MODELS / "four_bar.yaml"), "-o", str(tmp_path / "a")]) == 0
+    out = capsys.readouterr().out
+    assert "constraints 2 equations (2 on positions), dependent coordinates and speeds " \
+        "declared in the model" in out
+    assert "dependent  coordinates q2, q3; speeds q2_dot, q3_dot\n" in out
+    assert "independent speeds q1_dot\n" in out
+    # the same from a reused build
+    assert main(["generate", str(MODELS / "four_bar.yaml"), "-o", str(tmp_path / "a")]) == 0
+    again = capsys.readouterr().out
+    assert "reused the cached build" in again
+    assert "dependent  coordinates q2, q3; speeds q2_dot, q3_dot\n" in again
+
+    text = (MODELS / "four_bar.yaml").read_text()
+    free = tmp_path / "four_bar.yaml"
+    free.write_text("\n".join(line for line in text.splitlines()
+                              if not line.startswith("dependent:")) + "\n")
+    assert main(["generate", str(free), "-o", str(tmp_path / "b")]) == 0
+    out = capsys.readouterr().out
+    assert "dependent coordinates and speeds chosen by modelgen" in out
+    line = next(x for x in out.splitlines() if x.startswith("dependent  coordinates "))
+    coords, speeds = line[len("dependent  coordinates "):].split("; speeds ")
+    coords, speeds = coords.split(", "), speeds.split(", ")
+    cm = modelgen.load(free, out_dir=tmp_path / "b")
+    c = cm.manifest["constraints"]
+    assert coords == [cm.coordinates[k] for k in c["dependent_coordinates"]]
+    assert speeds == [cm.speeds[k] for k in c["dependent_speeds"]] and len(speeds) == 2
+    q = cm.assemble([0.3, 1.0, 2.0], keep=["q1"])
+    G = cm.constraint_jacobian(q)
+    assert abs(np.linalg.det(G[:, c["dependent_speeds"]])) > 1e-3
+    independent = [s for s in cm.speeds if s not in speeds]
+    assert f"independent speeds {', '.join(independent)}\n" in out

@@ -245,7 +245,7 @@ def test_numbers_must_be_finite(value, shown):
     ("{tip: {positon: P1}}",
      "s.yaml:11: outputs.tip.positon: unknown output kind 'positon'; fix: did you mean "
      "'position'? output kinds: position, velocity, orientation, angular_velocity, energy, "
-     "generalized_force, power, pose"),
+     "generalized_force, power, pose, constraint_force"),
     ("{tip: {position: P1, velocity: P1}}",
      "s.yaml:11: outputs.tip.velocity: output 'tip' has two kinds, 'position' and 'velocity'; "
      "fix: give each output one kind (make two outputs)"),

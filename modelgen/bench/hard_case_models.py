@@ -133,6 +133,43 @@ bodies:
 gravity: [0, -g, 0]
 """
 
+#: a crank-rocker four-bar (Grashof: the crank a turns fully) whose rocker's speed
+#: is the independent one: at the rocker's extremes crank and coupler are in line,
+#: the crank's and coupler's columns of the constraint Jacobian are singular (its
+#: dead points, which the motion reaches every half turn of the crank)
+FOUR_BAR_ROCKER = """
+name: hc_four_bar_rocker
+coordinates: [q1, q2, q3]
+parameters: {a: 1.0, b: 2.0, c: 2.0, d: 2.5, m1: 1.0, m2: 2.0, m3: 2.0, g: 9.81}
+bases:
+  B1: {parent: E, axis: 3, angle: q1}
+  B2: {parent: E, axis: 3, angle: q2}
+  B3: {parent: E, axis: 3, angle: q3}
+points:
+  D:  {coordinates: [d, 0, 0]}
+  P1: {from: O, base: B1, coordinates: [a, 0, 0]}
+  G1: {from: O, base: B1, coordinates: [a/2, 0, 0]}
+  P2: {from: P1, base: B2, coordinates: [b, 0, 0]}
+  G2: {from: P1, base: B2, coordinates: [b/2, 0, 0]}
+  P3: {from: D, base: B3, coordinates: [c, 0, 0]}
+  G3: {from: D, base: B3, coordinates: [c/2, 0, 0]}
+bodies:
+  crank:   {mass: m1, G: G1, base: B1, inertia: [0, m1*a**2/12, m1*a**2/12]}
+  coupler: {mass: m2, G: G2, base: B2, inertia: [0, m2*b**2/12, m2*b**2/12]}
+  rocker:  {mass: m3, G: G3, base: B3, inertia: [0, m3*c**2/12, m3*c**2/12]}
+gravity: [0, -g, 0]
+constraints:
+  loop: {type: coincide, point_a: P2, point_b: P3, base: E, axes: [1, 2]}
+dependent: {coordinates: [q1, q2], speeds: [q1_dot, q2_dot]}
+"""
+
+
+def rocker_dead_points(a=1.0, b=2.0, c=2.0, d=2.5) -> tuple:
+    """The rocker angles q3 at the four-bar's dead points, where crank and coupler are
+    in line and the loop's C is a + b (stretched) or b - a (folded) from A:
+    |D + c e(q3)| = a + b or b - a, by the law of cosines."""
+    return tuple(float(np.arccos((r**2 - d**2 - c**2) / (2 * c * d))) for r in (a + b, b - a))
+
 
 def pendulum_period(theta0: float, L: float = 1.0, g: float = 9.81) -> float:
     """T = 4 sqrt(L/g) K(sin^2(theta0/2)) (scipy's ellipk takes m = k^2)."""

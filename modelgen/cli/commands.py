@@ -39,7 +39,8 @@ MAX_OUTPUT_MB = 1000.0
 
 #: the columns an output of each kind adds to a result (n: one per speed)
 _OUTPUT_COLUMNS = {"position": 3, "velocity": 3, "orientation": 9, "angular_velocity": 3,
-                   "energy": 1, "generalized_force": "n", "power": 1, "pose": 16}
+                   "energy": 1, "generalized_force": "n", "power": 1, "pose": 16,
+                   "constraint_force": 3}
 
 
 #: a progress bar appears only once its task has run this long [s]
@@ -142,6 +143,9 @@ def generate_command(args) -> int:
           f"{len(spec.inputs)} inputs, {len(spec.bodies)} bodies")
     print(f"output     {b.directory}/{spec.name}.c, {spec.name}.h, {b.module_path.name}")
     print(f"rhs        formulation {g.manifest['formulation']}")
+    if g.manifest.get("constraints"):
+        for line in _constraint_lines(spec, g.manifest["constraints"]):
+            print(line)
     if b.cached:
         print("build      unchanged model: reused the cached build")
     print("\nroutine              statements   ops before CSE   ops after CSE")
@@ -158,6 +162,20 @@ def generate_command(args) -> int:
         print(f"other      {total - t_load - sum(s.values()):8.3f}")
         print(f"total      {total:8.3f}")
     return 0
+
+
+def _constraint_lines(spec, c: dict) -> list:
+    """What ``generate`` says of a constrained model: its equations, and the dependent
+    coordinates and speeds, declared in the model or chosen by modelgen."""
+    def names(kind, indices):
+        return ", ".join(kind[k] for k in indices) or "none"
+    how = ("chosen by modelgen (largest pivots of the constraint Jacobian; declare them "
+           "with 'dependent:' to fix them)" if c["chosen"] else "declared in the model")
+    return [f"constraints {c['m']} equations ({c['holonomic']} on positions), dependent "
+            f"coordinates and speeds {how}",
+            f"dependent  coordinates {names(spec.coordinates, c['dependent_coordinates'])}; "
+            f"speeds {names(spec.speeds, c['dependent_speeds'])}",
+            f"independent speeds {names(spec.speeds, c['independent_speeds'])}"]
 
 
 def import_command(args) -> int:

@@ -363,12 +363,15 @@ def template_context(*, name: str, description: str, model_hash: str, n: int,
 
 
 def constraint_context(m: int, mh: int, dependent, independent, n: int,
-                       ns: int | None = None) -> dict:
+                       ns: int | None = None, output_lam=()) -> dict:
     """What ``constraints.c.j2`` needs: ``m`` equations (``mh`` holonomic, first),
-    the speed indices of the dependent and independent speeds, and ``ns`` the
-    number of plain coordinates (default ``n``: no ball or free joints)."""
+    the speed indices of the dependent and independent speeds, ``ns`` the number
+    of plain coordinates (default ``n``: no ball or free joints); ``output_lam``,
+    when the outputs record constraint forces: per output column, the index of
+    the multiplier it is (-1: another output)."""
     return {"m": m, "mh": mh, "ni": n - m, "dep": list(dependent), "ind": list(independent),
-            "ns": n if ns is None else ns}
+            "ns": n if ns is None else ns,
+            "forces": bool(output_lam), "out_lam": list(output_lam)}
 
 
 def constraint_api(name: str, n: int, nq: int, n_p: int, c: dict) -> list:

@@ -30,10 +30,11 @@ from modelgen.errors import ModelError
 from modelgen.codegen.emit import (ABI_VERSION, constraint_context, emit_sources,
                                    integrator_sources, print_routine, runtime_sources,
                                    template_context, templates_digest)
-from modelgen.derive.constraints import check_constraints, derive_constraints
+from modelgen.derive.constraints import check_constraints, constraint_rows, derive_constraints
 from modelgen.codegen.options import FORMULATIONS, REFERENCES, BuildOptions
 from modelgen.derive.jacobian import accelerations, derive_jacobian_terms, residual
-from modelgen.derive.constrained_linearize import derive_constrained_linearization_terms
+from modelgen.derive.constrained_linearize import (derive_constrained_linearization_terms,
+                                                   multipliers)
 from modelgen.derive.linearize import derive_linearization_terms
 from modelgen.derive.kinematics import derive_kinematics
 from modelgen.derive.outputs import derive_outputs
@@ -159,7 +160,7 @@ def choose_formulation(spec: ModelSpec, formulation: str = BuildOptions.formulat
 
 def routines_for(eqs: Equations, output_exprs=(), jacobian=None,
                  forward: ForwardDynamics | None = None, linearization=None, inverse=None,
-                 constraints=None, derivatives=None):
+                 constraints=None, derivatives=None, output_lam=()):
     """The C routines of a model: (name, inputs, outputs) for make_routines.
 
     With ``forward`` (the ABA program) the ``rhs`` routine writes q_ddot and
@@ -170,6 +171,8 @@ def routines_for(eqs: Equations, output_exprs=(), jacobian=None,
     ``(qdd symbols, Q)`` of ``inverse_dynamics``, Q = A qdd + h - tau.
     ``derivatives`` (:class:`~modelgen.derive.rnea_derivatives.InverseDynamicsDerivatives`):
     ``derivative_terms`` writes dQ/dq, dQ/dv, dQ/du (with inputs) and M at ``a``.
+    ``output_lam``: the multiplier symbols, when an output records a constraint
+    force (the C computes them from the rhs and passes them to ``outputs``).
     """
     n = len(eqs.qd)
     t = (("t", (eqs.t,)),)
@@ -210,7 +213,8 @@ def routines_for(eqs: Equations, output_exprs=(), jacobian=None,
         ("body_poses", (q, p), (("T", tuple(e for pose in eqs.poses for e in pose)),)),
     ] + ([("inverse_dynamics", t + (x, ("qdd", inverse[0]), u, p), (("Q", inverse[1]),))]
          if inverse else []) \
-      + ([("outputs", t + (x, u, p), (("y", tuple(output_exprs)),))] if output_exprs else []) \
+      + ([("outputs", t + (x, u, p) + ((("lam", output_lam),) if output_lam else ()),
+            (("y", tuple(output_exprs)),))] if output_exprs else []) \
       + ([("jacobian_terms", jac_inputs,
            (("D", tuple(e for row in jacobian.D for e in row)),)
            + ((("K", tuple(e for row in jacobian.K for e in row)),) if jacobian.K else ()))]
@@ -454,6 +458,8 @@ def _derive(spec: ModelSpec, options: BuildOptions, tree: JointTree | None) -> D
     if spec.constraints:
         constraints = derive_constraints(kin, graph)
         check_constraints(constraints, spec)
+        if constraints.rows != constraint_rows(spec):   # pragma: no cover - kept in step
+            raise AssertionError("the constraint forces' rows differ from G's rows")
         graph = constraints.graph
     linearization = None
     if constraints is not None and options.jacobian:
@@ -492,9 +498,11 @@ def _eliminate(derived: Derived) -> tuple:
     """CSE of every routine; the rhs (what an integration runs) and the inverse
     dynamics are eliminated on their own, and the rhs's parameter-only part hoisted."""
     d = derived
+    output_lam = multipliers(d.constraints.m) \
+        if d.columns is not None and d.columns.reads_multipliers else ()
     routines = make_routines(d.graph, routines_for(d.eqs, d.output_exprs, d.terms, d.forward,
                                                    d.linearization, d.inverse, d.constraints,
-                                                   d.derivatives)
+                                                   d.derivatives, output_lam)
                              + frame_routines(d.frames, d.eqs),
                              alone=("rhs", "inverse_dynamics", "derivative_terms"))
     return _hoisted(routines)
@@ -528,16 +536,17 @@ def _emit(spec: ModelSpec, options: BuildOptions, derived: Derived, routines: tu
         mass_pattern=None if forward else [[e != 0 for e in row] for row in eqs.A],
         formulation=options.formulation, aba_inward=forward.inward if forward else (),
         frames=derived.frames,
-        constraints=_constraint_context(spec, derived.constraints),
+        constraints=_constraint_context(spec, derived.constraints, columns),
         derivatives_pattern=([[e != 0 for e in row] for row in derived.derivatives.M]
                              if derived.derivatives else None))
     return Emitted(functions, context, emit_sources(context))
 
 
-def _constraint_context(spec: ModelSpec, terms) -> dict | None:
+def _constraint_context(spec: ModelSpec, terms, columns=None) -> dict | None:
     return None if terms is None else constraint_context(
         terms.m, len(terms.residuals), terms.dependent, terms.independent, spec.n,
-        len(spec.simple_coordinates))
+        len(spec.simple_coordinates),
+        columns.multipliers if columns is not None and columns.reads_multipliers else ())
 
 
 def _quaternions(spec: ModelSpec) -> list:

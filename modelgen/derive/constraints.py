@@ -40,6 +40,7 @@ __all__ = [
     "ConstraintTerms",
     "check_constraints",
     "choose_dependent",
+    "constraint_rows",
     "derive_constraints",
 ]
 
@@ -82,6 +83,27 @@ def _material_point(kin: Kinematics, point: str, body: str, n: int):
                 for k in range(n)]
     a = add(add(G.a_bias, cross(B.alpha_bias, rho)), cross(B.omega, sub(P.v, G.v)))
     return v, partials, a
+
+
+def constraint_rows(spec) -> tuple:
+    """``(constraint name, axis or 0)`` of each row of G, in the order
+    :func:`derive_constraints` writes them (what the rows of a constraint are
+    before anything is derived: a scene's constraint forces name them).
+
+    >>> from modelgen.model.api import load_model                     # doctest: +SKIP
+    >>> constraint_rows(load_model("models/four_bar.yaml"))           # doctest: +SKIP
+    (('loop', 1), ('loop', 2))
+    """
+    rows = [(c.name, c.normal) for c in spec.constraints if c.kind == "rolling"]
+    for c in [c for c in spec.constraints if c.holonomic] + \
+            [c for c in spec.constraints if not c.holonomic]:
+        if c.kind == "rolling":
+            rows.extend((c.name, axis) for axis in (1, 2, 3) if axis != c.normal)
+        elif c.kind in ("position", "speeds"):
+            rows.append((c.name, 0))
+        else:
+            rows.extend((c.name, axis) for axis in c.axes)
+    return tuple(rows)
 
 
 def derive_constraints(kin: Kinematics, graph: Graph | None = None) -> ConstraintTerms:

@@ -11,6 +11,8 @@ from dataclasses import dataclass
 
 import sympy
 
+from modelgen.derive.constrained_linearize import multipliers
+from modelgen.derive.constraints import constraint_rows
 from modelgen.derive.dynamics import Equations
 from modelgen.derive.graph import Graph, GraphBuilder
 from modelgen.derive.spatial import sub
@@ -26,6 +28,13 @@ class OutputColumns:
     names: tuple            # output names, in order
     columns: tuple          # per output: tuple of column names
     exprs: tuple            # flat, one per column
+    #: per column, the index of the constraint force it records (-1: none); the
+    #: routine then reads the multipliers ``lam`` the rhs solves for
+    multipliers: tuple = ()
+
+    @property
+    def reads_multipliers(self) -> bool:
+        return any(k >= 0 for k in self.multipliers)
 
 
 def _transpose_times(R, v):
@@ -41,7 +50,9 @@ def derive_outputs(kin: Kinematics, eqs: Equations, outputs) -> OutputColumns:
     ('tip.x', 'tip.y', 'tip.z')
     """
     builder = GraphBuilder(eqs.graph)
-    names, columns, exprs = [], [], []
+    names, columns, exprs, lam_of = [], [], [], []
+    rows = constraint_rows(kin.spec) if kin.spec.constraints else ()
+    lam = multipliers(len(rows))
     parts = dict(eqs.tau_parts)
     body_index = {b: i for i, b in enumerate(eqs.bodies)}
     for out in outputs:
@@ -79,9 +90,23 @@ def derive_outputs(kin: Kinematics, eqs: Equations, outputs) -> OutputColumns:
         elif out.kind == "pose":
             values = list(eqs.poses[body_index[a["body"]]])
             cols = [f"{out.name}[{i},{j}]" for i in range(4) for j in range(4)]
+        elif out.kind == "constraint_force":
+            # the multipliers of the constraint's rows, by axis (G^T lam is the
+            # generalized force the constraints add: docs/constraints.md)
+            mine = sorted((axis, k) for k, (name, axis) in enumerate(rows)
+                          if name == a["constraint"])
+            values = [lam[k] for _, k in mine]
+            cols = [f"{out.name}.{AXES[axis - 1]}" if axis else out.name for axis, _ in mine]
+            lam_of.extend(k for _, k in mine)
+            names.append(out.name)
+            columns.append(tuple(cols))
+            exprs.extend(values)
+            continue
         else:   # pragma: no cover - the scene loader only produces the kinds above
             raise ValueError(f"unknown output kind {out.kind!r}")
         names.append(out.name)
         columns.append(tuple(cols))
         exprs.extend(builder.name(v) for v in values)
-    return OutputColumns(builder.freeze(), tuple(names), tuple(columns), tuple(exprs))
+        lam_of.extend(-1 for _ in values)
+    return OutputColumns(builder.freeze(), tuple(names), tuple(columns), tuple(exprs),
+                         tuple(lam_of))

@@ -67,7 +67,8 @@ OUTPUT_DEFAULTS = {
 }
 #: What each output argument names.
 _ARG_ROLE = {"point": "point", "from": "point", "base": "base", "relative_to": "base",
-             "components": "base", "body": "body", "which": "energy", "effect": "effect"}
+             "components": "base", "body": "body", "which": "energy", "effect": "effect",
+             "constraint": "constraint"}
 #: Name of the top-level gravity as an effect.
 GRAVITY = "gravity"
 _REL_TOL = 1e-9
@@ -565,10 +566,16 @@ class _SceneReader:
                              fix + f"switched-on effects: {listing(selected)}")
         known = {"point": [CANONICAL_POINT] + [p.name for p in model.points],
                  "base": [CANONICAL_BASE] + [b.name for b in model.bases],
-                 "body": [b.name for b in model.bodies]}[role]
+                 "body": [b.name for b in model.bodies],
+                 "constraint": [c.name for c in model.constraints]}[role]
         if value in known:
             return value
-        plural = {"point": "points", "base": "bases", "body": "bodies"}[role]
+        if role == "constraint" and not known:
+            raise self.error(f"model '{self.full.name}' has no constraints, so no constraint "
+                             "forces", key, "record a constraint force of a model with a "
+                             "'constraints:' section")
+        plural = {"point": "points", "base": "bases", "body": "bodies",
+                  "constraint": "constraints"}[role]
         names = f"{plural} of model '{self.full.name}': {listing(known, 20)}"
         other = self.full_ctx.kind_of(value)
         if other is not None:

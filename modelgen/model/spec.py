@@ -552,6 +552,7 @@ OUTPUT_KINDS = {
     "generalized_force": ("effect",),             # tau of one effect (n values)
     "power": ("effect",),                         # its power tau . q_dot (1 value, W)
     "pose": ("body",),                            # 4x4 pose, row-major
+    "constraint_force": ("constraint",),          # its rows' multipliers (docs/constraints.md)
 }
 
 
