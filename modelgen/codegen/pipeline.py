@@ -24,8 +24,8 @@ from modelgen.derive.dynamics import Equations, derive_equations
 from modelgen.derive.graph import GraphBuilder
 from modelgen.derive.joint_tree import JointTree, extract_joint_tree
 from modelgen.derive.rnea import derive_inverse_dynamics, derive_velocity_terms
-from modelgen.derive.rnea_derivatives import (derive_inverse_dynamics_derivatives,
-                                              differentiate_inverse_dynamics)
+from modelgen.derive.rnea_derivatives import differentiate_inverse_dynamics
+from modelgen.derive.rnea_partials import RneaPartials, derive_rnea_partials
 from modelgen.errors import ModelError
 from modelgen.codegen.emit import (ABI_VERSION, constraint_context, emit_sources,
                                    integrator_sources, print_routine, runtime_sources,
@@ -219,9 +219,16 @@ def routines_for(eqs: Equations, output_exprs=(), jacobian=None,
 
 def derivative_routine(inputs, d) -> tuple:
     """The ``derivative_terms`` routine: ``(name, inputs, outputs)`` of dQ/dq, dQ/dv,
-    dQ/du (when there are inputs) and M, row-major, at the accelerations ``a``."""
+    dQ/du (when there are inputs) and M, row-major, at the accelerations ``a``; for
+    the recursive derivatives (:class:`RneaPartials`) the per-dof vectors ``W`` and
+    the effects' non-zero entries ``E``, which the C's loop over the pairs of
+    dofs turns into those matrices."""
     def flat(rows):
         return tuple(e for row in rows for e in row)
+    if isinstance(d, RneaPartials):
+        effects = tuple(e for _, _, e in d.effect_entries())
+        return ("derivative_terms", inputs + (("a", d.a),),
+                (("W", flat(d.vectors)),) + ((("E", effects),) if effects else ()))
     du = (("dQ_du", flat(d.du)),) if d.du and d.du[0] else ()
     return ("derivative_terms", inputs + (("a", d.a),),
             (("dQ_dq", flat(d.dq)), ("dQ_dv", flat(d.dv))) + du + (("M", flat(d.M)),))
@@ -442,7 +449,10 @@ def _derive(spec: ModelSpec, options: BuildOptions, tree: JointTree | None) -> D
         inverse = (qdd, tuple(-e for e in r))
     derivatives = None
     if options.derivatives:
-        derivatives = (derive_inverse_dynamics_derivatives(eqs, tree, spec, graph)
+        # a joint tree: the recursive derivatives, O(n) statements and a C loop
+        # over the pairs of dofs on one branch; any other model: forward mode
+        # over its composite-body inverse dynamics
+        derivatives = (derive_rnea_partials(eqs, tree, spec, graph)
                        if tree is not None and _time_free(tree)
                        else differentiate_inverse_dynamics(graph, eqs, *inverse))
         graph = derivatives.graph
@@ -519,9 +529,32 @@ def _emit(spec: ModelSpec, options: BuildOptions, derived: Derived, routines: tu
         formulation=options.formulation, aba_inward=forward.inward if forward else (),
         frames=derived.frames,
         constraints=_constraint_context(spec, derived.constraints),
-        derivatives_pattern=([[e != 0 for e in row] for row in derived.derivatives.M]
-                             if derived.derivatives else None))
+        derivatives_pattern=_derivatives_pattern(derived.derivatives),
+        derivative_loop=(derivative_loop(derived.derivatives)
+                         if isinstance(derived.derivatives, RneaPartials) else None))
     return Emitted(functions, context, emit_sources(context))
+
+
+def _derivatives_pattern(d):
+    """The structure of the mass matrix of the derivatives (n x n booleans), or None."""
+    if d is None:
+        return None
+    if isinstance(d, RneaPartials):
+        return [list(row) for row in d.pattern()]
+    return [[e != 0 for e in row] for row in d.M]
+
+
+def derivative_loop(d: RneaPartials) -> dict:
+    """The tables of the C loop over the pairs of dofs (the template's
+    ``derivative_loop``): C initialiser lists and their lengths."""
+    def c_list(pairs):
+        return ", ".join(str(x) for pair in pairs for x in pair) or "0"
+    effects = [(array, index) for array, index, _ in d.effect_entries()]
+    return {"same": c_list(d.same), "nsame": len(d.same),
+            "pairs": c_list(d.pairs), "npairs": len(d.pairs),
+            "pairs_size": max(2 * len(d.pairs), 1),
+            "effects": c_list(effects), "neffects": len(effects),
+            "nw": sum(len(v) for v in d.vectors)}
 
 
 def _constraint_context(spec: ModelSpec, terms) -> dict | None:

@@ -158,11 +158,11 @@ def differentiate_inverse_dynamics(graph: Graph, eqs: Equations, a, Q) -> Invers
     if nq == n:
         dq = tuple(tuple(row) for row in dq_full)
     else:
-        graph, dq = _tangent(graph, eqs, dq_full)
+        graph, dq = tangent_rows(graph, eqs, dq_full)
     return InverseDynamicsDerivatives(graph, tuple(a), tuple(Q), dq, dv, du, M)
 
 
-def _tangent(graph: Graph, eqs: Equations, dq_full) -> tuple:
+def tangent_rows(graph: Graph, eqs: Equations, dq_full) -> tuple:
     """``dQ/dq_full N`` with ``N = d(dq/dt)/dv`` (nq x n, sparse): the derivatives
     along the joints' tangent directions."""
     builder = GraphBuilder(graph)
@@ -183,5 +183,5 @@ def _tangent(graph: Graph, eqs: Equations, dq_full) -> tuple:
 
 
 __all__ = ["InverseDynamicsDerivatives", "derive_inverse_dynamics_derivatives",
-           "differentiate_inverse_dynamics",
+           "differentiate_inverse_dynamics", "tangent_rows",
            "ground_acceleration", "rnea_with_loads"]
