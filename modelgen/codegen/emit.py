@@ -355,7 +355,7 @@ def template_context(*, name: str, description: str, model_hash: str, n: int,
         "has_derivatives": derivatives_pattern is not None,
         "derivative_loop": derivative_loop,
         "derivative_solve": (derivative_solve(n, f"{name.upper()}_PIVOT_TOL",
-                                              derivatives_pattern, len(inputs))
+                                              derivatives_pattern, len(inputs), name)
                              if derivatives_pattern is not None else None),
         "capi": capi.context(),
         "constraints": constraints,

@@ -18,7 +18,9 @@ products of 6-vectors that each joint computes once:
   (. x* oY_i ov_i)``;
 * inwards, with the composite ``oYc_i``, ``doYc_i`` and ``of_i`` of the
   subtree: per dof ``dFda = oYc J``, ``dFdq0 = doYc dVdq + oYc dAdq``,
-  ``dFdq = dFdq0 + J x* of``, ``dFdv = doYc J + oYc dAdv``, ``dYtJ = doYc^T J``.
+  ``dFdq = dFdq0 + J x* of``, ``dFdv = doYc J + oYc dAdv``, ``dYtJ = doYc^T J``
+  (``doY`` has only two non-zero 3x3 blocks, :func:`_variation`, so ``dYtJ``
+  has no linear part).
 
 Then for a dof k of a joint and a dof l of a strict descendant
 ``dQ_k/dq_l = J_k . dFdq_l``, ``dQ_l/dq_k = dFda_l . dAdq_k + dYtJ_l . dVdq_k``,
@@ -61,14 +63,18 @@ from modelgen.model.spec import ModelSpec
 
 #: the per-dof 6-vectors of :attr:`RneaPartials.vectors`, in their order
 VECTORS = ("J", "dAdq", "dVdq", "dAdv", "dFda", "dYtJ", "dFdq0", "dFdq", "dFdv")
+#: operations of the five entries of one pair of dofs (k, l) in the C loop: three
+#: dot products of 6-vectors and two sums of one of 6 and one of 3 terms
+PAIR_OPERATIONS = 3 * 11 + 2 * 17
 
 
 @dataclass(frozen=True)
 class RneaPartials:
     """Output of :func:`derive_rnea_partials`, over ``graph``.
 
-    ``vectors[k]``: the 6-vectors of :data:`VECTORS` of speed k (54
-    expressions, vector after vector); ``same``: the pairs ``(k, l)`` of dofs
+    ``vectors[k]``: the vectors of :data:`VECTORS` of speed k (51
+    expressions, vector after vector: 6 each but ``dYtJ``, whose linear part is
+    0); ``same``: the pairs ``(k, l)`` of dofs
     of one joint (``k == l`` included), ``pairs``: ``(k, l)`` with l a dof of a
     strict descendant of k's joint, both in the order the C loop runs.
     ``effects``: ``(dq, dv, du, M)``, n-row matrices (tuples of rows) of what
@@ -121,52 +127,48 @@ def _force_cross(v, f):
     return add(cross(v[:3], f[:3]), cross(v[3:], f[3:])) + cross(v[:3], f[3:])
 
 
-def _inertia_matrix(I, h, m) -> tuple:
-    """The 6x6 spatial inertia (rows) of ``(I_O, h, m)``: ``(I_O w + h x v, m v - h x w)``."""
-    hx = skew(h)
-    top = tuple(tuple(I[r]) + tuple(hx[r]) for r in range(3))
-    bottom = tuple(tuple(-hx[r][c] if hx[r][c] != 0 else ZERO for c in range(3))
-                   + tuple(m if r == c else ZERO for c in range(3)) for r in range(3))
-    return top + bottom
+def _inertia_times(Y, x) -> tuple:
+    """``Y x`` for a spatial inertia ``Y = (I_O, h, m)``: ``(I_O w + h x v, m v - h x w)``."""
+    I, h, m = Y
+    w, v = x[:3], x[3:]
+    return add(matvec(I, w), cross(h, v)) + sub(tuple(times(m, c) for c in v), cross(h, w))
 
 
-def _mat6vec(A, x) -> tuple:
-    return tuple(dot(row, x) for row in A)
+def _variation(builder, Y, v, oh) -> tuple:
+    """``doY = v x* Y - Y v x + B(oh)`` with ``B(oh) x = x x* oh`` and ``oh = Y v``
+    (Pinocchio's ``Inertia::variation`` plus ``addForceCrossMatrix``), as ``(A, F)``:
+    its blocks are ``[[A, 0], [-2 F x, 0]]``.
+
+    With ``W = w x``, ``U = u x``, ``H = h x`` for ``v = (w, u)``: the top left block
+    is ``W I - I W - (U H + H U) - (n x)`` (``n`` the angular part of ``oh``),
+    the top right ``W H - H W + m U - (f x) = 0`` since ``f = m u + w x h``, and
+    the bottom left ``-(W H - H W + m U) - (f x) = -2 (f x)``.
+    """
+    I, h, m = Y
+    w, u = v[:3], v[3:]
+    n, f = oh[:3], oh[3:]
+    P = tuple(tuple(builder.name(x) for x in cross(w, tuple(I[r][c] for r in range(3))))
+              for c in range(3))              # P[c] = column c of W I
+    uh = builder.name(dot(u, h))
+    nx = skew(n)
+    A = tuple(tuple(total((P[c][r], P[r][c], -times(h[r], u[c]), -times(u[r], h[c]),
+                           times(2, uh) if r == c else ZERO,
+                           -nx[r][c] if nx[r][c] != 0 else ZERO))
+                    for c in range(3)) for r in range(3))
+    return tuple(name_vec(builder, row) for row in A), f
 
 
-def _mat6T_vec(A, x) -> tuple:
-    return tuple(dot([A[r][c] for r in range(6)], x) for c in range(6))
+def _variation_times(dY, x) -> tuple:
+    """``doY x`` for ``doY = (A, F)`` of :func:`_variation`."""
+    A, F = dY
+    w = x[:3]
+    return matvec(A, w) + tuple(times(-2, c) for c in cross(F, w))
 
 
-def _crm(v) -> tuple:
-    """The 6x6 matrix of ``v x`` on motions."""
-    w, u = skew(v[:3]), skew(v[3:])
-    return tuple(tuple(w[r]) + ZERO3 for r in range(3)) + \
-        tuple(tuple(u[r]) + tuple(w[r]) for r in range(3))
-
-
-def _matmul6(A, B) -> tuple:
-    return tuple(tuple(total(times(A[r][k], B[k][c]) for k in range(6)) for c in range(6))
-                 for r in range(6))
-
-
-def _variation(Y, v, h) -> tuple:
-    """``doY = v x* Y - Y v x + B(h)`` (Pinocchio's ``Inertia::variation`` plus
-    ``addForceCrossMatrix``), with ``B(h) x = x x* h`` and ``h = Y v``."""
-    C = _crm(v)
-    crf = tuple(tuple(-C[c][r] if C[c][r] != 0 else ZERO for c in range(6)) for r in range(6))
-    left, right = _matmul6(crf, Y), _matmul6(Y, C)
-    n, f = skew(h[:3]), skew(h[3:])
-    B = tuple(tuple(-n[r][c] if n[r][c] != 0 else ZERO for c in range(3))
-              + tuple(-f[r][c] if f[r][c] != 0 else ZERO for c in range(3)) for r in range(3)) \
-        + tuple(tuple(-f[r][c] if f[r][c] != 0 else ZERO for c in range(3)) + ZERO3
-                for r in range(3))
-    return tuple(tuple(total((left[r][c], -right[r][c] if right[r][c] != 0 else ZERO, B[r][c]))
-                       for c in range(6)) for r in range(6))
-
-
-def _name6(builder, A) -> tuple:
-    return tuple(name_vec(builder, row) for row in A)
+def _variation_T_times(dY, x) -> tuple:
+    """The angular part of ``doY^T x`` (its linear part is 0): ``A^T w + 2 F x v``."""
+    A, F = dY
+    return add(matvec(transpose(A), x[:3]), tuple(times(2, c) for c in cross(F, x[3:])))
 
 
 def _poses(builder, tree: JointTree) -> tuple:
@@ -197,7 +199,7 @@ def _poses(builder, tree: JointTree) -> tuple:
 
 
 def _ground_inertia(builder, body, R, p) -> tuple:
-    """The link's spatial inertia about E's origin in E components, 6x6 rows."""
+    """The link's spatial inertia ``(I_O, h, m)`` about E's origin in E components."""
     I = symmetric(name_vec(builder, body.I))
     h = name_vec(builder, body.h)
     m = builder.name(body.m)
@@ -214,7 +216,7 @@ def _ground_inertia(builder, body, R, p) -> tuple:
         entries.append(e)
     I_O = symmetric(name_vec(builder, entries))
     h_O = name_vec(builder, add(hr, tuple(times(m, x) for x in p)))
-    return _inertia_matrix(I_O, h_O, m)
+    return I_O, h_O, m
 
 
 # -- the algorithm ---------------------------------------------------------------------
@@ -233,7 +235,7 @@ def derive_rnea_partials(eqs: Equations, tree: JointTree, spec: ModelSpec,
     >>> d = derive_rnea_partials(derive_equations(derive_kinematics(spec)),
     ...                          extract_joint_tree(spec), spec)
     >>> len(d.vectors), len(d.vectors[0]), d.same, d.pairs
-    (3, 54, ((0, 0), (1, 1), (2, 2)), ((0, 1), (0, 2), (1, 2)))
+    (3, 51, ((0, 0), (1, 1), (2, 2)), ((0, 1), (0, 2), (1, 2)))
     """
     builder = GraphBuilder(graph or eqs.graph)
     n = len(eqs.qd)
@@ -257,10 +259,10 @@ def derive_rnea_partials(eqs: Equations, tree: JointTree, spec: ModelSpec,
         vJ = name_vec(builder, vJ)
         ov[i] = name_vec(builder, add(ov_p, vJ))
         oa[i] = name_vec(builder, add(add(oa_p, aJ), cross_motion(ov[i], vJ)))
-        Y[i] = _name6(builder, _ground_inertia(builder, tree.inertias[i], R, p))
-        oh = name_vec(builder, _mat6vec(Y[i], ov[i]))
-        of[i] = name_vec(builder, add(_mat6vec(Y[i], oa[i]), _force_cross(ov[i], oh)))
-        doY[i] = _name6(builder, _variation(Y[i], ov[i], oh))
+        Y[i] = _ground_inertia(builder, tree.inertias[i], R, p)
+        oh = name_vec(builder, _inertia_times(Y[i], ov[i]))
+        of[i] = name_vec(builder, add(_inertia_times(Y[i], oa[i]), _force_cross(ov[i], oh)))
+        doY[i] = _variation(builder, Y[i], ov[i], oh)
         for k, _ in joint.dofs:
             dV = name_vec(builder, cross_motion(ov_p, J[k]))
             dVdq[k] = dV
@@ -272,17 +274,22 @@ def derive_rnea_partials(eqs: Equations, tree: JointTree, spec: ModelSpec,
     for i in reversed(range(count)):
         joint = tree.joints[i]
         for k, _ in joint.dofs:
-            dFda = name_vec(builder, _mat6vec(Yc[i], J[k]))
-            dFdq0 = name_vec(builder, add(_mat6vec(dYc[i], dVdq[k]), _mat6vec(Yc[i], dAdq[k])))
+            dFda = name_vec(builder, _inertia_times(Yc[i], J[k]))
+            dFdq0 = name_vec(builder, add(_variation_times(dYc[i], dVdq[k]),
+                                          _inertia_times(Yc[i], dAdq[k])))
             dFdq = name_vec(builder, add(dFdq0, _force_cross(J[k], fc[i])))
-            dFdv = name_vec(builder, add(_mat6vec(dYc[i], J[k]), _mat6vec(Yc[i], dAdv[k])))
-            dYtJ = name_vec(builder, _mat6T_vec(dYc[i], J[k]))
+            dFdv = name_vec(builder, add(_variation_times(dYc[i], J[k]),
+                                         _inertia_times(Yc[i], dAdv[k])))
+            dYtJ = name_vec(builder, _variation_T_times(dYc[i], J[k]))
             vectors[k] = (J[k], dAdq[k], dVdq[k], dAdv[k], dFda, dYtJ, dFdq0, dFdq, dFdv)
         par = joint.parent
         if par >= 0:
-            Yc[par] = _name6(builder, [add(x, y) for x, y in zip(Yc[par], Yc[i], strict=True)])
-            dYc[par] = _name6(builder, [add(x, y) for x, y in zip(dYc[par], dYc[i],
-                                                                  strict=True)])
+            (Ip, hp, mp), (Ii, hi, mi) = Yc[par], Yc[i]
+            Yc[par] = (tuple(name_vec(builder, add(a, b)) for a, b in zip(Ip, Ii, strict=True)),
+                       name_vec(builder, add(hp, hi)), builder.name(mp + mi))
+            (Ap, Fp), (Ai, Fi) = dYc[par], dYc[i]
+            dYc[par] = (tuple(name_vec(builder, add(a, b)) for a, b in zip(Ap, Ai, strict=True)),
+                        name_vec(builder, add(Fp, Fi)))
             fc[par] = name_vec(builder, add(fc[par], fc[i]))
     same, pairs = _dof_pairs(tree)
     graph, effects = _effects(builder.freeze(), eqs, tree, gravity_labels)
@@ -330,4 +337,4 @@ def _effects(graph: Graph, eqs: Equations, tree: JointTree, gravity_labels) -> t
     return graph, (dq, dv, du, M)
 
 
-__all__ = ["RneaPartials", "VECTORS", "derive_rnea_partials"]
+__all__ = ["PAIR_OPERATIONS", "RneaPartials", "VECTORS", "derive_rnea_partials"]
