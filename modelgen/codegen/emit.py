@@ -354,6 +354,7 @@ def template_context(*, name: str, description: str, model_hash: str, n: int,
         "aba_inward": list(aba_inward),
         "has_derivatives": derivatives_pattern is not None,
         "derivative_loop": derivative_loop,
+        "derivative_aba": bool(derivative_loop and derivative_loop["aba"]),
         "derivative_solve": (derivative_solve(n, f"{name.upper()}_PIVOT_TOL",
                                               derivatives_pattern, len(inputs), name)
                              if derivatives_pattern is not None else None),

@@ -227,8 +227,13 @@ def derivative_routine(inputs, d) -> tuple:
         return tuple(e for row in rows for e in row)
     if isinstance(d, RneaPartials):
         effects = tuple(e for _, _, e in d.effect_entries())
+        # component-major, W[c * n + k]: a component of every dof is one row,
+        # which the C's loops over consecutive dofs read as a vector
+        rows = [v + f for v, f in zip(d.vectors, d.factor or ((),) * len(d.vectors),
+                                      strict=True)]
+        W = tuple(v[c] for c in range(len(rows[0])) for v in rows)
         return ("derivative_terms", inputs + (("a", d.a),),
-                (("W", flat(d.vectors)),) + ((("E", effects),) if effects else ()))
+                (("W", W),) + ((("E", effects),) if effects else ()))
     du = (("dQ_du", flat(d.du)),) if d.du and d.du[0] else ()
     return ("derivative_terms", inputs + (("a", d.a),),
             (("dQ_dq", flat(d.dq)), ("dQ_dv", flat(d.dv))) + du + (("M", flat(d.M)),))
@@ -550,11 +555,29 @@ def derivative_loop(d: RneaPartials) -> dict:
     def c_list(pairs):
         return ", ".join(str(x) for pair in pairs for x in pair) or "0"
     effects = [(array, index) for array, index, _ in d.effect_entries()]
+    runs = d.runs()
+    # the inward pass of the factor: the first dof to reach each predecessor
+    first, reached = set(), set()
+    for k in reversed(d.dof_order):
+        p = d.dof_parent[k]
+        if p >= 0 and p not in reached:
+            first.add(k)
+            reached.add(p)
     return {"same": c_list(d.same), "nsame": len(d.same),
-            "pairs": c_list(d.pairs), "npairs": len(d.pairs),
-            "pairs_size": max(2 * len(d.pairs), 1),
+            "runs": c_list(runs), "nruns": len(runs), "runs_size": max(3 * len(runs), 1),
+            "npairs": len(d.pairs),
             "effects": c_list(effects), "neffects": len(effects),
-            "nw": sum(len(v) for v in d.vectors)}
+            "nw": sum(len(v) for v in d.vectors) + sum(len(f) for f in d.factor),
+            "aba": bool(d.factor),
+            # every entry written by the loops: no zeros to set first
+            "dense": all(all(row) for row in d.pattern()),
+            "first": ", ".join(str(int(k in first)) for k in range(len(d.vectors))),
+            "reached": ", ".join(str(int(k in reached)) for k in range(len(d.vectors))),
+            "order": ", ".join(map(str, d.dof_order)),
+            "parent": ", ".join(map(str, d.dof_parent)),
+            # the columns of the solve in chunks of 16 (the template's _DC)
+            "stride": -(-(2 * len(d.vectors) + len(d.effects[2][0] if d.effects[2] else ()))
+                        // 16) * 16}
 
 
 def _constraint_context(spec: ModelSpec, terms) -> dict | None:

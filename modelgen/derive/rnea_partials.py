@@ -63,6 +63,11 @@ from modelgen.model.spec import ModelSpec
 
 #: the per-dof 6-vectors of :attr:`RneaPartials.vectors`, in their order
 VECTORS = ("J", "dAdq", "dVdq", "dAdv", "dFda", "dYtJ", "dFdq0", "dFdq", "dFdv")
+#: Above this many speeds ``-M^-1`` is applied by the articulated-body factor
+#: (:func:`articulated_factor`, O(n) a column), up to it by the sparse LDL^T
+#: of M (unrolled, O(n^2) a column for a chain but with no extra factor to
+#: derive); at the 20-link chain the LDL^T is the cheaper, at 50 the factor.
+ARTICULATED_SOLVE_ABOVE = 30
 #: operations of the five entries of one pair of dofs (k, l) in the C loop: three
 #: dot products of 6-vectors and two sums of one of 6 and one of 3 terms
 PAIR_OPERATIONS = 3 * 11 + 2 * 17
@@ -77,6 +82,7 @@ class RneaPartials:
     0); ``same``: the pairs ``(k, l)`` of dofs
     of one joint (``k == l`` included), ``pairs``: ``(k, l)`` with l a dof of a
     strict descendant of k's joint, both in the order the C loop runs.
+    ``factor``, ``dof_order``, ``dof_parent``: see the fields.
     ``effects``: ``(dq, dv, du, M)``, n-row matrices (tuples of rows) of what
     adds to the dot products: the effects' ``-d tau/d q`` (tangent space),
     ``-d tau/d v``, ``-d tau/d u`` and the armature on M's diagonal.
@@ -87,6 +93,16 @@ class RneaPartials:
     same: tuple
     pairs: tuple
     effects: tuple
+    #: the articulated-body factor of M in E, per speed k: ``U_k`` (6) and
+    #: ``1 / D_k`` (7 expressions), for ``-M^-1`` applied column by column
+    #: (:func:`articulated_factor`); empty up to :data:`ARTICULATED_SOLVE_ABOVE`
+    #: speeds
+    factor: tuple = ()
+    #: the speeds in the order of the factor's inward pass reversed (a parent's
+    #: before its children's, a joint's in its own order), and each one's
+    #: predecessor in that chain of dofs (-1: the ground)
+    dof_order: tuple = ()
+    dof_parent: tuple = ()
 
     def pattern(self) -> tuple:
         """n x n booleans: the entries of M that can be non-zero (one branch)."""
@@ -105,6 +121,18 @@ class RneaPartials:
             for r, row in enumerate(rows):
                 out.extend((array, r * len(row) + c, e) for c, e in enumerate(row) if e != 0)
         return tuple(out)
+
+    def runs(self) -> tuple:
+        """:attr:`pairs` as runs ``(k, first, end)``: the dofs ``first <= l < end``
+        (consecutive speeds) of strict descendants of k's joint, one run for each
+        k when the speeds are numbered depth first (a chain, most trees)."""
+        out = []
+        for k, l in self.pairs:
+            if out and out[-1][0] == k and out[-1][2] == l:
+                out[-1][2] = l + 1
+            else:
+                out.append([k, l, l + 1])
+        return tuple(tuple(r) for r in out)
 
     def operations(self) -> int:
         """Operations of the per-joint program and the effects (before CSE), and
@@ -292,9 +320,82 @@ def derive_rnea_partials(eqs: Equations, tree: JointTree, spec: ModelSpec,
                         name_vec(builder, add(Fp, Fi)))
             fc[par] = name_vec(builder, add(fc[par], fc[i]))
     same, pairs = _dof_pairs(tree)
+    order, parent = _dof_chain(tree)
+    factor = (articulated_factor(builder, order, parent, J, Y, tree)
+              if n > ARTICULATED_SOLVE_ABOVE else None)
     graph, effects = _effects(builder.freeze(), eqs, tree, gravity_labels)
     return RneaPartials(graph, a, tuple(tuple(e for vec in vectors[k] for e in vec)
-                                        for k in range(n)), same, pairs, effects)
+                                        for k in range(n)), same, pairs, effects,
+                        tuple(factor[k] for k in range(n)) if factor else (), order, parent)
+
+
+def _dof_chain(tree: JointTree) -> tuple:
+    """``(order, parent)``: the speeds, a joint's in its own order after its parent's,
+    and each speed's predecessor (the previous dof of its joint, else the last of
+    the parent joint's, else -1): a ball or free joint is a chain of one-dof joints
+    between massless links."""
+    order, parent, last = [], {}, {}
+    for i, joint in enumerate(tree.joints):
+        prev = last[joint.parent] if joint.parent >= 0 else -1
+        for k, _ in joint.dofs:
+            order.append(k)
+            parent[k] = prev
+            prev = k
+        last[i] = prev
+    return tuple(order), tuple(parent[k] for k in range(len(order)))
+
+
+def _sym6(Y) -> list:
+    """The 6x6 rows of a rigid-body inertia ``(I_O, h, m)``."""
+    I, h, m = Y
+    hx = skew(h)
+    return [list(I[r]) + list(hx[r]) for r in range(3)] + \
+        [[-hx[r][c] if hx[r][c] != 0 else ZERO for c in range(3)]
+         + [m if r == c else ZERO for c in range(3)] for r in range(3)]
+
+
+def articulated_factor(builder, order, parent, J, Y, tree: JointTree) -> dict:
+    """{speed k: (U_k (6), 1 / D_k)}: the articulated-body inertias in E
+    (Featherstone §7.3, every quantity in one frame, so no transforms) with the
+    dofs as a chain of one-dof joints: inwards ``U_k = IA_k J_k``,
+    ``D_k = J_k . U_k + armature_k`` and ``IA_p += IA_k - U_k U_k^T / D_k``
+    for the predecessor p, ``IA_k`` starting as the inertia of k's link when k
+    is its joint's last dof.  ``-M^-1 b`` is then, inwards,
+    ``w_k = (b_k - J_k . P_k) / D_k``, ``P_p += P_k + U_k w_k``, and outwards
+    ``x_k = w_k - U_k . A_p / D_k``, ``A_k = A_p + J_k x_k`` (the C loop)."""
+    link = {}
+    for i, joint in enumerate(tree.joints):
+        link[joint.dofs[-1][0]] = i
+    IA = {k: _sym6(Y[link[k]]) for k in link}
+    out = {}
+    for k in reversed(order):
+        A = IA.pop(k)
+        U = name_vec(builder, [dot(row, J[k]) for row in A])
+        arm = tree.armature[k] if tree.armature else ZERO
+        d = builder.name(total((dot(J[k], U), arm)))
+        inv = builder.name(1 / d)
+        out[k] = U + (inv,)
+        p = parent[k]
+        if p < 0:
+            continue
+        Uw = name_vec(builder, [times(inv, x) for x in U])
+        # IA - U U^T / D: symmetric, each entry named once
+        child = [[None] * 6 for _ in range(6)]
+        for r in range(6):
+            for c in range(r, 6):
+                child[r][c] = child[c][r] = total((A[r][c], -times(U[r], Uw[c])))
+        if p in IA:
+            child = [[total((x, y)) for x, y in zip(ra, rb, strict=True)]
+                     for ra, rb in zip(IA[p], child, strict=True)]
+        elif p in link:
+            child = [[total((x, y)) for x, y in zip(ra, rb, strict=True)]
+                     for ra, rb in zip(_sym6(Y[link[p]]), child, strict=True)]
+        named6 = [[None] * 6 for _ in range(6)]
+        for r in range(6):
+            for c in range(r, 6):
+                named6[r][c] = named6[c][r] = named(builder, child[r][c])
+        IA[p] = named6
+    return out
 
 
 def _dof_pairs(tree: JointTree) -> tuple:
@@ -308,8 +409,8 @@ def _dof_pairs(tree: JointTree) -> tuple:
     for i, joint in enumerate(tree.joints):
         dofs = [k for k, _ in joint.dofs]
         same.extend((k, l) for k in dofs for l in dofs)
-        pairs.extend((k, l) for k in dofs for j in sorted(below[i])
-                     for l, _ in tree.joints[j].dofs)
+        pairs.extend((k, l) for k in dofs
+                     for l in sorted(m for j in below[i] for m, _ in tree.joints[j].dofs))
     return tuple(same), tuple(pairs)
 
 
@@ -337,4 +438,5 @@ def _effects(graph: Graph, eqs: Equations, tree: JointTree, gravity_labels) -> t
     return graph, (dq, dv, du, M)
 
 
-__all__ = ["PAIR_OPERATIONS", "RneaPartials", "VECTORS", "derive_rnea_partials"]
+__all__ = ["ARTICULATED_SOLVE_ABOVE", "PAIR_OPERATIONS", "RneaPartials", "VECTORS", "articulated_factor",
+           "derive_rnea_partials"]
