@@ -23,7 +23,10 @@ generalized forces (``Equations.tau_parts``) and are differentiated along
 with the rest.
 
 ``Q(q, v, a, u) = ID(q, v, a) - tau_effects(q, v, u)`` is the function of
-``<name>_inverse_dynamics``.  Ball and free joints are differentiated in the
+``<name>_inverse_dynamics``.  The generated C uses this forward mode for
+models that are not joint trees; a joint tree's derivatives come from
+:mod:`modelgen.derive.rnea_partials` (the recursive method, fewer operations
+per entry and O(n) statements).  Ball and free joints are differentiated in the
 tangent space, Pinocchio's convention: ``dQ/dq`` column j is the derivative
 along ``q (+) delta e_j`` (``quat * exp(delta w / 2)``, ``r + R delta v``),
 which to first order is ``dQ/dq_full N(q)`` with ``N = d(dq/dt)/dv``.
