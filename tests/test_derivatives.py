@@ -306,17 +306,22 @@ def _check_against_differences(cm, states=2, seed=0, tol=1e-6):
 @pytest.fixture(params=["ldlt", "articulated"])
 def solve(request, monkeypatch):
     """Both ways of applying -M^-1 of the recursive derivatives: the sparse LDL^T
-    (small models) and the articulated-body factor (large ones, here forced)."""
+    (small models) and the articulated-body factor (large ones, here forced); the
+    recursive derivatives forced too (a small tree may get forward mode)."""
+    from modelgen.codegen import pipeline
     from modelgen.derive import rnea_partials
+    monkeypatch.setattr(pipeline, "FORWARD_DERIVATIVES_MAX", 0)
     if request.param == "articulated":
         monkeypatch.setattr(rnea_partials, "ARTICULATED_SOLVE_ABOVE", 0)
     return request.param
 
 
 def _uses(cm, solve) -> bool:
-    """True if cm's C applies -M^-1 the way ``solve`` says."""
+    """True if cm's C has the recursive derivatives and applies -M^-1 the way
+    ``solve`` says."""
     source = (Path(cm.path).parent / f"{cm.name}.c").read_text()
-    return (f"{cm.name}_aba_in" in source) == (solve == "articulated")
+    return cm.manifest["derivative_method"] == "recursive" and \
+        (f"{cm.name}_aba_in" in source) == (solve == "articulated")
 
 
 def test_floating_solo12_matches_pinocchio_free_flyer_in_the_tangent_space(pin, tmp_path, solve):
@@ -374,6 +379,28 @@ def test_floating_solo12_matches_pinocchio_free_flyer_in_the_tangent_space(pin, 
 
 
 # -- central differences of the generated rhs: effects, inputs, any formulation -------
+
+@pytest.mark.parametrize("method", ["forward", "recursive"])
+def test_derivatives_with_armature_and_a_free_joint_match_central_differences(
+        method, tmp_path, monkeypatch):
+    # a small tree is derived both ways and the one with fewer operations kept:
+    # each forced here, on a free body with a hinged rod and armature on both
+    from test_armature import TUMBLER
+    from modelgen.codegen import pipeline
+    from modelgen.derive.rnea_partials import RneaPartials
+    from modelgen.model import parse_model
+    if method == "recursive":
+        monkeypatch.setattr(pipeline, "FORWARD_DERIVATIVES_MAX", 0)
+    else:
+        monkeypatch.setattr(RneaPartials, "operations", lambda self: 10 ** 9)
+    cm = modelgen.load(parse_model(TUMBLER), tmp_path / "build", derivatives=True)
+    assert cm.manifest["derivative_method"] == method
+    _check_against_differences(cm, seed=4)
+    q = cm.project(np.random.default_rng(4).uniform(-1, 1, cm.nq))
+    i = cm.inverse_dynamics_derivatives(0.0, np.concatenate([q, np.ones(cm.n)]),
+                                        np.zeros(cm.n))
+    assert _relative(i.M, cm.mass_matrix(q)) <= TOL     # the armature on M's diagonal
+
 
 def test_derivatives_of_a_branched_tree_with_effects_match_central_differences(tmp_path,
                                                                               solve):

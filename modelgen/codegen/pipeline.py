@@ -24,7 +24,8 @@ from modelgen.derive.dynamics import Equations, derive_equations
 from modelgen.derive.graph import GraphBuilder
 from modelgen.derive.joint_tree import JointTree, extract_joint_tree
 from modelgen.derive.rnea import derive_inverse_dynamics, derive_velocity_terms
-from modelgen.derive.rnea_derivatives import differentiate_inverse_dynamics
+from modelgen.derive.rnea_derivatives import (derive_inverse_dynamics_derivatives,
+                                              differentiate_inverse_dynamics)
 from modelgen.derive.rnea_partials import RneaPartials, derive_rnea_partials
 from modelgen.errors import ModelError
 from modelgen.codegen.emit import (ABI_VERSION, constraint_context, emit_sources,
@@ -457,7 +458,7 @@ def _derive(spec: ModelSpec, options: BuildOptions, tree: JointTree | None) -> D
         # a joint tree: the recursive derivatives, O(n) statements and a C loop
         # over the pairs of dofs on one branch; any other model: forward mode
         # over its composite-body inverse dynamics
-        derivatives = (derive_rnea_partials(eqs, tree, spec, graph)
+        derivatives = (_tree_derivatives(eqs, tree, spec, graph)
                        if tree is not None and _time_free(tree)
                        else differentiate_inverse_dynamics(graph, eqs, *inverse))
         graph = derivatives.graph
@@ -481,6 +482,31 @@ def _derive(spec: ModelSpec, options: BuildOptions, tree: JointTree | None) -> D
     graph = frames.graph if frames else graph
     return Derived(eqs, columns, forward, inverse, linearization, terms, graph, frames,
                    constraints, derivatives)
+
+
+#: Up to this many speeds a joint tree's derivatives are derived both ways, and
+#: forward mode over RNEA (derive/rnea_derivatives.py) is kept when it has fewer
+#: operations than the recursive method with its loop: on the 7-link chain it
+#: does (and runs fewer instructions), on the 7-joint arm it does not.  Above,
+#: forward mode costs more per entry and its derivation grows with n^2.
+FORWARD_DERIVATIVES_MAX = 10
+
+
+def _tree_derivatives(eqs: Equations, tree: JointTree, spec: ModelSpec, graph):
+    """The derivatives of inverse dynamics of a joint tree: the recursive ones
+    (:func:`derive_rnea_partials`), or forward mode where it has fewer operations."""
+    recursive = derive_rnea_partials(eqs, tree, spec, graph)
+    if spec.n > FORWARD_DERIVATIVES_MAX:
+        return recursive
+    forward = derive_inverse_dynamics_derivatives(eqs, tree, spec, graph)
+    return forward if forward.operations() < recursive.operations() else recursive
+
+
+def derivative_method(d) -> str | None:
+    """How the derivatives were derived (the manifest's ``derivative_method``)."""
+    if d is None:
+        return None
+    return "recursive" if isinstance(d, RneaPartials) else "forward"
 
 
 def _derive_frames(spec: ModelSpec, options: BuildOptions, kin, graph) -> FrameTerms | None:
@@ -612,6 +638,7 @@ def _manifest(spec: ModelSpec, options: BuildOptions, derived: Derived, emitted:
         "jacobian": options.jacobian,
         "linearize": options.linearize,
         "derivatives": options.derivatives,
+        "derivative_method": derivative_method(derived.derivatives),
         "formulation": options.formulation,
         **({"constraints": _constraint_manifest(spec, derived.constraints)}
            if derived.constraints else {}),

@@ -121,7 +121,10 @@ def rnea_with_loads(builder: GraphBuilder, eqs: Equations, tree: JointTree, spec
         if joint.parent >= 0:
             p = joint.parent
             force[p] = name_vec(builder, add(force[p], to_parent_force(builder, joint, force[i])))
-    return tuple(named(builder, out[k] - sympy.Add(*[part[k] for part in others]))
+    # a rotor's reflected inertia acts on its own dof only: armature_k qdd_k
+    armature = tree.armature or (0,) * n
+    return tuple(named(builder, out[k] + armature[k] * qdd[k]
+                       - sympy.Add(*[part[k] for part in others]))
                  for k in range(n))
 
 
