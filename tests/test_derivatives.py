@@ -52,6 +52,58 @@ def test_rnea_derivatives_program_matches_pinocchio_on_spatial_chains(n):
             assert _relative(got, want) <= TOL
 
 
+@pytest.mark.parametrize("n", [1, 5])
+def test_recursive_derivatives_program_matches_pinocchio_on_spatial_chains(n):
+    # the per-dof vectors of derive/rnea_partials.py, combined as the C loop does,
+    # and its articulated-body factor applied as the C does, in numpy
+    pin = pytest.importorskip("pinocchio")
+    from modelgen.bench.peers import chain_pinocchio
+    from modelgen.derive import rnea_partials
+    spec = spatial_chain(n).spec()
+    eqs = derive_equations(derive_kinematics(spec))
+    old = rnea_partials.ARTICULATED_SOLVE_ABOVE
+    try:
+        rnea_partials.ARTICULATED_SOLVE_ABOVE = 0
+        d = rnea_partials.derive_rnea_partials(eqs, extract_joint_tree(spec), spec)
+    finally:
+        rnea_partials.ARTICULATED_SOLVE_ABOVE = old
+    f = _program(d.graph, [e for v in d.vectors + d.factor for e in v],
+                 (eqs.t,) + eqs.q + eqs.qd + eqs.u + eqs.p + d.a)
+    rng = np.random.default_rng(n)
+    p = dict(zip((str(s) for s in eqs.p), rng.uniform(0.5, 1.5, len(eqs.p))))
+    p["r"], p["g"] = 0.02 * p["r"], 9.81 * p["g"]
+    model = chain_pinocchio(n, p)
+    q, v, a = rng.uniform(-1, 1, n), rng.uniform(-1, 1, n), rng.uniform(-1, 1, n)
+    r = np.array(f(0.0, *q, *v, *(p[str(s)] for s in eqs.p), *a), dtype=float)
+    W, F = r[:51 * n].reshape(n, 51), r[51 * n:].reshape(n, 7)
+    J, dAdq, dVdq, dAdv, dFda = (W[:, c:c + 6] for c in (0, 6, 12, 18, 24))
+    dYtJ, dFdq0, dFdq, dFdv = W[:, 30:33], W[:, 33:39], W[:, 39:45], W[:, 45:51]
+    dq, dv, M = np.zeros((n, n)), np.zeros((n, n)), np.zeros((n, n))
+    for k, l in d.same:
+        dq[k, l], dv[k, l], M[k, l] = J[k] @ dFdq0[l], J[k] @ dFdv[l], J[k] @ dFda[l]
+    for k, l in d.pairs:
+        dq[k, l], dv[k, l] = J[k] @ dFdq[l], J[k] @ dFdv[l]
+        dq[l, k] = dFda[l] @ dAdq[k] + dYtJ[l] @ dVdq[k, :3]
+        dv[l, k] = dFda[l] @ dAdv[k] + dYtJ[l] @ J[k, :3]
+        M[k, l] = M[l, k] = J[k] @ dFda[l]
+    data = model.createData()       # the results are views into it
+    rq, rv, M_pin = pin.computeRNEADerivatives(model, data, q, v, a)
+    for got, want in ((dq, rq), (dv, rv), (M, np.triu(M_pin) + np.triu(M_pin, 1).T)):
+        assert _relative(got, want) <= TOL
+    # -M^-1 B by the factor: inwards w, P; outwards x, A
+    B = rng.uniform(-1, 1, (n, 3))
+    P, A, w, x = np.zeros((n, 6, 3)), np.zeros((n, 6, 3)), np.zeros((n, 3)), np.zeros((n, 3))
+    for k in reversed(d.dof_order):
+        w[k] = (B[k] - J[k] @ P[k]) * F[k, 6]
+        if d.dof_parent[k] >= 0:
+            P[d.dof_parent[k]] += P[k] + np.outer(F[k, :6], w[k])
+    for k in d.dof_order:
+        Ap = A[d.dof_parent[k]] if d.dof_parent[k] >= 0 else np.zeros((6, 3))
+        x[k] = w[k] - F[k, 6] * (F[k, :6] @ Ap)
+        A[k] = Ap + np.outer(J[k], x[k])
+    assert _relative(x, np.linalg.solve(M, B)) <= TOL
+
+
 def test_entries_of_joints_on_different_branches_are_structurally_zero():
     from test_aba import branched_tree
     spec = branched_tree().spec()
@@ -151,9 +203,10 @@ def _check_against_pinocchio(pin, cm, model, states=3, seed=0, P=None, q_pin=Non
 
 
 @pytest.mark.parametrize("n", [2, 12])
-def test_generated_derivatives_match_pinocchio_on_spatial_chains(n, pin, tmp_path):
+def test_generated_derivatives_match_pinocchio_on_spatial_chains(n, pin, tmp_path, solve):
     from modelgen.bench.peers import chain_pinocchio
     cm = modelgen.load(spatial_chain(n), tmp_path / "build", derivatives=True)
+    assert _uses(cm, solve)
     _check_against_pinocchio(pin, cm, chain_pinocchio(n, cm.parameters), seed=n)
 
 
@@ -250,10 +303,32 @@ def _check_against_differences(cm, states=2, seed=0, tol=1e-6):
             assert _relative(got, want) <= tol, _relative(got, want)
 
 
-def test_floating_solo12_matches_pinocchio_free_flyer_in_the_tangent_space(pin, tmp_path):
+@pytest.fixture(params=["ldlt", "articulated"])
+def solve(request, monkeypatch):
+    """Both ways of applying -M^-1 of the recursive derivatives: the sparse LDL^T
+    (small models) and the articulated-body factor (large ones, here forced); the
+    recursive derivatives forced too (a small tree may get forward mode)."""
+    from modelgen.codegen import pipeline
+    from modelgen.derive import rnea_partials
+    monkeypatch.setattr(pipeline, "FORWARD_DERIVATIVES_MAX", 0)
+    if request.param == "articulated":
+        monkeypatch.setattr(rnea_partials, "ARTICULATED_SOLVE_ABOVE", 0)
+    return request.param
+
+
+def _uses(cm, solve) -> bool:
+    """True if cm's C has the recursive derivatives and applies -M^-1 the way
+    ``solve`` says."""
+    source = (Path(cm.path).parent / f"{cm.name}.c").read_text()
+    return cm.manifest["derivative_method"] == "recursive" and \
+        (f"{cm.name}_aba_in" in source) == (solve == "articulated")
+
+
+def test_floating_solo12_matches_pinocchio_free_flyer_in_the_tangent_space(pin, tmp_path, solve):
     path = URDF / "solo12.urdf"
     imp = import_urdf(path, floating_base=True)
     cm = modelgen.load(imp.model, tmp_path / "build", derivatives=True)
+    assert _uses(cm, solve)
     model = pin.buildModelFromUrdf(str(path), pin.JointModelFreeFlyer())
     ((quat, position, linear, angular),) = _free_joints(cm)
     P = np.zeros((model.nv, cm.n))        # Pinocchio's v = P v_mg
@@ -305,10 +380,33 @@ def test_floating_solo12_matches_pinocchio_free_flyer_in_the_tangent_space(pin, 
 
 # -- central differences of the generated rhs: effects, inputs, any formulation -------
 
-def test_derivatives_of_a_branched_tree_with_effects_match_central_differences(tmp_path):
+@pytest.mark.parametrize("method", ["forward", "recursive"])
+def test_derivatives_with_armature_and_a_free_joint_match_central_differences(
+        method, tmp_path, monkeypatch):
+    # a small tree is derived both ways and the one with fewer operations kept:
+    # each forced here, on a free body with a hinged rod and armature on both
+    from test_armature import TUMBLER
+    from modelgen.codegen import pipeline
+    from modelgen.derive.rnea_partials import RneaPartials
+    from modelgen.model import parse_model
+    if method == "recursive":
+        monkeypatch.setattr(pipeline, "FORWARD_DERIVATIVES_MAX", 0)
+    else:
+        monkeypatch.setattr(RneaPartials, "operations", lambda self: 10 ** 9)
+    cm = modelgen.load(parse_model(TUMBLER), tmp_path / "build", derivatives=True)
+    assert cm.manifest["derivative_method"] == method
+    _check_against_differences(cm, seed=4)
+    q = cm.project(np.random.default_rng(4).uniform(-1, 1, cm.nq))
+    i = cm.inverse_dynamics_derivatives(0.0, np.concatenate([q, np.ones(cm.n)]),
+                                        np.zeros(cm.n))
+    assert _relative(i.M, cm.mass_matrix(q)) <= TOL     # the armature on M's diagonal
+
+
+def test_derivatives_of_a_branched_tree_with_effects_match_central_differences(tmp_path,
+                                                                              solve):
     from test_aba import branched_tree
     cm = modelgen.load(branched_tree(), tmp_path / "build", derivatives=True)
-    assert cm.manifest["formulation"] == "aba" and cm.inputs == ("F",)
+    assert cm.manifest["formulation"] == "aba" and cm.inputs == ("F",) and _uses(cm, solve)
     _check_against_differences(cm, seed=1)
 
 

@@ -287,7 +287,8 @@ def template_context(*, name: str, description: str, model_hash: str, n: int,
                      has_linearize=False, nq: int | None = None, speeds=None,
                      quaternions=(), npd: int = 0, mass_pattern=None,
                      formulation: str = "crba", aba_inward=(), frames=None,
-                     constraints=None, derivatives_pattern=None) -> dict:
+                     constraints=None, derivatives_pattern=None,
+                     derivative_loop=None) -> dict:
     """The plain dict every C template receives.
 
     ``mass_pattern`` (n x n booleans, default dense) marks the entries of the
@@ -298,6 +299,9 @@ def template_context(*, name: str, description: str, model_hash: str, n: int,
     ``derivatives_pattern`` (n x n booleans, the structure of the mass matrix of
     ``derivative_terms``) asks for ``<name>_derivatives`` and
     ``<name>_inverse_dynamics_derivatives``; their solve skips its zeros.
+    ``derivative_loop`` (None: ``derivative_terms`` writes the matrices itself)
+    has the tables of the loop over the pairs of dofs of the recursive
+    derivatives (:func:`modelgen.codegen.pipeline.derivative_loop`).
 
     ``n`` is the number of speeds (the size of A), ``nq`` that of the
     coordinates (default ``n``; more with ball or free joints, whose
@@ -350,8 +354,10 @@ def template_context(*, name: str, description: str, model_hash: str, n: int,
         "formulation": formulation,
         "aba_inward": list(aba_inward),
         "has_derivatives": derivatives_pattern is not None,
+        "derivative_loop": derivative_loop,
+        "derivative_aba": bool(derivative_loop and derivative_loop["aba"]),
         "derivative_solve": (derivative_solve(n, f"{name.upper()}_PIVOT_TOL",
-                                              derivatives_pattern, len(inputs))
+                                              derivatives_pattern, len(inputs), name)
                              if derivatives_pattern is not None else None),
         "capi": capi.context(),
         "constraints": constraints,

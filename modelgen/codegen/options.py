@@ -97,7 +97,8 @@ class BuildOptions:
     linearize: bool = False
     #: also generate ``<name>_derivatives`` (dqdd/dq, dqdd/dv, dqdd/du) and
     #: ``<name>_inverse_dynamics_derivatives`` (dQ/dq, dQ/dv, M): RNEA's derivatives
-    #: (:mod:`modelgen.derive.rnea_derivatives`), solved with the mass matrix
+    #: (:mod:`modelgen.derive.rnea_partials` for a joint tree, else
+    #: :mod:`modelgen.derive.rnea_derivatives`), solved with the mass matrix
     derivatives: bool = False
     #: the outputs of a scene (:class:`~modelgen.model.spec.OutputSpec`, a tuple):
     #: ``<name>_outputs`` computes exactly these

@@ -26,6 +26,7 @@ from modelgen.derive.joint_tree import JointTree, extract_joint_tree
 from modelgen.derive.rnea import derive_inverse_dynamics, derive_velocity_terms
 from modelgen.derive.rnea_derivatives import (derive_inverse_dynamics_derivatives,
                                               differentiate_inverse_dynamics)
+from modelgen.derive.rnea_partials import RneaPartials, derive_rnea_partials
 from modelgen.errors import ModelError
 from modelgen.codegen.emit import (ABI_VERSION, constraint_context, emit_sources,
                                    integrator_sources, print_routine, runtime_sources,
@@ -225,9 +226,21 @@ def routines_for(eqs: Equations, output_exprs=(), jacobian=None,
 
 def derivative_routine(inputs, d) -> tuple:
     """The ``derivative_terms`` routine: ``(name, inputs, outputs)`` of dQ/dq, dQ/dv,
-    dQ/du (when there are inputs) and M, row-major, at the accelerations ``a``."""
+    dQ/du (when there are inputs) and M, row-major, at the accelerations ``a``; for
+    the recursive derivatives (:class:`RneaPartials`) the per-dof vectors ``W`` and
+    the effects' non-zero entries ``E``, which the C's loop over the pairs of
+    dofs turns into those matrices."""
     def flat(rows):
         return tuple(e for row in rows for e in row)
+    if isinstance(d, RneaPartials):
+        effects = tuple(e for _, _, e in d.effect_entries())
+        # component-major, W[c * n + k]: a component of every dof is one row,
+        # which the C's loops over consecutive dofs read as a vector
+        rows = [v + f for v, f in zip(d.vectors, d.factor or ((),) * len(d.vectors),
+                                      strict=True)]
+        W = tuple(v[c] for c in range(len(rows[0])) for v in rows)
+        return ("derivative_terms", inputs + (("a", d.a),),
+                (("W", W),) + ((("E", effects),) if effects else ()))
     du = (("dQ_du", flat(d.du)),) if d.du and d.du[0] else ()
     return ("derivative_terms", inputs + (("a", d.a),),
             (("dQ_dq", flat(d.dq)), ("dQ_dv", flat(d.dv))) + du + (("M", flat(d.M)),))
@@ -450,7 +463,10 @@ def _derive(spec: ModelSpec, options: BuildOptions, tree: JointTree | None) -> D
         inverse = (qdd, tuple(-e for e in r))
     derivatives = None
     if options.derivatives:
-        derivatives = (derive_inverse_dynamics_derivatives(eqs, tree, spec, graph)
+        # a joint tree: the recursive derivatives, O(n) statements and a C loop
+        # over the pairs of dofs on one branch; any other model: forward mode
+        # over its composite-body inverse dynamics
+        derivatives = (_tree_derivatives(eqs, tree, spec, graph)
                        if tree is not None and _time_free(tree)
                        else differentiate_inverse_dynamics(graph, eqs, *inverse))
         graph = derivatives.graph
@@ -482,6 +498,31 @@ def _derive(spec: ModelSpec, options: BuildOptions, tree: JointTree | None) -> D
     graph = frames.graph if frames else graph
     return Derived(eqs, columns, forward, inverse, linearization, terms, graph, frames,
                    constraints, derivatives)
+
+
+#: Up to this many speeds a joint tree's derivatives are derived both ways, and
+#: forward mode over RNEA (derive/rnea_derivatives.py) is kept when it has fewer
+#: operations than the recursive method with its loop: on the 7-link chain it
+#: does (and runs fewer instructions), on the 7-joint arm it does not.  Above,
+#: forward mode costs more per entry and its derivation grows with n^2.
+FORWARD_DERIVATIVES_MAX = 10
+
+
+def _tree_derivatives(eqs: Equations, tree: JointTree, spec: ModelSpec, graph):
+    """The derivatives of inverse dynamics of a joint tree: the recursive ones
+    (:func:`derive_rnea_partials`), or forward mode where it has fewer operations."""
+    recursive = derive_rnea_partials(eqs, tree, spec, graph)
+    if spec.n > FORWARD_DERIVATIVES_MAX:
+        return recursive
+    forward = derive_inverse_dynamics_derivatives(eqs, tree, spec, graph)
+    return forward if forward.operations() < recursive.operations() else recursive
+
+
+def derivative_method(d) -> str | None:
+    """How the derivatives were derived (the manifest's ``derivative_method``)."""
+    if d is None:
+        return None
+    return "recursive" if isinstance(d, RneaPartials) else "forward"
 
 
 def _derive_frames(spec: ModelSpec, options: BuildOptions, kin, graph) -> FrameTerms | None:
@@ -537,9 +578,50 @@ def _emit(spec: ModelSpec, options: BuildOptions, derived: Derived, routines: tu
         formulation=options.formulation, aba_inward=forward.inward if forward else (),
         frames=derived.frames,
         constraints=_constraint_context(spec, derived.constraints, columns),
-        derivatives_pattern=([[e != 0 for e in row] for row in derived.derivatives.M]
-                             if derived.derivatives else None))
+        derivatives_pattern=_derivatives_pattern(derived.derivatives),
+        derivative_loop=(derivative_loop(derived.derivatives)
+                         if isinstance(derived.derivatives, RneaPartials) else None))
     return Emitted(functions, context, emit_sources(context))
+
+
+def _derivatives_pattern(d):
+    """The structure of the mass matrix of the derivatives (n x n booleans), or None."""
+    if d is None:
+        return None
+    if isinstance(d, RneaPartials):
+        return [list(row) for row in d.pattern()]
+    return [[e != 0 for e in row] for row in d.M]
+
+
+def derivative_loop(d: RneaPartials) -> dict:
+    """The tables of the C loop over the pairs of dofs (the template's
+    ``derivative_loop``): C initialiser lists and their lengths."""
+    def c_list(pairs):
+        return ", ".join(str(x) for pair in pairs for x in pair) or "0"
+    effects = [(array, index) for array, index, _ in d.effect_entries()]
+    runs = d.runs()
+    # the inward pass of the factor: the first dof to reach each predecessor
+    first, reached = set(), set()
+    for k in reversed(d.dof_order):
+        p = d.dof_parent[k]
+        if p >= 0 and p not in reached:
+            first.add(k)
+            reached.add(p)
+    return {"same": c_list(d.same), "nsame": len(d.same),
+            "runs": c_list(runs), "nruns": len(runs), "runs_size": max(3 * len(runs), 1),
+            "npairs": len(d.pairs),
+            "effects": c_list(effects), "neffects": len(effects),
+            "nw": sum(len(v) for v in d.vectors) + sum(len(f) for f in d.factor),
+            "aba": bool(d.factor),
+            # every entry written by the loops: no zeros to set first
+            "dense": all(all(row) for row in d.pattern()),
+            "first": ", ".join(str(int(k in first)) for k in range(len(d.vectors))),
+            "reached": ", ".join(str(int(k in reached)) for k in range(len(d.vectors))),
+            "order": ", ".join(map(str, d.dof_order)),
+            "parent": ", ".join(map(str, d.dof_parent)),
+            # the columns of the solve in chunks of 16 (the template's _DC)
+            "stride": -(-(2 * len(d.vectors) + len(d.effects[2][0] if d.effects[2] else ()))
+                        // 16) * 16}
 
 
 def _constraint_context(spec: ModelSpec, terms, columns=None) -> dict | None:
@@ -576,6 +658,7 @@ def _manifest(spec: ModelSpec, options: BuildOptions, derived: Derived, emitted:
         "jacobian": options.jacobian,
         "linearize": options.linearize,
         "derivatives": options.derivatives,
+        "derivative_method": derivative_method(derived.derivatives),
         "formulation": options.formulation,
         **({"constraints": _constraint_manifest(spec, derived.constraints)}
            if derived.constraints else {}),

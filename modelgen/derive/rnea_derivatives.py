@@ -23,7 +23,10 @@ generalized forces (``Equations.tau_parts``) and are differentiated along
 with the rest.
 
 ``Q(q, v, a, u) = ID(q, v, a) - tau_effects(q, v, u)`` is the function of
-``<name>_inverse_dynamics``.  Ball and free joints are differentiated in the
+``<name>_inverse_dynamics``.  The generated C uses this forward mode for
+models that are not joint trees; a joint tree's derivatives come from
+:mod:`modelgen.derive.rnea_partials` (the recursive method, fewer operations
+per entry and O(n) statements).  Ball and free joints are differentiated in the
 tangent space, Pinocchio's convention: ``dQ/dq`` column j is the derivative
 along ``q (+) delta e_j`` (``quat * exp(delta w / 2)``, ``r + R delta v``),
 which to first order is ``dQ/dq_full N(q)`` with ``N = d(dq/dt)/dv``.
@@ -118,7 +121,10 @@ def rnea_with_loads(builder: GraphBuilder, eqs: Equations, tree: JointTree, spec
         if joint.parent >= 0:
             p = joint.parent
             force[p] = name_vec(builder, add(force[p], to_parent_force(builder, joint, force[i])))
-    return tuple(named(builder, out[k] - sympy.Add(*[part[k] for part in others]))
+    # a rotor's reflected inertia acts on its own dof only: armature_k qdd_k
+    armature = tree.armature or (0,) * n
+    return tuple(named(builder, out[k] + armature[k] * qdd[k]
+                       - sympy.Add(*[part[k] for part in others]))
                  for k in range(n))
 
 
@@ -158,11 +164,11 @@ def differentiate_inverse_dynamics(graph: Graph, eqs: Equations, a, Q) -> Invers
     if nq == n:
         dq = tuple(tuple(row) for row in dq_full)
     else:
-        graph, dq = _tangent(graph, eqs, dq_full)
+        graph, dq = tangent_rows(graph, eqs, dq_full)
     return InverseDynamicsDerivatives(graph, tuple(a), tuple(Q), dq, dv, du, M)
 
 
-def _tangent(graph: Graph, eqs: Equations, dq_full) -> tuple:
+def tangent_rows(graph: Graph, eqs: Equations, dq_full) -> tuple:
     """``dQ/dq_full N`` with ``N = d(dq/dt)/dv`` (nq x n, sparse): the derivatives
     along the joints' tangent directions."""
     builder = GraphBuilder(graph)
@@ -183,5 +189,5 @@ def _tangent(graph: Graph, eqs: Equations, dq_full) -> tuple:
 
 
 __all__ = ["InverseDynamicsDerivatives", "derive_inverse_dynamics_derivatives",
-           "differentiate_inverse_dynamics",
+           "differentiate_inverse_dynamics", "tangent_rows",
            "ground_acceleration", "rnea_with_loads"]

@@ -1,0 +1,442 @@
+"""Derivatives of inverse dynamics by the recursive method in the ground frame.
+
+Carpentier and Mansard, "Analytical derivatives of rigid body dynamics
+algorithms" (RSS 2018), as Pinocchio's ``computeRNEADerivatives``
+(``algorithm/rnea-derivatives.hxx``) computes them: with every quantity in
+the ground frame E, a joint's motion moves its whole subtree rigidly along
+its column ``J_k`` (the motion subspace in E), so the derivative of any
+quantity of a descendant along ``q_k`` is a cross product with ``J_k``, and
+every entry of ``dQ/dq``, ``dQ/dv`` and ``M = dQ/da`` is one or two dot
+products of 6-vectors that each joint computes once:
+
+* outwards, per joint i with parent p: ``J_k`` (each of its dofs),
+  ``ov_i = ov_p + J qd``, ``oa_i = oa_p + J qdd + ov_i x J qd`` (``oa`` of the
+  ground is ``-g``), the link's inertia ``oY_i`` and force
+  ``of_i = oY_i oa_i + ov_i x* oY_i ov_i`` in E, and per dof
+  ``dVdq = ov_p x J``, ``dAdq = oa_p x J + ov_p x dVdq``,
+  ``dAdv = ov_i x J + dVdq``, with ``doY_i = ov_i x* oY_i - oY_i ov_i x +
+  (. x* oY_i ov_i)``;
+* inwards, with the composite ``oYc_i``, ``doYc_i`` and ``of_i`` of the
+  subtree: per dof ``dFda = oYc J``, ``dFdq0 = doYc dVdq + oYc dAdq``,
+  ``dFdq = dFdq0 + J x* of``, ``dFdv = doYc J + oYc dAdv``, ``dYtJ = doYc^T J``
+  (``doY`` has only two non-zero 3x3 blocks, :func:`_variation`, so ``dYtJ``
+  has no linear part).
+
+Then for a dof k of a joint and a dof l of a strict descendant
+``dQ_k/dq_l = J_k . dFdq_l``, ``dQ_l/dq_k = dFda_l . dAdq_k + dYtJ_l . dVdq_k``,
+``dQ_k/dv_l = J_k . dFdv_l``, ``dQ_l/dv_k = dFda_l . dAdv_k + dYtJ_l . J_k``,
+``M_kl = M_lk = J_k . dFda_l``, and for two dofs of one joint ``J_k . dFdq0_l``,
+``J_k . dFdv_l``, ``J_k . dFda_l``.  Entries of joints on different branches
+are zero.
+
+The per-joint part (O(n) statements) is a straight-line program here; the
+O(n depth) dot products are left to the generated C as a loop over the
+pairs of dofs on one branch (:attr:`RneaPartials.pairs`), so what is derived,
+eliminated and compiled grows with n, not n^2.  The effects that are neither
+gravity in E (the ground's acceleration) nor inertial forces (springs,
+dampers, friction, drag, the actions...) enter as their generalized forces
+(``Equations.tau_parts``), differentiated in forward mode
+(:func:`modelgen.derive.jacobian.differentiate`): they are small.  An
+armature adds to the diagonal of M.
+
+Ball and free joints are differentiated in the tangent space, Pinocchio's
+convention (:mod:`modelgen.derive.rnea_derivatives`): a column ``J_k`` is the
+motion of the link along its own constant ``S`` column.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import sympy
+
+from modelgen.derive.dynamics import Equations
+from modelgen.derive.graph import Graph, GraphBuilder
+from modelgen.derive.jacobian import accelerations, differentiate
+from modelgen.derive.joint_tree import JointTree
+from modelgen.derive.kinematics import quaternion_columns
+from modelgen.derive.recursion import ground_acceleration
+from modelgen.derive.rnea_derivatives import tangent_rows
+from modelgen.derive.spatial import (IDENTITY3, PAIRS, ZERO, ZERO3, add, cross, cross_motion,
+                                     dot, is_identity, matmul, matvec, name_vec, named,
+                                     rotation, skew, sub, symmetric, times, total, transpose)
+from modelgen.model.spec import ModelSpec
+
+#: the per-dof 6-vectors of :attr:`RneaPartials.vectors`, in their order
+VECTORS = ("J", "dAdq", "dVdq", "dAdv", "dFda", "dYtJ", "dFdq0", "dFdq", "dFdv")
+#: Above this many speeds ``-M^-1`` is applied by the articulated-body factor
+#: (:func:`articulated_factor`, O(n) a column), up to it by the sparse LDL^T
+#: of M (unrolled, O(n^2) a column for a chain but with no extra factor to
+#: derive); at the 20-link chain the LDL^T is the cheaper, at 50 the factor.
+ARTICULATED_SOLVE_ABOVE = 30
+#: operations of the five entries of one pair of dofs (k, l) in the C loop: three
+#: dot products of 6-vectors and two sums of one of 6 and one of 3 terms
+PAIR_OPERATIONS = 3 * 11 + 2 * 17
+
+
+@dataclass(frozen=True)
+class RneaPartials:
+    """Output of :func:`derive_rnea_partials`, over ``graph``.
+
+    ``vectors[k]``: the vectors of :data:`VECTORS` of speed k (51
+    expressions, vector after vector: 6 each but ``dYtJ``, whose linear part is
+    0); ``same``: the pairs ``(k, l)`` of dofs
+    of one joint (``k == l`` included), ``pairs``: ``(k, l)`` with l a dof of a
+    strict descendant of k's joint, both in the order the C loop runs.
+    ``factor``, ``dof_order``, ``dof_parent``: see the fields.
+    ``effects``: ``(dq, dv, du, M)``, n-row matrices (tuples of rows) of what
+    adds to the dot products: the effects' ``-d tau/d q`` (tangent space),
+    ``-d tau/d v``, ``-d tau/d u`` and the armature on M's diagonal.
+    """
+    graph: Graph
+    a: tuple
+    vectors: tuple
+    same: tuple
+    pairs: tuple
+    effects: tuple
+    #: the articulated-body factor of M in E, per speed k: ``U_k`` (6) and
+    #: ``1 / D_k`` (7 expressions), for ``-M^-1`` applied column by column
+    #: (:func:`articulated_factor`); empty up to :data:`ARTICULATED_SOLVE_ABOVE`
+    #: speeds
+    factor: tuple = ()
+    #: the speeds in the order of the factor's inward pass reversed (a parent's
+    #: before its children's, a joint's in its own order), and each one's
+    #: predecessor in that chain of dofs (-1: the ground)
+    dof_order: tuple = ()
+    dof_parent: tuple = ()
+
+    def pattern(self) -> tuple:
+        """n x n booleans: the entries of M that can be non-zero (one branch)."""
+        n = len(self.vectors)
+        out = [[False] * n for _ in range(n)]
+        for k, l in self.same + self.pairs:
+            out[k][l] = out[l][k] = True
+        return tuple(tuple(row) for row in out)
+
+    def effect_entries(self) -> tuple:
+        """``((array, index, expr), ...)``: the non-zero entries of :attr:`effects`,
+        ``array`` 0 dq, 1 dv, 2 M, 3 du, ``index`` row-major in it."""
+        dq, dv, du, M = self.effects
+        out = []
+        for array, rows in enumerate((dq, dv, M, du)):
+            for r, row in enumerate(rows):
+                out.extend((array, r * len(row) + c, e) for c, e in enumerate(row) if e != 0)
+        return tuple(out)
+
+    def runs(self) -> tuple:
+        """:attr:`pairs` as runs ``(k, first, end)``: the dofs ``first <= l < end``
+        (consecutive speeds) of strict descendants of k's joint, one run for each
+        k when the speeds are numbered depth first (a chain, most trees)."""
+        out = []
+        for k, l in self.pairs:
+            if out and out[-1][0] == k and out[-1][2] == l:
+                out[-1][2] = l + 1
+            else:
+                out.append([k, l, l + 1])
+        return tuple(tuple(r) for r in out)
+
+    def operations(self) -> int:
+        """Operations of the per-joint program and the effects (before CSE), and
+        of the dot products of the C loop (11 per dot product of two 6-vectors)."""
+        flat = [e for v in self.vectors for e in v] + \
+            [e for m in self.effects for row in m for e in row]
+        return self.graph.operations(flat) + 11 * (3 * len(self.same) + 8 * len(self.pairs))
+
+
+# -- the ground-frame algebra --------------------------------------------------------
+
+def _motion_to_ground(R, p, m):
+    """A link's motion vector ``m`` (link components) in E: ``(R w, R v + p x R w)``."""
+    w = matvec(R, m[:3])
+    return tuple(w) + add(matvec(R, m[3:]), cross(p, w))
+
+
+def _force_cross(v, f):
+    """``v x* f`` (Featherstone's crf)."""
+    return add(cross(v[:3], f[:3]), cross(v[3:], f[3:])) + cross(v[:3], f[3:])
+
+
+def _inertia_times(Y, x) -> tuple:
+    """``Y x`` for a spatial inertia ``Y = (I_O, h, m)``: ``(I_O w + h x v, m v - h x w)``."""
+    I, h, m = Y
+    w, v = x[:3], x[3:]
+    return add(matvec(I, w), cross(h, v)) + sub(tuple(times(m, c) for c in v), cross(h, w))
+
+
+def _variation(builder, Y, v, oh) -> tuple:
+    """``doY = v x* Y - Y v x + B(oh)`` with ``B(oh) x = x x* oh`` and ``oh = Y v``
+    (Pinocchio's ``Inertia::variation`` plus ``addForceCrossMatrix``), as ``(A, F)``:
+    its blocks are ``[[A, 0], [-2 F x, 0]]``.
+
+    With ``W = w x``, ``U = u x``, ``H = h x`` for ``v = (w, u)``: the top left block
+    is ``W I - I W - (U H + H U) - (n x)`` (``n`` the angular part of ``oh``),
+    the top right ``W H - H W + m U - (f x) = 0`` since ``f = m u + w x h``, and
+    the bottom left ``-(W H - H W + m U) - (f x) = -2 (f x)``.
+    """
+    I, h, m = Y
+    w, u = v[:3], v[3:]
+    n, f = oh[:3], oh[3:]
+    P = tuple(tuple(builder.name(x) for x in cross(w, tuple(I[r][c] for r in range(3))))
+              for c in range(3))              # P[c] = column c of W I
+    uh = builder.name(dot(u, h))
+    nx = skew(n)
+    A = tuple(tuple(total((P[c][r], P[r][c], -times(h[r], u[c]), -times(u[r], h[c]),
+                           times(2, uh) if r == c else ZERO,
+                           -nx[r][c] if nx[r][c] != 0 else ZERO))
+                    for c in range(3)) for r in range(3))
+    return tuple(name_vec(builder, row) for row in A), f
+
+
+def _variation_times(dY, x) -> tuple:
+    """``doY x`` for ``doY = (A, F)`` of :func:`_variation`."""
+    A, F = dY
+    w = x[:3]
+    return matvec(A, w) + tuple(times(-2, c) for c in cross(F, w))
+
+
+def _variation_T_times(dY, x) -> tuple:
+    """The angular part of ``doY^T x`` (its linear part is 0): ``A^T w + 2 F x v``."""
+    A, F = dY
+    return add(matvec(transpose(A), x[:3]), tuple(times(2, c) for c in cross(F, x[3:])))
+
+
+def _poses(builder, tree: JointTree) -> tuple:
+    """``(R, p)`` of every link: its rotation (link -> E components) and origin in E."""
+    poses = []
+    for joint in tree.joints:
+        R, p = poses[joint.parent] if joint.parent >= 0 else (IDENTITY3, ZERO3)
+        E, r = joint.fixed
+        if any(x != 0 for x in r):
+            p = name_vec(builder, add(p, matvec(R, r)))
+        if not is_identity(E):
+            R = tuple(name_vec(builder, row) for row in matmul(R, transpose(E)))
+        if joint.kind in ("ball", "free"):
+            if joint.position:
+                p = name_vec(builder, add(p, matvec(R, joint.position)))
+            # quaternion_columns: the columns of R(quat), rows of E = R(quat)^T
+            Rq = transpose(tuple(tuple(builder.name(x) for x in col)
+                                 for col in quaternion_columns(joint.quaternion)))
+            R = tuple(name_vec(builder, row) for row in matmul(R, Rq))
+        elif joint.kind == "revolute":
+            c, s = builder.name(sympy.cos(joint.angle)), builder.name(sympy.sin(joint.angle))
+            R = tuple(name_vec(builder, row)
+                      for row in matmul(R, transpose(rotation(joint.axis, c, s))))
+        else:
+            p = name_vec(builder, add(p, matvec(R, name_vec(builder, joint.offset))))
+        poses.append((R, p))
+    return tuple(poses)
+
+
+def _ground_inertia(builder, body, R, p) -> tuple:
+    """The link's spatial inertia ``(I_O, h, m)`` about E's origin in E components."""
+    I = symmetric(name_vec(builder, body.I))
+    h = name_vec(builder, body.h)
+    m = builder.name(body.m)
+    Ir = matmul(R, matmul(I, transpose(R)))
+    hr = name_vec(builder, matvec(R, h))
+    ph = dot(p, hr)
+    pp = dot(p, p)
+    entries = []
+    for a, b in PAIRS:
+        e = total((Ir[a][b], -times(m, times(p[a], p[b])), -times(p[a], hr[b]),
+                   -times(hr[a], p[b])))
+        if a == b:
+            e = total((e, times(m, pp), times(2, ph)))
+        entries.append(e)
+    I_O = symmetric(name_vec(builder, entries))
+    h_O = name_vec(builder, add(hr, tuple(times(m, x) for x in p)))
+    return I_O, h_O, m
+
+
+# -- the algorithm ---------------------------------------------------------------------
+
+def derive_rnea_partials(eqs: Equations, tree: JointTree, spec: ModelSpec,
+                         graph: Graph | None = None) -> RneaPartials:
+    """The per-dof vectors of the recursive derivatives of inverse dynamics of a
+    joint tree, and the effects' derivatives, built over ``graph`` (default
+    ``eqs.graph``).
+
+    >>> from modelgen.model.chains import spatial_chain
+    >>> from modelgen.derive.kinematics import derive_kinematics
+    >>> from modelgen.derive.dynamics import derive_equations
+    >>> from modelgen.derive.joint_tree import extract_joint_tree
+    >>> spec = spatial_chain(3).spec()
+    >>> d = derive_rnea_partials(derive_equations(derive_kinematics(spec)),
+    ...                          extract_joint_tree(spec), spec)
+    >>> len(d.vectors), len(d.vectors[0]), d.same, d.pairs
+    (3, 51, ((0, 0), (1, 1), (2, 2)), ((0, 1), (0, 2), (1, 2)))
+    """
+    builder = GraphBuilder(graph or eqs.graph)
+    n = len(eqs.qd)
+    a = accelerations(n)
+    qd = eqs.qd
+    a0, gravity_labels = ground_acceleration(spec)
+    count = len(tree.joints)
+    poses = _poses(builder, tree)
+    J, ov, oa, Y, doY, of = {}, [None] * count, [None] * count, [None] * count, \
+        [None] * count, [None] * count
+    dVdq, dAdq, dAdv = {}, {}, {}
+    for i, joint in enumerate(tree.joints):
+        R, p = poses[i]
+        par = joint.parent
+        ov_p = ov[par] if par >= 0 else (ZERO,) * 6
+        oa_p = oa[par] if par >= 0 else tuple(a0)
+        for k, S in joint.dofs:
+            J[k] = name_vec(builder, _motion_to_ground(R, p, S))
+        vJ = tuple(total(times(J[k][r], qd[k]) for k, _ in joint.dofs) for r in range(6))
+        aJ = tuple(total(times(J[k][r], a[k]) for k, _ in joint.dofs) for r in range(6))
+        vJ = name_vec(builder, vJ)
+        ov[i] = name_vec(builder, add(ov_p, vJ))
+        oa[i] = name_vec(builder, add(add(oa_p, aJ), cross_motion(ov[i], vJ)))
+        Y[i] = _ground_inertia(builder, tree.inertias[i], R, p)
+        oh = name_vec(builder, _inertia_times(Y[i], ov[i]))
+        of[i] = name_vec(builder, add(_inertia_times(Y[i], oa[i]), _force_cross(ov[i], oh)))
+        doY[i] = _variation(builder, Y[i], ov[i], oh)
+        for k, _ in joint.dofs:
+            dV = name_vec(builder, cross_motion(ov_p, J[k]))
+            dVdq[k] = dV
+            dAdq[k] = name_vec(builder, add(cross_motion(oa_p, J[k]), cross_motion(ov_p, dV)))
+            dAdv[k] = name_vec(builder, add(cross_motion(ov[i], J[k]), dV))
+    # inwards: composite inertias, their variations and forces, leaves first
+    Yc, dYc, fc = list(Y), list(doY), list(of)
+    vectors = {}
+    for i in reversed(range(count)):
+        joint = tree.joints[i]
+        for k, _ in joint.dofs:
+            dFda = name_vec(builder, _inertia_times(Yc[i], J[k]))
+            dFdq0 = name_vec(builder, add(_variation_times(dYc[i], dVdq[k]),
+                                          _inertia_times(Yc[i], dAdq[k])))
+            dFdq = name_vec(builder, add(dFdq0, _force_cross(J[k], fc[i])))
+            dFdv = name_vec(builder, add(_variation_times(dYc[i], J[k]),
+                                         _inertia_times(Yc[i], dAdv[k])))
+            dYtJ = name_vec(builder, _variation_T_times(dYc[i], J[k]))
+            vectors[k] = (J[k], dAdq[k], dVdq[k], dAdv[k], dFda, dYtJ, dFdq0, dFdq, dFdv)
+        par = joint.parent
+        if par >= 0:
+            (Ip, hp, mp), (Ii, hi, mi) = Yc[par], Yc[i]
+            Yc[par] = (tuple(name_vec(builder, add(a, b)) for a, b in zip(Ip, Ii, strict=True)),
+                       name_vec(builder, add(hp, hi)), builder.name(mp + mi))
+            (Ap, Fp), (Ai, Fi) = dYc[par], dYc[i]
+            dYc[par] = (tuple(name_vec(builder, add(a, b)) for a, b in zip(Ap, Ai, strict=True)),
+                        name_vec(builder, add(Fp, Fi)))
+            fc[par] = name_vec(builder, add(fc[par], fc[i]))
+    same, pairs = _dof_pairs(tree)
+    order, parent = _dof_chain(tree)
+    factor = (articulated_factor(builder, order, parent, J, Y, tree)
+              if n > ARTICULATED_SOLVE_ABOVE else None)
+    graph, effects = _effects(builder.freeze(), eqs, tree, gravity_labels)
+    return RneaPartials(graph, a, tuple(tuple(e for vec in vectors[k] for e in vec)
+                                        for k in range(n)), same, pairs, effects,
+                        tuple(factor[k] for k in range(n)) if factor else (), order, parent)
+
+
+def _dof_chain(tree: JointTree) -> tuple:
+    """``(order, parent)``: the speeds, a joint's in its own order after its parent's,
+    and each speed's predecessor (the previous dof of its joint, else the last of
+    the parent joint's, else -1): a ball or free joint is a chain of one-dof joints
+    between massless links."""
+    order, parent, last = [], {}, {}
+    for i, joint in enumerate(tree.joints):
+        prev = last[joint.parent] if joint.parent >= 0 else -1
+        for k, _ in joint.dofs:
+            order.append(k)
+            parent[k] = prev
+            prev = k
+        last[i] = prev
+    return tuple(order), tuple(parent[k] for k in range(len(order)))
+
+
+def _sym6(Y) -> list:
+    """The 6x6 rows of a rigid-body inertia ``(I_O, h, m)``."""
+    I, h, m = Y
+    hx = skew(h)
+    return [list(I[r]) + list(hx[r]) for r in range(3)] + \
+        [[-hx[r][c] if hx[r][c] != 0 else ZERO for c in range(3)]
+         + [m if r == c else ZERO for c in range(3)] for r in range(3)]
+
+
+def articulated_factor(builder, order, parent, J, Y, tree: JointTree) -> dict:
+    """{speed k: (U_k (6), 1 / D_k)}: the articulated-body inertias in E
+    (Featherstone §7.3, every quantity in one frame, so no transforms) with the
+    dofs as a chain of one-dof joints: inwards ``U_k = IA_k J_k``,
+    ``D_k = J_k . U_k + armature_k`` and ``IA_p += IA_k - U_k U_k^T / D_k``
+    for the predecessor p, ``IA_k`` starting as the inertia of k's link when k
+    is its joint's last dof.  ``-M^-1 b`` is then, inwards,
+    ``w_k = (b_k - J_k . P_k) / D_k``, ``P_p += P_k + U_k w_k``, and outwards
+    ``x_k = w_k - U_k . A_p / D_k``, ``A_k = A_p + J_k x_k`` (the C loop)."""
+    link = {}
+    for i, joint in enumerate(tree.joints):
+        link[joint.dofs[-1][0]] = i
+    IA = {k: _sym6(Y[link[k]]) for k in link}
+    out = {}
+    for k in reversed(order):
+        A = IA.pop(k)
+        U = name_vec(builder, [dot(row, J[k]) for row in A])
+        arm = tree.armature[k] if tree.armature else ZERO
+        d = builder.name(total((dot(J[k], U), arm)))
+        inv = builder.name(1 / d)
+        out[k] = U + (inv,)
+        p = parent[k]
+        if p < 0:
+            continue
+        Uw = name_vec(builder, [times(inv, x) for x in U])
+        # IA - U U^T / D: symmetric, each entry named once
+        child = [[None] * 6 for _ in range(6)]
+        for r in range(6):
+            for c in range(r, 6):
+                child[r][c] = child[c][r] = total((A[r][c], -times(U[r], Uw[c])))
+        if p in IA:
+            child = [[total((x, y)) for x, y in zip(ra, rb, strict=True)]
+                     for ra, rb in zip(IA[p], child, strict=True)]
+        elif p in link:
+            child = [[total((x, y)) for x, y in zip(ra, rb, strict=True)]
+                     for ra, rb in zip(_sym6(Y[link[p]]), child, strict=True)]
+        named6 = [[None] * 6 for _ in range(6)]
+        for r in range(6):
+            for c in range(r, 6):
+                named6[r][c] = named6[c][r] = named(builder, child[r][c])
+        IA[p] = named6
+    return out
+
+
+def _dof_pairs(tree: JointTree) -> tuple:
+    """``(same, pairs)`` of :class:`RneaPartials`."""
+    same, pairs = [], []
+    below = [[] for _ in tree.joints]         # the strict descendants of each joint
+    for i in reversed(range(len(tree.joints))):
+        par = tree.joints[i].parent
+        if par >= 0:
+            below[par] = [i] + below[i] + below[par]
+    for i, joint in enumerate(tree.joints):
+        dofs = [k for k, _ in joint.dofs]
+        same.extend((k, l) for k in dofs for l in dofs)
+        pairs.extend((k, l) for k in dofs
+                     for l in sorted(m for j in below[i] for m, _ in tree.joints[j].dofs))
+    return tuple(same), tuple(pairs)
+
+
+def _effects(graph: Graph, eqs: Equations, tree: JointTree, gravity_labels) -> tuple:
+    """``(graph, (dq, dv, du, M))``: minus the derivatives of the generalized forces of
+    every effect but gravity in E, and the armature on M's diagonal."""
+    n, nq, nu = len(eqs.qd), len(eqs.q), len(eqs.u)
+    others = [part for label, part in eqs.tau_parts if label not in set(gravity_labels)]
+    zero = tuple(tuple(ZERO for _ in range(n)) for _ in range(n))
+    M = tuple(tuple((tree.armature[k] if tree.armature and k == l else ZERO)
+                    for l in range(n)) for k in range(n))
+    if not others:
+        return graph, (zero, zero, tuple(tuple(ZERO for _ in range(nu)) for _ in range(n)), M)
+    builder = GraphBuilder(graph)
+    tau = [named(builder, -sympy.Add(*[part[k] for part in others])) for k in range(n)]
+    graph, rows = differentiate(builder.freeze(), tau, tuple(eqs.q) + tuple(eqs.qd)
+                                + tuple(eqs.u))
+    dv = tuple(tuple(row[nq:nq + n]) for row in rows)
+    du = tuple(tuple(row[nq + n:]) for row in rows)
+    dq_full = [row[:nq] for row in rows]
+    if nq == n:
+        dq = tuple(tuple(row) for row in dq_full)
+    else:
+        graph, dq = tangent_rows(graph, eqs, dq_full)
+    return graph, (dq, dv, du, M)
+
+
+__all__ = ["ARTICULATED_SOLVE_ABOVE", "PAIR_OPERATIONS", "RneaPartials", "VECTORS", "articulated_factor",
+           "derive_rnea_partials"]
