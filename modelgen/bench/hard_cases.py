@@ -9,7 +9,7 @@ the curves worth plotting.  ``bench/hard_cases.py`` runs them all and writes
 The models and closed forms are in :mod:`modelgen.bench.hard_case_models`.
 
 >>> sorted(CASES)[:3]
-['chain_conditioning', 'energy_long_run', 'fixed_step_implicit']
+['bicycle_capsize', 'chain_conditioning', 'energy_long_run']
 """
 from __future__ import annotations
 
