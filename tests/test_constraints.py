@@ -1,6 +1,7 @@
 """Constrained models (``constraints:``): the rhs against sympy.physics.mechanics
-``KanesMethod`` with dependent speeds and velocity constraints, written here by
-hand (nothing shared with modelgen but the parameter values), and a four-bar's
+``KanesMethod`` with dependent speeds and velocity constraints, written by hand
+in ``constrained_references.py`` (nothing shared with modelgen but the parameter
+values), and a four-bar's
 position against Freudenstein's closed form.
 """
 from __future__ import annotations
@@ -10,14 +11,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 import sympy
-from sympy.physics.mechanics import (
-    KanesMethod,
-    Point,
-    ReferenceFrame,
-    RigidBody,
-    dynamicsymbols,
-    inertia,
-)
+from sympy.physics.mechanics import dynamicsymbols
+
+from constrained_references import four_bar_kane, rolling_disc_kane
 
 import modelgen
 from modelgen.errors import ModelError
@@ -57,66 +53,12 @@ def _kane_accelerations(kane, q, u, u_ind, u_dep, vc, params):
 
 
 def four_bar_reference(values):
-    q1, q2, q3 = q = list(dynamicsymbols("q1:4"))
-    u1, u2, u3 = u = list(dynamicsymbols("u1:4"))
-    a, b, c, d, m1, m2, m3, g = syms = sympy.symbols("a b c d m1 m2 m3 g")
-    N = ReferenceFrame("N")
-    frames = [N.orientnew(f"B{k}", "Axis", (qk, N.z)) for k, qk in enumerate(q, 1)]
-    for f, uk in zip(frames, u):
-        f.set_ang_vel(N, uk * N.z)
-    O = Point("O")
-    O.set_vel(N, 0)
-    D = O.locatenew("D", d * N.x)
-    P1 = O.locatenew("P1", a * frames[0].x)
-    G1 = O.locatenew("G1", a / 2 * frames[0].x)
-    P2 = P1.locatenew("P2", b * frames[1].x)
-    G2 = P1.locatenew("G2", b / 2 * frames[1].x)
-    P3 = D.locatenew("P3", c * frames[2].x)
-    G3 = D.locatenew("G3", c / 2 * frames[2].x)
-    kd = [qk.diff(t) - uk for qk, uk in zip(q, u)]
-    qd_to_u = {qk.diff(t): uk for qk, uk in zip(q, u)}
-    for P in (G1, G2, G3):
-        P.set_vel(N, P.pos_from(O).dt(N).subs(qd_to_u))
-    bodies = []
-    for name, G, f, m, L in (("crank", G1, frames[0], m1, a), ("coupler", G2, frames[1], m2, b),
-                             ("rocker", G3, frames[2], m3, c)):
-        bodies.append(RigidBody(name, G, f, m, (inertia(f, 0, m * L**2 / 12, m * L**2 / 12), G)))
-    loads = [(G, -body.mass * g * N.y) for G, body in zip((G1, G2, G3), bodies)]
-    loop = P2.pos_from(O) - P3.pos_from(O)
-    f = [loop.dot(N.x), loop.dot(N.y)]
-    vc = [sympy.diff(fi, t).subs(qd_to_u) for fi in f]
-    kane = KanesMethod(N, q_ind=[q1], u_ind=[u1], kd_eqs=kd, q_dependent=[q2, q3],
-                       configuration_constraints=f, u_dependent=[u2, u3],
-                       velocity_constraints=vc)
-    kane.kanes_equations(bodies, loads)
-    params = dict(zip(syms, values))
-    return _kane_accelerations(kane, q, u, [u1], [u2, u3], vc, params)
+    kane, q, u, syms, vc = four_bar_kane()
+    return _kane_accelerations(kane, q, u, u[:1], u[1:], vc, dict(zip(syms, values)))
 
 
 def rolling_disc_reference(values):
-    q1, q2, q3, x, y = q = list(dynamicsymbols("q1:4 x y"))
-    u = list(dynamicsymbols("u1:6"))
-    m, r, g = syms = sympy.symbols("m r g")
-    N = ReferenceFrame("N")
-    Y = N.orientnew("Y", "Axis", (q1, N.z))
-    L = Y.orientnew("L", "Axis", (q2, Y.x))
-    R = L.orientnew("R", "Axis", (q3, L.y))
-    qd_to_u = {qk.diff(t): uk for qk, uk in zip(q, u)}
-    for fr in (Y, L, R):
-        fr.set_ang_vel(N, fr.ang_vel_in(N).subs(qd_to_u))
-    O = Point("O")
-    O.set_vel(N, 0)
-    C = O.locatenew("C", x * N.x + y * N.y)
-    Dm = C.locatenew("Dm", r * L.z)
-    Dm.set_vel(N, Dm.pos_from(O).dt(N).subs(qd_to_u))
-    contact = Dm.vel(N) + R.ang_vel_in(N).cross(C.pos_from(Dm))
-    vc = [contact.dot(N.x), contact.dot(N.y)]
-    disc = RigidBody("disc", Dm, R, m, (inertia(R, m * r**2 / 4, m * r**2 / 2, m * r**2 / 4),
-                                        Dm))
-    kd = [qk.diff(t) - uk for qk, uk in zip(q, u)]
-    kane = KanesMethod(N, q_ind=q, u_ind=u[:3], kd_eqs=kd, u_dependent=u[3:],
-                       velocity_constraints=vc)
-    kane.kanes_equations([disc], [(Dm, -m * g * N.z)])
+    kane, q, u, syms, vc = rolling_disc_kane()
     return _kane_accelerations(kane, q, u, u[:3], u[3:], vc, dict(zip(syms, values)))
 
 
