@@ -18,6 +18,26 @@ from sympy.physics.mechanics import (
 
 t = dynamicsymbols._t
 
+#: A disc rolling without slip, written with the ``rolling`` constraint kind (its
+#: centre's three coordinates, the height dependent).
+WHEEL_DISC = """\
+name: wheel_disc
+coordinates: [q1, q2, q3, x, y, z]
+parameters: {m: 1.0, r: 0.5, g: 9.81}
+bases:
+  Y: {parent: E, axis: 3, angle: q1}
+  L: {parent: Y, axis: 1, angle: q2}
+  R: {parent: L, axis: 2, angle: q3}
+points:
+  Gd: {coordinates: [x, y, z]}
+bodies:
+  disc: {mass: m, G: Gd, base: R, inertia: [m*r**2/4, m*r**2/2, m*r**2/4]}
+gravity: [0, 0, -g]
+constraints:
+  wheel: {type: rolling, body: disc, axle: 2, radius: r}
+dependent: {coordinates: [z], speeds: [x_dot, y_dot, z_dot]}
+"""
+
 
 def rolling_disc_kane():
     """models/rolling_disc.yaml: yaw q1, lean q2, spin q3, contact (x, y); the two

@@ -13,7 +13,7 @@ import pytest
 import sympy
 from sympy.physics.mechanics import dynamicsymbols
 
-from constrained_references import four_bar_kane, rolling_disc_kane
+from constrained_references import WHEEL_DISC, four_bar_kane, rolling_disc_kane
 
 import modelgen
 from modelgen.errors import ModelError
@@ -285,23 +285,6 @@ def test_dependent_speeds_chosen_by_pivoting_give_the_same_motion(tmp_path, four
     assert worst <= 1e-12, worst
 
 
-WHEEL_DISC = """
-name: wheel_disc
-coordinates: [q1, q2, q3, x, y, z]
-parameters: {m: 1.0, r: 0.5, g: 9.81}
-bases:
-  Y: {parent: E, axis: 3, angle: q1}
-  L: {parent: Y, axis: 1, angle: q2}
-  R: {parent: L, axis: 2, angle: q3}
-points:
-  Gd: {coordinates: [x, y, z]}
-bodies:
-  disc: {mass: m, G: Gd, base: R, inertia: [m*r**2/4, m*r**2/2, m*r**2/4]}
-gravity: [0, 0, -g]
-constraints:
-  wheel: {type: rolling, body: disc, axle: 2, radius: r}
-dependent: {coordinates: [z], speeds: [x_dot, y_dot, z_dot]}
-"""
 
 
 def test_rolling_helper_moves_as_the_written_out_disc(tmp_path, rolling_disc):

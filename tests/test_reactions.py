@@ -24,6 +24,8 @@ from sympy.physics.mechanics import (
     inertia,
 )
 
+from constrained_references import WHEEL_DISC
+
 import modelgen
 from modelgen.errors import ModelError
 from modelgen.model.scene import parse_scene
@@ -206,23 +208,6 @@ outputs:
         assert np.abs(r).max() < 1e-12 * scale
 
 
-WHEEL_DISC = """\
-name: wheel_disc
-coordinates: [q1, q2, q3, x, y, z]
-parameters: {m: 1.0, r: 0.5, g: 9.81}
-bases:
-  Y: {parent: E, axis: 3, angle: q1}
-  L: {parent: Y, axis: 1, angle: q2}
-  R: {parent: L, axis: 2, angle: q3}
-points:
-  Gd: {coordinates: [x, y, z]}
-bodies:
-  disc: {mass: m, G: Gd, base: R, inertia: [m*r**2/4, m*r**2/2, m*r**2/4]}
-gravity: [0, 0, -g]
-constraints:
-  wheel: {type: rolling, body: disc, axle: 2, radius: r}
-dependent: {coordinates: [z], speeds: [x_dot, y_dot, z_dot]}
-"""
 
 
 def test_rolling_contact_force_is_newtons_law_on_the_disc(tmp_path):

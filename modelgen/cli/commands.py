@@ -182,46 +182,38 @@ def import_command(args) -> int:
     if Path(args.urdf).suffix.lower() == ".xml":
         return _import_mjcf(args)
     from modelgen.model.urdf import import_urdf, urdf_to_yaml
-    from modelgen.sim.result import replacing
     imported = import_urdf(args.urdf, fix_floating_root=args.fix_floating_root,
                            inertial_parameters=args.inertial_parameters,
                            floating_base=args.floating_base, **_reading(args))
-    spec = imported.model.spec()
-    out = Path(args.output) if args.output else Path(args.urdf).with_suffix(".yaml")
-    text = urdf_to_yaml(imported)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    with replacing(out) as part:        # no cut model file under the final name
-        part.write_text(text)
-    print(f"model      {spec.name}  ({args.urdf})")
-    sizes = f"{spec.n} coordinates" if spec.nq == spec.n else \
-        f"{spec.nq} coordinates, {spec.n} speeds"
-    print(f"n          {sizes}, {len(spec.bodies)} bodies, "
-          f"{len(spec.inputs)} inputs, {len(spec.effects)} joint effects")
-    for note in imported.notes:
-        print(f"note       {note}")
-    print(f"wrote      {out}")
-    return 0
+    return _write_import(args, imported, urdf_to_yaml(imported), inputs=True)
 
 
 def _import_mjcf(args) -> int:
     """``modelgen import robot.xml``: an MJCF file compiled by MuJoCo (docs/mjcf.md)."""
     from modelgen.model.mjcf import import_mjcf, mjcf_to_yaml
-    from modelgen.sim.result import replacing
     if args.fix_floating_root or args.floating_base or args.inertial_parameters:
         print("error: --fix-floating-root, --floating-base and --inertial-parameters apply "
               "to a URDF file; an MJCF model declares its free joints itself", file=sys.stderr)
         return 2
     imported = import_mjcf(args.urdf)
+    return _write_import(args, imported, mjcf_to_yaml(imported), inputs=False)
+
+
+def _write_import(args, imported, text: str, *, inputs: bool) -> int:
+    """Write an imported model's YAML ``text`` (to -o, else beside the source) and
+    report it; ``inputs``: the import made one input per joint (URDF)."""
+    from modelgen.sim.result import replacing
     spec = imported.model.spec()
     out = Path(args.output) if args.output else Path(args.urdf).with_suffix(".yaml")
-    text = mjcf_to_yaml(imported)
     out.parent.mkdir(parents=True, exist_ok=True)
     with replacing(out) as part:        # no cut model file under the final name
         part.write_text(text)
     print(f"model      {spec.name}  ({args.urdf})")
     sizes = f"{spec.n} coordinates" if spec.nq == spec.n else \
         f"{spec.nq} coordinates, {spec.n} speeds"
-    print(f"n          {sizes}, {len(spec.bodies)} bodies, {len(spec.effects)} joint effects")
+    counts = f"{len(spec.inputs)} inputs, " if inputs else ""
+    print(f"n          {sizes}, {len(spec.bodies)} bodies, {counts}"
+          f"{len(spec.effects)} joint effects")
     for note in imported.notes:
         print(f"note       {note}")
     print(f"wrote      {out}")

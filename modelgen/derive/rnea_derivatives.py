@@ -43,11 +43,10 @@ from modelgen.derive.graph import Graph, GraphBuilder
 from modelgen.derive.jacobian import accelerations, differentiate
 from modelgen.derive.joint_tree import JointTree
 from modelgen.derive.recursion import (
-    action_force,
-    ground_acceleration,
     joint_motion,
     joint_velocity,
     link_force,
+    link_loads,
     link_velocities,
     to_parent_force,
 )
@@ -92,17 +91,7 @@ def rnea_with_loads(builder: GraphBuilder, eqs: Equations, tree: JointTree, spec
     as the ground's acceleration and the actions as link forces; the other
     effects' generalized forces are subtracted."""
     n = len(eqs.qd)
-    a0, labels = ground_acceleration(spec)
-    actions = list(spec.actions) + [e for e in spec.effects if e.kind == "action"]
-    local = set(labels) | {act.name for act in actions}
-    others = [part for label, part in eqs.tau_parts if label not in local]
-    link_of = dict(tree.body_links)
-    external: dict = {}
-    for act in actions:
-        i = link_of[act.body]
-        if i >= 0:
-            f = action_force(builder, spec, tree.joints[i], act)
-            external[i] = name_vec(builder, add(external[i], f)) if i in external else f
+    a0, tau, external = link_loads(builder, eqs, tree, spec)
     v, c = link_velocities(builder, tree, eqs.qd)
     count = len(tree.joints)
     acc, force = [None] * count, [None] * count
@@ -123,9 +112,7 @@ def rnea_with_loads(builder: GraphBuilder, eqs: Equations, tree: JointTree, spec
             force[p] = name_vec(builder, add(force[p], to_parent_force(builder, joint, force[i])))
     # a rotor's reflected inertia acts on its own dof only: armature_k qdd_k
     armature = tree.armature or (0,) * n
-    return tuple(named(builder, out[k] + armature[k] * qdd[k]
-                       - sympy.Add(*[part[k] for part in others]))
-                 for k in range(n))
+    return tuple(named(builder, out[k] + armature[k] * qdd[k] - tau[k]) for k in range(n))
 
 
 def derive_inverse_dynamics_derivatives(eqs: Equations, tree: JointTree, spec: ModelSpec,
@@ -189,5 +176,4 @@ def tangent_rows(graph: Graph, eqs: Equations, dq_full) -> tuple:
 
 
 __all__ = ["InverseDynamicsDerivatives", "derive_inverse_dynamics_derivatives",
-           "differentiate_inverse_dynamics", "tangent_rows",
-           "ground_acceleration", "rnea_with_loads"]
+           "differentiate_inverse_dynamics", "tangent_rows", "rnea_with_loads"]
