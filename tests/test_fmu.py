@@ -70,7 +70,7 @@ def _steps(times, values):
 
 # -- the archive and its model description ---------------------------------------------
 
-@pytest.mark.parametrize("name", ["dp_free", "cart_pole", "arm7"])
+@pytest.mark.parametrize("name", ["dp_free", "cart_pole", "arm7", "four_bar"])
 def test_fmpy_validates_the_fmu_with_no_problem(fmus, name, capsys):
     fmu = fmus(name)
     problems = validate_fmu(str(fmu.path))
@@ -252,6 +252,86 @@ def test_co_simulation_of_a_scene_repeats_its_fixed_steps_exactly(fmus, build_ro
     assert dev < 1e-11
 
 
+# -- a constrained model under Model Exchange -------------------------------------------
+
+def _four_bar_start(build_root, crank_speed=2.0):
+    cm = modelgen.load(MODELS / "four_bar.yaml", build_root / "four_bar")
+    q0 = cm.assemble([0.3, 1.0, 2.0], keep=["q1"])
+    x0 = np.concatenate([q0, cm.consistent_speeds(q0, [crank_speed, 0.0, 0.0])])
+    return cm, dict(zip(cm.state_names, x0))
+
+
+def _violations(cm, result):
+    """max |f(q)| and max |G qd| at each recorded row, computed by the model's own C."""
+    X = np.array([result[s] for s in cm.state_names])
+    f = np.array([np.max(np.abs(cm.constraint_residuals(x[:cm.nq]))) for x in X.T])
+    g = np.array([np.max(np.abs(cm.constraint_jacobian(x[:cm.nq]) @ x[cm.nq:])) for x in X.T])
+    return f, g
+
+
+def test_model_exchange_projects_a_constrained_model_onto_its_constraints(fmus, build_root):
+    """FMPy's CVode (rtol 1e-6) drives the four-bar for 100 s.  With
+    fmi2CompletedIntegratorStep (the model description asks for it) the FMU asks
+    for an event whenever the loop's residual or G qd exceeds the states'
+    absolute tolerance and projects in fmi2NewDiscreteStates: every recorded row
+    is within it.  The same run with the call switched off in the description
+    (so no projection) drifts off, more at the end than after 10 s."""
+    fmu = fmus("four_bar")
+    md = read_model_description(str(fmu.path))
+    assert md.modelExchange.needsCompletedIntegratorStep
+    assert not read_model_description(str(fmus("cart_pole").path)) \
+        .modelExchange.needsCompletedIntegratorStep
+    cm, start = _four_bar_start(build_root)
+    rtol = 1e-6
+    tol = CS_ATOL * rtol / CS_RTOL      # fmi2SetupExperiment scales atol with the tolerance
+    runs = {}
+    for project in (True, False):
+        md = read_model_description(str(fmu.path))
+        md.modelExchange.needsCompletedIntegratorStep = project
+        result = simulate_fmu(str(fmu.path), fmi_type="ModelExchange", solver="CVode",
+                              relative_tolerance=rtol, start_time=0.0, stop_time=100.0,
+                              output_interval=0.05, start_values=start, model_description=md,
+                              output=list(cm.state_names), record_events=False)
+        assert result["time"][-1] == pytest.approx(100.0)
+        runs[project] = _violations(cm, result)
+    (f, g), (f_off, g_off) = runs[True], runs[False]
+    SUMMARY.append(f"fmu four_bar: Model Exchange (FMPy CVode, rtol {rtol:g}) over 100 s: "
+                   f"max |f| {f.max():.1e}, |G qd| {g.max():.1e} with the projection "
+                   f"(tolerance {tol:.0e}); {f_off.max():.1e}, {g_off.max():.1e} without")
+    assert f.max() <= tol and g.max() <= tol
+    assert f_off.max() > 100 * tol and g_off.max() > 100 * tol
+    assert f_off[-200:].max() > 5 * f_off[:200].max()         # about linear in t
+
+
+def test_model_exchange_through_a_dead_point_is_an_error_naming_it(build_root, tmp_path):
+    """The rocker-driven four-bar (crank and coupler dependent) reaches a dead point
+    at t = 0.31 s: under Model Exchange fmi2CompletedIntegratorStep sees det G_d
+    change sign and fails with the dead point named, under Co-Simulation
+    fmi2DoStep fails with mg_integrate's status; never a silent crossing or NaN."""
+    from modelgen.bench import hard_case_models as hm
+    path = tmp_path / "hc_four_bar_rocker.yaml"
+    path.write_text(hm.FOUR_BAR_ROCKER)
+    fmu = build_fmu(path, tmp_path / "rocker.fmu", out_dir=build_root / "hc_four_bar_rocker")
+    cm = modelgen.load(path, build_root / "hc_four_bar_rocker")
+    q0 = cm.assemble([0.0, 1.2, 2.0], keep=["q3"])
+    start = dict(zip(cm.state_names,
+                     np.concatenate([q0, cm.consistent_speeds(q0, [0.0, 0.0, 3.0])])))
+    messages = []
+    with pytest.raises(FMICallException):
+        simulate_fmu(str(fmu.path), fmi_type="ModelExchange", solver="CVode",
+                     relative_tolerance=1e-6, start_time=0.0, stop_time=5.0,
+                     output_interval=0.01, start_values=start,
+                     logger=lambda *args: messages.append(args[-1].decode()))
+    assert any("dead point" in m and "t = 0.3" in m for m in messages), messages
+    # Co-Simulation: mg_integrate's own status, through fmi2DoStep
+    messages.clear()
+    with pytest.raises(FMICallException):
+        simulate_fmu(str(fmu.path), fmi_type="CoSimulation", start_time=0.0, stop_time=5.0,
+                     output_interval=0.01, start_values=start,
+                     logger=lambda *args: messages.append(args[-1].decode()))
+    assert any("MG_STATUS_DEAD_POINT" in m for m in messages), messages
+
+
 def test_the_sources_rebuild_the_binary(fmus, tmp_path):
     """sources/ is complete: compiled alone (as an importer on another platform would),
     it gives a library that FMPy runs to the same result."""
@@ -277,15 +357,16 @@ def test_the_sources_rebuild_the_binary(fmus, tmp_path):
     assert np.max(np.abs(original["theta"] - start["theta"])) > 0.01   # it did move
 
 
-def test_the_wrapper_compiles_as_strict_c99_and_as_cpp(fmus, tmp_path):
-    fmu = fmus("dp_free")
+@pytest.mark.parametrize("name", ["dp_free", "four_bar"])
+def test_the_wrapper_compiles_as_strict_c99_and_as_cpp(fmus, tmp_path, name):
+    fmu = fmus(name)
     with zipfile.ZipFile(fmu.path) as z:
         z.extractall(tmp_path)
     sources = tmp_path / "sources"
     for command in ([*compiler(), "-std=c99", "-pedantic"],
                     ["c++", "-x", "c++", "-std=c++11"]):
         proc = subprocess.run([*command, "-Wall", "-Wextra", "-Werror", "-I.", "-c",
-                               "dp_free_fmi2.c", "-o", "wrapper.o"], cwd=sources,
+                               f"{name}_fmi2.c", "-o", "wrapper.o"], cwd=sources,
                               capture_output=True, text=True)
         assert proc.returncode == 0, proc.stdout + proc.stderr
 

@@ -25,7 +25,7 @@ import re
 from typing import NamedTuple
 
 #: Version of the C interface (model functions and mg_integrate), checked by the loader.
-ABI_VERSION = 7
+ABI_VERSION = 8
 #: Prefix of every constant, type and function of the model-independent C.
 PREFIX = "MG"
 
@@ -93,6 +93,10 @@ STATUSES = (
                               "t={t_fail!r} (Gauss-Newton did not converge, or the dependent "
                               "speeds are not determined there: a dead point); last good state "
                               "at t={t!r}: x={x}."),
+    Status(-11, "DEAD_POINT", "The configuration passed through a singularity of its "
+                              "coordinates between t={t!r} and t={t_fail!r}: the orientation of "
+                              "the system's chart changed sign (a dead point); last good state "
+                              "at t={t!r}: x={x}."),
 )
 STATUS = {s.code: s for s in STATUSES}
 STATUS_BY_NAME = {s.name: s for s in STATUSES}
@@ -145,6 +149,11 @@ STRUCTS = (
          "NULL, or puts x back on its manifold (unit quaternions of ball and free joints, "
          "the constraints) after each accepted step and at the start; returns 0, or "
          "nonzero when it cannot (status PROJECTION)"),
+        ("int (*orientation)(void *model, const double *p, const double *x)", "orientation",
+         "NULL, or the sign (1 or -1, 0 if singular) of the determinant of the chart x is "
+         "written in (a constrained model: the constraint Jacobian's dependent columns); "
+         "recorded at the start, a change after an accepted step stops the run (status "
+         "DEAD_POINT): the configuration passed through a singularity of that chart"),
         ("void *", "model", "passed as the first argument of the functions above"),
     )),
     ("mg_inputs", "The inputs u(t): none, samples, or a callback.", (

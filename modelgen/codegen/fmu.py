@@ -266,8 +266,10 @@ def _number(value: float) -> str:
 
 
 def model_description(name: str, description: str, guid: str, variables, settings,
-                      sources, experiment=None) -> str:
-    """The text of ``modelDescription.xml`` (FMI 2.0, naming convention flat)."""
+                      sources, experiment=None, completed_step_needed=False) -> str:
+    """The text of ``modelDescription.xml`` (FMI 2.0, naming convention flat).
+    ``completed_step_needed``: Model Exchange must call fmi2CompletedIntegratorStep
+    (a constrained model checks there whether its state drifted off the constraints)."""
     root = ET.Element("fmiModelDescription", {
         "fmiVersion": "2.0", "modelName": name, "guid": guid,
         "description": description,
@@ -276,7 +278,8 @@ def model_description(name: str, description: str, guid: str, variables, setting
     common = {"modelIdentifier": name, "canNotUseMemoryManagementFunctions": "false",
               "canGetAndSetFMUstate": "false", "canSerializeFMUstate": "false",
               "providesDirectionalDerivative": "false"}
-    me = ET.SubElement(root, "ModelExchange", dict(common, completedIntegratorStepNotNeeded="true"))
+    me = ET.SubElement(root, "ModelExchange", dict(
+        common, completedIntegratorStepNotNeeded="false" if completed_step_needed else "true"))
     cs = ET.SubElement(root, "CoSimulation", dict(
         common, canHandleVariableCommunicationStepSize="true", canInterpolateInputs="false",
         maxOutputDerivativeOrder="0", canRunAsynchronuously="false"))
@@ -354,8 +357,10 @@ def _c_string(text: str) -> str:
 
 
 def wrapper_source(name: str, hash16: str, guid: str, variables, settings,
-                   initial, input_starts, n_outputs: int) -> str:
-    """``<name>_fmi2.c``: the FMI 2.0 functions over the model's C (``fmu/fmi2.c.j2``)."""
+                   initial, input_starts, n_outputs: int, constraints=None) -> str:
+    """``<name>_fmi2.c``: the FMI 2.0 functions over the model's C (``fmu/fmi2.c.j2``).
+    ``constraints``: the manifest's entry of a constrained model (its equations
+    ``m``, the position ones ``holonomic``), else None."""
     method = capi.METHODS[settings.method]
     codes = [s.code for s in capi.STATUSES]
     by_code = {s.code: s.name for s in capi.STATUSES}
@@ -373,6 +378,8 @@ def wrapper_source(name: str, hash16: str, guid: str, variables, settings,
         "rtol": _number(settings.rtol), "atol": _number(settings.atol),
         "fixed_step": _number(settings.step or 0.0), "max_steps": str(settings.max_steps),
         "ny": n_outputs,
+        "constraints": ({"m": int(constraints["m"]), "mh": int(constraints["holonomic"])}
+                        if constraints else None),
     }
     return render("fmu/fmi2.c.j2", context)
 
@@ -476,7 +483,8 @@ def build_fmu(source, out_path, *, method: str | None = None, rtol: float | None
     folder, suffix = fmi_platform()
     wrapper = f"{spec.name}_fmi2.c"
     texts[wrapper] = wrapper_source(spec.name, hash16, guid, variables, settings, src.initial,
-                                    src.input_starts, len(columns))
+                                    src.input_starts, len(columns),
+                                    manifest.get("constraints"))
     for header in FMI2_HEADERS + (FMI2_LICENSE,):
         texts[header] = (fmi2_dir() / header).read_text()
     c_files = [f"{spec.name}.c", "mg_integrate.c", wrapper]
@@ -486,7 +494,7 @@ def build_fmu(source, out_path, *, method: str | None = None, rtol: float | None
                    f"{__version__}; Co-Simulation integrates with mg_integrate: "
                    f"{settings.describe()})")
     xml = model_description(spec.name, description, guid, variables, settings, c_files,
-                            src.experiment)
+                            src.experiment, bool(manifest.get("constraints")))
     statements = max(o["statements"] for o in manifest["ops"].values())
     with tempfile.TemporaryDirectory(prefix="modelgen-fmu-") as tmp:
         tmp = Path(tmp)

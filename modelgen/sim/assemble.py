@@ -24,6 +24,7 @@ __all__ = [
     "check_initial_state",
     "consistent_speeds",
     "constraint_jacobian",
+    "crossing_message",
     "residuals",
     "singular_message",
 ]
@@ -178,3 +179,19 @@ def singular_message(cm, status: int, t, x) -> str:
             f"(pivot of {speed}) at q = {np.array2string(np.asarray(x)[:cm.nq])}, a dead "
             "point or a lock-up of the mechanism; choose other dependent speeds "
             "('dependent:' in the model) or keep the motion away from it")
+
+
+def crossing_message(cm, t, t_fail, x) -> str:
+    """The words for status DEAD_POINT of a constrained model: det G_d (the constraint
+    Jacobian's dependent columns) changed sign in the step from t to t_fail, so the
+    motion went through a configuration where they are singular; x is the last
+    state before it."""
+    info = _info(cm)
+    names = ", ".join(cm.speeds[k] for k in info["dependent_speeds"])
+    return (f"{cm.name}: the motion went through a dead point between t = {float(t):.6g} and "
+            f"t = {float(t_fail):.6g}: the determinant of the constraint Jacobian's "
+            f"dependent columns ({names}) changed sign, so they were singular in between "
+            "and the dependent coordinates cannot follow the motion through it; last good "
+            "state at t = "
+            f"{float(t):.6g}: q = {np.array2string(np.asarray(x)[:cm.nq])}; choose other "
+            "dependent speeds ('dependent:' in the model) or keep the motion away from it")

@@ -41,6 +41,7 @@ from modelgen.sim.arguments import (LONG, MIN_ATOL, MIN_RTOL, Inputs, c_options,
                                      method_of, run_options, sample_times, span,
                                      terminal_count)
 from modelgen.sim.conditioning import condition_number, failure_kind, growth_note
+from modelgen.sim.assemble import crossing_message
 from modelgen.sim.assemble import singular_message as constraint_message
 from modelgen.sim.result import Result, make_result
 
@@ -55,6 +56,7 @@ MAX_STEPS = STATUS_BY_NAME["MAX_STEPS"].code
 INTERRUPTED = STATUS_BY_NAME["INTERRUPTED"].code
 INPUT_ERROR = STATUS_BY_NAME["INPUT_ERROR"].code
 EVENT_ERROR = STATUS_BY_NAME["EVENT_ERROR"].code
+DEAD_POINT = STATUS_BY_NAME["DEAD_POINT"].code
 #: the step budget of a run when max_steps is not given (fixed-step runs get at
 #: least the steps they need)
 DEFAULT_MAX_STEPS = 100_000
@@ -361,6 +363,8 @@ def _finish(cm, m, run: _Run, errors, inputs, sign, p_vec, x_start, max_steps, t
                                run.stats["naccept"] == 0))
     if pivot > cm.n and cm.manifest.get("constraints"):
         message = constraint_message(cm, pivot, t_fail, stop[STOP_X:])
+    elif status == DEAD_POINT and cm.manifest.get("constraints"):
+        message = crossing_message(cm, t_reached, t_fail, stop[STOP_X:])
     if failure is not None:
         message = f"{message.rstrip('.')}: {type(failure).__name__}: {failure}."
     if status < 0:
@@ -593,6 +597,9 @@ def simulate_batch(cm, X0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol
             kind=_mass_matrix_kind(cm, int(status[r]), pivot,
                                    P_rows[r] if p_stride else P_rows, X0[r],
                                    stats[r].naccept == 0)))
+        if status[r] == DEAD_POINT and cm.manifest.get("constraints"):
+            messages[-1] = crossing_message(cm, sign * float(stop[r, 0]),
+                                            sign * float(stop[r, 2]), stop[r, STOP_X:])
         if status[r] < 0:
             messages[-1] += _conditioning_note(cm, P_rows[r] if p_stride else P_rows, X0[r],
                                                stop[r, STOP_X:])

@@ -67,6 +67,8 @@ typedef struct {
     double t, t_new, h, hmax, err, facold, hacc, erracc, t_origin;
     long rows, found, attempts, n_fixed, done_steps;
     int m, reject, last, dense_ready, fresh_jacobian, singular;
+    /* the sign of the system's chart at the last accepted state (0: not known) */
+    int orientation;
     /* the events: found in the step (sorted by time), counted, and where a terminal one cut */
     int hit_i[MG_MAX_EVENTS], counts[MG_MAX_EVENTS], terminated;
     double t_cut;
@@ -139,6 +141,7 @@ static void mg_begin(mg_run *r, const double *x0, double *work)
     r->rows = r->found = r->attempts = r->n_fixed = r->done_steps = 0;
     r->m = 4;
     r->reject = r->last = r->dense_ready = r->fresh_jacobian = r->singular = 0;
+    r->orientation = 0;
     r->terminated = 0;
     memset(r->o.stats, 0, sizeof *r->o.stats);
     for (i = 0; i < MG_MAX_EVENTS; ++i)
@@ -255,6 +258,9 @@ static int mg_start(mg_run *r)
         r->o.t_fail = r->t;
         return MG_STATUS_PROJECTION;
     }
+    /* recorded afresh by every call (a continued run too): no state outlives it */
+    if (r->sys->orientation)
+        r->orientation = r->sys->orientation(r->sys->model, r->o.p, r->x);
     mg_copy(r->x_cut, r->x, r->nx);
     if ((status = mg_first_rows(r)))
         return status;
@@ -358,7 +364,11 @@ static int mg_attempt(mg_run *r, int *accepted)
 /* The accepted step's end: back onto the state's manifold (unit quaternions: a
  * projection, first order in the step's error, which the next step's error
  * estimate sees), then xdot at the new state (already known to dopri5 when
- * nothing was projected: FSAL). */
+ * nothing was projected: FSAL).  A chart whose orientation changed sign over
+ * the step was singular somewhere inside it (the determinant is continuous along
+ * the motion): an adaptive step can jump over a four-bar's dead point without
+ * a stage near enough to see the singular matrix, and the projection would
+ * carry the run on from the other branch, so the run stops at the step's start. */
 static int mg_accept(mg_run *r)
 {
     const mg_system *sys = r->sys;
@@ -366,6 +376,14 @@ static int mg_accept(mg_run *r)
     if (sys->project && sys->project(sys->model, r->o.p, r->xn)) {
         r->o.t_fail = r->t_new;
         return MG_STATUS_PROJECTION;
+    }
+    if (sys->orientation) {
+        const int orientation = sys->orientation(sys->model, r->o.p, r->xn);
+        if (r->orientation && orientation != r->orientation) {
+            r->o.t_fail = r->t_new;
+            return MG_STATUS_DEAD_POINT;
+        }
+        r->orientation = orientation;
     }
     if (r->method == MG_METHOD_DOPRI5 && !sys->project)
         mg_copy(r->f1, r->K + 6 * r->nx, r->nx);
