@@ -78,7 +78,7 @@ except ImportError:   # not POSIX: builds are not serialised
 
 from modelgen.errors import BuildError
 
-# shutil, socket, subprocess and tempfile are imported where a build needs them:
+# shutil, subprocess and tempfile are imported where a build needs them:
 # a cached load (modelgen.codegen.index) imports this module and needs none.
 
 #: -O2 without gcc's basic-block (SLP) vectorizer, which gcc 12 enables at -O2:
@@ -464,9 +464,12 @@ def cache_lookup(directory: Path, build_hash: str) -> tuple:
 
 def host_tag() -> str:
     """8 hex digits naming this machine, in a temporary directory's name beside its
-    process id (a cache may be shared between machines, whose pids differ)."""
-    import socket
-    return hashlib.sha256(socket.gethostname().encode()).hexdigest()[:8]
+    process id (a cache may be shared between machines, whose pids differ); the name
+    is uname's, which POSIX's gethostname returns, without importing socket."""
+    if not hasattr(os, "uname"):
+        import socket
+        return hashlib.sha256(socket.gethostname().encode()).hexdigest()[:8]
+    return hashlib.sha256(os.uname().nodename.encode()).hexdigest()[:8]
 
 
 def _private_dir(directory: Path, prefix: str) -> Path:
