@@ -134,6 +134,7 @@ _MODEL_FUNCTIONS = {
     # dqdd_dq, dqdd_dv, then dqdd_du (n x nu) when the model has inputs
     "derivatives": lambda cm: (["-DMG_DERIVATIVES", f"-DMG_N={cm.n}"],
                                2 * cm.n * cm.n + cm.n * len(cm.inputs)),
+    "jacobian": lambda cm: (["-DMG_JACOBIAN"], cm.nx * cm.nx),
 }
 
 

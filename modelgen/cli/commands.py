@@ -118,6 +118,11 @@ def _reading(args) -> dict:
     return out
 
 
+#: what ``generate`` says of the manifest's ``jacobian_method``
+_JACOBIAN_WORDS = {"forward": "forward mode over the rhs program (fewer operations here)",
+                   "derivatives": "from the analytical derivatives (<name>_derivatives)"}
+
+
 def generate_command(args) -> int:
     from modelgen.model import as_spec, is_scene_file
     from modelgen.sim.load import generate_model
@@ -143,6 +148,8 @@ def generate_command(args) -> int:
           f"{len(spec.inputs)} inputs, {len(spec.bodies)} bodies")
     print(f"output     {b.directory}/{spec.name}.c, {spec.name}.h, {b.module_path.name}")
     print(f"rhs        formulation {g.manifest['formulation']}")
+    if g.manifest.get("jacobian_method"):
+        print(f"jacobian   {_JACOBIAN_WORDS[g.manifest['jacobian_method']]}")
     if g.manifest.get("constraints"):
         for line in _constraint_lines(spec, g.manifest["constraints"]):
             print(line)

@@ -288,7 +288,7 @@ def template_context(*, name: str, description: str, model_hash: str, n: int,
                      quaternions=(), npd: int = 0, mass_pattern=None,
                      formulation: str = "crba", aba_inward=(), frames=None,
                      constraints=None, derivatives_pattern=None,
-                     derivative_loop=None) -> dict:
+                     derivative_loop=None, jacobian_method=None) -> dict:
     """The plain dict every C template receives.
 
     ``mass_pattern`` (n x n booleans, default dense) marks the entries of the
@@ -302,6 +302,9 @@ def template_context(*, name: str, description: str, model_hash: str, n: int,
     ``derivative_loop`` (None: ``derivative_terms`` writes the matrices itself)
     has the tables of the loop over the pairs of dofs of the recursive
     derivatives (:func:`modelgen.codegen.pipeline.derivative_loop`).
+    ``jacobian_method``: ``derivatives`` builds ``<name>_jacobian`` and the
+    dynamics' rows of ``<name>_linearize`` on ``<name>_derivatives``; else
+    (``forward``, None) forward mode over the rhs program.
 
     ``n`` is the number of speeds (the size of A), ``nq`` that of the
     coordinates (default ``n``; more with ball or free joints, whose
@@ -338,13 +341,15 @@ def template_context(*, name: str, description: str, model_hash: str, n: int,
         "ny": len(output_columns),
         "has_jacobian": bool(has_jacobian),
         "has_linearize": bool(has_linearize),
+        "jacobian_method": jacobian_method or "forward",
         "nc": nq + n + len(inputs),
         "output_columns": list(output_columns),
         "api": _before_integration(
             public_api(name, n, len(parameters), len(inputs), len(bodies),
                        len(output_columns), has_jacobian, has_linearize, nq,
                        rhs_solve=_solve_words(formulation, solve),
-                       has_derivatives=derivatives_pattern is not None), kinematics, name),
+                       has_derivatives=derivatives_pattern is not None,
+                       jacobian_method=jacobian_method), kinematics, name),
         "kinematics": kinematics,
         "frames": list(frames.frames) if frames else [],
         "nframes": len(frames.frames) if frames else 0,
@@ -398,7 +403,7 @@ def constraint_api(name: str, n: int, nq: int, n_p: int, c: dict) -> list:
 def public_api(name: str, n: int, n_p: int, n_u: int, n_b: int, n_y: int = 0,
                has_jacobian: bool = False, has_linearize: bool = False,
                nq: int | None = None, rhs_solve: str = "",
-               has_derivatives: bool = False) -> list:
+               has_derivatives: bool = False, jacobian_method: str | None = None) -> list:
     """Prototypes and documentation of every exported function.
 
     The header is rendered from this one list, and the manifest records each
@@ -409,6 +414,8 @@ def public_api(name: str, n: int, n_p: int, n_u: int, n_b: int, n_y: int = 0,
     P = f"p: {n_p} parameters (see {name}_default_parameters)"
     nq = n if nq is None else nq
     nx = nq + n
+    how = (f"the dynamics' rows from {name}_derivatives" if jacobian_method == "derivatives"
+           else "forward mode over the generated program")
     extra = []
     if n_y:
         extra.append(
@@ -421,7 +428,7 @@ def public_api(name: str, n: int, n_p: int, n_u: int, n_b: int, n_y: int = 0,
             {"ret": "int", "name": f"{name}_jacobian",
              "params": "double t, const double *x, const double *u, const double *p, double *J",
              "doc": [f"Jacobian J[{nx}*{nx}] = d xdot / d x, row-major, derived symbolically",
-                     "(forward mode over the generated program). Returns the rhs status."]})
+                     f"({how}). Returns the rhs status."]})
     if has_derivatives:
         extra.extend(_derivatives_api(name, n, nq, n_u))
     if has_linearize:
@@ -430,7 +437,7 @@ def public_api(name: str, n: int, n_p: int, n_u: int, n_b: int, n_y: int = 0,
              "params": "double t, const double *x, const double *u, const double *p, "
                        "double *A, double *B, double *C, double *D",
              "doc": [f"State space model about (t, x[{nx}], u[{n_u}], p[{n_p}]), derived",
-                     "symbolically (forward mode over the generated program), row-major:",
+                     f"symbolically ({how}), row-major:",
                      f"A[{nx}*{nx}] = d xdot / d x, B[{nx}*{n_u}] = d xdot / d u,",
                      f"C[{n_y}*{nx}] = d y / d x, D[{n_y}*{n_u}] = d y / d u (y: the outputs).",
                      "B and D are untouched (may be NULL) when there are no inputs, C and D",

@@ -36,7 +36,8 @@ from modelgen.codegen.options import FORMULATIONS, REFERENCES, BuildOptions
 from modelgen.derive.jacobian import accelerations, derive_jacobian_terms, residual
 from modelgen.derive.constrained_linearize import (derive_constrained_linearization_terms,
                                                    multipliers)
-from modelgen.derive.linearize import derive_linearization_terms
+from modelgen.derive.linearize import (derive_linearization_terms,
+                                      derive_output_linearization)
 from modelgen.derive.kinematics import derive_kinematics
 from modelgen.derive.outputs import derive_outputs
 from modelgen.model.spec import TIME, ModelSpec
@@ -192,11 +193,13 @@ def routines_for(eqs: Equations, output_exprs=(), jacobian=None,
                + ((("gamma", constraints.gamma),) if constraints else ()))
         jac_inputs = t + (x, u, p, ("a", jacobian.a)) if jacobian else ()
     lin = []
-    if linearization is not None:
+    if linearization is not None and (linearization.R or linearization.Y):
+        # no R: the dynamics' rows come from <name>_derivatives, only the outputs' here
         lin_inputs = t + (x, u, p) + ((("a", linearization.a),) if linearization.a else ()) \
             + ((("lam", linearization.lam),) if linearization.lam else ())
         lin = [("linearize_terms", lin_inputs,
-                (("R", tuple(e for row in linearization.R for e in row)),)
+                ((("R", tuple(e for row in linearization.R for e in row)),)
+                 if linearization.R else ())
                 + ((("Y", tuple(e for row in linearization.Y for e in row)),)
                    if linearization.Y else ()))]
     cons = []
@@ -429,8 +432,12 @@ class Derived:
     graph: object = field(repr=False)
     frames: FrameTerms | None = None    # the frame kinematics asked for, or None
     constraints: object = None  # ConstraintTerms of a constrained model, or None
-    #: InverseDynamicsDerivatives (options.derivatives), or None
+    #: InverseDynamicsDerivatives or RneaPartials (options.derivatives, or what the
+    #: Jacobian is built on), or None
     derivatives: object = None
+    #: how ``<name>_jacobian`` and ``<name>_linearize`` get the accelerations'
+    #: derivatives (``forward`` or ``derivatives``: :func:`_state_derivatives`), or None
+    jacobian_method: str | None = None
 
     @property
     def output_exprs(self) -> tuple:
@@ -477,27 +484,22 @@ def _derive(spec: ModelSpec, options: BuildOptions, tree: JointTree | None) -> D
         if constraints.rows != constraint_rows(spec):   # pragma: no cover - kept in step
             raise AssertionError("the constraint forces' rows differ from G's rows")
         graph = constraints.graph
-    linearization = None
+    linearization, terms, method = None, None, None
     if constraints is not None and options.jacobian:
         # the rhs's three sets of equations, differentiated for the C code to solve
         # for the total derivatives (the Jacobian is the state columns of its A)
         linearization = derive_constrained_linearization_terms(
             eqs, constraints, columns.exprs if columns and options.linearize else ())
-        terms = None
-    elif options.linearize:     # one pass for A, B, C, D; the Jacobian is its state columns
-        linearization = derive_linearization_terms(
-            eqs, graph, columns.exprs if columns else (), forward.qdd if forward else None)
-        terms = linearization.jacobian_terms()
-    elif options.jacobian:
-        terms = (derive_aba_jacobian(forward, eqs) if forward else
-                 derive_jacobian_terms(eqs, graph))
-    else:
-        terms = None
-    graph = linearization.graph if linearization else terms.graph if terms else graph
+        method = "forward"
+    elif options.jacobian or options.linearize:
+        method, derivatives, linearization, terms = _state_derivatives(
+            spec, options, eqs, tree, graph, columns, forward, derivatives)
+    graph = (linearization.graph if linearization else terms.graph if terms else
+             derivatives.graph if derivatives else graph)
     frames = _derive_frames(spec, options, kin, graph)
     graph = frames.graph if frames else graph
     return Derived(eqs, columns, forward, inverse, linearization, terms, graph, frames,
-                   constraints, derivatives)
+                   constraints, derivatives, method)
 
 
 #: Up to this many speeds a joint tree's derivatives are derived both ways, and
@@ -516,6 +518,73 @@ def _tree_derivatives(eqs: Equations, tree: JointTree, spec: ModelSpec, graph):
         return recursive
     forward = derive_inverse_dynamics_derivatives(eqs, tree, spec, graph)
     return forward if forward.operations() < recursive.operations() else recursive
+
+
+#: Up to this many speeds the Jacobian of a joint tree is derived both ways, and
+#: forward mode over the rhs is kept when its estimate (:func:`jacobian_operations`)
+#: is lower than that of ``<name>_derivatives`` (:func:`derivatives_operations`);
+#: above, forward mode is not even derived: its derivation grows with n^2 and its
+#: code per Jacobian entry does not shrink, while the derivatives' does.  The
+#: estimates follow callgrind's instructions of ``<name>_jacobian`` both ways
+#: (the commit that added this records them): forward mode wins on one- and
+#: two-dof models, the derivatives from three dofs on.
+FORWARD_JACOBIAN_MAX = 6
+#: operations ``<name>_jacobian`` spends calling ``<name>_derivatives`` (their
+#: calls and loops), besides copying its 2 n^2 entries into J
+DERIVATIVES_CALL = 32
+
+
+def jacobian_candidate(spec: ModelSpec, tree: JointTree | None) -> bool:
+    """Whether ``<name>_jacobian`` can be built on ``<name>_derivatives``: a joint
+    tree (RNEA's derivatives) with no ball or free joints (whose derivatives are
+    in the tangent space, not in the quaternion's four coordinates)."""
+    return tree is not None and spec.nq == spec.n and _time_free(tree)
+
+
+def _state_derivatives(spec, options, eqs, tree, graph, columns, forward, derivatives):
+    """``(method, derivatives, linearization, terms)`` for ``<name>_jacobian`` and
+    ``<name>_linearize``: ``forward``, by forward mode over the rhs program
+    (``terms``, or the state columns of ``linearization``), or ``derivatives``, the
+    dynamics' rows from ``<name>_derivatives`` (``derivatives``, derived here when
+    the options did not ask for them) and only the outputs' rows differentiated."""
+    outputs = columns.exprs if columns and options.linearize else ()
+
+    def forward_mode():
+        if options.linearize:   # one pass for A, B, C, D; the Jacobian is its state columns
+            lin = derive_linearization_terms(eqs, graph, outputs,
+                                             forward.qdd if forward else None)
+            return lin, lin.jacobian_terms()
+        return None, (derive_aba_jacobian(forward, eqs) if forward else
+                      derive_jacobian_terms(eqs, graph))
+
+    if not jacobian_candidate(spec, tree):
+        return ("forward", derivatives) + forward_mode()
+    d = derivatives if derivatives is not None else _tree_derivatives(eqs, tree, spec, graph)
+    if spec.n <= FORWARD_JACOBIAN_MAX:
+        lin, terms = forward_mode()
+        if jacobian_operations(terms) <= derivatives_operations(d, len(eqs.u)) \
+                + DERIVATIVES_CALL + 2 * spec.n * spec.n:
+            return "forward", derivatives, lin, terms
+    lin = derive_output_linearization(eqs, d.graph, outputs) if options.linearize else None
+    return "derivatives", d, lin, None
+
+
+def jacobian_operations(terms) -> int:
+    """Estimated operations of ``<name>_jacobian`` by forward mode past its rhs call:
+    the derivatives' program, and for crba the solve of its 2n columns."""
+    ops = terms.graph.operations([e for row in terms.D for e in row])
+    n = len(terms.D)
+    return ops + (2 * n * 2 * n * n if terms.a else 0)
+
+
+def derivatives_operations(d, nu: int) -> int:
+    """Estimated operations of ``<name>_derivatives`` past its rhs call: the
+    derivatives of inverse dynamics (:meth:`RneaPartials.operations`) and -M^-1
+    applied to their 2n + nu columns through the tree's sparse factor."""
+    pattern = _derivatives_pattern(d)
+    n = len(pattern)
+    below = (sum(sum(map(bool, row)) for row in pattern) - n) // 2
+    return d.operations() + (2 * n + nu) * (4 * below + n)
 
 
 def derivative_method(d) -> str | None:
@@ -572,6 +641,7 @@ def _emit(spec: ModelSpec, options: BuildOptions, derived: Derived, routines: tu
         bodies=eqs.bodies, functions=functions,
         output_columns=[c for cols in columns.columns for c in cols] if columns else (),
         has_jacobian=options.jacobian, has_linearize=options.linearize,
+        jacobian_method=derived.jacobian_method,
         npd=next(len(r.outputs[0][1]) for r in routines if r.name == "prepare"),
         # the crba rhs's solve skips the entries of A that are structurally zero
         mass_pattern=None if forward else [[e != 0 for e in row] for row in eqs.A],
@@ -659,6 +729,7 @@ def _manifest(spec: ModelSpec, options: BuildOptions, derived: Derived, emitted:
         "linearize": options.linearize,
         "derivatives": options.derivatives,
         "derivative_method": derivative_method(derived.derivatives),
+        "jacobian_method": derived.jacobian_method,
         "formulation": options.formulation,
         **({"constraints": _constraint_manifest(spec, derived.constraints)}
            if derived.constraints else {}),

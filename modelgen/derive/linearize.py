@@ -14,6 +14,12 @@ differentiated with respect to ``[q, qd, u]`` and the C code solves with
 ``A``; for aba, ``qdd`` itself is differentiated and nothing is solved.  The
 outputs are differentiated in the same pass, so they share its derivatives
 of the kinematics.  No finite differences anywhere.
+
+A joint tree whose ``<name>_derivatives`` (the derivatives of RNEA,
+:mod:`modelgen.derive.rnea_partials`) cost fewer operations than this forward
+mode takes the dynamics' rows of A and B from them instead, and only the
+outputs are differentiated here (:func:`derive_output_linearization`; the
+choice is :func:`modelgen.codegen.pipeline.generate`'s ``jacobian_method``).
 """
 from __future__ import annotations
 
@@ -64,3 +70,17 @@ def derive_linearization_terms(eqs: Equations, graph: Graph, outputs=(),
         a, f = (), tuple(qdd)
     builder, rows = differentiate(graph, list(f) + list(outputs), eqs.q + eqs.qd + eqs.u)
     return LinearizationTerms(builder, a, rows[:n], rows[n:], 2 * n)
+
+
+def derive_output_linearization(eqs: Equations, graph: Graph, outputs=()) -> LinearizationTerms:
+    """Forward-mode derivatives of ``outputs`` alone w.r.t. x and u (``R`` empty): for
+    a model whose A and B rows of the dynamics come from ``<name>_derivatives``
+    (:mod:`modelgen.derive.rnea_partials`), so only C and D are differentiated here.
+
+    >>> derive_output_linearization(eqs, eqs.graph).R                # doctest: +SKIP
+    ()
+    """
+    if not outputs:
+        return LinearizationTerms(graph, (), (), (), 2 * len(eqs.q))
+    builder, rows = differentiate(graph, list(outputs), eqs.q + eqs.qd + eqs.u)
+    return LinearizationTerms(builder, (), (), rows, 2 * len(eqs.q))

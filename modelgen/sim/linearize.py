@@ -1,7 +1,8 @@
 """Linearization: the compiled model about an operating point as a state space model.
 
 ``cm.linearize(x, u)`` calls the generated ``<name>_linearize`` (symbolic
-derivatives, see :mod:`modelgen.derive.linearize`; no finite differences) and
+derivatives, see :mod:`modelgen.derive.linearize`, or for a joint tree the
+analytical ``<name>_derivatives``; no finite differences) and
 returns a :class:`Linearization`: ``A, B, C, D`` with the operating point and
 the names of states, inputs and outputs, its eigenvalues and modes (natural
 frequency, damping ratio), and writers for NPZ, MAT and python-control.

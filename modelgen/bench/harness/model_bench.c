@@ -1,7 +1,8 @@
 /* Harness of a generated model's <name>_rhs_prepared (or, with -DMG_INVERSE,
  * <name>_inverse_dynamics at the accelerations 0.3 (i mod 3) - 0.2; with
  * -DMG_DERIVATIVES, <name>_derivatives into dqdd_dq, dqdd_dv, dqdd_du one after
- * the other in the output), built by modelgen.bench.harnesses.build_model_harness.
+ * the other in the output; with -DMG_JACOBIAN, <name>_jacobian), built by
+ * modelgen.bench.harnesses.build_model_harness.
  * No argument: prints the best time per call, the loops, the status and a sink.
  * K: K calls untimed, then the status and the sink (for callgrind).
  *
@@ -30,6 +31,8 @@
 
 #if defined(MG_INVERSE)
 #define CALL() (MG_FN(inverse_dynamics)(0.0, x, a, u, p, out), 0)
+#elif defined(MG_JACOBIAN)
+#define CALL() MG_FN(jacobian)(0.0, x, u, p, out)
 #elif defined(MG_DERIVATIVES)
 #if NOUT > 2 * MG_N * MG_N
 #define MG_DU (out + 2 * MG_N * MG_N)
