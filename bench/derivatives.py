@@ -28,8 +28,8 @@ Method
     ``computeABADerivatives(q, v, tau)`` through ``harness/pinocchio_bench.cpp``'s
     mode 3 (C++ ``-O3 -march=native``).  Time: each harness calls its function in a
     loop, perturbing one entry of x from the previous call's derivatives (a
-    dependency chain), minimum over 5 repeats of >= 0.2 s; the two harnesses run
-    alternately ``--rounds`` times and the minimum is kept.  Instructions: callgrind,
+    dependency chain), minimum over 5 repeats of >= 0.2 s; the harnesses (modelgen,
+    Pinocchio, MuJoCo) run alternately ``--rounds`` times and the minimum is kept.  Instructions: callgrind,
     K = 200 calls minus K = 0 (``harnesses.instructions_per_call``), Pinocchio in
     its build without AVX-512.  *agree*: the largest difference over the largest
     entry, of both matrices, ``cm.derivatives`` at x0 against Pinocchio's.
