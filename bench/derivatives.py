@@ -1,29 +1,45 @@
 """Analytical derivatives in C: modelgen's ``<name>_derivatives`` against Pinocchio's
-``computeABADerivatives``.
+``computeABADerivatives`` and MuJoCo's ``mjd_transitionFD``.
 
 Run from the repository root (needs the ``bench`` extra: ``pin`` and ``cmeel-eigen``;
 valgrind for the instruction counts)::
 
-    .venv/bin/python bench/derivatives.py                  # chain n = 7 and arm7
+    .venv/bin/python bench/derivatives.py                  # chain n = 7, arm7, solo12
     .venv/bin/python bench/derivatives.py --n 7 20 50 --rounds 5
-    .venv/bin/python bench/derivatives.py --quick          # n = 7, no arm7, one round
+    .venv/bin/python bench/derivatives.py --quick          # n = 7 only, one round
     .venv/bin/python bench/derivatives.py --n 100 --no-arm --max-operations 400000
 
 Method
     The models are the spatial chain of ``spatial_chain(n)`` and ``models/arm7.yaml``,
     written for Pinocchio by ``modelgen.bench.peers.write_peer_models`` (as
     ``bench/codegen_scaling.py`` does), at the state x0 of that script (seed
-    1000 + n) and zero inputs.  Both compute d qdd / d q and d qdd / d v of forward
+    1000 + n) and zero inputs; and floating-base solo12, example-robot-data's
+    ``solo12.urdf`` imported with ``floating_base=True`` (a free joint at the root)
+    against ``buildModelFromUrdf(urdf, JointModelFreeFlyer())``, written for the
+    harness and as MJCF from Pinocchio's model (``peers.write_pinocchio_peer_models``),
+    at q = ``cm.project`` of uniform(-pi, pi), v uniform(-2, 2) (seed 1000 + n).  Its
+    free joint's speeds are body-frame in both, the derivatives in the tangent space
+    in both; Pinocchio's q and v are modelgen's reordered (``robots.pinocchio_maps``:
+    quaternion (x, y, z, w) last, the free flyer first), MuJoCo's have the
+    quaternion scalar first and the linear velocity in the world frame.  modelgen
+    and Pinocchio compute d qdd / d q and d qdd / d v of forward
     dynamics (modelgen also d qdd / d u when the model has inputs):
     ``<name>_derivatives`` through ``harness/model_bench.c -DMG_DERIVATIVES``, and
     ``computeABADerivatives(q, v, tau)`` through ``harness/pinocchio_bench.cpp``'s
     mode 3 (C++ ``-O3 -march=native``).  Time: each harness calls its function in a
     loop, perturbing one entry of x from the previous call's derivatives (a
-    dependency chain), minimum over 5 repeats of >= 0.2 s; the two harnesses run
-    alternately ``--rounds`` times and the minimum is kept.  Instructions: callgrind,
+    dependency chain), minimum over 5 repeats of >= 0.2 s; the harnesses (modelgen,
+    Pinocchio, MuJoCo) run alternately ``--rounds`` times and the minimum is kept.  Instructions: callgrind,
     K = 200 calls minus K = 0 (``harnesses.instructions_per_call``), Pinocchio in
     its build without AVX-512.  *agree*: the largest difference over the largest
     entry, of both matrices, ``cm.derivatives`` at x0 against Pinocchio's.
+    *MuJoCo FD*: ``mjd_transitionFD`` (central differences, eps 1e-6, the model's
+    integrator set to Euler, timestep 0.001) through ``harness/mujoco_bench.c``'s
+    mode ``transition``, the same timing rule, in the same alternation, and
+    callgrind over K = 10 calls minus K = 0.  It computes another thing: the
+    Jacobian of the discrete transition x -> x_next of one step (2 (2 nv) + 1 steps
+    a call), not d qdd / d x, so its matrix is not compared; MuJoCo's qacc at x0
+    against modelgen's q_ddot is printed below the table (the MJCF is the same model).
     Generation: wall and CPU seconds (the process and its compilers) and peak RSS of
     ``modelgen.load(..., derivatives=True, force=True)`` in a fresh process, started
     before this one imports numpy or the library, so that its ``ru_maxrss`` is its
@@ -32,7 +48,7 @@ Method
     operations after CSE of the ``derivative_terms`` routine over n^2 (for a joint
     tree the per-dof vectors and the effects, O(n): the O(n^2) dot products are a
     loop in the C and not counted).  Prints the table, then the issue's targets
-    (issue 25) with met / NOT met.
+    (issue 25) with met / NOT met, and the ops / n^2 constants.
 """
 from __future__ import annotations
 
@@ -53,6 +69,8 @@ sys.path.insert(0, str(REPO))
 # are started before the parent has loaded them (see the docstring).
 
 ARM = REPO / "models" / "arm7.yaml"
+FLOATING = "solo12"            # the floating-base row's case name
+SOLO12 = "solo_description/robots/solo12.urdf"       # in example-robot-data's robots
 GENERATE_MARK = "@@derivatives@@ "
 #: the issue's targets: instructions and time, Pinocchio / modelgen; generation s
 TARGET_INSTR = 2.0
@@ -60,10 +78,25 @@ TARGET_TIME = 1.5
 TARGET_SECONDS = {20: 3.0, 100: 30.0}
 
 
+def solo12_urdf():
+    """example-robot-data's solo12 URDF, or None when it is not installed."""
+    from modelgen.bench.robots import robots_directory
+    robots = robots_directory()
+    return robots / SOLO12 if robots is not None and (robots / SOLO12).is_file() else None
+
+
+def solo12_import():
+    """solo12 imported with a free joint at its root (Pinocchio's free flyer)."""
+    from modelgen.model.urdf import import_urdf
+    return import_urdf(solo12_urdf(), floating_base=True)
+
+
 def model_spec(arg: str):
-    """The chain ``spatial_chain(int(arg))`` or the model file ``arg``."""
+    """The chain ``spatial_chain(int(arg))``, the model file ``arg`` or floating solo12."""
     from modelgen.model.api import load_model
     from modelgen.model.chains import spatial_chain
+    if arg == FLOATING:
+        return solo12_import().model
     return load_model(arg) if arg.endswith(".yaml") else spatial_chain(int(arg)).spec()
 
 
@@ -95,39 +128,85 @@ def generate(arg: str, out: Path, budget=None) -> dict:
                        f"{proc.stdout}{proc.stderr}")
 
 
-def measure(arg: str, gen: dict, work: Path, pin, pin_count, rounds: int,
+def peer_models(arg: str, spec, cm, x0, work: Path):
+    """The peers' files of one case: (MJCF, the Pinocchio harness's input, MuJoCo's
+    state, P with Pinocchio's v = P v, MuJoCo's qacc of modelgen's q_ddot as a
+    function), or None when the peers cannot see the model."""
+    import numpy as np
+
+    from modelgen.bench import peers
+    if arg != FLOATING:
+        files = peers.write_peer_models(spec, cm, x0, work, not arg.endswith(".yaml"))
+        return None if files is None else (*files, x0, np.eye(cm.n), lambda a: a)
+    import pinocchio as pin
+
+    from modelgen.bench.robots import pinocchio_maps
+    model = pin.buildModelFromUrdf(str(solo12_urdf()), pin.JointModelFreeFlyer())
+    q_pin, P = pinocchio_maps(model, solo12_import(), cm)
+    q, v = q_pin(x0[:cm.nq]), P @ x0[cm.nq:]
+    files = peers.write_pinocchio_peer_models(cm.name, model, q, v, work)
+    if files is None:
+        return None
+    links = peers.pinocchio_links(model)
+    return (*files, P, lambda a: peers.mujoco_acceleration(links, q, v, P @ a))
+
+
+def mujoco_qacc_agreement(xml: Path, state, qacc_of, cm, x0) -> float:
+    """MuJoCo's qacc after mj_forward at ``state`` against modelgen's q_ddot at x0
+    (mapped by ``qacc_of``): the largest difference over the largest entry."""
+    import mujoco
+    import numpy as np
+    model = mujoco.MjModel.from_xml_path(str(xml))
+    data = mujoco.MjData(model)
+    data.qpos[:], data.qvel[:] = state[:model.nq], state[model.nq:]
+    mujoco.mj_forward(model, data)
+    want = qacc_of(cm.rhs(0.0, x0)[cm.nq:])
+    return float(np.max(np.abs(data.qacc - want)) / np.max(np.abs(want)))
+
+
+def measure(arg: str, gen: dict, work: Path, pin, pin_count, mj, rounds: int,
             count: bool, budget=None) -> dict:
-    """One model: time, count and compare both sides (the row of the table).  ``pin``,
-    ``pin_count``: Pinocchio's harness and its build for callgrind, or None."""
+    """One model: time, count and compare every side (the row of the table).  ``pin``,
+    ``pin_count``, ``mj``: Pinocchio's harness, its build for callgrind and MuJoCo's
+    harness, or None."""
     import numpy as np
 
     import modelgen
     from modelgen.bench import harnesses as hn
-    from modelgen.bench import peers
     spec = model_spec(arg)
     cm = modelgen.load(spec, work / "model", derivatives=True,      # generate()'s build
                        max_operations=budget)
     n = cm.n
     rng = np.random.default_rng(1000 + n)                 # codegen_scaling's x0
-    x0 = np.concatenate([rng.uniform(-np.pi, np.pi, n), rng.uniform(-2, 2, n)])
+    q0 = rng.uniform(-np.pi, np.pi, cm.nq)
+    x0 = np.concatenate([cm.project(q0), rng.uniform(-2, 2, n)])
     exe, _ = hn.build_model_harness(cm, x0, work / "harness", "derivatives")
-    files = peers.write_peer_models(spec, cm, x0, work / "peers", not arg.endswith(".yaml"))
-    tree = files[1] if files else None
+    files = peer_models(arg, spec, cm, x0, work / "peers") if pin or mj else None
     runs = {"mg": lambda: hn.run_model_harness(exe)}
-    if pin and tree:
-        runs["pin"] = lambda: hn.run_pinocchio_derivatives(pin, tree)
+    if pin and files:
+        runs["pin"] = lambda: hn.run_pinocchio_derivatives(pin, files[1])
+    mj_cmd = hn.mj_command(mj, files[0], files[2], "transition") if mj and files else None
+    if mj_cmd:
+        runs["mj"] = lambda: hn.run_mj_transition(mj_cmd)
     times = hn.alternate(rounds, runs)
-    row = {"model": cm.name, "n": n, "gen": gen, "ops_n2": gen["ops"] / n / n,
-           "mg_us": min(times["mg"]), "pin_us": None, "agree": None,
+    row = {"model": f"{FLOATING} (floating)" if arg == FLOATING else cm.name, "n": n, "gen": gen, "ops_n2": gen["ops"] / n / n,
+           "mg_us": min(times["mg"]), "pin_us": None, "agree": None, "mj_us": None,
+           "mj_i": None, "mj_qacc": None,
            "mg_i": hn.instructions_per_call([str(exe)]) if count else None, "pin_i": None}
     if "pin" in times:
         d = cm.derivatives(0.0, x0)
         _, pin_dq, pin_dv = times["pin"][-1]
+        P = files[3]
         row["pin_us"] = min(t for t, _, _ in times["pin"])
-        row["agree"] = max(float(np.max(np.abs(got - want)) / np.max(np.abs(got)))
+        row["agree"] = max(float(np.max(np.abs(got - P.T @ want @ P)) / np.max(np.abs(got)))
                            for got, want in ((d.dqdd_dq, pin_dq), (d.dqdd_dv, pin_dv)))
         if count and pin_count:
-            row["pin_i"] = hn.instructions_per_call([str(pin_count), str(tree), "3"])
+            row["pin_i"] = hn.instructions_per_call([str(pin_count), str(files[1]), "3"])
+    if mj_cmd:
+        row["mj_us"] = min(times["mj"])
+        row["mj_qacc"] = mujoco_qacc_agreement(files[0], files[2], files[4], cm, x0)
+        if count:
+            row["mj_i"] = hn.instructions_per_call(mj_cmd, hn.TRANSITION_COUNT_CALLS)
     return row
 
 
@@ -139,12 +218,15 @@ def table(rows) -> str:
     from modelgen.bench.tables import fmt, markdown
     head = ["model", "n", "generate s (wall / CPU)", "peak MB", "ops / n^2",
             "modelgen instr.", "Pinocchio instr.", "Pinocchio / modelgen (instr.)",
-            "modelgen µs", "Pinocchio µs", "Pinocchio / modelgen (time)", "agree"]
+            "modelgen µs", "Pinocchio µs", "Pinocchio / modelgen (time)", "agree",
+            "MuJoCo FD instr.", "MuJoCo FD µs", "MuJoCo FD / modelgen (time)"]
     body = [[r["model"], r["n"], f"{r['gen']['wall']:.1f} / {r['gen']['cpu']:.1f}",
              f"{r['gen']['mb']:.0f}", f"{r['ops_n2']:.0f}", fmt(r["mg_i"], ",.0f"),
              fmt(r["pin_i"], ",.0f"), fmt(ratio(r["pin_i"], r["mg_i"]), ".2f"),
              f"{r['mg_us']:.2f}", fmt(r["pin_us"], ".2f"),
-             fmt(ratio(r["pin_us"], r["mg_us"]), ".2f"), fmt(r["agree"], ".1e")]
+             fmt(ratio(r["pin_us"], r["mg_us"]), ".2f"), fmt(r["agree"], ".1e"),
+             fmt(r["mj_i"], ",.0f"), fmt(r["mj_us"], ".1f"),
+             fmt(ratio(r["mj_us"], r["mg_us"]), ".0f")]
             for r in rows]
     return markdown(head, body)
 
@@ -178,9 +260,12 @@ def main(argv=None) -> int:
     parser.add_argument("--n", type=int, nargs="+", default=[7], help="chain sizes")
     parser.add_argument("--arm", default=str(ARM), help="a model file measured as well")
     parser.add_argument("--no-arm", action="store_true")
+    parser.add_argument("--no-floating", action="store_true",
+                        help="skip floating-base solo12")
     parser.add_argument("--rounds", type=int, default=3, help="alternated timing rounds")
     parser.add_argument("--no-count", action="store_true", help="skip callgrind")
-    parser.add_argument("--quick", action="store_true", help="n = 7 only, one round")
+    parser.add_argument("--quick", action="store_true",
+                        help="n = 7 only (no arm7, no solo12), one round")
     parser.add_argument("--max-operations", type=int, default=None,
                         help="build budget of the generations (default: the library's)")
     parser.add_argument("--generate", nargs=3, metavar=("MODEL", "OUT", "BUDGET"),
@@ -190,8 +275,13 @@ def main(argv=None) -> int:
         generate_child(*args.generate)
         return 0
     if args.quick:
-        args.n, args.no_arm, args.rounds = [7], True, 1
-    cases = [str(n) for n in args.n] + ([] if args.no_arm else [args.arm])
+        args.n, args.no_arm, args.no_floating, args.rounds = [7], True, True, 1
+    notes = []
+    floating = not args.no_floating and solo12_urdf() is not None
+    if not args.no_floating and not floating:
+        notes.append("solo12 not measured: example-robot-data is not installed")
+    cases = [str(n) for n in args.n] + ([] if args.no_arm else [args.arm]) \
+        + ([FLOATING] if floating else [])
     loadavg = os.getloadavg()[0]
     with tempfile.TemporaryDirectory() as tmp:
         root = Path(tmp)
@@ -200,7 +290,11 @@ def main(argv=None) -> int:
                 for k, arg in enumerate(cases)]
         from modelgen.bench import harnesses as hn
         pin, why = hn.build_pinocchio_harness(root / "pin")
-        notes = [f"Pinocchio not measured: {why}"] if pin is None else []
+        if pin is None:
+            notes.append(f"Pinocchio not measured: {why}")
+        mj, why = hn.build_mujoco_harness(root / "mujoco")
+        if mj is None:
+            notes.append(f"MuJoCo not measured: {why}")
         count = not args.no_count and shutil.which("valgrind") is not None
         if not args.no_count and not count:
             notes.append("valgrind not found: no instruction counts")
@@ -209,7 +303,7 @@ def main(argv=None) -> int:
             pin_count, why = hn.build_pinocchio_harness(root / "pin", count=True)
             if pin_count is None:
                 notes.append(f"Pinocchio's instructions not counted: {why}")
-        rows = [measure(arg, gen, root / f"case{k}", pin, pin_count, args.rounds, count,
+        rows = [measure(arg, gen, root / f"case{k}", pin, pin_count, mj, args.rounds, count,
                         args.max_operations)
                 for k, (arg, gen) in enumerate(zip(cases, gens, strict=True))]
     env = hn.environment()
@@ -219,6 +313,13 @@ def main(argv=None) -> int:
     print()
     for line in [*goals(rows), *notes]:
         print("- " + line)
+    print("\nOperations per coordinate^2 (derivative_terms after CSE / n^2): "
+          + ", ".join(f"{r['model']} {r['ops_n2']:.1f} ({r['gen']['ops']:,} / {r['n']}^2)"
+                      for r in rows))
+    mj_rows = [r for r in rows if r["mj_qacc"] is not None]
+    if mj_rows:
+        print("MuJoCo's qacc against modelgen's q_ddot at x0 (the same model): "
+              + ", ".join(f"{r['model']} {r['mj_qacc']:.1e}" for r in mj_rows))
     return 0
 
 

@@ -1,6 +1,6 @@
 """Build, run and count the C/C++ harnesses of ``harness/``: modelgen's rhs,
-inverse dynamics or derivatives, MuJoCo's mj_forward / mj_step / mj_inverse,
-Pinocchio's ABA, CRBA + Cholesky, rnea and computeABADerivatives.
+inverse dynamics or derivatives, MuJoCo's mj_forward / mj_step / mj_inverse /
+mjd_transitionFD, Pinocchio's ABA, CRBA + Cholesky, rnea and computeABADerivatives.
 
 Every harness calls its function in a loop, perturbing one entry of the state
 from the previous output (so consecutive calls form a dependency chain), and
@@ -36,6 +36,8 @@ MIN_SECONDS = 0.2        # each timing repeat runs at least this long
 REPEATS = 5              # minimum over this many repeats
 STEP_RESET = 1000        # mj_step harness: restart from x0 every this many steps
 COUNT_CALLS = 200        # calls per callgrind count (instructions_per_call)
+#: calls per callgrind count of mjd_transitionFD, each 2 (2 nv) + 1 MuJoCo steps
+TRANSITION_COUNT_CALLS = 10
 
 
 def run_checked(cmd, cwd=None) -> str:
@@ -254,6 +256,21 @@ def run_mj_harness(harness: Path, xml_path: Path, x0) -> tuple:
     forward, step, bad, _sink = run_checked([str(harness), str(xml_path),
                                              str(state_path)]).split()
     return float(forward) * 1e6, float(step) * 1e6 / 4, int(bad)
+
+
+def mj_command(harness: Path, xml_path: Path, state, mode: str) -> list:
+    """The MuJoCo harness's command for ``mode`` (``inverse`` or ``transition``) at
+    MuJoCo's ``state`` (qpos then qvel), which goes to ``xml_path`` with the suffix
+    ``.state``; add ``str(K)`` for K untimed calls (:func:`instructions_per_call`)."""
+    state_path = xml_path.with_suffix(".state")
+    state_path.write_text(" ".join(repr(float(v)) for v in state) + "\n")
+    return [str(harness), str(xml_path), str(state_path), mode]
+
+
+def run_mj_transition(cmd) -> float:
+    """One timed run of ``mj_command(..., "transition")``: µs per mjd_transitionFD
+    call (central differences, eps 1e-6, Euler; min over REPEATS)."""
+    return float(run_checked(cmd).split()[0]) * 1e6
 
 
 # -- Pinocchio ----------------------------------------------------------------------

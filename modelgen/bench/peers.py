@@ -6,7 +6,9 @@ that is a tree of revolute joints with gravity only (:func:`tree_links`, read of
 modelgen's joint tree).  Each is written as MJCF (:func:`chain_mjcf`,
 :func:`tree_mjcf`), as the input file of ``harness/pinocchio_bench.cpp``
 (:func:`pinocchio_chain_file`, :func:`pinocchio_tree_file`), or built as a
-Pinocchio model in Python (:func:`chain_pinocchio`).
+Pinocchio model in Python (:func:`chain_pinocchio`).  A third source, a Pinocchio
+model of revolute joints and free flyers (a URDF robot with a floating base), is
+written for both from Pinocchio's own numbers (:func:`write_pinocchio_peer_models`).
 
 >>> p = {"m1": 1.0, "m2": 2.0, "l1": 0.5, "l2": 0.4, "r": 0.02, "g": 9.81}
 >>> [(offset, axis, m) for offset, axis, m, _c, _I in chain_links(2, p)]
@@ -148,8 +150,95 @@ def tree_links(spec, params: dict):
     return links
 
 
+#: the joint codes of ``harness/pinocchio_bench.cpp``'s input: revolute about z, y, x
+#: of the joint frame, or a free flyer
+HARNESS_JOINTS = ("z", "y", "x", "free")
+
+
+def pinocchio_links(model):
+    """A Pinocchio model of revolute joints about the joint frame's axes and free flyers
+    as links in :func:`tree_links`'s layout (axis ``free`` for a free flyer), read off
+    Pinocchio's own joint placements and inertias (a URDF's fixed links already merged
+    into their moving parents'), or None for any other joint.  Pinocchio numbers its
+    joints parents first and depth first, so :func:`tree_mjcf` writes them in its
+    order, and MuJoCo's qpos and qvel follow Pinocchio's q and v
+    (:func:`mujoco_state`)."""
+    kinds = {"JointModelRX": "x", "JointModelRY": "y", "JointModelRZ": "z",
+             "JointModelFreeFlyer": "free"}
+    links = []
+    for jid in range(1, model.njoints):
+        kind = kinds.get(model.joints[jid].shortname())
+        if kind is None:
+            return None
+        placement, body = model.jointPlacements[jid], model.inertias[jid]
+        I = np.array(body.inertia)
+        links.append((int(model.parents[jid]), kind,
+                      tuple(tuple(float(x) for x in row) for row in placement.rotation),
+                      tuple(float(x) for x in placement.translation), float(body.mass),
+                      tuple(float(x) for x in body.lever),
+                      (I[0, 0], I[1, 1], I[2, 2], I[0, 1], I[0, 2], I[1, 2])))
+    return links
+
+
+def quaternion_matrix(w, x, y, z) -> np.ndarray:
+    """The rotation matrix of the unit quaternion (w, x, y, z).
+
+    >>> quaternion_matrix(0.0, 0.0, 0.0, 1.0).round(12).tolist()
+    [[-1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, 1.0]]
+    """
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                     [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                     [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+
+
+def mujoco_state(links, q, v):
+    """MuJoCo's (qpos, qvel) of :func:`tree_mjcf`'s model of ``links`` at Pinocchio's
+    (q, v): a free joint's quaternion first-scalar (Pinocchio's is (x, y, z, w)) and
+    its linear velocity in the world frame (Pinocchio's is in the body frame; both
+    have the angular velocity in the body frame).
+
+    >>> links = [(0, "free", None, None, 1.0, None, None), (1, "x", None, None, 1.0,
+    ...          None, None)]
+    >>> qpos, qvel = mujoco_state(links, [1, 2, 3, 0, 0, 1, 0, 0.5], [1, 0, 0, 0, 0, 7, 8])
+    >>> qpos.tolist(), qvel.round(12).tolist()
+    ([1.0, 2.0, 3.0, 0.0, 0.0, 0.0, 1.0, 0.5], [-1.0, 0.0, 0.0, 0.0, 0.0, 7.0, 8.0])
+    """
+    q, v = np.asarray(q, float), np.asarray(v, float)
+    qpos, qvel, iq, iv = [], [], 0, 0
+    for link in links:
+        if link[1] == "free":
+            x, y, z, w = q[iq + 3:iq + 7]
+            qpos += [*q[iq:iq + 3], w, x, y, z]
+            qvel += [*(quaternion_matrix(w, x, y, z) @ v[iv:iv + 3]), *v[iv + 3:iv + 6]]
+            iq, iv = iq + 7, iv + 6
+        else:
+            qpos.append(q[iq])
+            qvel.append(v[iv])
+            iq, iv = iq + 1, iv + 1
+    return np.array(qpos), np.array(qvel)
+
+
+def mujoco_acceleration(links, q, v, a):
+    """MuJoCo's qacc of :func:`tree_mjcf`'s model at Pinocchio's (q, v) and
+    acceleration ``a``: a free joint's linear rows are the derivative of its
+    world-frame velocity R v, R (a + w x v) (:func:`mujoco_state`)."""
+    q, v, a = (np.asarray(z, float) for z in (q, v, a))
+    out, iq, iv = [], 0, 0
+    for link in links:
+        if link[1] == "free":
+            x, y, z, w = q[iq + 3:iq + 7]
+            linear = a[iv:iv + 3] + np.cross(v[iv + 3:iv + 6], v[iv:iv + 3])
+            out += [*(quaternion_matrix(w, x, y, z) @ linear), *a[iv + 3:iv + 6]]
+            iq, iv = iq + 7, iv + 6
+        else:
+            out.append(a[iv])
+            iq, iv = iq + 1, iv + 1
+    return np.array(out)
+
+
 def tree_mjcf(name: str, links, g: float) -> str:
-    """MJCF of ``links`` (:func:`tree_links`), with the chain's options."""
+    """MJCF of ``links`` (:func:`tree_links` or :func:`pinocchio_links`), with the
+    chain's options; a link of axis ``free`` is a ``freejoint``."""
     children: dict = {}
     for i, link in enumerate(links, start=1):
         children.setdefault(link[0], []).append(i)
@@ -172,9 +261,12 @@ def tree_mjcf(name: str, links, g: float) -> str:
         pad = "  " * depth
         lines.append(f'{pad}<body name="link{i}" pos="{" ".join(repr(float(x)) for x in p)}" '
                      f'quat="{" ".join(repr(float(x)) for x in quat(R))}">')
-        lines.append(f'{pad}  <joint name="q{i}" type="hinge" axis="'
-                     + {"x": "1 0 0", "y": "0 1 0", "z": "0 0 1"}[axis]
-                     + '" damping="0" armature="0"/>')
+        if axis == "free":
+            lines.append(f'{pad}  <freejoint name="q{i}"/>')
+        else:
+            lines.append(f'{pad}  <joint name="q{i}" type="hinge" axis="'
+                         + {"x": "1 0 0", "y": "0 1 0", "z": "0 0 1"}[axis]
+                         + '" damping="0" armature="0"/>')
         lines.append(f'{pad}  <inertial pos="{" ".join(repr(float(x)) for x in c)}" mass="{m!r}" '
                      f'fullinertia="{" ".join(repr(float(x)) for x in inertia)}"/>')
         for k in children.get(i, []):
@@ -187,15 +279,37 @@ def tree_mjcf(name: str, links, g: float) -> str:
 
 
 def pinocchio_tree_file(links, g: float, x0, path: Path) -> Path:
-    """The input of the Pinocchio harness for ``links`` as :func:`tree_links` gives them."""
+    """The input of the Pinocchio harness for ``links`` as :func:`tree_links` or
+    :func:`pinocchio_links` gives them, and the state ``x0`` in Pinocchio's
+    coordinates (q, then v)."""
     lines = [str(len(links))]
     for parent, axis, R, p, m, c, inertia in links:
-        lines.append(" ".join([str(parent), str("zyx".index(axis)),
+        lines.append(" ".join([str(parent), str(HARNESS_JOINTS.index(axis)),
                                *(repr(float(x)) for row in R for x in row),
                                *(repr(float(x)) for x in (*p, m, *c, *inertia))]))
     lines += [repr(g), " ".join(repr(float(v)) for v in x0)]
     path.write_text("\n".join(lines) + "\n")
     return path
+
+
+def write_pinocchio_peer_models(name: str, model, q, v, work: Path):
+    """Write a Pinocchio model (of the joints :func:`pinocchio_links` reads: a URDF
+    robot with a free-flyer base) for the peers at Pinocchio's state (q, v):
+    ``work/<name>.xml`` (MJCF), ``work/<name>.pin.txt`` (the Pinocchio harness's
+    input).  Returns the two paths and MuJoCo's state (qpos then qvel, one array;
+    :func:`mujoco_state`), or None when a joint is of another kind."""
+    links = pinocchio_links(model)
+    if links is None:
+        return None
+    gravity = np.array(model.gravity.linear)
+    if gravity[0] or gravity[1]:
+        return None
+    g = -float(gravity[2])
+    xml, pin = work / f"{name}.xml", work / f"{name}.pin.txt"
+    work.mkdir(parents=True, exist_ok=True)
+    xml.write_text(tree_mjcf(name, links, g))
+    pinocchio_tree_file(links, g, np.concatenate([q, v]), pin)
+    return xml, pin, np.concatenate(mujoco_state(links, q, v))
 
 
 def write_peer_models(spec, cm, x0, work: Path, chain: bool):

@@ -126,8 +126,10 @@ def adjusted_pinocchio_model(pm, inertia: str = "physical", min_mass: float = 0.
     return pm
 
 
-def _maps(pm, imp, cm):
-    """q -> Pinocchio's q, and P (nv_pin x n) with Pinocchio's v = P v."""
+def pinocchio_maps(pm, imp, cm):
+    """q -> Pinocchio's q, and P (nv_pin x n) with Pinocchio's v = P v, for the
+    Pinocchio model ``pm`` of the URDF that ``imp`` (its import) and ``cm`` come from.
+    A free joint's speeds are in its body frame in both (Pinocchio's free flyer)."""
     joints = {j.name: j for j in imp.joints}
     names, speeds = list(cm.coordinates), list(cm.speeds)
     P = np.zeros((pm.nv, cm.n))
@@ -182,7 +184,7 @@ def compare(directory: Path, relative: str, out_dir: Path, *, floating: bool = F
     adjusted_pinocchio_model(pm, options.get("inertia", "physical"),
                              options.get("min_mass", 0.0), options.get("min_inertia", 0.0))
     pd = pm.createData()
-    q_pin, P = _maps(pm, imp, cm)
+    q_pin, P = pinocchio_maps(pm, imp, cm)
     rng = np.random.default_rng(seed)
     nu, worst = len(cm.inputs), np.zeros(3)
     for _ in range(samples):

@@ -5,7 +5,10 @@
  * (nq + nv numbers).  With K, it calls mj_forward K times untimed and exits
  * (for callgrind).  mjbench model.xml state.txt inverse [K] does the same with
  * mj_inverse at the accelerations 0.3 (i mod 3) - 0.2 (bench/inverse_dynamics.py),
- * printing its best time. */
+ * printing its best time.  mjbench model.xml state.txt transition [K] does it with
+ * mjd_transitionFD (central differences, eps 1e-6; the model's integrator
+ * replaced by Euler, MuJoCo's default, so that each perturbation is one step),
+ * the discrete transition Jacobian A = d x_next / d x (bench/derivatives.py). */
 #define _POSIX_C_SOURCE 199309L
 #include <stdio.h>
 #include <stdlib.h>
@@ -24,6 +27,7 @@ static mjModel *m;
 static mjData *d;
 static double q0[1024], v0[1024];
 static double sink;
+static double *transition;     /* A of mjd_transitionFD, (2 nv + na)^2 */
 
 static void reset(void)
 {
@@ -60,6 +64,20 @@ static double run_inverse(long loops)
         d->qpos[j] = q0[j] + 1e-9 * d->qfrc_inverse[nv - 1 - j];
         mj_inverse(m, d);
         sink += d->qfrc_inverse[nv - 1];
+    }
+    return now() - start;
+}
+
+static double run_transition(long loops)
+{
+    long k;
+    const int nv = m->nv, nx = 2 * m->nv + m->na;
+    const double start = now();
+    for (k = 0; k < loops; ++k) {
+        const int j = (int)(k % nv);
+        d->qpos[j] = q0[j] + 1e-9 * transition[nx * nx - 1 - j];
+        mjd_transitionFD(m, d, 1e-6, 1, transition, NULL, NULL, NULL);
+        sink += transition[nx * nx - 1];
     }
     return now() - start;
 }
@@ -101,7 +119,7 @@ int main(int argc, char **argv)
     int i;
     double forward, step;
     if (argc < 3 || argc > 5) {
-        fprintf(stderr, "usage: %s model.xml state.txt [inverse] [K]\n", argv[0]);
+        fprintf(stderr, "usage: %s model.xml state.txt [inverse | transition] [K]\n", argv[0]);
         return 2;
     }
     m = mj_loadXML(argv[1], NULL, error, sizeof(error));
@@ -126,6 +144,20 @@ int main(int argc, char **argv)
     fclose(f);
     reset();
     mj_forward(m, d);
+    if (argc >= 4 && strcmp(argv[3], "transition") == 0) {
+        const int nx = 2 * m->nv + m->na;
+        m->opt.integrator = mjINT_EULER;
+        transition = (double *)calloc((size_t)nx * (size_t)nx, sizeof(double));
+        if (!transition)
+            return 1;
+        if (argc == 5)
+            run_transition(atol(argv[4]));
+        else
+            printf("%.9e ", best_of(run_transition));
+        printf("%.17g\n", sink);
+        free(transition);
+        return 0;
+    }
     if (argc >= 4 && strcmp(argv[3], "inverse") == 0) {
         if (argc == 5)
             run_inverse(atol(argv[4]));

@@ -1,10 +1,11 @@
 // Timing harness for Pinocchio's ABA, CRBA + Cholesky, rnea and
 // computeABADerivatives, built by
 // modelgen.bench.harnesses.build_pinocchio_harness with -DMIN_SECONDS and -DREPEATS.
-// Usage: pin_bench tree.txt, the file holding n,
-// then per joint (parents first) "parent(0 = ground, else 1-based) axis(0 = z,
-// 1 = y, 2 = x) R(9, row-major, joint frame in the parent's) p(3) mass c(3)
-// Ixx Iyy Izz Ixy Ixz Iyz (about c)", then g, then x0 (2n numbers).
+// Usage: pin_bench tree.txt, the file holding the number of joints,
+// then per joint (parents first) "parent(0 = ground, else 1-based) kind(0, 1, 2 =
+// revolute about z, y, x; 3 = free flyer) R(9, row-major, joint frame in the
+// parent's) p(3) mass c(3) Ixx Iyy Izz Ixy Ixz Iyz (about c)", then g, then x0
+// (q then v: nq + nv numbers, a free flyer's q as x y z qx qy qz qw).
 // Prints: aba_s crba_s, then q_ddot at x0 by each, then rnea's tau at x0 and the
 // accelerations ACC(i).  pin_bench tree.txt WHICH prints the time of ABA (WHICH 0),
 // the CRBA path (1), rnea (2) or computeABADerivatives at tau = 0 (3) alone, and for
@@ -44,8 +45,8 @@ static void crba_path(pinocchio::Data &data, const Eigen::VectorXd &q, const Eig
 
 template <int WHICH> static double run(pinocchio::Data &data, long loops, double &sink) {
     const int n = model.nv;
-    Eigen::VectorXd q = Eigen::Map<const Eigen::VectorXd>(x0, n);
-    Eigen::VectorXd v = Eigen::Map<const Eigen::VectorXd>(x0 + n, n);
+    Eigen::VectorXd q = Eigen::Map<const Eigen::VectorXd>(x0, model.nq);
+    Eigen::VectorXd v = Eigen::Map<const Eigen::VectorXd>(x0 + model.nq, n);
     Eigen::VectorXd tau = Eigen::VectorXd::Zero(n), qdd = Eigen::VectorXd::Zero(n);
     Eigen::VectorXd acc(n);
     for (int i = 0; i < n; ++i) acc[i] = ACC(i);
@@ -104,8 +105,10 @@ static int read_chain(const char *path) {
             id = model.addJoint(p, pinocchio::JointModelRZ(), placement, name);
         else if (axis == 1)
             id = model.addJoint(p, pinocchio::JointModelRY(), placement, name);
-        else
+        else if (axis == 2)
             id = model.addJoint(p, pinocchio::JointModelRX(), placement, name);
+        else
+            id = model.addJoint(p, pinocchio::JointModelFreeFlyer(), placement, name);
         Eigen::Matrix3d I;
         I << v[16], v[19], v[20], v[19], v[17], v[21], v[20], v[21], v[18];
         model.appendBodyToJoint(id, pinocchio::Inertia(v[12], Eigen::Vector3d(v[13], v[14], v[15]),
@@ -114,7 +117,8 @@ static int read_chain(const char *path) {
     double g;
     if (std::fscanf(f, "%lf", &g) != 1) return 0;
     model.gravity.linear(Eigen::Vector3d(0.0, 0.0, -g));
-    for (int i = 0; i < 2 * n; ++i)
+    if (model.nq + model.nv > 2048) return 0;
+    for (int i = 0; i < model.nq + model.nv; ++i)
         if (std::fscanf(f, "%lf", &x0[i]) != 1) return 0;
     std::fclose(f);
     return n;
@@ -123,8 +127,8 @@ static int read_chain(const char *path) {
 // d q_ddot / d q, then d q_ddot / d v, at x0 and tau = 0, row-major, a line each
 static void print_aba_derivatives(pinocchio::Data &data) {
     const int n = model.nv;
-    const Eigen::VectorXd q = Eigen::Map<const Eigen::VectorXd>(x0, n);
-    const Eigen::VectorXd v = Eigen::Map<const Eigen::VectorXd>(x0 + n, n);
+    const Eigen::VectorXd q = Eigen::Map<const Eigen::VectorXd>(x0, model.nq);
+    const Eigen::VectorXd v = Eigen::Map<const Eigen::VectorXd>(x0 + model.nq, n);
     pinocchio::computeABADerivatives(model, data, q, v, Eigen::VectorXd::Zero(n));
     const auto print = [n](const auto &m) {
         for (int i = 0; i < n; ++i)
@@ -167,8 +171,8 @@ int main(int argc, char **argv) {
     }
     const double aba = best<0>(data, sink), crba = best<1>(data, sink);
     const int n = model.nv;
-    Eigen::VectorXd q = Eigen::Map<const Eigen::VectorXd>(x0, n);
-    Eigen::VectorXd v = Eigen::Map<const Eigen::VectorXd>(x0 + n, n);
+    Eigen::VectorXd q = Eigen::Map<const Eigen::VectorXd>(x0, model.nq);
+    Eigen::VectorXd v = Eigen::Map<const Eigen::VectorXd>(x0 + model.nq, n);
     Eigen::VectorXd tau = Eigen::VectorXd::Zero(n), qdd(n);
     std::printf("%.9e %.9e %.3g\n", aba, crba, sink * 0.0);
     pinocchio::aba(model, data, q, v, tau);
