@@ -76,6 +76,7 @@ try:
 except ImportError:   # not POSIX: builds are not serialised
     fcntl = None
 
+from modelgen.codegen.compilers import GCC_FLAGS, is_gcc
 from modelgen.errors import BuildError
 
 # shutil, socket, subprocess and tempfile are imported where a build needs them:
@@ -100,13 +101,6 @@ O2 = ("-O2", "-fno-tree-slp-vectorize")
 #: the FMU): -O1 above 400 statements, else :data:`O2`.
 OPT_LEVELS = {0: ((("-O1",), 400),), 1: ((("-O0",), -1),), 2: ((("-O1",), 4000),),
               3: ((("-O1",), 4000),)}
-#: Added to an optimised level when the compiler is gcc: its dead-store passes,
-#: which find no dead store in generated code (the same machine code with and
-#: without, up to the stack slots of spills, on the 20- and 50-link chains with
-#: their derivatives), but walk the aliasing stores behind each of the many
-#: stores of a large routine (a seventh of the compile time of the derivatives'
-#: part).  clang has no such flags.
-GCC_FLAGS = ("-fno-tree-dse", "-fno-dse")
 #: A model's C is compiled as three parts in parallel (MG_PART 1, 2 and 3) when
 #: the machine has two cores or more, at every size (even the double pendulum
 #: gains); on one core, as one part (0: the whole file).
@@ -197,20 +191,6 @@ def compile_flags(statements: int, part: int = 2, *, host: bool = False) -> list
     gcc = GCC_FLAGS if opt[0] != "-O0" and is_gcc(tuple(compiler())) else ()
     return [*opt, *gcc, *BASE_FLAGS, *(host_flags() if host else ()),
             *_split_env("MODELGEN_CFLAGS", "")]
-
-
-@functools.lru_cache(maxsize=4)
-def is_gcc(command: tuple) -> bool:
-    """True if the C compiler ``command`` is gcc (its ``--version`` names the Free
-    Software Foundation; clang, Apple's cc and Intel's icx do not); False if it
-    does not run."""
-    import subprocess
-    try:
-        out = subprocess.run([*command, "--version"], capture_output=True, text=True,
-                             timeout=30).stdout
-    except (OSError, subprocess.SubprocessError):
-        return False
-    return "Free Software Foundation" in out
 
 
 #: Instruction-set flag for code built for this machine only, when its CPU has
