@@ -76,6 +76,7 @@ try:
 except ImportError:   # not POSIX: builds are not serialised
     fcntl = None
 
+from modelgen.codegen.compilers import GCC_FLAGS, is_gcc
 from modelgen.errors import BuildError
 
 # shutil, subprocess and tempfile are imported where a build needs them:
@@ -187,7 +188,8 @@ def compile_flags(statements: int, part: int = 2, *, host: bool = False) -> list
     ('-O0', ['-O2', '-fno-tree-slp-vectorize'], '-O1')
     """
     opt = next((flags for flags, above in OPT_LEVELS[part] if statements > above), O2)
-    return [*opt, *BASE_FLAGS, *(host_flags() if host else ()),
+    gcc = GCC_FLAGS if opt[0] != "-O0" and is_gcc(tuple(compiler())) else ()
+    return [*opt, *gcc, *BASE_FLAGS, *(host_flags() if host else ()),
             *_split_env("MODELGEN_CFLAGS", "")]
 
 

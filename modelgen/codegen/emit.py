@@ -201,6 +201,11 @@ class CFunction:
     ops_before: int
     ops_after: int
     statements: int
+    #: the output lines of a large routine in noinline pieces of CHUNK lines (then
+    #: ``body`` is empty), which take ``out_params`` (``out_args`` in a call)
+    outs: tuple = ()
+    out_params: str = ""
+    out_args: str = ""
 
 
 def print_routine(routine: Routine) -> CFunction:
@@ -254,9 +259,21 @@ def print_routine(routine: Routine) -> CFunction:
         return CFunction(routine.name, params, args, inputs, work, (),
                          tuple(parts[0] + out_lines), routine.ops_before,
                          routine.ops_after, len(statements))
+    if len(out_lines) <= CHUNK:
+        return CFunction(routine.name, params, args, inputs, work,
+                         tuple(tuple(p) for p in parts), tuple(out_lines),
+                         routine.ops_before, routine.ops_after, len(statements))
+    # thousands of output lines in one function (the derivatives' W) cost gcc
+    # more than the statements that compute them: each load of w is checked
+    # against every store to an output before it
+    arrays = [array for array, _ in routine.outputs]
     return CFunction(routine.name, params, args, inputs, work,
-                     tuple(tuple(p) for p in parts), tuple(out_lines),
-                     routine.ops_before, routine.ops_after, len(statements))
+                     tuple(tuple(p) for p in parts), (),
+                     routine.ops_before, routine.ops_after, len(statements),
+                     tuple(tuple([f"(void){a};" for a in ("w", *arrays)] + out_lines[k:k + CHUNK])
+                           for k in range(0, len(out_lines), CHUNK)),
+                     ", ".join(f"double *{a}" for a in arrays),
+                     ", ".join(arrays))
 
 
 def _comment_safe(text: str) -> str:
