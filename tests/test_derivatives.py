@@ -321,7 +321,7 @@ def _uses(cm, solve) -> bool:
     ``solve`` says."""
     source = (Path(cm.path).parent / f"{cm.name}.c").read_text()
     return cm.manifest["derivative_method"] == "recursive" and \
-        (f"{cm.name}_aba_in" in source) == (solve == "articulated")
+        (f"{cm.name}_aba_columns" in source) == (solve == "articulated")
 
 
 def test_floating_solo12_matches_pinocchio_free_flyer_in_the_tangent_space(pin, tmp_path, solve):

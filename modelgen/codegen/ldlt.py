@@ -33,9 +33,10 @@ SPARSE_UNROLL_SIZE = 30
 #: columns runs one column at a time through straight-line code; above, every
 #: update of it is a whole row of the columns side by side (vectorized).
 #: Callgrind instructions a call of ``<name>_derivatives``, one column at a time
-#: against by rows: the 7-link chain 14,463 against 16,224, the 7-joint arm
-#: 20,045 against 19,549, the 12-link chain 36,248 against 33,820.
-BY_COLUMN_SOLVE = 8
+#: against by rows (each row updated once forwards and once backwards,
+#: ``<name>_derivatives_rows``): the 7-link chain 14,463 against 14,231, the
+#: 7-joint arm 20,045 against 19,316 (with the loop over the pairs of dofs).
+BY_COLUMN_SOLVE = 6
 
 
 class Elimination(NamedTuple):
@@ -227,23 +228,48 @@ def unrolled_columns(plan: Elimination, array: str, stride: str) -> list:
 def unrolled_apply(plan: Elimination, name: str) -> list:
     """Straight-line C that overwrites the rows of ``B`` (all the columns at once,
     rows ``<NAME>_DS`` apart) with ``-A^-1 B``, from the locals of
-    :func:`unrolled_factor`: one call of ``<name>_derivatives_axpy`` (``y -= a x``
-    over a row) per entry of L forwards and backwards, and one of
-    ``<name>_derivatives_scale`` per row.
+    :func:`unrolled_factor`: one call of ``<name>_derivatives_rows`` per row
+    forwards (``y_i = b_i - sum L_ik y_k``) and backwards (``x_i = -y_i / d_i -
+    sum L_ki x_k``), each a fused update that reads row i once and every row it
+    subtracts once, keeping row i in registers.
 
     >>> unrolled_apply(elimination([[1, 1], [1, 1]]), "m")[0]
-    'm_derivatives_axpy(B + 1 * M_DS, B + 0 * M_DS, L1_0);'
+    '{ static const int r[1] = {0 * M_DS}; const double a[1] = {L1_0}; \
+m_derivatives_rows(B + 1 * M_DS, B, r, a, 1, 1.0); }'
     """
     stride = f"{name.upper()}_DS"
+    earlier = plan.earlier()
 
-    def row(i):
-        return f"B + {i} * {stride}"
-    lines = [f"{name}_derivatives_axpy({row(i)}, {row(j)}, L{i}_{j});"
-             for j in plan.order for i in plan.below[j]]
-    lines += [f"{name}_derivatives_scale({row(j)}, -inv{j});" for j in plan.order]
-    lines += [f"{name}_derivatives_axpy({row(j)}, {row(i)}, L{i}_{j});"
-              for j in reversed(plan.order) for i in plan.below[j]]
+    def call(i, rows, coefs, scale):
+        if not rows:
+            return f"{name}_derivatives_rows(B + {i} * {stride}, B, NULL, NULL, 0, {scale});"
+        offsets = ", ".join(f"{k} * {stride}" for k in rows)
+        return (f"{{ static const int r[{len(rows)}] = {{{offsets}}}; "
+                f"const double a[{len(rows)}] = {{{', '.join(coefs)}}}; "
+                f"{name}_derivatives_rows(B + {i} * {stride}, B, r, a, {len(rows)}, {scale}); }}")
+    lines = [call(i, earlier[i], [f"L{i}_{k}" for k in earlier[i]], "1.0")
+             for i in plan.order if earlier[i]]
+    lines += [call(i, plan.below[i], [f"L{k}_{i}" for k in plan.below[i]], f"-inv{i}")
+              for i in reversed(plan.order)]
     return lines
+
+
+def row_blocks(stride: int, most: int = 12) -> list:
+    """``[(first, count), ...]``: the vectors of 4 doubles of a row of ``stride``
+    doubles in blocks of at most ``most``, the accumulators
+    ``<name>_derivatives_rows`` keeps in registers (16 vector registers on x86-64).
+
+    >>> row_blocks(40), row_blocks(60)
+    ([(0, 10)], [(0, 8), (8, 7)])
+    """
+    vectors = stride // 4
+    blocks = -(-vectors // most)
+    out, first = [], 0
+    for b in range(blocks):
+        count = vectors // blocks + (1 if b < vectors % blocks else 0)
+        out.append((first, count))
+        first += count
+    return out
 
 
 def derivative_solve(n: int, tol: str, pattern, nu: int, name: str = "model") -> dict:
@@ -268,5 +294,6 @@ def derivative_solve(n: int, tol: str, pattern, nu: int, name: str = "model") ->
         else:
             unrolled["apply"] = unrolled_apply(plan, name)
     # the loop's array of all columns: rows padded to a multiple of 4 (a vector)
-    return {"loop": loop_tables(plan), "unrolled": unrolled,
-            "stride": -(-(2 * n + nu) // 4) * 4}
+    stride = -(-(2 * n + nu) // 4) * 4
+    return {"loop": loop_tables(plan), "unrolled": unrolled, "stride": stride,
+            "blocks": [[4 * v for v in range(f, f + c)] for f, c in row_blocks(stride)]}

@@ -12,6 +12,8 @@ from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
+import sympy
+
 from modelgen.version import __version__
 from modelgen.codegen import budget
 from modelgen.codegen.build import (Generated, build_module, cache_dir, cache_lookup,
@@ -24,9 +26,10 @@ from modelgen.derive.dynamics import Equations, derive_equations
 from modelgen.derive.graph import GraphBuilder
 from modelgen.derive.joint_tree import JointTree, extract_joint_tree
 from modelgen.derive.rnea import derive_inverse_dynamics, derive_velocity_terms
-from modelgen.derive.rnea_derivatives import (derive_inverse_dynamics_derivatives,
+from modelgen.derive.rnea_derivatives import (InverseDynamicsDerivatives,
+                                              derive_inverse_dynamics_derivatives,
                                               differentiate_inverse_dynamics)
-from modelgen.derive.rnea_partials import RneaPartials, derive_rnea_partials
+from modelgen.derive.rnea_partials import VECTORS, RneaPartials, derive_rnea_partials
 from modelgen.errors import ModelError
 from modelgen.codegen.emit import (ABI_VERSION, constraint_context, emit_sources,
                                    integrator_sources, print_routine, runtime_sources,
@@ -505,19 +508,65 @@ def _derive(spec: ModelSpec, options: BuildOptions, tree: JointTree | None) -> D
 #: Up to this many speeds a joint tree's derivatives are derived both ways, and
 #: forward mode over RNEA (derive/rnea_derivatives.py) is kept when it has fewer
 #: operations than the recursive method with its loop: on the 7-link chain it
-#: does (and runs fewer instructions), on the 7-joint arm it does not.  Above,
-#: forward mode costs more per entry and its derivation grows with n^2.
+#: does, on the 7-joint arm it does not; else the recursive method's dot
+#: products are written into the program (:class:`UnrolledPartials`).  Above,
+#: forward mode costs more per entry and its derivation grows with n^2, and the
+#: dot products are a vectorized C loop.
 FORWARD_DERIVATIVES_MAX = 10
+
+
+@dataclass(frozen=True)
+class UnrolledPartials(InverseDynamicsDerivatives):
+    """The recursive derivatives (:class:`RneaPartials`) with the dot products of
+    every pair of dofs written out as the entries of dQ/dq, dQ/dv, dQ/du and M:
+    for a few dofs straight-line code runs fewer instructions than the loop
+    over the pairs (its set-up, short runs, the transposed copies)."""
+
+
+def unrolled_partials(d: RneaPartials) -> UnrolledPartials:
+    """``d``'s matrices as expressions (the dot products of the C loop of
+    ``derivative_terms``, :data:`~modelgen.derive.rnea_partials.VECTORS`), the
+    effects' entries added."""
+    n = len(d.vectors)
+    start, at = {}, 0
+    for name in VECTORS:
+        start[name] = at
+        at += 3 if name == "dYtJ" else 6
+
+    def vec(k, name, size=6):
+        return d.vectors[k][start[name]:start[name] + size]
+
+    def dot(x, y):
+        return sympy.Add(*[a * b for a, b in zip(x, y, strict=True)])
+    dq, dv, M = ([[sympy.S.Zero] * n for _ in range(n)] for _ in range(3))
+    for k, l in d.same:
+        J = vec(k, "J")
+        dq[k][l], dv[k][l], M[k][l] = (dot(J, vec(l, "dFdq0")), dot(J, vec(l, "dFdv")),
+                                       dot(J, vec(l, "dFda")))
+    for k, l in d.pairs:
+        J, Fa = vec(k, "J"), vec(l, "dFda")
+        dq[k][l], dv[k][l] = dot(J, vec(l, "dFdq")), dot(J, vec(l, "dFdv"))
+        M[k][l] = M[l][k] = dot(J, Fa)
+        dq[l][k] = dot(Fa, vec(k, "dAdq")) + dot(vec(l, "dYtJ", 3), vec(k, "dVdq", 3))
+        dv[l][k] = dot(Fa, vec(k, "dAdv")) + dot(vec(l, "dYtJ", 3), J[:3])
+    edq, edv, edu, eM = d.effects
+
+    def plus(a, b):
+        return tuple(tuple(x + y for x, y in zip(ra, rb, strict=True))
+                     for ra, rb in zip(a, b, strict=True))
+    return UnrolledPartials(d.graph, d.a, (), plus(dq, edq), plus(dv, edv), edu, plus(M, eM))
 
 
 def _tree_derivatives(eqs: Equations, tree: JointTree, spec: ModelSpec, graph):
     """The derivatives of inverse dynamics of a joint tree: the recursive ones
-    (:func:`derive_rnea_partials`), or forward mode where it has fewer operations."""
+    (:func:`derive_rnea_partials`), for a few speeds with their dot products
+    unrolled, or forward mode where that has fewer operations."""
     recursive = derive_rnea_partials(eqs, tree, spec, graph)
     if spec.n > FORWARD_DERIVATIVES_MAX:
         return recursive
     forward = derive_inverse_dynamics_derivatives(eqs, tree, spec, graph)
-    return forward if forward.operations() < recursive.operations() else recursive
+    return forward if forward.operations() < recursive.operations() else \
+        unrolled_partials(recursive)
 
 
 #: Up to this many speeds the Jacobian of a joint tree is derived both ways, and
@@ -591,7 +640,7 @@ def derivative_method(d) -> str | None:
     """How the derivatives were derived (the manifest's ``derivative_method``)."""
     if d is None:
         return None
-    return "recursive" if isinstance(d, RneaPartials) else "forward"
+    return "recursive" if isinstance(d, (RneaPartials, UnrolledPartials)) else "forward"
 
 
 def _derive_frames(spec: ModelSpec, options: BuildOptions, kin, graph) -> FrameTerms | None:
@@ -670,13 +719,6 @@ def derivative_loop(d: RneaPartials) -> dict:
         return ", ".join(str(x) for pair in pairs for x in pair) or "0"
     effects = [(array, index) for array, index, _ in d.effect_entries()]
     runs = d.runs()
-    # the inward pass of the factor: the first dof to reach each predecessor
-    first, reached = set(), set()
-    for k in reversed(d.dof_order):
-        p = d.dof_parent[k]
-        if p >= 0 and p not in reached:
-            first.add(k)
-            reached.add(p)
     return {"same": c_list(d.same), "nsame": len(d.same),
             "runs": c_list(runs), "nruns": len(runs), "runs_size": max(3 * len(runs), 1),
             "npairs": len(d.pairs),
@@ -685,13 +727,36 @@ def derivative_loop(d: RneaPartials) -> dict:
             "aba": bool(d.factor),
             # every entry written by the loops: no zeros to set first
             "dense": all(all(row) for row in d.pattern()),
-            "first": ", ".join(str(int(k in first)) for k in range(len(d.vectors))),
-            "reached": ", ".join(str(int(k in reached)) for k in range(len(d.vectors))),
+            "flags": ", ".join(map(str, _solve_flags(d.dof_order, d.dof_parent))),
             "order": ", ".join(map(str, d.dof_order)),
-            "parent": ", ".join(map(str, d.dof_parent)),
-            # the columns of the solve in chunks of 16 (the template's _DC)
-            "stride": -(-(2 * len(d.vectors) + len(d.effects[2][0] if d.effects[2] else ()))
-                        // 16) * 16}
+            "parent": ", ".join(map(str, d.dof_parent))}
+
+
+def _solve_flags(order, parent) -> list:
+    """Per speed, the bits of the template's ``dflags`` for the articulated solve,
+    which runs inwards over ``order`` reversed and outwards over ``order``: 1, it
+    receives the P carried from the dof processed just before it inwards (its
+    child); 2, other children's P in memory; 4, its own P goes to memory (its
+    parent is not the next processed), 8, first there; 16, outwards the carried A
+    is its parent's; 32, its A is stored for a child not processed just after it.
+
+    >>> _solve_flags((0, 1, 2), (-1, 0, 1)), _solve_flags((0, 1, 2), (-1, 0, 0))
+    ([1, 17, 16], [35, 16, 12])
+    """
+    flags = [0] * len(order)
+    seen = set()
+    for i in reversed(range(len(order))):
+        k, p = order[i], parent[order[i]]
+        if p < 0:
+            continue
+        if i > 0 and order[i - 1] == p:
+            flags[p] |= 1                      # carried inwards to p
+            flags[k] |= 16                     # and outwards from p
+        else:
+            flags[p] |= 2 | 32
+            flags[k] |= 4 | (8 if p not in seen else 0)
+            seen.add(p)
+    return flags
 
 
 def _constraint_context(spec: ModelSpec, terms, columns=None) -> dict | None:
