@@ -308,9 +308,9 @@ def solve(request, monkeypatch):
     """Both ways of applying -M^-1 of the recursive derivatives: the sparse LDL^T
     (small models) and the articulated-body factor (large ones, here forced); the
     recursive derivatives forced too (a small tree may get forward mode)."""
-    from modelgen.codegen import pipeline
+    from modelgen.codegen import tree_derivatives
     from modelgen.derive import rnea_partials
-    monkeypatch.setattr(pipeline, "FORWARD_DERIVATIVES_MAX", 0)
+    monkeypatch.setattr(tree_derivatives, "FORWARD_DERIVATIVES_MAX", 0)
     if request.param == "articulated":
         monkeypatch.setattr(rnea_partials, "ARTICULATED_SOLVE_ABOVE", 0)
     return request.param
@@ -386,11 +386,11 @@ def test_derivatives_with_armature_and_a_free_joint_match_central_differences(
     # a small tree is derived both ways and the one with fewer operations kept:
     # each forced here, on a free body with a hinged rod and armature on both
     from test_armature import TUMBLER
-    from modelgen.codegen import pipeline
+    from modelgen.codegen import tree_derivatives
     from modelgen.derive.rnea_partials import RneaPartials
     from modelgen.model import parse_model
     if method == "recursive":
-        monkeypatch.setattr(pipeline, "FORWARD_DERIVATIVES_MAX", 0)
+        monkeypatch.setattr(tree_derivatives, "FORWARD_DERIVATIVES_MAX", 0)
     else:
         monkeypatch.setattr(RneaPartials, "operations", lambda self: 10 ** 9)
     cm = modelgen.load(parse_model(TUMBLER), tmp_path / "build", derivatives=True)

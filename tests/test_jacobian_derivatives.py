@@ -14,7 +14,7 @@ import pytest
 
 import modelgen
 from conftest import SUMMARY
-from modelgen.codegen import pipeline
+from modelgen.codegen import pipeline, tree_derivatives
 from modelgen.model.chains import spatial_chain
 
 
@@ -44,11 +44,11 @@ def _forced(monkeypatch, method):
     """A monkeypatch context in which the pipeline chooses ``method``."""
     mp = monkeypatch.context()
     ctx = mp.__enter__()
-    ctx.setattr(pipeline, "FORWARD_JACOBIAN_MAX", 100)
+    ctx.setattr(tree_derivatives, "FORWARD_JACOBIAN_MAX", 100)
     if method == "forward":
-        ctx.setattr(pipeline, "derivatives_operations", lambda d, nu: 10 ** 12)
+        ctx.setattr(tree_derivatives, "derivatives_operations", lambda d, nu: 10 ** 12)
     else:
-        ctx.setattr(pipeline, "jacobian_operations", lambda terms: 10 ** 12)
+        ctx.setattr(tree_derivatives, "jacobian_operations", lambda terms: 10 ** 12)
     return mp
 
 

@@ -318,7 +318,7 @@ def template_context(*, name: str, description: str, model_hash: str, n: int,
     ``<name>_inverse_dynamics_derivatives``; their solve skips its zeros.
     ``derivative_loop`` (None: ``derivative_terms`` writes the matrices itself)
     has the tables of the loop over the pairs of dofs of the recursive
-    derivatives (:func:`modelgen.codegen.pipeline.derivative_loop`).
+    derivatives (:func:`modelgen.codegen.tree_derivatives.derivative_loop`).
     ``jacobian_method``: ``derivatives`` builds ``<name>_jacobian`` and the
     dynamics' rows of ``<name>_linearize`` on ``<name>_derivatives``; else
     (``forward``, None) forward mode over the rhs program.
