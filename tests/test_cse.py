@@ -49,7 +49,8 @@ def _program(make, options):
         captured["args"] = (graph, list(routines))
         raise _Captured
     if isinstance(make, str):
-        scene = modelgen.model.scene.load_scene(SCENES / make)
+        from modelgen.model.scene import load_scene
+        scene = load_scene(SCENES / make)
         spec, options = scene.model, dict(options, outputs=scene.outputs)
     else:
         spec = make()
