@@ -215,8 +215,20 @@ def total(terms):
 
 
 def neg(x):
-    """``-x``, an exact zero kept as ``ZERO``."""
-    return ZERO if is_zero(x) else -x
+    """``-x``, an exact zero kept as ``ZERO``; a sum negated term by term and
+    summed by :func:`canonical_sum` (what sympy's ``-x`` builds by ``Add``).
+
+    >>> x, y = sympy.symbols("x y")
+    >>> neg(x - 2 * y).args == (2 * y - x).args
+    True
+    """
+    if is_zero(x):
+        return ZERO
+    if type(x) is sympy.Add:
+        r = canonical_sum([-t for t in x.args])
+        if r is not None:
+            return r
+    return -x
 
 
 def _plus(x, y):
@@ -278,7 +290,7 @@ def named(builder, e):
     if isinstance(e, sympy.Add):
         negative = sum(1 for t in e.args if _leading_minus(t))
         if 2 * negative > len(e.args):
-            return -builder.name(-e)
+            return -builder.name(neg(e))
     return builder.name(e)
 
 
@@ -304,7 +316,7 @@ def _leading_minus(term) -> bool:
 def signed(namer, e):
     """``namer(e)`` with the sign sympy would extract kept outside, so that e
     and -e share one name."""
-    return -namer(-e) if e.could_extract_minus_sign() else namer(e)
+    return -namer(neg(e)) if e.could_extract_minus_sign() else namer(e)
 
 
 def name_vec(builder, xs) -> tuple:
@@ -436,10 +448,10 @@ def _sym_axis_rot_T(builder, M, k1, k2, c, s, trig):
     j = 3 - k1 - k2
     a, b, d = M[k1][k1], M[k1][k2], M[k2][k2]
     out = [[None] * 3 for _ in range(3)]
-    diff = named(builder, a - d)
-    t = named(builder, ss * diff + S2 * b)
-    out[k1][k1], out[k2][k2] = a - t, d + t
-    out[k1][k2] = cs * diff + C2 * b
+    diff = named(builder, _minus(a, d))
+    t = named(builder, _plus(times(ss, diff), times(S2, b)))
+    out[k1][k1], out[k2][k2] = _minus(a, t), _plus(d, t)
+    out[k1][k2] = _plus(times(cs, diff), times(C2, b))
     out[j][k1], out[j][k2] = _plane_rot_T(c, s, k1, k2, M[j][k1], M[j][k2])
     out[j][j] = M[j][j]
     return name_symmetric(builder, _sym_rows(out))
@@ -462,8 +474,8 @@ def _full_axis_rot_T(builder, M, k1, k2, c, s, trig):
     ss, cs = trig[0], trig[1]
     j = 3 - k1 - k2
     out = [[None] * 3 for _ in range(3)]
-    d = named(builder, M[k1][k1] - M[k2][k2])
-    e = named(builder, M[k1][k2] + M[k2][k1])
+    d = named(builder, _minus(M[k1][k1], M[k2][k2]))
+    e = named(builder, _plus(M[k1][k2], M[k2][k1]))
     t = named(builder, total((times(ss, d), times(cs, e))))
     w = named(builder, total((times(cs, d), neg(times(ss, e)))))
     out[k1][k1], out[k2][k2] = total((M[k1][k1], neg(t))), total((M[k2][k2], t))
