@@ -104,12 +104,12 @@ class Graph:
     @cached_property
     def _index(self) -> tuple:
         """(definitions, position of each symbol, intermediates each expression uses),
-        computed once: a graph is asked for many closures."""
+        computed once: a graph is asked for many closures.  The last is filled
+        as closures reach each statement (most graphs of a derivation are asked
+        for the closure of a few outputs only)."""
         defs = dict(self.assignments)
         order = {sym: i for i, (sym, _) in enumerate(self.assignments)}
-        deps = {sym: tuple(s for s in self.symbols_of(expr) if s in defs)
-                for sym, expr in self.assignments}
-        return defs, order, deps
+        return defs, order, {}
 
     def symbols_of(self, expr) -> tuple:
         """The free symbols of ``expr`` (:func:`free_symbols`), remembered."""
@@ -128,7 +128,10 @@ class Graph:
             if sym in needed:
                 continue
             needed.add(sym)
-            stack.extend(s for s in deps[sym] if s not in needed)
+            uses = deps.get(sym)
+            if uses is None:
+                uses = deps[sym] = tuple(s for s in self.symbols_of(defs[sym]) if s in defs)
+            stack.extend(s for s in uses if s not in needed)
         return tuple(self.assignments[i] for i in sorted(order[s] for s in needed))
 
     def operations(self, outputs) -> int:
