@@ -233,12 +233,18 @@ def eliminate(graph: Graph, outputs, shared=None) -> tuple:
 
 
 def _propagate_copies(statements, outputs, free=None):
-    """Drop statements ``a = b`` (b a symbol or number) and use b in place of a."""
+    """Drop statements ``a = b`` (b a symbol or number) and use b in place of a.
+    ``free``: the program's memo of free symbols (:attr:`Graph.free`), which
+    the new graph keeps."""
+    free = {} if free is None else free
     alias = {}
     kept = []
     for sym, expr in statements:
         if alias and not expr.is_Atom:
-            renamed = {s: alias[s] for s in free_symbols(expr) if s in alias}
+            symbols = free.get(expr)
+            if symbols is None:
+                symbols = free[expr] = tuple(free_symbols(expr))
+            renamed = {s: alias[s] for s in symbols if s in alias}
             if renamed:
                 expr = expr.xreplace(renamed)
         elif expr in alias:
@@ -251,7 +257,7 @@ def _propagate_copies(statements, outputs, free=None):
         outputs = [alias.get(e, e) if e.is_Symbol else
                    e.xreplace({s: alias[s] for s in free_symbols(e) if s in alias})
                    for e in outputs]
-    return Graph(tuple(kept), {} if free is None else free), outputs
+    return Graph(tuple(kept), free), outputs
 
 
 def make_routines(graph: Graph, routines, *, cse: bool = True, alone=()) -> tuple:
