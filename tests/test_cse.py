@@ -197,6 +197,71 @@ def test_product_is_sympys_product_on_every_pair():
         assert got.args == expected.args, (x, y)
 
 
+def _term_pool():
+    """Terms of a program's sums and products: symbols in an order that is not
+    their names' order, rationals, products of rationals and symbols, powers,
+    functions, sums; floats and noncommutative ones too (which must be left to
+    sympy)."""
+    x, y, z = sympy.symbols("x y z")
+    mg9, mg10 = sympy.symbols("mg_9 mg_10")
+    r, nc = sympy.Symbol("r", real=True), sympy.Symbol("N", commutative=False)
+    half, third = sympy.Rational(1, 2), sympy.Rational(-1, 3)
+    return [x, y, z, mg9, mg10, r, -x, 2 * y, half * z, x * y, -x * y, 3 * x * mg9,
+            third * mg10 * z, x * y * z, -mg9 * mg10, x ** 2, y ** -1, 2 * x ** 2,
+            sympy.sin(x), -sympy.cos(y), x * sympy.sin(y), x + 1, x - y, mg9 * mg10 + z,
+            half - z * x, sympy.S(3), sympy.S.NegativeOne, half, third,
+            sympy.Float(2.5), sympy.Float(2.5) * x, x + sympy.Float(1.0), nc, 2 * nc,
+            sympy.Dummy("d"), x * (y + z)]
+
+
+def test_canonical_sum_and_product_are_sympys():
+    """The direct constructors give sympy's own Add and Mul, argument for
+    argument, or decline (None); and they do not decline a program's sums."""
+    rng = random.Random(5)
+    pool = _term_pool()
+    built = {"sum": 0, "product": 0}
+    for _ in range(3000):
+        terms = [rng.choice(pool) for _ in range(rng.randint(2, 6))]
+        for kind, fast, slow in (("sum", spatial.canonical_sum, sympy.Add),
+                                 ("product", spatial.canonical_product, sympy.Mul)):
+            got, expected = fast(terms), slow(*terms)
+            if got is None:
+                continue
+            built[kind] += 1
+            assert type(got) is type(expected), (kind, terms)
+            assert got == expected and got.args == expected.args, (kind, terms)
+            assert str(got) == str(expected) and got.is_commutative == expected.is_commutative
+    assert built["sum"] > 1000 and built["product"] > 50, built
+
+
+def test_total_and_times_are_sympys_on_a_program():
+    """Every sum and product of the 4-link chain's derivation (with its derivatives),
+    rebuilt by sympy."""
+    spec = spatial_chain(4).spec()
+    calls = []
+    total, product = spatial.total, spatial.product
+
+    def spy_total(terms):
+        terms = list(terms)
+        calls.append(("sum", terms, total(terms)))
+        return calls[-1][2]
+
+    def spy_product(x, y):
+        calls.append(("product", [x, y], product(x, y)))
+        return calls[-1][2]
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(spatial, "total", spy_total)
+        mp.setattr(spatial, "product", spy_product)
+        pipeline._derive(spec, pipeline.BuildOptions(derivatives=True, formulation="aba"),
+                         pipeline.choose_formulation(spec, "aba")[1])
+    assert len(calls) > 500
+    for kind, args, got in calls:
+        args = [a for a in args if not spatial.is_zero(a)]
+        expected = (sympy.Add if kind == "sum" else sympy.Mul)(*args)
+        assert got == expected and got.args == expected.args, (kind, args)
+
+
 def test_closure_is_the_needed_statements_in_program_order():
     x, y = sympy.symbols("x y")
     g = graph_module.GraphBuilder()

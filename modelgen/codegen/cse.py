@@ -20,6 +20,7 @@ from dataclasses import dataclass
 import sympy
 
 from modelgen.derive.graph import Graph, free_symbols
+from modelgen.derive.spatial import canonical_product, canonical_sum
 from modelgen.codegen.printer import c_operations
 
 
@@ -58,7 +59,7 @@ _SYMENGINE_FUNCTIONS = ("sin", "cos", "tan", "asin", "acos", "atan", "sinh", "co
                         "exp", "log")
 
 
-def _converters(symengine):
+def _converters(symengine, shared=None):
     """``(to_symengine, to_sympy)``: sympy <-> symengine converters sharing one memo.
 
     The statements of a program share their leaves (every intermediate symbol
@@ -69,10 +70,17 @@ def _converters(symengine):
     to the name given by ``to_sympy.rename``), so cse's temporaries get their
     final names as the sympy expression is built, instead of by an
     ``xreplace`` that builds it a second time.
+
+    ``shared`` (a dict, empty at first) keeps the way in and the symbols for
+    the next converters given it: the CSE passes of one program convert the
+    same statements (the way back is each pass's own, for its renames).
     """
     functions = {getattr(sympy, name): getattr(symengine, name) for name in _SYMENGINE_FUNCTIONS}
-    forward = {}
-    back = {}
+    if shared is None:
+        shared = {}
+    forward = shared.setdefault("forward", {})
+    origin = shared.setdefault("symbols", {})
+    back = dict(origin)
 
     def to_symengine(e):
         r = forward.get(e)
@@ -80,7 +88,7 @@ def _converters(symengine):
             return r
         if e.is_Symbol:
             r = symengine.Symbol(e.name)
-            back[r] = e
+            back[r] = origin[r] = e
         elif e.is_Add:
             r = symengine.Add(*[to_symengine(a) for a in e.args])
         elif e.is_Mul:
@@ -107,9 +115,15 @@ def _converters(symengine):
             return r
         kind = type(e)
         if kind is add:
-            r = sympy.Add(*[to_sympy(a) for a in e.args])
+            args = [to_sympy(a) for a in e.args]
+            r = canonical_sum(args)
+            if r is None:
+                r = sympy.Add(*args)
         elif kind is mul:
-            r = sympy.Mul(*[to_sympy(a) for a in e.args])
+            args = [to_sympy(a) for a in e.args]
+            r = canonical_product(args)
+            if r is None:
+                r = sympy.Mul(*args)
         elif kind is power:
             r = sympy.Pow(to_sympy(e.args[0]), to_sympy(e.args[1]))
         else:       # numbers, functions, anything else: symengine's own conversion
@@ -129,28 +143,31 @@ def _converters(symengine):
 
 
 def _closure_ops(statements, memo: dict) -> int:
-    """Operations of ``statements``, each counted once per symbol in ``memo``."""
+    """Operations of ``statements``, each expression counted once (``memo``:
+    expression -> operations, shared by the routines of one program)."""
     total = 0
-    for sym, expr in statements:
-        n = memo.get(sym)
+    for _, expr in statements:
+        n = memo.get(expr)
         if n is None:
-            n = memo[sym] = c_operations(expr)
+            n = memo[expr] = c_operations(expr)
         total += n
     return total
 
 
-def _cse(exprs):
-    """(replacements, reduced) from symengine's cse when available, else sympy's.
+def _cse(exprs, shared=None):
+    """(replacements, reduced) from symengine's cse when available, else sympy's;
+    an expression the cse leaves unchanged is returned as the same object.
 
     symengine's cse is about 17x faster on a 30-link chain (0.08 s against
     1.4 s for sympy's ``order='none'``) for the same number of temporaries.
     Replacement symbols are renamed ``mg_c<i>`` in order of appearance.
+    ``shared``: the conversions' memo of :func:`_converters`.
     """
     try:
         import symengine
     except ImportError:   # pragma: no cover - symengine is a declared dependency
         return sympy.cse(exprs, symbols=_numbered("mg_c"), order="none")
-    to_symengine, to_sympy = _converters(symengine)
+    to_symengine, to_sympy = _converters(symengine, shared)
     originals = [to_symengine(e) for e in exprs]
     reps, reduced = symengine.cse(originals)
     replacements = []
@@ -171,19 +188,21 @@ def _numbered(prefix):
         i += 1
 
 
-def eliminate(graph: Graph, outputs) -> tuple:
+def eliminate(graph: Graph, outputs, shared=None) -> tuple:
     """One ``sympy.cse`` pass over everything needed for ``outputs``.
 
     Returns ``(new_graph, new_outputs)``: a program whose statements compute
     the same values with common subexpressions named ``mg_c<i>``, and the
     outputs rewritten in terms of it (dead statements are dropped).
+    ``shared`` (a dict) carries the conversions to symengine to the next pass
+    over the same program.
     """
     outputs = list(outputs)
     program = graph.closure(outputs)
     if not program:
         return Graph(()), outputs
     exprs = [e for _, e in program] + outputs
-    replacements, reduced = _cse(exprs)
+    replacements, reduced = _cse(exprs, shared)
     rep = dict(replacements)
     emitted = set()
     statements = []
@@ -203,22 +222,29 @@ def eliminate(graph: Graph, outputs) -> tuple:
                 stack.append((s, True))
                 stack.append((rep[s], False))
 
-    for (sym, _), expr in zip(program, reduced):
-        emit_deps(expr)
+    for (sym, original), expr in zip(program, reduced):
+        if expr is not original:    # an unchanged statement uses no replacement
+            emit_deps(expr)
         statements.append((sym, expr))
     new_outputs = reduced[len(program):]
     for e in new_outputs:
         emit_deps(e)
-    return _propagate_copies(statements, list(new_outputs))
+    return _propagate_copies(statements, list(new_outputs), graph.free)
 
 
-def _propagate_copies(statements, outputs):
-    """Drop statements ``a = b`` (b a symbol or number) and use b in place of a."""
+def _propagate_copies(statements, outputs, free=None):
+    """Drop statements ``a = b`` (b a symbol or number) and use b in place of a.
+    ``free``: the program's memo of free symbols (:attr:`Graph.free`), which
+    the new graph keeps."""
+    free = {} if free is None else free
     alias = {}
     kept = []
     for sym, expr in statements:
         if alias and not expr.is_Atom:
-            renamed = {s: alias[s] for s in free_symbols(expr) if s in alias}
+            symbols = free.get(expr)
+            if symbols is None:
+                symbols = free[expr] = tuple(free_symbols(expr))
+            renamed = {s: alias[s] for s in symbols if s in alias}
             if renamed:
                 expr = expr.xreplace(renamed)
         elif expr in alias:
@@ -231,7 +257,7 @@ def _propagate_copies(statements, outputs):
         outputs = [alias.get(e, e) if e.is_Symbol else
                    e.xreplace({s: alias[s] for s in free_symbols(e) if s in alias})
                    for e in outputs]
-    return Graph(tuple(kept)), outputs
+    return Graph(tuple(kept), free), outputs
 
 
 def make_routines(graph: Graph, routines, *, cse: bool = True, alone=()) -> tuple:
@@ -252,6 +278,11 @@ def make_routines(graph: Graph, routines, *, cse: bool = True, alone=()) -> tupl
     >>> [str(e) for _, e in r.statements], r.ops_before, r.ops_after
     (['x*y', 'mg_c0 + x', '(mg_c0 + 1)**2'], 5, 4)
     """
+    # expression -> operations, for every routine: the groups share statements
+    return _make_routines(graph, routines, cse, alone, {}, {})
+
+
+def _make_routines(graph: Graph, routines, cse: bool, alone, ops: dict, shared: dict) -> tuple:
     routines = [(name, tuple(inputs), tuple(outputs)) for name, inputs, outputs in routines]
     if alone:
         groups = [[r] for r in routines if r[0] in alone]
@@ -259,17 +290,16 @@ def make_routines(graph: Graph, routines, *, cse: bool = True, alone=()) -> tupl
         built = {}
         for group in groups:
             if group:
-                built.update((r.name, r) for r in make_routines(graph, group, cse=cse))
+                built.update((r.name, r) for r in _make_routines(graph, group, cse, (), ops,
+                                                                   shared))
         return tuple(built[name] for name, _, _ in routines)
     all_outputs = [e for _, _, outs in routines for _, items in outs for e in items]
     before = {}
-    ops = {}        # statement symbol -> its operations (routines share statements)
     for name, _, outs in routines:
         flat = [e for _, items in outs for e in items]
         before[name] = _closure_ops(graph.closure(flat), ops) + count_ops(flat)
-    ops = {}        # CSE rewrites statements under the same symbols
     if cse:
-        graph, all_outputs = eliminate(graph, all_outputs)
+        graph, all_outputs = eliminate(graph, all_outputs, shared)
     result = []
     pos = 0
     for name, inputs, outs in routines:

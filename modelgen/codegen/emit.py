@@ -26,6 +26,7 @@ from modelgen.version import __version__
 from modelgen.codegen import capi
 from modelgen.codegen.build import cache_dir
 from modelgen.codegen.cse import Routine
+from modelgen.derive.graph import free_symbols
 from modelgen.codegen.ldlt import derivative_solve, solve_code
 from modelgen.errors import TemplateError
 from modelgen.codegen.printer import ModelPrinter
@@ -222,13 +223,13 @@ def print_routine(routine: Routine) -> CFunction:
     shared = set()
     for i, (_, expr) in enumerate(statements):
         here = i // size
-        for s in expr.free_symbols:
+        for s in free_symbols(expr):
             if s in part_of and part_of[s] != here:
                 shared.add(s)
     if n_parts > 1:
         for _, items in routine.outputs:
             for e in items:
-                shared.update(s for s in e.free_symbols if s in part_of)
+                shared.update(s for s in free_symbols(e) if s in part_of)
 
     slots = _input_slots(routine)
     work = 0

@@ -146,12 +146,19 @@ class ModelPrinter(C99CodePrinter):
         # numbers are compared by their fields or by identity (S.One, S.NegativeOne
         # and S.Half are singletons): sympy's rich comparisons sympify their
         # other operand, which took a fifth of the printing
-        coeff, rest = e.as_coeff_Mul()
+        # as_coeff_Mul and make_args of the rest, without building the rest
+        args = e.args
+        if args[0].is_Number:
+            coeff, factors = args[0], args[1:]
+            if len(factors) == 1 and factors[0].is_Mul:
+                factors = factors[0].args
+        else:
+            coeff, factors = _ONE, args
         negative = negative_number(coeff)
         sign = "-" if negative else ""
         coeff = -coeff if negative else coeff
         num, den = [], []
-        for factor in sympy.Mul.make_args(rest):
+        for factor in factors:
             exp = factor.exp if factor.is_Pow else None
             if exp is not None and exp.is_Rational and exp.p < 0:
                 den.append(factor.base if exp is _MINUS_ONE else

@@ -30,7 +30,8 @@ import sympy
 
 from modelgen.derive.effects import action_forces, derive_effect
 from modelgen.derive.graph import Graph, GraphBuilder
-from modelgen.derive.spatial import ZERO, ZERO3, add, cross, dot, matvec, scale, sub
+from modelgen.derive.spatial import (ZERO, ZERO3, add, cross, dot, matvec, scale, sub, times,
+                                     total)
 from modelgen.derive.kinematics import Kinematics, quaternion_columns
 from modelgen.model.spec import TIME, symbol
 
@@ -66,13 +67,14 @@ class Equations:
 def _transform_inertia(builder: GraphBuilder, R, inertia):
     """I_E = R I R^T as a named symmetric 3x3 (tuple of rows)."""
     # X = I R^T  (X[i][j] = sum_l I[i][l] R[j][l])
-    X = [[sympy.Add(*[inertia[i][l] * R[j][l] for l in range(3)]) for j in range(3)]
+    X = [[total([times(inertia[i][l], R[j][l]) for l in range(3)]) for j in range(3)]
          for i in range(3)]
     X = [[builder.name(x) for x in row] for row in X]
     out = [[None] * 3 for _ in range(3)]
     for i in range(3):
         for j in range(i, 3):
-            out[i][j] = out[j][i] = builder.name(sympy.Add(*[R[i][l] * X[l][j] for l in range(3)]))
+            out[i][j] = out[j][i] = builder.name(total([times(R[i][l], X[l][j])
+                                                        for l in range(3)]))
     return tuple(tuple(row) for row in out)
 
 
@@ -91,9 +93,7 @@ class _Spatial:
         """M S for a spatial motion S = (c, beta): (I_O c + h x beta, m beta + c x h)."""
         c, beta = S[:3], S[3:]
         xx, yy, zz, xy, xz, yz = self.I
-        Ic = (xx * c[0] + xy * c[1] + xz * c[2],
-              xy * c[0] + yy * c[1] + yz * c[2],
-              xz * c[0] + yz * c[1] + zz * c[2])
+        Ic = (dot((xx, xy, xz), c), dot((xy, yy, yz), c), dot((xz, yz, zz), c))
         ang = add(Ic, cross(self.h, beta))
         lin = add(scale(self.m, beta), cross(c, self.h))
         return builder.vec(ang + lin)

@@ -13,7 +13,7 @@ the first, cheapest level of common-subexpression elimination.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import cached_property
 from typing import Iterable
 
@@ -93,6 +93,9 @@ class Graph:
     parameter, input, time) or an intermediate assigned earlier in the list.
     """
     assignments: tuple
+    #: expression -> its free symbols (a tuple): shared by the graphs built on
+    #: this one (:class:`GraphBuilder`), which each index the same statements
+    free: dict = field(default_factory=dict, compare=False, repr=False)
 
     def definitions(self) -> dict:
         """Mapping intermediate symbol -> expression."""
@@ -101,24 +104,34 @@ class Graph:
     @cached_property
     def _index(self) -> tuple:
         """(definitions, position of each symbol, intermediates each expression uses),
-        computed once: a graph is asked for many closures."""
+        computed once: a graph is asked for many closures.  The last is filled
+        as closures reach each statement (most graphs of a derivation are asked
+        for the closure of a few outputs only)."""
         defs = dict(self.assignments)
         order = {sym: i for i, (sym, _) in enumerate(self.assignments)}
-        deps = {sym: tuple(s for s in free_symbols(expr) if s in defs)
-                for sym, expr in self.assignments}
-        return defs, order, deps
+        return defs, order, {}
+
+    def symbols_of(self, expr) -> tuple:
+        """The free symbols of ``expr`` (:func:`free_symbols`), remembered."""
+        symbols = self.free.get(expr)
+        if symbols is None:
+            symbols = self.free[expr] = tuple(free_symbols(expr))
+        return symbols
 
     def closure(self, outputs: Iterable[sympy.Expr]) -> tuple:
         """The assignments needed to evaluate ``outputs``, in program order."""
         defs, order, deps = self._index
         needed = set()
-        stack = [s for e in outputs for s in free_symbols(sympy.sympify(e)) if s in defs]
+        stack = [s for e in outputs for s in self.symbols_of(sympy.sympify(e)) if s in defs]
         while stack:
             sym = stack.pop()
             if sym in needed:
                 continue
             needed.add(sym)
-            stack.extend(s for s in deps[sym] if s not in needed)
+            uses = deps.get(sym)
+            if uses is None:
+                uses = deps[sym] = tuple(s for s in self.symbols_of(defs[sym]) if s in defs)
+            stack.extend(s for s in uses if s not in needed)
         return tuple(self.assignments[i] for i in sorted(order[s] for s in needed))
 
     def operations(self, outputs) -> int:
@@ -159,6 +172,7 @@ class GraphBuilder:
 
     def __init__(self, graph: Graph | None = None):
         self._assignments: list = list(graph.assignments) if graph else []
+        self._free: dict = graph.free if graph else {}
         self._memo: dict = {expr: sym for sym, expr in self._assignments}
         #: where statements recorded from now on belong in the program (a tuple,
         #: compared as tuples; None for nowhere in particular): see :meth:`arrange`
@@ -238,4 +252,4 @@ class GraphBuilder:
         return tuple(self.name(c) for c in components)
 
     def freeze(self) -> Graph:
-        return Graph(tuple(self._assignments))
+        return Graph(tuple(self._assignments), self._free)

@@ -10,9 +10,12 @@ ch. 2).  Transforms are Plücker ``X = rot(E) xlt(r)``.
 Python ``int``) is skipped before sympy sees it: axis vectors, motion
 subspaces, joint rotations and offsets are mostly zeros and ones, and
 building ``0*x`` or ``x + 0`` through sympy (sympify, flatten) costs as much
-as a real product.  Anything else goes through sympy's own arithmetic, and
-two numbers are combined by sympy, so every helper returns the expression
-sympy's arithmetic builds (``tests/test_cse.py`` checks it, float zeros
+as a real product.  Anything else is sympy's own arithmetic: a sum or
+product of symbols, rationals and such simple terms is built directly in the
+form sympy's flatten would give it (:func:`canonical_sum`,
+:func:`canonical_product`), the rest by ``Add`` and ``Mul``, and two numbers
+are combined by sympy, so every helper returns the expression sympy's
+arithmetic builds (``tests/test_cse.py`` checks it, float zeros
 included: ``Float(0.0)`` is not skipped, sympy absorbs it in ``0.0*x`` and
 ``x + 0.0``).  No derive/ call site meets a float zero: every number of a
 ``ModelSpec`` is exact (the expression reader makes ``0.1`` a ``Rational``)
@@ -25,6 +28,8 @@ Helpers whose first argument is ``builder`` (a
 straight-line program shares them.
 """
 from __future__ import annotations
+
+import functools
 
 import sympy
 
@@ -52,27 +57,134 @@ def _is_number(x) -> bool:
     return isinstance(x, (int, float)) or x.is_Number
 
 
+#: sympy's order of the arguments of a sum or product (``Basic.compare``)
+_ORDER = functools.cmp_to_key(sympy.Basic.compare)
+
+
+def _factors(e):
+    """``(number, symbols)`` of a symbol, a rational or a product of a rational
+    and symbols (in sympy's form, the number first), else None."""
+    kind = type(e)
+    if kind is sympy.Symbol:
+        return ONE, (e,)
+    if kind is sympy.Mul:
+        args = e.args
+        number = args[0]
+        if isinstance(number, sympy.Rational):
+            args = args[1:]
+        else:
+            number = ONE
+        for a in args:
+            if type(a) is not sympy.Symbol:
+                return None
+        return number, args
+    if isinstance(e, sympy.Rational):
+        return e, ()
+    return None
+
+
+def canonical_product(factors):
+    """The product of ``factors`` built directly in sympy's canonical form when
+    each is a symbol, a rational or a product of a rational and symbols and no
+    symbol repeats (the rationals multiplied, the symbols sorted by
+    ``Basic.compare``: what ``Mul``'s flatten returns, at a tenth of its cost);
+    None otherwise, for ``Mul`` to build.
+
+    >>> x, y, z = sympy.symbols("x y z")
+    >>> canonical_product((2 * z, x, sympy.Rational(1, 2) * y)) == x * y * z
+    True
+    """
+    number = ONE
+    symbols = []
+    for f in factors:
+        parts = _factors(f)
+        if parts is None:
+            return None
+        if parts[0] is not ONE:
+            number = number * parts[0]
+        symbols.extend(parts[1])
+    if len(set(symbols)) != len(symbols) or number is ZERO:
+        return None
+    for s in symbols:
+        if not s.is_commutative:
+            return None
+    if not symbols:
+        return number
+    symbols.sort(key=_ORDER)
+    if number is ONE:
+        return symbols[0] if len(symbols) == 1 else sympy.Mul._from_args(symbols, True)
+    return sympy.Mul._from_args([number] + symbols, True)
+
+
+def canonical_sum(terms):
+    """The sum of the sympy expressions ``terms`` built directly in sympy's
+    canonical form when no two terms are alike (no two share their non-numeric
+    part) and each is a rational, a symbol, a power of a symbol, a function, a
+    commutative product whose number (if any) is a rational, or a sum of
+    those: the rationals added, the other terms sorted by ``Basic.compare``,
+    what ``Add``'s flatten returns without its dictionary of like terms; None
+    otherwise, for ``Add`` to build.
+
+    >>> x, y = sympy.symbols("x y")
+    >>> canonical_sum((2 * x * y, x + 1, sympy.S(3))) == 2*x*y + x + 4
+    True
+    """
+    flat = []
+    for t in terms:
+        if type(t) is sympy.Add:
+            flat.extend(t.args)
+        else:
+            flat.append(t)
+    number = ZERO
+    seq = []
+    seen = set()
+    for t in flat:
+        kind = type(t)
+        if kind is sympy.Symbol:
+            if not t.is_commutative:
+                return None
+            key = (t,)
+        elif kind is sympy.Mul:
+            args = t.args
+            if args[0].is_Number:
+                if not isinstance(args[0], sympy.Rational):
+                    return None
+                args = args[1:]
+            if not t.is_commutative:
+                return None
+            key = args
+        elif isinstance(t, sympy.Rational):
+            number = number + t
+            continue
+        elif (kind is sympy.Pow and type(t.args[0]) is sympy.Symbol) or t.is_Function:
+            if not t.is_commutative:
+                return None
+            key = (t,)
+        else:
+            return None
+        if key in seen:
+            return None
+        seen.add(key)
+        seq.append(t)
+    seq.sort(key=_ORDER)
+    if number is not ZERO:
+        seq.insert(0, number)
+    if len(seq) < 2:
+        return seq[0] if seq else ZERO
+    return sympy.Add._from_args(seq, True)
+
+
 def product(x, y):
-    """``x*y`` of two sympy expressions, the two commonest products of a program
-    (two different symbols; a rational and a symbol) built directly in sympy's
-    canonical form (the factors sorted by ``Basic.compare``, a number first),
-    which costs a tenth of ``Mul``'s flatten; any other pair goes through ``Mul``.
+    """``x*y`` of two sympy expressions: :func:`canonical_product` where it
+    applies (products of symbols and rationals, most of a program's), else
+    ``Mul``.
 
     >>> x, y = sympy.symbols("x y")
     >>> product(y, x).args == (x * y).args, product(x, sympy.Rational(1, 2)) == x / 2
     (True, True)
     """
-    tx, ty = type(x), type(y)
-    if tx is sympy.Symbol:
-        if ty is sympy.Symbol and x != y and x.is_commutative and y.is_commutative:
-            return sympy.Mul._from_args((x, y) if x.compare(y) < 0 else (y, x))
-        if isinstance(y, sympy.Rational) and y is not ZERO and y is not ONE \
-                and x.is_commutative:
-            return sympy.Mul._from_args((y, x))
-    elif ty is sympy.Symbol and isinstance(x, sympy.Rational) and x is not ZERO \
-            and x is not ONE and y.is_commutative:
-        return sympy.Mul._from_args((x, y))
-    return x * y
+    r = canonical_product((x, y))
+    return x * y if r is None else r
 
 
 def times(x, y):
@@ -93,12 +205,30 @@ def total(terms):
     terms = [t for t in terms if not is_zero(t)]
     if len(terms) == 1:
         return terms[0] if isinstance(terms[0], sympy.Basic) else sympy.sympify(terms[0])
-    return sympy.Add(*terms) if terms else ZERO
+    if not terms:
+        return ZERO
+    if all(isinstance(t, sympy.Basic) for t in terms):
+        r = canonical_sum(terms)
+        if r is not None:
+            return r
+    return sympy.Add(*terms)
 
 
 def neg(x):
-    """``-x``, an exact zero kept as ``ZERO``."""
-    return ZERO if is_zero(x) else -x
+    """``-x``, an exact zero kept as ``ZERO``; a sum negated term by term and
+    summed by :func:`canonical_sum` (what sympy's ``-x`` builds by ``Add``).
+
+    >>> x, y = sympy.symbols("x y")
+    >>> neg(x - 2 * y).args == (2 * y - x).args
+    True
+    """
+    if is_zero(x):
+        return ZERO
+    if type(x) is sympy.Add:
+        r = canonical_sum([-t for t in x.args])
+        if r is not None:
+            return r
+    return -x
 
 
 def _plus(x, y):
@@ -160,7 +290,7 @@ def named(builder, e):
     if isinstance(e, sympy.Add):
         negative = sum(1 for t in e.args if _leading_minus(t))
         if 2 * negative > len(e.args):
-            return -builder.name(-e)
+            return -builder.name(neg(e))
     return builder.name(e)
 
 
@@ -186,7 +316,7 @@ def _leading_minus(term) -> bool:
 def signed(namer, e):
     """``namer(e)`` with the sign sympy would extract kept outside, so that e
     and -e share one name."""
-    return -namer(-e) if e.could_extract_minus_sign() else namer(e)
+    return -namer(neg(e)) if e.could_extract_minus_sign() else namer(e)
 
 
 def name_vec(builder, xs) -> tuple:
@@ -318,10 +448,10 @@ def _sym_axis_rot_T(builder, M, k1, k2, c, s, trig):
     j = 3 - k1 - k2
     a, b, d = M[k1][k1], M[k1][k2], M[k2][k2]
     out = [[None] * 3 for _ in range(3)]
-    diff = named(builder, a - d)
-    t = named(builder, ss * diff + S2 * b)
-    out[k1][k1], out[k2][k2] = a - t, d + t
-    out[k1][k2] = cs * diff + C2 * b
+    diff = named(builder, _minus(a, d))
+    t = named(builder, _plus(times(ss, diff), times(S2, b)))
+    out[k1][k1], out[k2][k2] = _minus(a, t), _plus(d, t)
+    out[k1][k2] = _plus(times(cs, diff), times(C2, b))
     out[j][k1], out[j][k2] = _plane_rot_T(c, s, k1, k2, M[j][k1], M[j][k2])
     out[j][j] = M[j][j]
     return name_symmetric(builder, _sym_rows(out))
@@ -344,8 +474,8 @@ def _full_axis_rot_T(builder, M, k1, k2, c, s, trig):
     ss, cs = trig[0], trig[1]
     j = 3 - k1 - k2
     out = [[None] * 3 for _ in range(3)]
-    d = named(builder, M[k1][k1] - M[k2][k2])
-    e = named(builder, M[k1][k2] + M[k2][k1])
+    d = named(builder, _minus(M[k1][k1], M[k2][k2]))
+    e = named(builder, _plus(M[k1][k2], M[k2][k1]))
     t = named(builder, total((times(ss, d), times(cs, e))))
     w = named(builder, total((times(cs, d), neg(times(ss, e)))))
     out[k1][k1], out[k2][k2] = total((M[k1][k1], neg(t))), total((M[k2][k2], t))
