@@ -199,10 +199,25 @@ def _variation_T_times(dY, x) -> tuple:
     return add(matvec(transpose(A), x[:3]), tuple(times(2, c) for c in cross(F, x[3:])))
 
 
-def _poses(builder, tree: JointTree) -> tuple:
-    """``(R, p)`` of every link: its rotation (link -> E components) and origin in E."""
-    poses = []
+def floating_root(tree: JointTree) -> bool:
+    """True if the tree has one root joint and it is a ball or free joint: then
+    :func:`derive_rnea_partials` works in that root link's frame at the current
+    configuration (a fixed frame like E), where the root's columns ``J_k`` are its
+    constant ``S`` columns and only gravity depends on the root's rotation."""
+    roots = [joint for joint in tree.joints if joint.parent < 0]
+    return len(roots) == 1 and roots[0].kind in ("ball", "free")
+
+
+def _poses(builder, tree: JointTree, root_frame: bool = False) -> tuple:
+    """``(poses, R0)``: ``(R, p)`` of every link, its rotation (link -> E components)
+    and origin in E, and the root link's rotation R0 when ``root_frame`` (then E is
+    the root link's frame: R = I and p = 0 for the root; else R0 is None)."""
+    poses, R0 = [], None
     for joint in tree.joints:
+        if root_frame and joint.parent < 0:
+            R0 = _root_rotation(builder, joint)
+            poses.append((IDENTITY3, ZERO3))
+            continue
         R, p = poses[joint.parent] if joint.parent >= 0 else (IDENTITY3, ZERO3)
         E, r = joint.fixed
         if any(x != 0 for x in r):
@@ -223,7 +238,17 @@ def _poses(builder, tree: JointTree) -> tuple:
         else:
             p = name_vec(builder, add(p, matvec(R, name_vec(builder, joint.offset))))
         poses.append((R, p))
-    return tuple(poses)
+    return tuple(poses), R0
+
+
+def _root_rotation(builder, joint) -> tuple:
+    """The rows of the rotation (link -> E components) of a ball or free root joint's
+    link: ``E^T R(quat)`` for its fixed rotation E (the position does not rotate)."""
+    Rq = transpose(tuple(tuple(builder.name(x) for x in col)
+                         for col in quaternion_columns(joint.quaternion)))
+    E = joint.fixed[0]
+    R = Rq if is_identity(E) else matmul(transpose(E), Rq)
+    return tuple(name_vec(builder, row) for row in R)
 
 
 def _ground_inertia(builder, body, R, p) -> tuple:
@@ -271,7 +296,11 @@ def derive_rnea_partials(eqs: Equations, tree: JointTree, spec: ModelSpec,
     qd = eqs.qd
     a0, gravity_labels = ground_acceleration(spec)
     count = len(tree.joints)
-    poses = _poses(builder, tree)
+    root_frame = floating_root(tree)
+    poses, R0 = _poses(builder, tree, root_frame)
+    if root_frame and any(x != 0 for x in a0[3:]):
+        # gravity (the ground's linear acceleration) in the root link's components
+        a0 = ZERO3 + name_vec(builder, matvec(transpose(R0), a0[3:]))
     J, ov, oa, Y, doY, of = {}, [None] * count, [None] * count, [None] * count, \
         [None] * count, [None] * count
     dVdq, dAdq, dAdv = {}, {}, {}
