@@ -32,16 +32,21 @@ are zero.
 The per-joint part (O(n) statements) is a straight-line program here; the
 O(n depth) dot products are left to the generated C as a loop over the
 pairs of dofs on one branch (:attr:`RneaPartials.pairs`), so what is derived,
-eliminated and compiled grows with n, not n^2.  The effects that are neither
+eliminated and compiled grows with n, not n^2.  An action whose spatial force
+is constant in its link's frame (a joint's motor and its reaction) is a force
+on that link, subtracted from ``of``: its derivatives along q are the
+transport ``J_k x* of`` already there.  The other effects that are neither
 gravity in E (the ground's acceleration) nor inertial forces (springs,
-dampers, friction, drag, the actions...) enter as their generalized forces
+dampers, friction, drag, other actions...) enter as their generalized forces
 (``Equations.tau_parts``), differentiated in forward mode
 (:func:`modelgen.derive.jacobian.differentiate`): they are small.  An
 armature adds to the diagonal of M.
 
 Ball and free joints are differentiated in the tangent space, Pinocchio's
 convention (:mod:`modelgen.derive.rnea_derivatives`): a column ``J_k`` is the
-motion of the link along its own constant ``S`` column.
+motion of the link along its own constant ``S`` column.  A tree whose one
+root joint is a ball or free joint is worked in that root link's frame at
+the current configuration instead of E (:func:`floating_root`).
 """
 from __future__ import annotations
 
@@ -54,7 +59,7 @@ from modelgen.derive.graph import Graph, GraphBuilder
 from modelgen.derive.jacobian import accelerations, differentiate
 from modelgen.derive.joint_tree import JointTree
 from modelgen.derive.kinematics import quaternion_columns
-from modelgen.derive.recursion import ground_acceleration
+from modelgen.derive.recursion import action_force, ground_acceleration
 from modelgen.derive.rnea_derivatives import tangent_rows
 from modelgen.derive.spatial import (IDENTITY3, PAIRS, ZERO, ZERO3, add, cross, cross_motion,
                                      dot, is_identity, matmul, matvec, name_vec, named,
@@ -298,6 +303,7 @@ def derive_rnea_partials(eqs: Equations, tree: JointTree, spec: ModelSpec,
     count = len(tree.joints)
     root_frame = floating_root(tree)
     poses, R0 = _poses(builder, tree, root_frame)
+    loads, moved, load_du = _body_fixed_actions(builder, eqs, tree, spec)
     if root_frame and any(x != 0 for x in a0[3:]):
         # gravity (the ground's linear acceleration) in the root link's components
         a0 = ZERO3 + name_vec(builder, matvec(transpose(R0), a0[3:]))
@@ -319,6 +325,8 @@ def derive_rnea_partials(eqs: Equations, tree: JointTree, spec: ModelSpec,
         Y[i] = _ground_inertia(builder, tree.inertias[i], R, p)
         oh = name_vec(builder, _inertia_times(Y[i], ov[i]))
         of[i] = name_vec(builder, add(_inertia_times(Y[i], oa[i]), _force_cross(ov[i], oh)))
+        if i in loads:                  # Q = RNEA's forces less the actions'
+            of[i] = name_vec(builder, sub(of[i], _force_to_ground(R, p, loads[i])))
         doY[i] = _variation(builder, Y[i], ov[i], oh)
         for k, _ in joint.dofs:
             dV = name_vec(builder, cross_motion(ov_p, J[k]))
@@ -352,7 +360,9 @@ def derive_rnea_partials(eqs: Equations, tree: JointTree, spec: ModelSpec,
     order, parent = _dof_chain(tree)
     factor = (articulated_factor(builder, order, parent, J, Y, tree)
               if n > ARTICULATED_SOLVE_ABOVE else None)
-    graph, effects = _effects(builder.freeze(), eqs, tree, gravity_labels)
+    du_loads = _loads_du(builder, load_du, poses, J, tree, len(eqs.u))
+    graph, effects = _effects(builder.freeze(), eqs, tree, set(gravity_labels) | moved,
+                              du_loads)
     return RneaPartials(graph, a, tuple(tuple(e for vec in vectors[k] for e in vec)
                                         for k in range(n)), same, pairs, effects,
                         tuple(factor[k] for k in range(n)) if factor else (), order, parent)
@@ -443,22 +453,98 @@ def _dof_pairs(tree: JointTree) -> tuple:
     return tuple(same), tuple(pairs)
 
 
-def _effects(graph: Graph, eqs: Equations, tree: JointTree, gravity_labels) -> tuple:
+def _force_to_ground(R, p, f):
+    """A link's force ``f`` (link components, at its origin) in E at E's origin:
+    ``(R n + p x R f, R f)``."""
+    F = matvec(R, f[3:])
+    return add(matvec(R, f[:3]), cross(p, F)) + tuple(F)
+
+
+def _body_fixed_actions(builder, eqs: Equations, tree: JointTree, spec: ModelSpec) -> tuple:
+    """``(loads, labels, du)``: the actions whose spatial force is constant in their
+    link's frame (no coordinate or speed in it, a joint's motor and its reaction
+    among them), as forces on their links ({joint index: 6-vector in link
+    components}), their labels, and {joint index: {input index: d force / d u}}.
+    Their derivatives along q are then the transport of the links' forces
+    (``J_k x* of``), exact, where forward mode over their generalized forces
+    differentiates expressions that are constant only for a unit quaternion."""
+    moving = set(eqs.q) | set(eqs.qd)
+    link_of = dict(tree.body_links)
+    loads, labels, du = {}, set(), {}
+    # each force in a scratch graph first: the ones kept are expanded (small)
+    probe = GraphBuilder(eqs.graph)
+    forces = [(act, link_of.get(act.body, -1))
+              for act in list(spec.actions) + [e for e in spec.effects if e.kind == "action"]]
+    forces = [(act, i, action_force(probe, spec, tree.joints[i], act))
+              for act, i in forces if i >= 0]
+    graph = probe.freeze()
+    for act, i, f in forces:
+        if set().union(*(_symbols_through(graph, e) for e in f)) & moving:
+            continue
+        f = tuple(graph.expand(e) for e in f)
+        labels.add(act.name)
+        loads[i] = name_vec(builder, add(loads[i], f)) if i in loads else name_vec(builder, f)
+        for j, uj in enumerate(eqs.u):
+            d = tuple(sympy.diff(e, uj) for e in f)
+            if any(x != 0 for x in d):
+                row = du.setdefault(i, {})
+                row[j] = add(row[j], d) if j in row else d
+    return loads, labels, du
+
+
+def _symbols_through(graph: Graph, expr) -> set:
+    """The symbols ``expr`` depends on through ``graph``'s intermediates."""
+    defs = graph.definitions()
+    out = set(sympy.sympify(expr).free_symbols)
+    for _, e in graph.closure([expr]):
+        out |= e.free_symbols
+    return out - set(defs)
+
+
+def _loads_du(builder, load_du, poses, J, tree: JointTree, nu: int) -> tuple:
+    """n x nu: minus the derivatives of the body-fixed actions' generalized forces
+    along the inputs, ``-J_k . sum of d f / d u_j`` over the links of the subtree
+    of k's joint (in E)."""
+    n = len(J)
+    out = [[ZERO] * nu for _ in range(n)]
+    if not load_du:
+        return tuple(tuple(row) for row in out)
+    comp = [{} for _ in tree.joints]
+    for i, row in load_du.items():
+        R, p = poses[i]
+        for j, d in row.items():
+            comp[i][j] = name_vec(builder, _force_to_ground(R, p, d))
+    for i in reversed(range(len(tree.joints))):
+        joint = tree.joints[i]
+        for k, _ in joint.dofs:
+            for j, g in comp[i].items():
+                out[k][j] = builder.name(-dot(J[k], g))
+        par = joint.parent
+        if par >= 0:
+            for j, g in comp[i].items():
+                comp[par][j] = name_vec(builder, add(comp[par][j], g)) \
+                    if j in comp[par] else g
+    return tuple(tuple(row) for row in out)
+
+
+def _effects(graph: Graph, eqs: Equations, tree: JointTree, local, du_loads) -> tuple:
     """``(graph, (dq, dv, du, M))``: minus the derivatives of the generalized forces of
-    every effect but gravity in E, and the armature on M's diagonal."""
+    every effect but those in ``local`` (gravity in E, the body-fixed actions, whose
+    ``du`` is ``du_loads``), and the armature on M's diagonal."""
     n, nq, nu = len(eqs.qd), len(eqs.q), len(eqs.u)
-    others = [part for label, part in eqs.tau_parts if label not in set(gravity_labels)]
+    others = [part for label, part in eqs.tau_parts if label not in local]
     zero = tuple(tuple(ZERO for _ in range(n)) for _ in range(n))
     M = tuple(tuple((tree.armature[k] if tree.armature and k == l else ZERO)
                     for l in range(n)) for k in range(n))
     if not others:
-        return graph, (zero, zero, tuple(tuple(ZERO for _ in range(nu)) for _ in range(n)), M)
+        return graph, (zero, zero, du_loads, M)
     builder = GraphBuilder(graph)
     tau = [named(builder, -sympy.Add(*[part[k] for part in others])) for k in range(n)]
     graph, rows = differentiate(builder.freeze(), tau, tuple(eqs.q) + tuple(eqs.qd)
                                 + tuple(eqs.u))
     dv = tuple(tuple(row[nq:nq + n]) for row in rows)
-    du = tuple(tuple(row[nq + n:]) for row in rows)
+    du = tuple(tuple(x + y for x, y in zip(row[nq + n:], extra, strict=True))
+               for row, extra in zip(rows, du_loads, strict=True))
     dq_full = [row[:nq] for row in rows]
     if nq == n:
         dq = tuple(tuple(row) for row in dq_full)
@@ -468,4 +554,4 @@ def _effects(graph: Graph, eqs: Equations, tree: JointTree, gravity_labels) -> t
 
 
 __all__ = ["ARTICULATED_SOLVE_ABOVE", "PAIR_OPERATIONS", "RneaPartials", "VECTORS", "articulated_factor",
-           "derive_rnea_partials"]
+           "derive_rnea_partials", "floating_root"]
