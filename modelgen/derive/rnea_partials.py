@@ -504,26 +504,26 @@ def _symbols_through(graph: Graph, expr) -> set:
 def _loads_du(builder, load_du, poses, J, tree: JointTree, nu: int) -> tuple:
     """n x nu: minus the derivatives of the body-fixed actions' generalized forces
     along the inputs, ``-J_k . sum of d f / d u_j`` over the links of the subtree
-    of k's joint (in E)."""
+    of k's joint, in E; where only k's own link has such a force, ``-S_k . d f /
+    d u_j`` in that link's frame (a motor on its own coordinate: a constant)."""
     n = len(J)
     out = [[ZERO] * nu for _ in range(n)]
-    if not load_du:
-        return tuple(tuple(row) for row in out)
-    comp = [{} for _ in tree.joints]
-    for i, row in load_du.items():
-        R, p = poses[i]
-        for j, d in row.items():
-            comp[i][j] = name_vec(builder, _force_to_ground(R, p, d))
+    below = [{} for _ in tree.joints]       # the strict descendants' d f / d u in E
     for i in reversed(range(len(tree.joints))):
-        joint = tree.joints[i]
-        for k, _ in joint.dofs:
-            for j, g in comp[i].items():
-                out[k][j] = builder.name(-dot(J[k], g))
-        par = joint.parent
-        if par >= 0:
-            for j, g in comp[i].items():
-                comp[par][j] = name_vec(builder, add(comp[par][j], g)) \
-                    if j in comp[par] else g
+        joint, own = tree.joints[i], load_du.get(i, {})
+        R, p = poses[i]
+        here = dict(below[i])
+        for j, d in own.items():
+            f = _force_to_ground(R, p, d)
+            here[j] = name_vec(builder, add(here[j], f)) if j in here else name_vec(builder, f)
+        for k, S in joint.dofs:
+            for j in here:
+                e = dot(S, own[j]) if j not in below[i] else dot(J[k], here[j])
+                out[k][j] = builder.name(-e)
+        if joint.parent >= 0:
+            up = below[joint.parent]
+            for j, g in here.items():
+                up[j] = name_vec(builder, add(up[j], g)) if j in up else g
     return tuple(tuple(row) for row in out)
 
 
