@@ -108,6 +108,15 @@ class RneaPartials:
     #: predecessor in that chain of dofs (-1: the ground)
     dof_order: tuple = ()
     dof_parent: tuple = ()
+    #: the pairs of :attr:`same` whose dot products are in :attr:`effects`, not
+    #: in the C loop: a floating root's (:func:`floating_root`), whose ``J_k``
+    #: are constant in its frame: each dot product is an entry of the other vector
+    programmed: tuple = ()
+
+    def looped_same(self) -> tuple:
+        """The pairs of :attr:`same` the C loop computes."""
+        programmed = set(self.programmed)
+        return tuple(pair for pair in self.same if pair not in programmed)
 
     def pattern(self) -> tuple:
         """n x n booleans: the entries of M that can be non-zero (one branch)."""
@@ -144,7 +153,8 @@ class RneaPartials:
         of the dot products of the C loop (11 per dot product of two 6-vectors)."""
         flat = [e for v in self.vectors for e in v] + \
             [e for m in self.effects for row in m for e in row]
-        return self.graph.operations(flat) + 11 * (3 * len(self.same) + 8 * len(self.pairs))
+        return self.graph.operations(flat) + 11 * (3 * len(self.looped_same())
+                                                   + 8 * len(self.pairs))
 
 
 # -- the ground-frame algebra --------------------------------------------------------
@@ -361,11 +371,33 @@ def derive_rnea_partials(eqs: Equations, tree: JointTree, spec: ModelSpec,
     factor = (articulated_factor(builder, order, parent, J, Y, tree)
               if n > ARTICULATED_SOLVE_ABOVE else None)
     du_loads = _loads_du(builder, load_du, poses, J, tree, len(eqs.u))
+    root_dofs = {k for joint in tree.joints if joint.parent < 0 for k, _ in joint.dofs}
+    programmed = tuple((k, l) for k, l in same if root_frame and k in root_dofs)
+    constant = _constant_pairs(builder, programmed, vectors, n)
     graph, effects = _effects(builder.freeze(), eqs, tree, set(gravity_labels) | moved,
                               du_loads)
+    effects = (_plus(effects[0], constant[0]), _plus(effects[1], constant[1]), effects[2],
+               _plus(effects[3], constant[2]))
     return RneaPartials(graph, a, tuple(tuple(e for vec in vectors[k] for e in vec)
                                         for k in range(n)), same, pairs, effects,
-                        tuple(factor[k] for k in range(n)) if factor else (), order, parent)
+                        tuple(factor[k] for k in range(n)) if factor else (), order, parent,
+                        programmed)
+
+
+def _constant_pairs(builder, programmed, vectors, n) -> tuple:
+    """``(dq, dv, M)`` (n x n) of the pairs ``programmed`` of one joint's dofs with
+    constant ``J_k``: ``J_k . dFdq0_l``, ``J_k . dFdv_l``, ``J_k . dFda_l``."""
+    out = [[[ZERO] * n for _ in range(n)] for _ in range(3)]
+    for k, l in programmed:
+        J, (dFda, dFdq0, dFdv) = vectors[k][0], (vectors[l][4], vectors[l][6], vectors[l][8])
+        for m, x in zip(out, (dFdq0, dFdv, dFda), strict=True):
+            m[k][l] = builder.name(dot(J, x))
+    return tuple(tuple(tuple(row) for row in m) for m in out)
+
+
+def _plus(a, b) -> tuple:
+    return tuple(tuple(x + y for x, y in zip(ra, rb, strict=True))
+                 for ra, rb in zip(a, b, strict=True))
 
 
 def _dof_chain(tree: JointTree) -> tuple:
