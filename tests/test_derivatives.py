@@ -118,6 +118,18 @@ def test_entries_of_joints_on_different_branches_are_structurally_zero():
     assert all(d.M[i][i] != 0 for i in range(spec.n))
 
 
+
+def test_joint_motors_enter_the_recursive_derivatives_as_their_own_torques():
+    # a motor torque about its joint's axis with its reaction on the parent link
+    # has the generalized force tau_k on coordinate k alone: d Q / d u = I and
+    # nothing along q or v, whatever the quaternion's or the angles' values
+    from modelgen.derive.rnea_partials import derive_rnea_partials
+    spec = load_model(REPO / "models" / "arm7.yaml")
+    d = derive_rnea_partials(derive_equations(derive_kinematics(spec)),
+                             extract_joint_tree(spec), spec)
+    nu = len(spec.inputs)
+    assert d.effect_entries() == tuple((3, k * nu + k, -1) for k in range(spec.n))
+
 # -- the generated C: <name>_derivatives and <name>_inverse_dynamics_derivatives -----
 
 from pathlib import Path  # noqa: E402

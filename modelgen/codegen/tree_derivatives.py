@@ -90,7 +90,7 @@ def unrolled_partials(d: RneaPartials) -> UnrolledPartials:
     def dot(x, y):
         return sympy.Add(*[a * b for a, b in zip(x, y, strict=True)])
     dq, dv, M = ([[sympy.S.Zero] * n for _ in range(n)] for _ in range(3))
-    for k, l in d.same:
+    for k, l in d.looped_same():
         J = vec(k, "J")
         dq[k][l], dv[k][l], M[k][l] = (dot(J, vec(l, "dFdq0")), dot(J, vec(l, "dFdv")),
                                        dot(J, vec(l, "dFda")))
@@ -184,14 +184,15 @@ def derivative_loop(d: RneaPartials) -> dict:
         return ", ".join(str(x) for pair in pairs for x in pair) or "0"
     effects = [(array, index) for array, index, _ in d.effect_entries()]
     runs = d.runs()
-    return {"same": c_list(d.same), "nsame": len(d.same),
+    same = d.looped_same()
+    return {"same": c_list(same), "nsame": len(same), "same_size": max(2 * len(same), 2),
             "runs": c_list(runs), "nruns": len(runs), "runs_size": max(3 * len(runs), 1),
             "npairs": len(d.pairs),
             "effects": c_list(effects), "neffects": len(effects),
             "nw": sum(len(v) for v in d.vectors) + sum(len(f) for f in d.factor),
             "aba": bool(d.factor),
             # every entry written by the loops: no zeros to set first
-            "dense": all(all(row) for row in d.pattern()),
+            "dense": all(all(row) for row in d.pattern()) and not d.programmed,
             "flags": ", ".join(map(str, solve_flags(d.dof_order, d.dof_parent))),
             "order": ", ".join(map(str, d.dof_order)),
             "parent": ", ".join(map(str, d.dof_parent))}

@@ -32,16 +32,21 @@ are zero.
 The per-joint part (O(n) statements) is a straight-line program here; the
 O(n depth) dot products are left to the generated C as a loop over the
 pairs of dofs on one branch (:attr:`RneaPartials.pairs`), so what is derived,
-eliminated and compiled grows with n, not n^2.  The effects that are neither
+eliminated and compiled grows with n, not n^2.  An action whose spatial force
+is constant in its link's frame (a joint's motor and its reaction) is a force
+on that link, subtracted from ``of``: its derivatives along q are the
+transport ``J_k x* of`` already there.  The other effects that are neither
 gravity in E (the ground's acceleration) nor inertial forces (springs,
-dampers, friction, drag, the actions...) enter as their generalized forces
+dampers, friction, drag, other actions...) enter as their generalized forces
 (``Equations.tau_parts``), differentiated in forward mode
 (:func:`modelgen.derive.jacobian.differentiate`): they are small.  An
 armature adds to the diagonal of M.
 
 Ball and free joints are differentiated in the tangent space, Pinocchio's
 convention (:mod:`modelgen.derive.rnea_derivatives`): a column ``J_k`` is the
-motion of the link along its own constant ``S`` column.
+motion of the link along its own constant ``S`` column.  A tree whose one
+root joint is a ball or free joint is worked in that root link's frame at
+the current configuration instead of E (:func:`floating_root`).
 """
 from __future__ import annotations
 
@@ -54,7 +59,7 @@ from modelgen.derive.graph import Graph, GraphBuilder
 from modelgen.derive.jacobian import accelerations, differentiate
 from modelgen.derive.joint_tree import JointTree
 from modelgen.derive.kinematics import quaternion_columns
-from modelgen.derive.recursion import ground_acceleration
+from modelgen.derive.recursion import action_force, ground_acceleration
 from modelgen.derive.rnea_derivatives import tangent_rows
 from modelgen.derive.spatial import (IDENTITY3, PAIRS, ZERO, ZERO3, add, cross, cross_motion,
                                      dot, is_identity, matmul, matvec, name_vec, named,
@@ -103,6 +108,15 @@ class RneaPartials:
     #: predecessor in that chain of dofs (-1: the ground)
     dof_order: tuple = ()
     dof_parent: tuple = ()
+    #: the pairs of :attr:`same` whose dot products are in :attr:`effects`, not
+    #: in the C loop: a floating root's (:func:`floating_root`), whose ``J_k``
+    #: are constant in its frame: each dot product is an entry of the other vector
+    programmed: tuple = ()
+
+    def looped_same(self) -> tuple:
+        """The pairs of :attr:`same` the C loop computes."""
+        programmed = set(self.programmed)
+        return tuple(pair for pair in self.same if pair not in programmed)
 
     def pattern(self) -> tuple:
         """n x n booleans: the entries of M that can be non-zero (one branch)."""
@@ -139,7 +153,8 @@ class RneaPartials:
         of the dot products of the C loop (11 per dot product of two 6-vectors)."""
         flat = [e for v in self.vectors for e in v] + \
             [e for m in self.effects for row in m for e in row]
-        return self.graph.operations(flat) + 11 * (3 * len(self.same) + 8 * len(self.pairs))
+        return self.graph.operations(flat) + 11 * (3 * len(self.looped_same())
+                                                   + 8 * len(self.pairs))
 
 
 # -- the ground-frame algebra --------------------------------------------------------
@@ -199,10 +214,25 @@ def _variation_T_times(dY, x) -> tuple:
     return add(matvec(transpose(A), x[:3]), tuple(times(2, c) for c in cross(F, x[3:])))
 
 
-def _poses(builder, tree: JointTree) -> tuple:
-    """``(R, p)`` of every link: its rotation (link -> E components) and origin in E."""
-    poses = []
+def floating_root(tree: JointTree) -> bool:
+    """True if the tree has one root joint and it is a ball or free joint: then
+    :func:`derive_rnea_partials` works in that root link's frame at the current
+    configuration (a fixed frame like E), where the root's columns ``J_k`` are its
+    constant ``S`` columns and only gravity depends on the root's rotation."""
+    roots = [joint for joint in tree.joints if joint.parent < 0]
+    return len(roots) == 1 and roots[0].kind in ("ball", "free")
+
+
+def _poses(builder, tree: JointTree, root_frame: bool = False) -> tuple:
+    """``(poses, R0)``: ``(R, p)`` of every link, its rotation (link -> E components)
+    and origin in E, and the root link's rotation R0 when ``root_frame`` (then E is
+    the root link's frame: R = I and p = 0 for the root; else R0 is None)."""
+    poses, R0 = [], None
     for joint in tree.joints:
+        if root_frame and joint.parent < 0:
+            R0 = _root_rotation(builder, joint)
+            poses.append((IDENTITY3, ZERO3))
+            continue
         R, p = poses[joint.parent] if joint.parent >= 0 else (IDENTITY3, ZERO3)
         E, r = joint.fixed
         if any(x != 0 for x in r):
@@ -223,7 +253,17 @@ def _poses(builder, tree: JointTree) -> tuple:
         else:
             p = name_vec(builder, add(p, matvec(R, name_vec(builder, joint.offset))))
         poses.append((R, p))
-    return tuple(poses)
+    return tuple(poses), R0
+
+
+def _root_rotation(builder, joint) -> tuple:
+    """The rows of the rotation (link -> E components) of a ball or free root joint's
+    link: ``E^T R(quat)`` for its fixed rotation E (the position does not rotate)."""
+    Rq = transpose(tuple(tuple(builder.name(x) for x in col)
+                         for col in quaternion_columns(joint.quaternion)))
+    E = joint.fixed[0]
+    R = Rq if is_identity(E) else matmul(transpose(E), Rq)
+    return tuple(name_vec(builder, row) for row in R)
 
 
 def _ground_inertia(builder, body, R, p) -> tuple:
@@ -271,7 +311,12 @@ def derive_rnea_partials(eqs: Equations, tree: JointTree, spec: ModelSpec,
     qd = eqs.qd
     a0, gravity_labels = ground_acceleration(spec)
     count = len(tree.joints)
-    poses = _poses(builder, tree)
+    root_frame = floating_root(tree)
+    poses, R0 = _poses(builder, tree, root_frame)
+    loads, moved, load_du = _body_fixed_actions(builder, eqs, tree, spec)
+    if root_frame and any(x != 0 for x in a0[3:]):
+        # gravity (the ground's linear acceleration) in the root link's components
+        a0 = ZERO3 + name_vec(builder, matvec(transpose(R0), a0[3:]))
     J, ov, oa, Y, doY, of = {}, [None] * count, [None] * count, [None] * count, \
         [None] * count, [None] * count
     dVdq, dAdq, dAdv = {}, {}, {}
@@ -290,6 +335,8 @@ def derive_rnea_partials(eqs: Equations, tree: JointTree, spec: ModelSpec,
         Y[i] = _ground_inertia(builder, tree.inertias[i], R, p)
         oh = name_vec(builder, _inertia_times(Y[i], ov[i]))
         of[i] = name_vec(builder, add(_inertia_times(Y[i], oa[i]), _force_cross(ov[i], oh)))
+        if i in loads:                  # Q = RNEA's forces less the actions'
+            of[i] = name_vec(builder, sub(of[i], _force_to_ground(R, p, loads[i])))
         doY[i] = _variation(builder, Y[i], ov[i], oh)
         for k, _ in joint.dofs:
             dV = name_vec(builder, cross_motion(ov_p, J[k]))
@@ -323,10 +370,34 @@ def derive_rnea_partials(eqs: Equations, tree: JointTree, spec: ModelSpec,
     order, parent = _dof_chain(tree)
     factor = (articulated_factor(builder, order, parent, J, Y, tree)
               if n > ARTICULATED_SOLVE_ABOVE else None)
-    graph, effects = _effects(builder.freeze(), eqs, tree, gravity_labels)
+    du_loads = _loads_du(builder, load_du, poses, J, tree, len(eqs.u))
+    root_dofs = {k for joint in tree.joints if joint.parent < 0 for k, _ in joint.dofs}
+    programmed = tuple((k, l) for k, l in same if root_frame and k in root_dofs)
+    constant = _constant_pairs(builder, programmed, vectors, n)
+    graph, effects = _effects(builder.freeze(), eqs, tree, set(gravity_labels) | moved,
+                              du_loads)
+    effects = (_plus(effects[0], constant[0]), _plus(effects[1], constant[1]), effects[2],
+               _plus(effects[3], constant[2]))
     return RneaPartials(graph, a, tuple(tuple(e for vec in vectors[k] for e in vec)
                                         for k in range(n)), same, pairs, effects,
-                        tuple(factor[k] for k in range(n)) if factor else (), order, parent)
+                        tuple(factor[k] for k in range(n)) if factor else (), order, parent,
+                        programmed)
+
+
+def _constant_pairs(builder, programmed, vectors, n) -> tuple:
+    """``(dq, dv, M)`` (n x n) of the pairs ``programmed`` of one joint's dofs with
+    constant ``J_k``: ``J_k . dFdq0_l``, ``J_k . dFdv_l``, ``J_k . dFda_l``."""
+    out = [[[ZERO] * n for _ in range(n)] for _ in range(3)]
+    for k, l in programmed:
+        J, (dFda, dFdq0, dFdv) = vectors[k][0], (vectors[l][4], vectors[l][6], vectors[l][8])
+        for m, x in zip(out, (dFdq0, dFdv, dFda), strict=True):
+            m[k][l] = builder.name(dot(J, x))
+    return tuple(tuple(tuple(row) for row in m) for m in out)
+
+
+def _plus(a, b) -> tuple:
+    return tuple(tuple(x + y for x, y in zip(ra, rb, strict=True))
+                 for ra, rb in zip(a, b, strict=True))
 
 
 def _dof_chain(tree: JointTree) -> tuple:
@@ -414,22 +485,98 @@ def _dof_pairs(tree: JointTree) -> tuple:
     return tuple(same), tuple(pairs)
 
 
-def _effects(graph: Graph, eqs: Equations, tree: JointTree, gravity_labels) -> tuple:
+def _force_to_ground(R, p, f):
+    """A link's force ``f`` (link components, at its origin) in E at E's origin:
+    ``(R n + p x R f, R f)``."""
+    F = matvec(R, f[3:])
+    return add(matvec(R, f[:3]), cross(p, F)) + tuple(F)
+
+
+def _body_fixed_actions(builder, eqs: Equations, tree: JointTree, spec: ModelSpec) -> tuple:
+    """``(loads, labels, du)``: the actions whose spatial force is constant in their
+    link's frame (no coordinate or speed in it, a joint's motor and its reaction
+    among them), as forces on their links ({joint index: 6-vector in link
+    components}), their labels, and {joint index: {input index: d force / d u}}.
+    Their derivatives along q are then the transport of the links' forces
+    (``J_k x* of``), exact, where forward mode over their generalized forces
+    differentiates expressions that are constant only for a unit quaternion."""
+    moving = set(eqs.q) | set(eqs.qd)
+    link_of = dict(tree.body_links)
+    loads, labels, du = {}, set(), {}
+    # each force in a scratch graph first: the ones kept are expanded (small)
+    probe = GraphBuilder(eqs.graph)
+    forces = [(act, link_of.get(act.body, -1))
+              for act in list(spec.actions) + [e for e in spec.effects if e.kind == "action"]]
+    forces = [(act, i, action_force(probe, spec, tree.joints[i], act))
+              for act, i in forces if i >= 0]
+    graph = probe.freeze()
+    for act, i, f in forces:
+        if set().union(*(_symbols_through(graph, e) for e in f)) & moving:
+            continue
+        f = tuple(graph.expand(e) for e in f)
+        labels.add(act.name)
+        loads[i] = name_vec(builder, add(loads[i], f)) if i in loads else name_vec(builder, f)
+        for j, uj in enumerate(eqs.u):
+            d = tuple(sympy.diff(e, uj) for e in f)
+            if any(x != 0 for x in d):
+                row = du.setdefault(i, {})
+                row[j] = add(row[j], d) if j in row else d
+    return loads, labels, du
+
+
+def _symbols_through(graph: Graph, expr) -> set:
+    """The symbols ``expr`` depends on through ``graph``'s intermediates."""
+    defs = graph.definitions()
+    out = set(sympy.sympify(expr).free_symbols)
+    for _, e in graph.closure([expr]):
+        out |= e.free_symbols
+    return out - set(defs)
+
+
+def _loads_du(builder, load_du, poses, J, tree: JointTree, nu: int) -> tuple:
+    """n x nu: minus the derivatives of the body-fixed actions' generalized forces
+    along the inputs, ``-J_k . sum of d f / d u_j`` over the links of the subtree
+    of k's joint, in E; where only k's own link has such a force, ``-S_k . d f /
+    d u_j`` in that link's frame (a motor on its own coordinate: a constant)."""
+    n = len(J)
+    out = [[ZERO] * nu for _ in range(n)]
+    below = [{} for _ in tree.joints]       # the strict descendants' d f / d u in E
+    for i in reversed(range(len(tree.joints))):
+        joint, own = tree.joints[i], load_du.get(i, {})
+        R, p = poses[i]
+        here = dict(below[i])
+        for j, d in own.items():
+            f = _force_to_ground(R, p, d)
+            here[j] = name_vec(builder, add(here[j], f)) if j in here else name_vec(builder, f)
+        for k, S in joint.dofs:
+            for j in here:
+                e = dot(S, own[j]) if j not in below[i] else dot(J[k], here[j])
+                out[k][j] = builder.name(-e)
+        if joint.parent >= 0:
+            up = below[joint.parent]
+            for j, g in here.items():
+                up[j] = name_vec(builder, add(up[j], g)) if j in up else g
+    return tuple(tuple(row) for row in out)
+
+
+def _effects(graph: Graph, eqs: Equations, tree: JointTree, local, du_loads) -> tuple:
     """``(graph, (dq, dv, du, M))``: minus the derivatives of the generalized forces of
-    every effect but gravity in E, and the armature on M's diagonal."""
+    every effect but those in ``local`` (gravity in E, the body-fixed actions, whose
+    ``du`` is ``du_loads``), and the armature on M's diagonal."""
     n, nq, nu = len(eqs.qd), len(eqs.q), len(eqs.u)
-    others = [part for label, part in eqs.tau_parts if label not in set(gravity_labels)]
+    others = [part for label, part in eqs.tau_parts if label not in local]
     zero = tuple(tuple(ZERO for _ in range(n)) for _ in range(n))
     M = tuple(tuple((tree.armature[k] if tree.armature and k == l else ZERO)
                     for l in range(n)) for k in range(n))
     if not others:
-        return graph, (zero, zero, tuple(tuple(ZERO for _ in range(nu)) for _ in range(n)), M)
+        return graph, (zero, zero, du_loads, M)
     builder = GraphBuilder(graph)
     tau = [named(builder, -sympy.Add(*[part[k] for part in others])) for k in range(n)]
     graph, rows = differentiate(builder.freeze(), tau, tuple(eqs.q) + tuple(eqs.qd)
                                 + tuple(eqs.u))
     dv = tuple(tuple(row[nq:nq + n]) for row in rows)
-    du = tuple(tuple(row[nq + n:]) for row in rows)
+    du = tuple(tuple(x + y for x, y in zip(row[nq + n:], extra, strict=True))
+               for row, extra in zip(rows, du_loads, strict=True))
     dq_full = [row[:nq] for row in rows]
     if nq == n:
         dq = tuple(tuple(row) for row in dq_full)
@@ -439,4 +586,4 @@ def _effects(graph: Graph, eqs: Equations, tree: JointTree, gravity_labels) -> t
 
 
 __all__ = ["ARTICULATED_SOLVE_ABOVE", "PAIR_OPERATIONS", "RneaPartials", "VECTORS", "articulated_factor",
-           "derive_rnea_partials"]
+           "derive_rnea_partials", "floating_root"]
