@@ -563,7 +563,7 @@ def _effects(graph: Graph, eqs: Equations, tree: JointTree, local, du_loads) -> 
     """``(graph, (dq, dv, du, M))``: minus the derivatives of the generalized forces of
     every effect but those in ``local`` (gravity in E, the body-fixed actions, whose
     ``du`` is ``du_loads``), and the armature on M's diagonal."""
-    n, nq, nu = len(eqs.qd), len(eqs.q), len(eqs.u)
+    n, nq = len(eqs.qd), len(eqs.q)
     others = [part for label, part in eqs.tau_parts if label not in local]
     zero = tuple(tuple(ZERO for _ in range(n)) for _ in range(n))
     M = tuple(tuple((tree.armature[k] if tree.armature and k == l else ZERO)
