@@ -122,14 +122,21 @@ def unrolled_ldlt(n: int, tol: str, plan: Elimination | None = None) -> list:
     to skip; without it, A is dense and eliminated in index order.
     """
     plan = plan or elimination([[True] * n for _ in range(n)])
+    return unrolled_factor(n, tol, plan) + _substitutions(plan, lambda i: f"b[{i}]", "")
+
+
+def _substitutions(plan: Elimination, entry, sign: str) -> list:
+    """Straight-line forward (``y_i = b_i - sum L_ik y_k``) and backward
+    (``b_i = sign y_i / d_i - sum L_ki b_k``) substitution in place on the
+    entries ``entry(i)``, with the locals of :func:`unrolled_factor`."""
     earlier = plan.earlier()
-    lines = unrolled_factor(n, tol, plan)
+    lines = []
     for i in plan.order:
         terms = "".join(f" - L{i}_{k} * y{k}" for k in earlier[i])
-        lines.append(f"const double y{i} = b[{i}]{terms};")
+        lines.append(f"const double y{i} = {entry(i)}{terms};")
     for i in reversed(plan.order):
-        terms = "".join(f" - L{k}_{i} * b[{k}]" for k in plan.below[i])
-        lines.append(f"b[{i}] = y{i} * inv{i}{terms};")
+        terms = "".join(f" - L{k}_{i} * {entry(k)}" for k in plan.below[i])
+        lines.append(f"{entry(i)} = {sign}y{i} * inv{i}{terms};")
     return lines
 
 
@@ -214,15 +221,7 @@ def unrolled_columns(plan: Elimination, array: str, stride: str) -> list:
     ``stride`` apart, entry ``array[i * stride + c]``) with ``-A^-1`` times it,
     using the factor of :func:`unrolled_factor`: one block of a loop over the
     columns of many right-hand sides."""
-    earlier = plan.earlier()
-    lines = []
-    for i in plan.order:
-        terms = "".join(f" - L{i}_{k} * y{k}" for k in earlier[i])
-        lines.append(f"const double y{i} = {array}[{i} * {stride} + c]{terms};")
-    for i in reversed(plan.order):
-        terms = "".join(f" - L{k}_{i} * {array}[{k} * {stride} + c]" for k in plan.below[i])
-        lines.append(f"{array}[{i} * {stride} + c] = -y{i} * inv{i}{terms};")
-    return lines
+    return _substitutions(plan, lambda i: f"{array}[{i} * {stride} + c]", "-")
 
 
 def unrolled_apply(plan: Elimination, name: str) -> list:
