@@ -253,7 +253,9 @@ def test_a_raising_event_function_re_raises_with_the_run_so_far(sp):
     partial = info.value.partial_result
     assert isinstance(partial, Result) and not partial.success
     assert partial.status == capi.STATUS_BY_NAME["EVENT_ERROR"].code
-    assert partial.t[0] == 0.0 and 0.3 < partial.t[-1] <= 0.6
+    assert "Broken: event function broke" in partial.message and "t=" in partial.message
+    assert partial.info["exception"] is info.value
+    assert partial.t[0] == 0.0 and 0.3 < partial.t[-1] <= 0.6 and np.all(np.isfinite(partial.y))
     if hasattr(info.value, "add_note"):          # Python 3.11+
         assert any("event function" in note and ".partial_result" in note
                    for note in info.value.__notes__)

@@ -248,20 +248,6 @@ def test_hundreds_of_events_are_all_found_across_output_buffers(dp, method):
     assert res.y_events[0].shape == (200, 4)
 
 
-def test_an_exception_in_an_event_function_keeps_the_trajectory_so_far(sp):
-    def broken(t, x):
-        if t > 0.5:
-            raise ValueError("event function broke")
-        return 1.0
-    with pytest.raises(ValueError, match="event function broke") as info:
-        sp.simulate([1.0, 0.0], (0, 2), events=broken)
-    res = info.value.partial_result
-    assert res.status == capi.STATUS_BY_NAME["EVENT_ERROR"].code and not res.success
-    assert "ValueError: event function broke" in res.message and "t=" in res.message
-    assert res.info["exception"] is info.value
-    assert res.t[0] == 0.0 and 0.3 < res.t[-1] <= 0.6 and np.all(np.isfinite(res.y))
-
-
 def test_an_event_function_returning_nan_is_an_error_not_silence(sp):
     res = sp.simulate([1.0, 0.0], (0, 2), events=lambda t, x: float("nan"))
     assert res.status == capi.STATUS_BY_NAME["EVENT_ERROR"].code
