@@ -18,7 +18,8 @@ for the children, as for an installed package):
     already in the cache (found through its fast index, see
     ``modelgen/codegen/index.py``); the symbolic packages the process imported
     are printed too (none is the point).
-(d) ``modelgen --help`` (the console script's ``main``).
+(d) ``modelgen --help`` (``python -m modelgen``, which runs what the console
+    script runs: ``modelgen.cli.run``).
 (e) cached ``modelgen simulate models/scenes/dp_free.yaml`` end to end (read
     the scene, find its build, integrate, write CSV, NPZ and PNG).
 (f) the 6-link spatial chain (``modelgen.model.chains.spatial_chain(6)``,
@@ -95,8 +96,7 @@ def python(code: str) -> list:
 
 
 def modelgen_cli(*args) -> list:
-    return python("import sys; from modelgen.cli import main; sys.exit(main(sys.argv[1:]))") \
-        + [str(a) for a in args]
+    return [sys.executable, "-m", "modelgen", *(str(a) for a in args)]
 
 
 def row(name: str, times: list, note: str = "") -> str:

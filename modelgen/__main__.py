@@ -1,6 +1,4 @@
 """``python -m modelgen`` runs the command line (see :mod:`modelgen.cli`)."""
-import sys
+from modelgen.cli import run
 
-from modelgen.cli import main
-
-sys.exit(main())
+run()

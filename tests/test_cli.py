@@ -73,6 +73,20 @@ def _modelgen(*argv, cwd=None):
                           capture_output=True, text=True, timeout=300)
 
 
+def test_the_console_script_and_python_dash_m_run_the_same_entry_point():
+    import tomllib
+    from pathlib import Path
+    root = Path(__file__).resolve().parent.parent
+    scripts = tomllib.loads((root / "pyproject.toml").read_text())["project"]["scripts"]
+    assert scripts["modelgen"] == "modelgen.cli:run"
+    assert "from modelgen.cli import run" in (root / "modelgen" / "__main__.py").read_text()
+
+
+def test_the_entry_point_exits_with_the_commands_status(tmp_path):
+    proc = _modelgen("generate", tmp_path / "missing.yaml")
+    assert proc.returncode == 2 and "modelgen: error:" in proc.stderr
+
+
 def test_python_dash_m_modelgen_prints_the_version():
     from modelgen.version import __version__
     proc = _modelgen("--version")

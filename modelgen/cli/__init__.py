@@ -90,6 +90,34 @@ def _os_error_text(exc: OSError) -> str:
     return f"{exc.strerror or exc}{where}; fix: check the path and its permissions"
 
 
+#: The collector's first-generation threshold while the console script runs
+#: (Python's default is 700 allocations): a generation allocates millions of
+#: short-lived, acyclic sympy objects that reference counting frees, so at the
+#: default most young collections find nothing to collect.
+CLI_GC_THRESHOLD = 50_000
+
+
+def run() -> None:
+    """The console script and ``python -m modelgen``: :func:`main` in a process of
+    its own, then exit with its status.
+
+    Two garbage-collector settings that only a process about to exit may make
+    (so never :func:`main`, which tests and scripts call in long-lived processes):
+    a first-generation threshold of :data:`CLI_GC_THRESHOLD`, and, before
+    exiting, ``gc.freeze()``, which spares the interpreter's shutdown its full
+    collections over every object the symbolic packages created (nothing is
+    left undone: the atexit handlers run and the modules are cleared as usual).
+    The time each saves is in docs/benchmarks.md, "Start-up".
+    """
+    import gc
+    gc.set_threshold(CLI_GC_THRESHOLD, *gc.get_threshold()[1:])
+    try:
+        status = main()
+    finally:
+        gc.freeze()
+    sys.exit(status)
+
+
 def main(argv=None) -> int:
     """Entry point; returns the exit status (see :data:`EXIT`)."""
     parser = build_parser()
