@@ -430,6 +430,25 @@ def test_derivatives_match_central_differences_on_shipped_models(model, formulat
     _check_against_differences(cm, seed=2)
 
 
+@pytest.mark.parametrize("model", ["simple_pendulum", "double_pendulum"])
+def test_derivatives_and_a_forward_mode_jacobian_build_together(model, tmp_path):
+    # both options: the Jacobian (forward mode on these small models) is derived
+    # over the program that already holds the derivatives'
+    cm = modelgen.load(REPO / "models" / f"{model}.yaml", tmp_path / "build",
+                       derivatives=True, jacobian=True)
+    assert cm.manifest["jacobian_method"] == "forward"
+    _check_against_differences(cm, seed=6)
+    x = np.concatenate([cm.project(np.full(cm.nq, 0.4)), np.full(cm.n, -0.3)])
+    d, J = cm.derivatives(0.0, x), cm.jac(0.0, x)
+    assert _relative(np.hstack([d.dqdd_dq, d.dqdd_dv]), J[cm.nq:]) <= 1e-12
+
+
+def test_a_constrained_model_is_refused_the_derivatives_with_the_fix(tmp_path):
+    from modelgen.errors import ModelError
+    with pytest.raises(ModelError, match="constrained model.*jacobian=True"):
+        modelgen.load(REPO / "models" / "four_bar.yaml", tmp_path / "build", derivatives=True)
+
+
 def test_without_the_option_there_are_no_derivatives(tmp_path):
     from modelgen.errors import BuildError
     cm = modelgen.load(spatial_chain(2), tmp_path / "build")

@@ -363,6 +363,15 @@ def _check_options(spec: ModelSpec, options: BuildOptions) -> None:
                          "its state holds unit quaternions, whose four components cannot "
                          "move independently", file=spec.source, key="linearize",
                          fix="linearize a model whose rotations are simple ones (angles)")
+    if options.derivatives and spec.constraints:
+        raise ModelError("the analytical derivatives of a constrained model are not "
+                         "supported: they are those of the joint tree's dynamics, while "
+                         "a constrained model's accelerations also carry the constraint "
+                         "forces, which depend on the state", file=spec.source,
+                         key="derivatives",
+                         fix="build with jacobian=True instead: <name>_jacobian and "
+                             "<name>_linearize differentiate the constrained rhs, "
+                             "constraint forces included")
     if options.jacobian and spec.joints and spec.constraints:
         raise ModelError("the Jacobian of a constrained model with ball or free joints is "
                          "not supported: its derivatives are taken in the coordinates, "
@@ -466,8 +475,11 @@ def _derive(spec: ModelSpec, options: BuildOptions, tree: JointTree | None) -> D
     elif options.jacobian or options.linearize:
         method, derivatives, linearization, terms = _state_derivatives(
             spec, options, eqs, tree, graph, columns, forward, derivatives)
+    # the last extension of the program: the derivatives' graph stops before the
+    # constraints' (derived after them), so it is the last only when
+    # _state_derivatives chose (and perhaps derived) them
     graph = (linearization.graph if linearization else terms.graph if terms else
-             derivatives.graph if derivatives else graph)
+             derivatives.graph if method == "derivatives" else graph)
     frames = _derive_frames(spec, options, kin, graph)
     graph = frames.graph if frames else graph
     return Derived(eqs, columns, forward, inverse, linearization, terms, graph, frames,
@@ -487,8 +499,10 @@ def _state_derivatives(spec, options, eqs, tree, graph, columns, forward, deriva
             lin = derive_linearization_terms(eqs, graph, outputs,
                                              forward.qdd if forward else None)
             return lin, lin.jacobian_terms()
-        return None, (derive_aba_jacobian(forward, eqs) if forward else
-                      derive_jacobian_terms(eqs, graph))
+        # over ``graph``, which holds the derivatives' program too when the options
+        # ask for both (forward's own graph stops before it)
+        return None, (derive_aba_jacobian(replace(forward, graph=graph), eqs) if forward
+                      else derive_jacobian_terms(eqs, graph))
 
     if not plan.jacobian_candidate(spec, tree):
         return ("forward", derivatives) + forward_mode()
