@@ -120,14 +120,30 @@ def build_cost(routines) -> Cost:
     for r in routines:
         calls = 0
         for expr in [e for _, e in r.statements] + [e for _, es in r.outputs for e in es]:
-            if isinstance(expr, sympy.Basic) and expr.has(sympy.sin, sympy.cos):
-                calls += sum(1 for node in sympy.preorder_traversal(expr)
-                             if isinstance(node, (sympy.sin, sympy.cos)))
+            if isinstance(expr, sympy.Basic):
+                calls += _trig_calls(expr)
         operations += r.ops_after
         trig += calls
         if r.ops_after + (TRIG_OPERATIONS - 1) * calls > most:
             largest, most = r.name, r.ops_after + (TRIG_OPERATIONS - 1) * calls
     return Cost(operations, trig, largest)
+
+
+def _trig_calls(expr) -> int:
+    """The ``sin`` and ``cos`` nodes of ``expr``'s tree, a repeated subtree counted
+    each time it appears (as ``sympy.preorder_traversal`` visits them), by one
+    walk that skips the atoms (``has`` then ``preorder_traversal`` walked every
+    statement twice, through generators)."""
+    calls = 0
+    stack = [expr]
+    while stack:
+        e = stack.pop()
+        if e.is_Atom:
+            continue
+        if isinstance(e, (sympy.sin, sympy.cos)):
+            calls += 1
+        stack.extend(e.args)
+    return calls
 
 
 def _fix(budget: int) -> str:

@@ -216,7 +216,8 @@ def eliminate(graph: Graph, outputs, shared=None) -> tuple:
                     emitted.add(e)
                     statements.append((e, rep[e]))
                 continue
-            deps = {e} if e.is_Symbol else free_symbols(e)
+            # remembered in the program's memo, which _propagate_copies reads again
+            deps = (e,) if e.is_Symbol else graph.symbols_of(e)
             for s in sorted((s for s in deps if s in rep and s not in emitted),
                             key=str, reverse=True):
                 stack.append((s, True))
@@ -342,7 +343,8 @@ def hoist_parameters(routine: Routine, name: str = "prepare") -> tuple:
     params = set(parameters)
     fixed, before, after = set(), [], []
     for sym, expr in routine.statements:
-        if free_symbols(expr) <= (params | fixed):
+        # not ``<= params | fixed``: that union costs the size of ``fixed`` each time
+        if all(s in params or s in fixed for s in free_symbols(expr)):
             fixed.add(sym)
             before.append((sym, expr))
         else:

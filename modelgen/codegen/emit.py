@@ -16,7 +16,7 @@ import contextlib
 import functools
 import hashlib
 import sys
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass, fields
 from pathlib import Path
 
 import jinja2
@@ -209,6 +209,12 @@ class CFunction:
     out_args: str = ""
 
 
+def _fields(f: CFunction) -> dict:
+    """``asdict(f)`` without its deep copy of every printed line (a CFunction holds
+    only strings, ints and tuples of them, which are never changed)."""
+    return {field.name: getattr(f, field.name) for field in fields(f)}
+
+
 def print_routine(routine: Routine) -> CFunction:
     """Print a routine; each output array keeps its name in C."""
     statements = list(routine.statements)
@@ -220,11 +226,13 @@ def print_routine(routine: Routine) -> CFunction:
     part_of = {sym: i // size for i, (sym, _) in enumerate(statements)}
 
     # symbols used outside the part that defines them live in the work array
+    # (none when there is one part)
     shared = set()
-    for i, (_, expr) in enumerate(statements):
+    for i, (_, expr) in enumerate(statements if n_parts > 1 else ()):
         here = i // size
         for s in free_symbols(expr):
-            if s in part_of and part_of[s] != here:
+            part = part_of.get(s)
+            if part is not None and part != here:
                 shared.add(s)
     if n_parts > 1:
         for _, items in routine.outputs:
@@ -355,7 +363,7 @@ def template_context(*, name: str, description: str, model_hash: str, n: int,
         "parameters": [{"name": p, "default": repr(float(v))} for p, v in parameters],
         "inputs": list(inputs),
         "bodies": list(bodies),
-        "functions": {k: asdict(f) for k, f in functions.items()},
+        "functions": {k: _fields(f) for k, f in functions.items()},
         "ny": len(output_columns),
         "has_jacobian": bool(has_jacobian),
         "has_linearize": bool(has_linearize),

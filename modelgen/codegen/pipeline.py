@@ -5,6 +5,7 @@ of each stage and the operation counts.  It knows nothing of YAML or the CLI.
 """
 from __future__ import annotations
 
+import gc
 import hashlib
 import os
 import time
@@ -318,13 +319,14 @@ def generate(spec: ModelSpec, out_dir=None, *, force: bool = False,
     budget.check_estimate(spec, tree, limit)
     clock = _Clock(progress)
     clock.seconds["check"] = time.perf_counter() - start    # hashes, formulation, cache
-    with clock("derive"):
-        derived = _derive(spec, options, tree)
-    with clock("cse"):
-        routines = _eliminate(derived)
-        budget.check_cost(spec, budget.build_cost(routines), limit)
-    with clock("emit"):
-        emitted = _emit(spec, options, derived, routines, model_key)
+    with _collector_paused():
+        with clock("derive"):
+            derived = _derive(spec, options, tree)
+        with clock("cse"):
+            routines = _eliminate(derived)
+            budget.check_cost(spec, budget.build_cost(routines), limit)
+        with clock("emit"):
+            emitted = _emit(spec, options, derived, routines, model_key)
     with clock("compile"):
         return _compile(directory, spec, options, derived, emitted, key, clock.seconds, damage)
 
@@ -350,6 +352,25 @@ class _Clock:
             yield
         finally:        # set before a return inside the block reaches the caller
             self.seconds[name] = time.perf_counter() - t0
+
+
+@contextmanager
+def _collector_paused():
+    """Python's cyclic garbage collector off for the block, as it was after.
+
+    The derivation, CSE and printing build hundreds of thousands of sympy
+    objects that live until the stages end and make few reference cycles, so
+    the collector's passes, each over every object alive (more and longer ones
+    as the model grows), find next to nothing to free; the few cycles are
+    freed by the first collection after the block.
+    """
+    enabled = gc.isenabled()
+    gc.disable()
+    try:
+        yield
+    finally:
+        if enabled:
+            gc.enable()
 
 
 def _check_options(spec: ModelSpec, options: BuildOptions) -> None:

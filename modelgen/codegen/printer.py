@@ -283,11 +283,19 @@ def _c_ops(e) -> tuple:
         # a sign after the first term is its '-'; only the first one's can cost
         return sum(n for n, _ in terms) + len(terms) - 1 + first[1], 0
     if e.is_Mul:
-        coeff, rest = e.as_coeff_Mul()
+        # as_coeff_Mul and make_args of the rest, without building the rest (as
+        # ModelPrinter._fast_mul)
+        args = e.args
+        if args[0].is_Number:
+            coeff, rest = args[0], args[1:]
+            if len(rest) == 1 and rest[0].is_Mul:
+                rest = rest[0].args
+        else:
+            coeff, rest = _ONE, args
         negative = negative_number(coeff)
         coeff = -coeff if negative else coeff
         count, factors, den = 0, (0 if coeff is _ONE else 1), 0
-        for factor in sympy.Mul.make_args(rest):
+        for factor in rest:
             exp = factor.exp if factor.is_Pow else None
             if exp is not None and exp.is_Rational and exp.p < 0:
                 den += 1
@@ -317,7 +325,7 @@ def _negative_text(e) -> bool:
     if e.is_Number:
         return negative_number(e)
     if e.is_Mul:
-        return negative_number(e.as_coeff_Mul()[0])
+        return e.args[0].is_Number and negative_number(e.args[0])
     return False
 
 

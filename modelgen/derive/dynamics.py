@@ -254,8 +254,8 @@ def _body_terms(builder: GraphBuilder, kin: Kinematics) -> _BodyTerms:
     every body."""
     spec = kin.spec
     S, M, bias, grav_forces, poses = [], {}, {}, {}, []
-    kinetic = ZERO
-    potential = ZERO
+    # summed once at the end: adding to a growing sum re-sorts all of it each time
+    kinetic, potential = [], []
     gravity = spec.gravity
     for i, body in enumerate(spec.bodies):
         B = kin.bases[body.base]
@@ -289,15 +289,17 @@ def _body_terms(builder: GraphBuilder, kin: Kinematics) -> _BodyTerms:
         N_G = add(matvec(IE, alpha), cross(omega, I_omega))
         bias[i] = builder.vec(add(N_G, cross(r, F))) + F
 
-        kinetic += (m * (G.v[0] ** 2 + G.v[1] ** 2 + G.v[2] ** 2) + dot(omega, I_omega)) / 2
+        kinetic.append((m * (G.v[0] ** 2 + G.v[1] ** 2 + G.v[2] ** 2)
+                        + dot(omega, I_omega)) / 2)
         if gravity is not None:
             Fg = builder.vec(scale(m, gravity))
             grav_forces[i] = builder.vec(cross(r, Fg)) + Fg
-            potential -= dot(Fg, r)
+            potential.append(-dot(Fg, r))
         R = B.R
         poses.append(tuple(R[0]) + (r[0],) + tuple(R[1]) + (r[1],) + tuple(R[2]) + (r[2],)
                      + (ZERO, ZERO, ZERO, sympy.S.One))
-    return _BodyTerms(S, M, bias, grav_forces, kinetic, potential, poses)
+    return _BodyTerms(S, M, bias, grav_forces, sympy.Add(*kinetic), sympy.Add(*potential),
+                      poses)
 
 
 def _mass_matrix(builder: GraphBuilder, M: dict, groups, n: int) -> list:

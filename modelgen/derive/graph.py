@@ -103,10 +103,12 @@ class Graph:
 
     @cached_property
     def _index(self) -> tuple:
-        """(definitions, position of each symbol, intermediates each expression uses),
-        computed once: a graph is asked for many closures.  The last is filled
-        as closures reach each statement (most graphs of a derivation are asked
-        for the closure of a few outputs only)."""
+        """(definitions, position of each symbol, positions of the intermediates each
+        statement uses), computed once: a graph is asked for many closures.  The
+        last is filled as closures reach each statement (most graphs of a
+        derivation are asked for the closure of a few outputs only); it holds
+        positions, not symbols, because a closure's walk then hashes ints, not
+        sympy objects (whose hash is a Python-level call)."""
         defs = dict(self.assignments)
         order = {sym: i for i, (sym, _) in enumerate(self.assignments)}
         return defs, order, {}
@@ -120,19 +122,22 @@ class Graph:
 
     def closure(self, outputs: Iterable[sympy.Expr]) -> tuple:
         """The assignments needed to evaluate ``outputs``, in program order."""
-        defs, order, deps = self._index
+        _, order, deps = self._index
+        assignments = self.assignments
         needed = set()
-        stack = [s for e in outputs for s in self.symbols_of(sympy.sympify(e)) if s in defs]
+        stack = [order[s] for e in outputs for s in self.symbols_of(sympy.sympify(e))
+                 if s in order]
         while stack:
-            sym = stack.pop()
-            if sym in needed:
+            i = stack.pop()
+            if i in needed:
                 continue
-            needed.add(sym)
-            uses = deps.get(sym)
+            needed.add(i)
+            uses = deps.get(i)
             if uses is None:
-                uses = deps[sym] = tuple(s for s in self.symbols_of(defs[sym]) if s in defs)
-            stack.extend(s for s in uses if s not in needed)
-        return tuple(self.assignments[i] for i in sorted(order[s] for s in needed))
+                uses = deps[i] = tuple(order[s] for s in self.symbols_of(assignments[i][1])
+                                       if s in order)
+            stack.extend(uses)
+        return tuple(assignments[i] for i in sorted(needed))
 
     def operations(self, outputs) -> int:
         """Arithmetic operations of ``outputs`` and the assignments they need

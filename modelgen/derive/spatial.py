@@ -61,6 +61,25 @@ def _is_number(x) -> bool:
 _ORDER = functools.cmp_to_key(sympy.Basic.compare)
 
 
+def _symbol_key(s) -> tuple:
+    """A sort key of sympy Symbols in ``Basic.compare``'s order (one class: the
+    length of the hashable content, name and assumptions, then the content),
+    which ``sort`` compares without calling back into Python as ``cmp_to_key``
+    does at every comparison."""
+    content = s._hashable_content()
+    return len(content), content
+
+
+def _sort_terms(seq) -> None:
+    """Sort ``seq`` in place in ``Basic.compare``'s order; two terms (most sums of a
+    program) by one ``compare``, without ``cmp_to_key``'s wrappers."""
+    if len(seq) == 2:
+        if seq[0].compare(seq[1]) > 0:
+            seq.reverse()
+    else:
+        seq.sort(key=_ORDER)
+
+
 def _factors(e):
     """``(number, symbols)`` of a symbol, a rational or a product of a rational
     and symbols (in sympy's form, the number first), else None."""
@@ -110,7 +129,7 @@ def canonical_product(factors):
             return None
     if not symbols:
         return number
-    symbols.sort(key=_ORDER)
+    symbols.sort(key=_symbol_key)    # all Symbols of one class: compare's order
     if number is ONE:
         return symbols[0] if len(symbols) == 1 else sympy.Mul._from_args(symbols, True)
     return sympy.Mul._from_args([number] + symbols, True)
@@ -166,7 +185,7 @@ def canonical_sum(terms):
             return None
         seen.add(key)
         seq.append(t)
-    seq.sort(key=_ORDER)
+    _sort_terms(seq)
     if number is not ZERO:
         seq.insert(0, number)
     if len(seq) < 2:
