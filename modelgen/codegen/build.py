@@ -76,7 +76,8 @@ try:
 except ImportError:   # not POSIX: builds are not serialised
     fcntl = None
 
-from modelgen.codegen.compilers import GCC_FLAGS, is_gcc
+from modelgen.codegen.compilers import (FIX_COMPILER, GCC_FLAGS, core_count, is_gcc,
+                                        run_commands)
 from modelgen.errors import BuildError
 
 # shutil, subprocess and tempfile are imported where a build needs them:
@@ -120,7 +121,6 @@ MANIFEST_KEYS = {"name": str, "build_hash": str, "abi_version": int, "n": int,
                  "outputs": list, "module_name": str, "module_file": str,
                  "module_size": int, "module_sha256": str, "manifest_sha256": str,
                  "functions": dict}
-FIX_COMPILER = "install a C compiler (e.g. apt install gcc) or set CC to one"
 FIX_PYTHON_H = ("install the Python development headers (e.g. apt install python3-dev, "
                 "dnf install python3-devel)")
 
@@ -564,17 +564,7 @@ def _remove_old_builds(directory: Path, name: str, keep: str) -> None:
                 manifest_path(directory, short).unlink()
 
 
-def core_count() -> int:
-    """The cores this process may run on (its CPU affinity where the platform
-    tells it, else the machine's)."""
-    try:
-        return len(os.sched_getaffinity(0)) or 1
-    except (AttributeError, OSError):
-        return os.cpu_count() or 1
-
-
-#: Relative cost per statement of compiling at an optimisation level, for the
-#: order of :func:`part_order` (rough: only the order counts).
+#: Rough cost per statement of compiling at a level (:func:`part_order`'s order).
 COMPILE_WEIGHT = {"-O0": 1, "-O1": 1, "-O2": 2}
 
 
@@ -592,36 +582,6 @@ def part_order(statements: dict) -> tuple:
                       if statements[part] > above), O2)[0]
         return statements[part] * COMPILE_WEIGHT[level]
     return tuple(sorted(statements, key=lambda part: (-cost(part), part)))
-
-
-def run_commands(commands: list, cwd: Path, what: str = "C compiler failed",
-                 jobs: int | None = None) -> None:
-    """Run compiler commands in parallel, at most ``jobs`` at once (default: all),
-    each started in ``commands``' order as soon as one before it has finished;
-    raise BuildError (``what``, the command, its full output and exit status) on
-    the first failure in that order, once all have finished."""
-    import subprocess
-    from concurrent.futures import ThreadPoolExecutor
-
-    def run(cmd: list) -> BuildError | None:
-        try:
-            proc = subprocess.Popen(cmd, cwd=cwd, stdout=subprocess.PIPE,
-                                    stderr=subprocess.STDOUT, text=True)
-        except OSError as exc:
-            return BuildError(f"the C compiler {cmd[0]!r} cannot be run "
-                              f"({exc.strerror or exc})", cmd, fix=FIX_COMPILER)
-        out, _ = proc.communicate()
-        return BuildError(what, cmd, out, returncode=proc.returncode) \
-            if proc.returncode != 0 else None
-
-    if not commands:
-        return
-    with ThreadPoolExecutor(max_workers=max(1, min(jobs or len(commands),
-                                                   len(commands)))) as pool:
-        failures = list(pool.map(run, commands))
-    failure = next((f for f in failures if f is not None), None)
-    if failure:
-        raise failure
 
 
 def _write_if_changed(path: Path, text: str, tmpdir: Path) -> None:
