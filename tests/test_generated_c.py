@@ -8,9 +8,9 @@ as C99 and as C++, it is deterministic, and the build around it is robust.
   (large enough that routines are cut into ``noinline`` parts), and the
   model-independent ``mg_integrate.c`` copied next to them, compile with
   ``cc -std=c99 -Wall -Wextra -Werror -pedantic`` and
-  ``c++ -x c++ -std=c++11 -Wall -Wextra -Werror``, whole and as the two
+  ``c++ -x c++ -std=c++11 -Wall -Wextra -Werror``, whole and as its
   ``MG_PART`` parts, and a small generated ``main`` calls every exported
-  function of the header.
+  function of the header; a chain with derivatives (part 4) as well.
 * Golden files: ``tests/golden/double_pendulum.c`` and ``.h`` are the generated
   model source, byte for byte (the integrators, the same for every model, are
   not part of them).  The preamble holds the modelgen version and the model
@@ -407,8 +407,8 @@ def _defined_globals(obj: Path) -> list:
     return sorted(line.split()[-1] for line in r.stdout.splitlines() if line.strip())
 
 
-#: The MG_PART values a build compiles (model.c.j2).
-PARTS = (1, 2, 3)
+#: The MG_PART values a build compiles (model.c.j2; 4 holds code only with derivatives).
+PARTS = (1, 2, 3, 4)
 
 
 def test_generated_c_compiles_warning_free_as_c99_and_cxx(generated, tmp_path):
@@ -474,6 +474,65 @@ def test_generated_c_compiles_warning_free_as_c99_and_cxx(generated, tmp_path):
         parts = [g for k in PARTS for g in _defined_globals(out / f"c_{k}.o")]
         assert sorted(parts) == exported, f"{name}: MG_PART parts overlap or miss symbols"
         assert all(g.startswith("mg_") for g in _defined_globals(out / "c_mg.o"))
+
+
+def _symbols(obj: Path) -> dict:
+    """Defined global symbols of an object file -> their visibility (readelf)."""
+    r = _run(["readelf", "-sW", obj])
+    assert r.returncode == 0, r.stdout
+    return {f[7]: f[5] for f in (line.split() for line in r.stdout.splitlines())
+            if len(f) >= 8 and f[4] in ("GLOBAL", "WEAK") and f[6] != "UND"}
+
+
+def test_derivatives_parts_split_the_header_and_hide_what_they_share(tmp_path):
+    """A model with derivatives compiles as C99 (-pedantic) and C++, whole and per
+    MG_PART; the parts define each function of its header once, the straight line
+    that part 3's solve calls (``<name>_derivative_terms``) only in part 4 and
+    hidden, and neither it nor anything else unprefixed leaves the library."""
+    name = "spatial_chain_3"
+    g = modelgen.generate_model(spatial_chain(3).spec(), tmp_path / "build", derivatives=True)
+    src = g.build.directory
+    header = sorted(f for _, f, _ in PROTOTYPE.findall((src / f"{name}.h").read_text()))
+    assert f"{name}_derivatives" in header and f"{name}_derivative_terms" not in header
+    commands = [c for c in g.manifest["compile_commands"] if "-DMG_PART=" in c]
+    if commands:     # a build in parts (more than one core): the largest part first
+        assert "-DMG_PART=4" in commands[0] and len(commands) == len(PARTS)
+    compiles = []
+    for tag, flags in (("all", []), *((str(k), [f"-DMG_PART={k}"]) for k in PARTS)):
+        compiles.append(([*C99, *flags, "-c", src / f"{name}.c", "-o", f"c_{tag}.o"], tmp_path))
+        compiles.append(([*CXX11, *flags, "-c", src / f"{name}.c", "-o", f"cxx_{tag}.o"],
+                         tmp_path))
+    failures = _run_all(compiles)
+    assert not failures, "generated C does not compile cleanly:\n" + "\n".join(failures)
+    shared = f"{name}_derivative_terms"
+    for lang in ("c", "cxx"):
+        whole = _symbols(tmp_path / f"{lang}_all.o")
+        assert sorted(whole) == header and set(whole.values()) == {"DEFAULT"}
+        parts = {k: _symbols(tmp_path / f"{lang}_{k}.o") for k in PARTS}
+        public = sorted(s for syms in parts.values() for s, vis in syms.items()
+                        if vis == "DEFAULT")
+        assert public == header, f"{lang}: MG_PART parts overlap or miss symbols"
+        hidden = {k: sorted(s for s, vis in syms.items() if vis != "DEFAULT")
+                  for k, syms in parts.items()}
+        assert hidden == {1: [], 2: [], 3: [], 4: [shared]}, hidden
+    r = _run(["nm", "-D", "--defined-only", g.build.module_path])
+    assert r.returncode == 0, r.stdout
+    exported = [line.split()[-1] for line in r.stdout.splitlines() if line.strip()]
+    assert f"{name}_derivatives" in exported and shared not in exported
+
+
+def test_derivatives_built_in_one_part_match_central_differences(tmp_path, monkeypatch):
+    """On one core the whole file is one compile (no MG_PART), where the shared
+    straight line is static; its derivatives still match the rhs's central
+    differences."""
+    from modelgen.codegen import build
+    from test_derivatives import _check_against_differences
+    monkeypatch.setattr(build, "core_count", lambda: 1)
+    cm = modelgen.load(spatial_chain(4).spec(), tmp_path / "build", derivatives=True,
+                       force=True)
+    commands = cm.manifest["compile_commands"]
+    assert len(commands) == 1 and "MG_PART" not in commands[0]
+    _check_against_differences(cm, seed=4)
 
 
 def test_two_models_link_into_one_program_without_symbol_clashes(generated, tmp_path):

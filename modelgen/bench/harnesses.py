@@ -103,8 +103,9 @@ def c_array(values) -> str:
 # -- modelgen -----------------------------------------------------------------------
 
 def compile_model(cm, work: Path) -> tuple:
-    """``<name>.c``'s integration path (part 2: the rhs) and what a controller calls
-    (part 3: the inverse dynamics, derivatives, frame kinematics), each compiled by
+    """``<name>.c``'s integration path (part 2: the rhs), what a controller calls
+    (part 3: the inverse dynamics, the derivatives' solve, frame kinematics) and
+    the derivatives' straight line (part 4, with derivatives), each compiled by
     the exact command modelgen's build used (from the manifest) into ``work``;
     returns (the object files, the commands as one text)."""
     name, manifest = cm.name, cm.manifest
@@ -112,8 +113,10 @@ def compile_model(cm, work: Path) -> tuple:
     work.mkdir(parents=True, exist_ok=True)
     commands = [shlex.split(c) for c in manifest.get("compile_commands", [])]
     objects, texts = [], []
-    for part in (2, 3):
+    for part in (2, 3, 4):
         built = [c for c in commands if f"-DMG_PART={part}" in c]
+        if part == 4 and "derivative_terms" not in manifest["ops"]:
+            continue            # no derivatives: nothing in part 4
         obj = work / f"model_part{part}.o"
         if built:
             cmd = list(built[0])

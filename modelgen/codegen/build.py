@@ -14,9 +14,9 @@ pendulum: about 0.15 s instead of 0.45 s with a cffi wrapper of its own).
 
 The runtime module is compiled by cffi through setuptools' compiler driver
 (which knows the platform's flags for Python extensions); a model's library
-is compiled by calling the C compiler directly (two parts in parallel for
-large models), and a failure raises :class:`BuildError` with the exact
-command and the compiler's full output (nothing is swallowed).
+is compiled by calling the C compiler directly (in parts, in parallel, on a
+machine with more than one core), and a failure raises :class:`BuildError`
+with the exact command and the compiler's full output (nothing is swallowed).
 
 The integrators (``mg_integrate.c`` and the ``mg_integrate/*.c`` it includes,
 the same for every model) are compiled once per compiler, flags and source
@@ -76,7 +76,8 @@ try:
 except ImportError:   # not POSIX: builds are not serialised
     fcntl = None
 
-from modelgen.codegen.compilers import GCC_FLAGS, is_gcc
+from modelgen.codegen.compilers import (FIX_COMPILER, GCC_FLAGS, core_count, is_gcc,
+                                        run_commands)
 from modelgen.errors import BuildError
 
 # shutil, subprocess and tempfile are imported where a build needs them:
@@ -91,19 +92,21 @@ O2 = ("-O2", "-fno-tree-slp-vectorize")
 #: part, (flags, above this many statements) rows, first match wins, else
 #: :data:`O2`.  gcc's time grows faster than linearly with code size.
 #:
-#: Parts 2 (the integration path) and 3 (what a controller calls at every step:
-#: inverse dynamics, derivatives, frame kinematics) are at :data:`O2` up to
-#: 4,000 statements, -O1 above.  Part 1 (A, h, tau, energies, poses: never
+#: Parts 2 (the integration path), 3 (what a controller calls at every step:
+#: inverse dynamics, the derivatives' solve, frame kinematics) and 4 (the
+#: derivatives' straight line) are at :data:`O2` up to 4,000 statements, -O1
+#: above.  Part 1 (A, h, tau, energies, poses: never
 #: called by an integrator, only from Python through the runtime, where a call
 #: costs about a microsecond anyway, or from a user's C, compiled by the user)
 #: is at -O0 at every size, so it compiles beside the others without becoming
 #: the critical path.  Part 0 is the whole file in one process (one core, and
 #: the FMU): -O1 above 400 statements, else :data:`O2`.
 OPT_LEVELS = {0: ((("-O1",), 400),), 1: ((("-O0",), -1),), 2: ((("-O1",), 4000),),
-              3: ((("-O1",), 4000),)}
-#: A model's C is compiled as three parts in parallel (MG_PART 1, 2 and 3) when
-#: the machine has two cores or more, at every size (even the double pendulum
-#: gains); on one core, as one part (0: the whole file).
+              3: ((("-O1",), 4000),), 4: ((("-O1",), 4000),)}
+#: A model's C is compiled in parts (MG_PART 1, 2, 3 and, with derivatives, 4)
+#: when the machine has two cores or more, at every size (even the double
+#: pendulum gains), at most one compiler per core, the largest part first
+#: (:func:`part_order`); on one core, as one part (0: the whole file).
 BASE_FLAGS = ("-std=c99", "-fPIC", "-Wall", "-Wextra")
 #: Flags of mg_integrate.c (compiled once, on the integration hot path).
 INTEGRATOR_FLAGS = ("-O2", *BASE_FLAGS, "-Werror")
@@ -118,7 +121,6 @@ MANIFEST_KEYS = {"name": str, "build_hash": str, "abi_version": int, "n": int,
                  "outputs": list, "module_name": str, "module_file": str,
                  "module_size": int, "module_sha256": str, "manifest_sha256": str,
                  "functions": dict}
-FIX_COMPILER = "install a C compiler (e.g. apt install gcc) or set CC to one"
 FIX_PYTHON_H = ("install the Python development headers (e.g. apt install python3-dev, "
                 "dnf install python3-devel)")
 
@@ -562,28 +564,24 @@ def _remove_old_builds(directory: Path, name: str, keep: str) -> None:
                 manifest_path(directory, short).unlink()
 
 
-def run_commands(commands: list, cwd: Path, what: str = "C compiler failed") -> None:
-    """Run compiler commands in parallel; raise BuildError (``what``, the command, its
-    full output and exit status) on the first failure."""
-    import subprocess
-    procs = []
-    try:
-        for cmd in commands:
-            procs.append((cmd, subprocess.Popen(cmd, cwd=cwd, stdout=subprocess.PIPE,
-                                                stderr=subprocess.STDOUT, text=True)))
-    except OSError as exc:
-        for _, proc in procs:
-            proc.kill()
-            proc.communicate()
-        raise BuildError(f"the C compiler {cmd[0]!r} cannot be run ({exc.strerror or exc})",
-                         cmd, fix=FIX_COMPILER) from None
-    failure = None
-    for cmd, proc in procs:
-        out, _ = proc.communicate()
-        if proc.returncode != 0 and failure is None:
-            failure = BuildError(what, cmd, out, returncode=proc.returncode)
-    if failure:
-        raise failure
+#: Rough cost per statement of compiling at a level (:func:`part_order`'s order).
+COMPILE_WEIGHT = {"-O0": 1, "-O1": 1, "-O2": 2}
+
+
+def part_order(statements: dict) -> tuple:
+    """The parts of ``statements`` (part -> its largest routine's statements), the
+    most expensive to compile first: with more parts than cores, the largest
+    then has a core to itself from the start while the others share the rest,
+    instead of finishing last.
+
+    >>> part_order({1: 1500, 2: 2300, 3: 1400, 4: 3800})
+    (4, 2, 3, 1)
+    """
+    def cost(part: int) -> int:
+        level = next((flags for flags, above in OPT_LEVELS[part]
+                      if statements[part] > above), O2)[0]
+        return statements[part] * COMPILE_WEIGHT[level]
+    return tuple(sorted(statements, key=lambda part: (-cost(part), part)))
 
 
 def _write_if_changed(path: Path, text: str, tmpdir: Path) -> None:
@@ -738,10 +736,11 @@ def build_module(directory: Path, name: str, sources: dict, manifest: dict,
 
     ``manifest`` must hold ``build_hash``; the library is named after it so a
     changed model never collides with an already loaded one.  ``statements`` maps
-    each part (1: the model functions, 2: the integration path, 3: what a
-    controller calls) to its largest
+    each part to compile (1: the model functions, 2: the integration path, 3:
+    what a controller calls, 4: the derivatives' straight line) to its largest
     routine's statement count, which chooses its optimisation level
-    (:data:`OPT_LEVELS`; see :func:`modelgen.codegen.pipeline.part_statements`).
+    (:data:`OPT_LEVELS`; see :func:`modelgen.codegen.pipeline.part_statements`)
+    and its place in the order the parts start in (:func:`part_order`).
     """
     import shutil
     start = time.perf_counter()
@@ -758,12 +757,13 @@ def build_module(directory: Path, name: str, sources: dict, manifest: dict,
             (tmp / fname).write_text(sources[fname])
         (tmp / "mg_integrate.h").write_text(integrator["mg_integrate.h"])
         cc = compiler()
+        cores = core_count()
         by_part = {**statements, 0: max(statements.values())}
-        parts = (1, 2, 3) if (os.cpu_count() or 1) > 1 else (0,)
+        parts = part_order(statements) if cores > 1 else (0,)
         model_objs = [[*cc, *compile_flags(by_part[part], part, host=True), "-Werror",
                        *([f"-DMG_PART={part}"] if part else []), "-c", f"{name}.c",
                        "-o", f"{name}_{part}.o"] for part in parts]
-        run_commands(model_objs, tmp)
+        run_commands(model_objs, tmp, jobs=cores)
         run_commands([link_command([*(f"{name}_{part}.o" for part in parts), str(integrator_obj)],
                            module_file)], tmp)
 

@@ -1,7 +1,14 @@
-"""Which C compiler a build runs, for flags only one compiler knows."""
+"""Which C compiler a build runs, for flags only one compiler knows, and how its
+commands run: in parallel, at most one per core."""
 from __future__ import annotations
 
 import functools
+import os
+from pathlib import Path
+
+from modelgen.errors import BuildError
+
+FIX_COMPILER = "install a C compiler (e.g. apt install gcc) or set CC to one"
 
 #: Added to an optimised level when the compiler is gcc: its dead-store passes,
 #: which find no dead store in generated code (the same machine code with and
@@ -28,3 +35,42 @@ def is_gcc(command: tuple) -> bool:
     except (OSError, subprocess.SubprocessError):
         return False
     return "Free Software Foundation" in out
+
+
+def core_count() -> int:
+    """The cores this process may run on (its CPU affinity where the platform
+    tells it, else the machine's)."""
+    try:
+        return len(os.sched_getaffinity(0)) or 1
+    except (AttributeError, OSError):
+        return os.cpu_count() or 1
+
+
+def run_commands(commands: list, cwd: Path, what: str = "C compiler failed",
+                 jobs: int | None = None) -> None:
+    """Run compiler commands in parallel, at most ``jobs`` at once (default: all),
+    each started in ``commands``' order as soon as one before it has finished;
+    raise BuildError (``what``, the command, its full output and exit status) on
+    the first failure in that order, once all have finished."""
+    import subprocess
+    from concurrent.futures import ThreadPoolExecutor
+
+    def run(cmd: list) -> BuildError | None:
+        try:
+            proc = subprocess.Popen(cmd, cwd=cwd, stdout=subprocess.PIPE,
+                                    stderr=subprocess.STDOUT, text=True)
+        except OSError as exc:
+            return BuildError(f"the C compiler {cmd[0]!r} cannot be run "
+                              f"({exc.strerror or exc})", cmd, fix=FIX_COMPILER)
+        out, _ = proc.communicate()
+        return BuildError(what, cmd, out, returncode=proc.returncode) \
+            if proc.returncode != 0 else None
+
+    if not commands:
+        return
+    with ThreadPoolExecutor(max_workers=max(1, min(jobs or len(commands),
+                                                   len(commands)))) as pool:
+        failures = list(pool.map(run, commands))
+    failure = next((f for f in failures if f is not None), None)
+    if failure:
+        raise failure

@@ -88,23 +88,35 @@ def model_hash(spec: ModelSpec, options: BuildOptions | None = None) -> str:
 #: The routines on the integration path (compiled as MG_PART 2, see model.c.j2).
 INTEGRATION_PATH = ("prepare", "rhs", "outputs", "jacobian_terms", "linearize_terms",
                     "constraint_residuals", "constraint_jacobian")
-#: What a controller calls at every step (MG_PART 3; kinematics.c.j2's are there too).
-CONTROL_PATH = ("inverse_dynamics", "derivative_terms", "frame_poses", "frame_velocities",
+#: What a controller calls at every step (MG_PART 3; kinematics.c.j2's are there too,
+#: and the derivatives' solve and API).
+CONTROL_PATH = ("inverse_dynamics", "frame_poses", "frame_velocities",
                 "frame_jacobians", "frame_bias_accelerations", "com", "com_jacobian",
                 "centroidal_momentum_matrix")
+#: The derivatives' straight line (MG_PART 4): the largest routine of a model built
+#: with derivatives, so a part of its own, compiled beside the others.
+DERIVATIVE_PATH = ("derivative_terms",)
 
 
 def routine_part(name: str) -> int:
-    """The MG_PART a routine is compiled in: 2, 3, else 1 (the model functions)."""
-    return 2 if name in INTEGRATION_PATH else 3 if name in CONTROL_PATH else 1
+    """The MG_PART a routine is compiled in: 2, 3, 4, else 1 (the model functions)."""
+    return (2 if name in INTEGRATION_PATH else 3 if name in CONTROL_PATH
+            else 4 if name in DERIVATIVE_PATH else 1)
 
 
 def part_statements(statements: dict) -> dict:
     """Routine name -> statements, to part -> its largest routine's statements (what
-    :func:`modelgen.codegen.build.build_module` chooses optimisation levels by)."""
+    :func:`modelgen.codegen.build.build_module` chooses optimisation levels and
+    the order it starts the parts in by): parts 1 to 3 always, 4 only with the
+    derivatives (without, it would compile nothing).
+
+    >>> part_statements({"rhs": 900, "prepare": 40, "mass_matrix": 500})
+    {1: 500, 2: 900, 3: 0}
+    """
+    parts = {1, 2, 3} | {routine_part(name) for name in statements}
     return {part: max((count for name, count in statements.items()
                        if routine_part(name) == part), default=0)
-            for part in (1, 2, 3)}
+            for part in sorted(parts)}
 
 
 #: How a model is built and loaded (part of the cache key): a plain shared library
