@@ -7,7 +7,7 @@ valgrind for the instruction counts)::
     .venv/bin/python bench/derivatives.py                  # chain n = 7, arm7, solo12
     .venv/bin/python bench/derivatives.py --n 7 20 50 --rounds 5
     .venv/bin/python bench/derivatives.py --quick          # n = 7 only, one round
-    .venv/bin/python bench/derivatives.py --n 100 --no-arm --max-operations 400000
+    .venv/bin/python bench/derivatives.py --n 100 --no-arm
 
 Method
     The models are the spatial chain of ``spatial_chain(n)`` and ``models/arm7.yaml``,
@@ -43,8 +43,8 @@ Method
     Generation: wall and CPU seconds (the process and its compilers) and peak RSS of
     ``modelgen.load(..., derivatives=True, force=True)`` in a fresh process, started
     before this one imports numpy or the library, so that its ``ru_maxrss`` is its
-    own.  ``--max-operations`` raises the build budget of every generation (a
-    100-link chain with its derivatives is over the default 250,000).  *ops / n^2*:
+    own.  ``--max-operations`` sets the build budget of every generation (a
+    100-link chain with its derivatives costs 297k of the default 320,000).  *ops / n^2*:
     operations after CSE of the ``derivative_terms`` routine over n^2 (for a joint
     tree the per-dof vectors and the effects, O(n): the O(n^2) dot products are a
     loop in the C and not counted).  Prints the table, then the issue's targets

@@ -129,7 +129,7 @@ def _generate_parser(sub) -> None:
     g.add_argument("--max-operations", type=int, default=None, metavar="N",
                    help="build budget: refuse a model whose C would cost more than N "
                         "operations after CSE (sin, cos count 40), before compiling "
-                        "(default: $MODELGEN_MAX_OPERATIONS, else 250000)")
+                        "(default: $MODELGEN_MAX_OPERATIONS, else 320000)")
     g.set_defaults(func=generate_command)
 
 
@@ -146,7 +146,7 @@ def _simulate_parser(sub) -> None:
     s.add_argument("--max-operations", type=int, default=None, metavar="N",
                    help="build budget: refuse a model whose C would cost more than N "
                         "operations after CSE (sin, cos count 40), before compiling "
-                        "(default: $MODELGEN_MAX_OPERATIONS, else 250000)")
+                        "(default: $MODELGEN_MAX_OPERATIONS, else 320000)")
     s.add_argument("--t-end", type=float, default=None,
                    help="final time [s] (default: the scene's, or 10 for a model)")
     s.add_argument("--dt", type=float, default=None,

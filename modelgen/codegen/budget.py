@@ -27,14 +27,15 @@ import sympy
 from modelgen.errors import ModelError
 
 #: Default budget, in operations after CSE (sin and cos weighted).  Calibrated on
-#: gcc 12 (the levels of build.OPT_LEVELS), 2-core machine shared with other
-#: work: spatial chains n = 20 / 50 / 100 cost 18k / 56k / 142k and compile in
-#: 3.5 / 8.0 s / (n = 100) 3.1 s idle; a sum of 100 terms ``c*sin(k*q)*cos(q)``
-#: costs 8,505 operations with 1,301 sin and cos (59k weighted) and
-#: compiles in 10.5 s (3.5 s with libm's sin); 360 such terms (8,889 characters)
-#: cost 212k weighted and compile in 61 s.  250k keeps a build's compile to
-#: about 70 s on such a machine and admits the 100-link chain (196k).
-MAX_OPERATIONS = 250_000
+#: gcc 12 (the levels and parts of build.OPT_LEVELS), 2-core machine shared with
+#: other work: the 100-link spatial chain costs 196k, 297k with its derivatives
+#: (generated in 28 s of CPU); the 150-link chain 336k (refused: its derivation
+#: and CSE alone take about a minute).  Sums of ``c*sin(k*q)*cos(q)`` terms on a
+#: one-coordinate pendulum, the costliest C per operation (every sin inline):
+#: 206k weighted compile in 18 s of compiler CPU, 247k in 21 s, 384k in 34 s
+#: (58 s of wall at load 5).  320k admits the 100-link chain with its derivatives
+#: and keeps a build's compile under a minute on such a machine.
+MAX_OPERATIONS = 320_000
 #: Operations a ``sin`` or ``cos`` counts for: the inline ``mg_sin``'s kernels
 #: and reduction are about 40 operations that gcc compiles at every call.
 TRIG_OPERATIONS = 40

@@ -303,7 +303,7 @@ def generate(spec: ModelSpec, out_dir=None, *, force: bool = False,
     ``progress`` is None or a callable ``progress(stage)`` called as each of
     :data:`~modelgen.codegen.build.STAGES` starts (not at all when the build is reused).
     ``max_operations`` is the build budget (:mod:`modelgen.codegen.budget`:
-    default ``$MODELGEN_MAX_OPERATIONS``, else 250,000 operations after CSE): a
+    default ``$MODELGEN_MAX_OPERATIONS``, else 320,000 operations after CSE): a
     model over it is refused with a ModelError before deriving (by an estimate
     from its size) or after CSE, never after minutes of compiling.  The seconds
     of the result (``check``, then each stage) add up to the whole call.
