@@ -272,13 +272,15 @@ def _root_rotation(builder, joint) -> tuple:
     return tuple(name_vec(builder, row) for row in R)
 
 
-def _rotated_inertia(builder, I, R) -> tuple:
+def _rotated_inertia(builder, I, R, orthogonal: bool) -> tuple:
     """The 6 entries (as :data:`PAIRS`) of ``R I R^T`` for the 6 entries ``I``.
 
-    A diagonal ``I`` (principal axes along the link's: rods, boxes, cylinders) is
+    With R ``orthogonal`` (a product of the joints' cos/sin rotations, exactly
+    orthogonal, where a quaternion's matrix is only when its norm is 1) a
+    diagonal ``I`` (principal axes along the link's: rods, boxes, cylinders) is
     ``d 1 + sum_k (I_k - d) r_k r_k^T`` over the columns ``r_k`` of R, with ``d``
     the moment most axes share: one term less per axis of symmetry."""
-    if any(x != 0 for x in I[3:]):
+    if not orthogonal or any(x != 0 for x in I[3:]):
         RI = tuple(name_vec(builder, row) for row in matmul(R, symmetric(I)))
         return tuple(dot(RI[a], R[b]) for a, b in PAIRS)
     d = max(I[:3], key=lambda x: sum(1 for y in I[:3] if y == x))
@@ -293,7 +295,7 @@ def _rotated_inertia(builder, I, R) -> tuple:
     return tuple(out)
 
 
-def _ground_inertia(builder, body, R, p) -> tuple:
+def _ground_inertia(builder, body, R, p, orthogonal: bool) -> tuple:
     """The link's spatial inertia ``(I_O, h, m)`` about E's origin in E components.
 
     ``I_O = R I R^T - m p^ p^ - p^ hr^ - hr^ p^`` (``x^`` the cross-product matrix,
@@ -301,9 +303,10 @@ def _ground_inertia(builder, body, R, p) -> tuple:
     first moment about E's origin, which the link needs anyway: an off-diagonal
     entry ``(a, b)`` is ``(R I R^T)_ab - p_a h_O,b - hr_a p_b``, a diagonal one
     ``(R I R^T)_aa + t_b + t_c`` over the two other axes, ``t_b = p_b (h_O,b +
-    hr_b)`` (that is ``m p_b^2 + 2 p_b hr_b``).
+    hr_b)`` (that is ``m p_b^2 + 2 p_b hr_b``).  ``orthogonal``: see
+    :func:`_rotated_inertia`.
     """
-    Ir = _rotated_inertia(builder, name_vec(builder, body.I), R)
+    Ir = _rotated_inertia(builder, name_vec(builder, body.I), R, orthogonal)
     h = name_vec(builder, body.h)
     m = builder.name(body.m)
     hr = name_vec(builder, matvec(R, h))
@@ -354,9 +357,12 @@ def derive_rnea_partials(eqs: Equations, tree: JointTree, spec: ModelSpec,
     J, ov, oa, Y, doY, of = {}, [None] * count, [None] * count, [None] * count, \
         [None] * count, [None] * count
     dVdq, dAdq, dAdv = {}, {}, {}
+    turned = [False] * count            # a quaternion's matrix in the link's R
     for i, joint in enumerate(tree.joints):
         R, p = poses[i]
         par = joint.parent
+        turned[i] = (par >= 0 and turned[par]) or \
+            (joint.kind in ("ball", "free") and not (root_frame and par < 0))
         ov_p = ov[par] if par >= 0 else (ZERO,) * 6
         oa_p = oa[par] if par >= 0 else tuple(a0)
         for k, S in joint.dofs:
@@ -369,7 +375,7 @@ def derive_rnea_partials(eqs: Equations, tree: JointTree, spec: ModelSpec,
         vJ = name_vec(builder, vJ)
         ov[i] = name_vec(builder, add(ov_p, vJ))
         oa[i] = name_vec(builder, add(add(oa_p, aJ), cJ))
-        Y[i] = _ground_inertia(builder, tree.inertias[i], R, p)
+        Y[i] = _ground_inertia(builder, tree.inertias[i], R, p, not turned[i])
         oh = name_vec(builder, _inertia_times(Y[i], ov[i]))
         of[i] = name_vec(builder, add(_inertia_times(Y[i], oa[i]), _force_cross(ov[i], oh)))
         if i in loads:                  # Q = RNEA's forces less the actions'
