@@ -14,8 +14,9 @@ products of 6-vectors that each joint computes once:
   ground is ``-g``), the link's inertia ``oY_i`` and force
   ``of_i = oY_i oa_i + ov_i x* oY_i ov_i`` in E, and per dof
   ``dVdq = ov_p x J``, ``dAdq = oa_p x J + ov_p x dVdq``,
-  ``dAdv = ov_i x J + dVdq``, with ``doY_i = ov_i x* oY_i - oY_i ov_i x +
-  (. x* oY_i ov_i)``;
+  ``dAdv = ov_i x J + dVdq`` (``2 dVdq`` for a joint of one dof, whose
+  ``J qd x J`` is 0; ``ov_i x J qd`` in ``oa_i`` is likewise the sum of the
+  ``dVdq qd``), with ``doY_i = ov_i x* oY_i - oY_i ov_i x + (. x* oY_i ov_i)``;
 * inwards, with the composite ``oYc_i``, ``doYc_i`` and ``of_i`` of the
   subtree: per dof ``dFda = oYc J``, ``dFdq0 = doYc dVdq + oYc dAdq``,
   ``dFdq = dFdq0 + J x* of``, ``dFdv = doYc J + oYc dAdv``, ``dYtJ = doYc^T J``
