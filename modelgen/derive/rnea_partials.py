@@ -284,7 +284,8 @@ def _rotated_inertia(builder, I, R, orthogonal: bool) -> tuple:
     if not orthogonal or any(x != 0 for x in I[3:]):
         RI = tuple(name_vec(builder, row) for row in matmul(R, symmetric(I)))
         return tuple(dot(RI[a], R[b]) for a, b in PAIRS)
-    d = max(I[:3], key=lambda x: sum(1 for y in I[:3] if y == x))
+    # the moment most axes share, a zero on a tie (no d 1 to add, no I_k - 0)
+    d = max(I[:3], key=lambda x: (sum(1 for y in I[:3] if y == x), x == 0))
     out = [d, d, d, ZERO, ZERO, ZERO]
     for k in range(3):
         if I[k] == d:
