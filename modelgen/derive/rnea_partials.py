@@ -14,8 +14,9 @@ products of 6-vectors that each joint computes once:
   ground is ``-g``), the link's inertia ``oY_i`` and force
   ``of_i = oY_i oa_i + ov_i x* oY_i ov_i`` in E, and per dof
   ``dVdq = ov_p x J``, ``dAdq = oa_p x J + ov_p x dVdq``,
-  ``dAdv = ov_i x J + dVdq``, with ``doY_i = ov_i x* oY_i - oY_i ov_i x +
-  (. x* oY_i ov_i)``;
+  ``dAdv = ov_i x J + dVdq`` (``2 dVdq`` for a joint of one dof, whose
+  ``J qd x J`` is 0; ``ov_i x J qd`` in ``oa_i`` is likewise the sum of the
+  ``dVdq qd``), with ``doY_i = ov_i x* oY_i - oY_i ov_i x + (. x* oY_i ov_i)``;
 * inwards, with the composite ``oYc_i``, ``doYc_i`` and ``of_i`` of the
   subtree: per dof ``dFda = oYc J``, ``dFdq0 = doYc dVdq + oYc dAdq``,
   ``dFdq = dFdq0 + J x* of``, ``dFdv = doYc J + oYc dAdv``, ``dYtJ = doYc^T J``
@@ -192,13 +193,19 @@ def _variation(builder, Y, v, oh) -> tuple:
     n, f = oh[:3], oh[3:]
     P = tuple(tuple(builder.name(x) for x in cross(w, tuple(I[r][c] for r in range(3))))
               for c in range(3))              # P[c] = column c of W I
-    uh = builder.name(dot(u, h))
     nx = skew(n)
-    A = tuple(tuple(total((P[c][r], P[r][c], -times(h[r], u[c]), -times(u[r], h[c]),
-                           times(2, uh) if r == c else ZERO,
-                           -nx[r][c] if nx[r][c] != 0 else ZERO))
-                    for c in range(3)) for r in range(3))
-    return tuple(name_vec(builder, row) for row in A), f
+    # the symmetric part once per pair of entries, the skew part -(n x) on each
+    A = [[None] * 3 for _ in range(3)]
+    for r in range(3):
+        # W I - I W - (U H + H U) on the diagonal: 2 ((W I)_rr + u . h - u_r h_r)
+        others = tuple(times(u[c], h[c]) for c in range(3) if c != r)
+        A[r][r] = builder.factor(times(2, named(builder, total((P[r][r],) + others))))
+        for c in range(r + 1, 3):
+            sym = named(builder, total((P[c][r], P[r][c], -times(h[r], u[c]),
+                                        -times(u[r], h[c]))))
+            A[r][c] = named(builder, total((sym, -nx[r][c])))
+            A[c][r] = named(builder, total((sym, -nx[c][r])))
+    return tuple(tuple(row) for row in A), f
 
 
 def _variation_times(dY, x) -> tuple:
@@ -266,24 +273,56 @@ def _root_rotation(builder, joint) -> tuple:
     return tuple(name_vec(builder, row) for row in R)
 
 
-def _ground_inertia(builder, body, R, p) -> tuple:
-    """The link's spatial inertia ``(I_O, h, m)`` about E's origin in E components."""
-    I = symmetric(name_vec(builder, body.I))
+def _rotated_inertia(builder, I, R, orthogonal: bool) -> tuple:
+    """The 6 entries (as :data:`PAIRS`) of ``R I R^T`` for the 6 entries ``I``.
+
+    With R ``orthogonal`` (a product of the joints' cos/sin rotations, exactly
+    orthogonal, where a quaternion's matrix is only when its norm is 1) a
+    diagonal ``I`` (principal axes along the link's: rods, boxes, cylinders) is
+    ``d 1 + sum_k (I_k - d) r_k r_k^T`` over the columns ``r_k`` of R, with ``d``
+    the moment most axes share: one term less per axis of symmetry."""
+    if not orthogonal or any(x != 0 for x in I[3:]):
+        RI = tuple(name_vec(builder, row) for row in matmul(R, symmetric(I)))
+        return tuple(dot(RI[a], R[b]) for a, b in PAIRS)
+    # the moment most axes share, a zero on a tie (no d 1 to add, no I_k - 0)
+    d = max(I[:3], key=lambda x: (sum(1 for y in I[:3] if y == x), x == 0))
+    out = [d, d, d, ZERO, ZERO, ZERO]
+    for k in range(3):
+        if I[k] == d:
+            continue
+        s = builder.name(total((I[k], -d)))
+        r = tuple(R[a][k] for a in range(3))
+        sr = name_vec(builder, tuple(times(s, x) for x in r))
+        out = [total((e, times(sr[a], r[b]))) for e, (a, b) in zip(out, PAIRS, strict=True)]
+    return tuple(out)
+
+
+def _ground_inertia(builder, body, R, p, orthogonal: bool) -> tuple:
+    """The link's spatial inertia ``(I_O, h, m)`` about E's origin in E components.
+
+    ``I_O = R I R^T - m p^ p^ - p^ hr^ - hr^ p^`` (``x^`` the cross-product matrix,
+    ``hr = R h``), its translation part arranged around ``h_O = hr + m p``, the
+    first moment about E's origin, which the link needs anyway: an off-diagonal
+    entry ``(a, b)`` is ``(R I R^T)_ab - p_a h_O,b - hr_a p_b``, a diagonal one
+    ``(R I R^T)_aa + t_b + t_c`` over the two other axes, ``t_b = p_b (h_O,b +
+    hr_b)`` (that is ``m p_b^2 + 2 p_b hr_b``).  ``orthogonal``: see
+    :func:`_rotated_inertia`.
+    """
+    Ir = _rotated_inertia(builder, name_vec(builder, body.I), R, orthogonal)
     h = name_vec(builder, body.h)
     m = builder.name(body.m)
-    Ir = matmul(R, matmul(I, transpose(R)))
     hr = name_vec(builder, matvec(R, h))
-    ph = dot(p, hr)
-    pp = dot(p, p)
+    h_O = name_vec(builder, add(hr, tuple(times(m, x) for x in p)))
+    t = name_vec(builder, tuple(times(x, total((y, z))) for x, y, z in zip(p, h_O, hr,
+                                                                           strict=True)))
     entries = []
-    for a, b in PAIRS:
-        e = total((Ir[a][b], -times(m, times(p[a], p[b])), -times(p[a], hr[b]),
-                   -times(hr[a], p[b])))
+    for (a, b), Iab in zip(PAIRS, Ir, strict=True):
         if a == b:
-            e = total((e, times(m, pp), times(2, ph)))
+            e = total((Iab,) + tuple(t[c] for c in range(3) if c != a))
+        else:
+            e = total((Iab, -times(p[a], h_O[b]), -times(hr[a], p[b])))
         entries.append(e)
     I_O = symmetric(name_vec(builder, entries))
-    h_O = name_vec(builder, add(hr, tuple(times(m, x) for x in p)))
     return I_O, h_O, m
 
 
@@ -320,29 +359,37 @@ def derive_rnea_partials(eqs: Equations, tree: JointTree, spec: ModelSpec,
     J, ov, oa, Y, doY, of = {}, [None] * count, [None] * count, [None] * count, \
         [None] * count, [None] * count
     dVdq, dAdq, dAdv = {}, {}, {}
+    turned = [False] * count            # a quaternion's matrix in the link's R
     for i, joint in enumerate(tree.joints):
         R, p = poses[i]
         par = joint.parent
+        turned[i] = (par >= 0 and turned[par]) or \
+            (joint.kind in ("ball", "free") and not (root_frame and par < 0))
         ov_p = ov[par] if par >= 0 else (ZERO,) * 6
         oa_p = oa[par] if par >= 0 else tuple(a0)
         for k, S in joint.dofs:
             J[k] = name_vec(builder, _motion_to_ground(R, p, S))
+            dVdq[k] = name_vec(builder, cross_motion(ov_p, J[k]))
         vJ = tuple(total(times(J[k][r], qd[k]) for k, _ in joint.dofs) for r in range(6))
         aJ = tuple(total(times(J[k][r], a[k]) for k, _ in joint.dofs) for r in range(6))
+        # ov_i x vJ = ov_p x vJ (vJ x vJ = 0), a sum of the dVdq already there
+        cJ = tuple(total(times(dVdq[k][r], qd[k]) for k, _ in joint.dofs) for r in range(6))
         vJ = name_vec(builder, vJ)
         ov[i] = name_vec(builder, add(ov_p, vJ))
-        oa[i] = name_vec(builder, add(add(oa_p, aJ), cross_motion(ov[i], vJ)))
-        Y[i] = _ground_inertia(builder, tree.inertias[i], R, p)
+        oa[i] = name_vec(builder, add(add(oa_p, aJ), cJ))
+        Y[i] = _ground_inertia(builder, tree.inertias[i], R, p, not turned[i])
         oh = name_vec(builder, _inertia_times(Y[i], ov[i]))
         of[i] = name_vec(builder, add(_inertia_times(Y[i], oa[i]), _force_cross(ov[i], oh)))
         if i in loads:                  # Q = RNEA's forces less the actions'
             of[i] = name_vec(builder, sub(of[i], _force_to_ground(R, p, loads[i])))
         doY[i] = _variation(builder, Y[i], ov[i], oh)
         for k, _ in joint.dofs:
-            dV = name_vec(builder, cross_motion(ov_p, J[k]))
-            dVdq[k] = dV
+            dV = dVdq[k]
             dAdq[k] = name_vec(builder, add(cross_motion(oa_p, J[k]), cross_motion(ov_p, dV)))
-            dAdv[k] = name_vec(builder, add(cross_motion(ov[i], J[k]), dV))
+            # ov_i x J_k = dV + vJ x J_k, and vJ x J_k = 0 for a joint of one dof
+            twice = tuple(builder.factor(times(2, x)) for x in dV)
+            dAdv[k] = (twice if len(joint.dofs) == 1 else
+                       name_vec(builder, add(cross_motion(vJ, J[k]), twice)))
     # inwards: composite inertias, their variations and forces, leaves first
     Yc, dYc, fc = list(Y), list(doY), list(of)
     vectors = {}
