@@ -77,7 +77,7 @@ except ImportError:   # not POSIX: builds are not serialised
     fcntl = None
 
 from modelgen.codegen.compilers import (FIX_COMPILER, GCC_FLAGS, core_count, is_gcc,
-                                        run_commands)
+                                        part_order, run_commands)
 from modelgen.errors import BuildError
 
 # shutil, subprocess and tempfile are imported where a build needs them:
@@ -106,7 +106,8 @@ OPT_LEVELS = {0: ((("-O1",), 400),), 1: ((("-O0",), -1),), 2: ((("-O1",), 4000),
 #: A model's C is compiled in parts (MG_PART 1, 2, 3 and, with derivatives, 4)
 #: when the machine has two cores or more, at every size (even the double
 #: pendulum gains), at most one compiler per core, the largest part first
-#: (:func:`part_order`); on one core, as one part (0: the whole file).
+#: (:func:`~modelgen.codegen.compilers.part_order`); on one core, as one part
+#: (0: the whole file).
 BASE_FLAGS = ("-std=c99", "-fPIC", "-Wall", "-Wextra")
 #: Flags of mg_integrate.c (compiled once, on the integration hot path).
 INTEGRATOR_FLAGS = ("-O2", *BASE_FLAGS, "-Werror")
@@ -189,10 +190,16 @@ def compile_flags(statements: int, part: int = 2, *, host: bool = False) -> list
     >>> compile_flags(100, 1)[0], compile_flags(100, 2)[:2], compile_flags(5000, 2)[0]
     ('-O0', ['-O2', '-fno-tree-slp-vectorize'], '-O1')
     """
-    opt = next((flags for flags, above in OPT_LEVELS[part] if statements > above), O2)
+    opt = _opt_level(statements, part)
     gcc = GCC_FLAGS if opt[0] != "-O0" and is_gcc(tuple(compiler())) else ()
     return [*opt, *gcc, *BASE_FLAGS, *(host_flags() if host else ()),
             *_split_env("MODELGEN_CFLAGS", "")]
+
+
+def _opt_level(statements: int, part: int) -> tuple:
+    """The optimisation flags of :data:`OPT_LEVELS` for a part whose largest routine
+    has ``statements``."""
+    return next((flags for flags, above in OPT_LEVELS[part] if statements > above), O2)
 
 
 #: Instruction-set flag for code built for this machine only, when its CPU has
@@ -564,26 +571,6 @@ def _remove_old_builds(directory: Path, name: str, keep: str) -> None:
                 manifest_path(directory, short).unlink()
 
 
-#: Rough cost per statement of compiling at a level (:func:`part_order`'s order).
-COMPILE_WEIGHT = {"-O0": 1, "-O1": 1, "-O2": 2}
-
-
-def part_order(statements: dict) -> tuple:
-    """The parts of ``statements`` (part -> its largest routine's statements), the
-    most expensive to compile first: with more parts than cores, the largest
-    then has a core to itself from the start while the others share the rest,
-    instead of finishing last.
-
-    >>> part_order({1: 1500, 2: 2300, 3: 1400, 4: 3800})
-    (4, 2, 3, 1)
-    """
-    def cost(part: int) -> int:
-        level = next((flags for flags, above in OPT_LEVELS[part]
-                      if statements[part] > above), O2)[0]
-        return statements[part] * COMPILE_WEIGHT[level]
-    return tuple(sorted(statements, key=lambda part: (-cost(part), part)))
-
-
 def _write_if_changed(path: Path, text: str, tmpdir: Path) -> None:
     """Atomically replace ``path`` with ``text`` unless it already holds it."""
     data = text.encode()
@@ -740,7 +727,8 @@ def build_module(directory: Path, name: str, sources: dict, manifest: dict,
     what a controller calls, 4: the derivatives' straight line) to its largest
     routine's statement count, which chooses its optimisation level
     (:data:`OPT_LEVELS`; see :func:`modelgen.codegen.pipeline.part_statements`)
-    and its place in the order the parts start in (:func:`part_order`).
+    and its place in the order the parts start in
+    (:func:`~modelgen.codegen.compilers.part_order`).
     """
     import shutil
     start = time.perf_counter()
@@ -759,7 +747,8 @@ def build_module(directory: Path, name: str, sources: dict, manifest: dict,
         cc = compiler()
         cores = core_count()
         by_part = {**statements, 0: max(statements.values())}
-        parts = part_order(statements) if cores > 1 else (0,)
+        parts = part_order({part: (count, _opt_level(count, part)[0])
+                            for part, count in statements.items()}) if cores > 1 else (0,)
         model_objs = [[*cc, *compile_flags(by_part[part], part, host=True), "-Werror",
                        *([f"-DMG_PART={part}"] if part else []), "-c", f"{name}.c",
                        "-o", f"{name}_{part}.o"] for part in parts]

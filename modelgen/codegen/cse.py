@@ -230,22 +230,18 @@ def eliminate(graph: Graph, outputs, shared=None) -> tuple:
     new_outputs = reduced[len(program):]
     for e in new_outputs:
         emit_deps(e)
-    return _propagate_copies(statements, list(new_outputs), graph.free)
+    return _propagate_copies(statements, list(new_outputs), graph)
 
 
-def _propagate_copies(statements, outputs, free=None):
+def _propagate_copies(statements, outputs, graph: Graph):
     """Drop statements ``a = b`` (b a symbol or number) and use b in place of a.
-    ``free``: the program's memo of free symbols (:attr:`Graph.free`), which
+    The free symbols come from ``graph``'s memo (:meth:`Graph.symbols_of`), which
     the new graph keeps."""
-    free = {} if free is None else free
     alias = {}
     kept = []
     for sym, expr in statements:
         if alias and not expr.is_Atom:
-            symbols = free.get(expr)
-            if symbols is None:
-                symbols = free[expr] = tuple(free_symbols(expr))
-            renamed = {s: alias[s] for s in symbols if s in alias}
+            renamed = {s: alias[s] for s in graph.symbols_of(expr) if s in alias}
             if renamed:
                 expr = expr.xreplace(renamed)
         elif expr in alias:
@@ -258,7 +254,7 @@ def _propagate_copies(statements, outputs, free=None):
         outputs = [alias.get(e, e) if e.is_Symbol else
                    e.xreplace({s: alias[s] for s in free_symbols(e) if s in alias})
                    for e in outputs]
-    return Graph(tuple(kept), free), outputs
+    return Graph(tuple(kept), graph.free), outputs
 
 
 def make_routines(graph: Graph, routines, *, cse: bool = True, alone=()) -> tuple:

@@ -146,14 +146,7 @@ class ModelPrinter(C99CodePrinter):
         # numbers are compared by their fields or by identity (S.One, S.NegativeOne
         # and S.Half are singletons): sympy's rich comparisons sympify their
         # other operand, which took a fifth of the printing
-        # as_coeff_Mul and make_args of the rest, without building the rest
-        args = e.args
-        if args[0].is_Number:
-            coeff, factors = args[0], args[1:]
-            if len(factors) == 1 and factors[0].is_Mul:
-                factors = factors[0].args
-        else:
-            coeff, factors = _ONE, args
+        coeff, factors = _coeff_and_factors(e)
         negative = negative_number(coeff)
         sign = "-" if negative else ""
         coeff = -coeff if negative else coeff
@@ -255,6 +248,19 @@ class ModelPrinter(C99CodePrinter):
 
 
 
+def _coeff_and_factors(e) -> tuple:
+    """``(coeff, factors)`` of a Mul: ``as_coeff_Mul`` and ``make_args`` of the
+    rest, without building the rest (a Mul's number, if any, is its first
+    argument)."""
+    args = e.args
+    if not args[0].is_Number:
+        return _ONE, args
+    factors = args[1:]
+    if len(factors) == 1 and factors[0].is_Mul:     # an unevaluated 2*(x*y)
+        factors = factors[0].args
+    return args[0], factors
+
+
 def c_operations(e) -> int:
     """Floating-point operations of ``e`` as :class:`ModelPrinter` prints it in C.
 
@@ -283,15 +289,7 @@ def _c_ops(e) -> tuple:
         # a sign after the first term is its '-'; only the first one's can cost
         return sum(n for n, _ in terms) + len(terms) - 1 + first[1], 0
     if e.is_Mul:
-        # as_coeff_Mul and make_args of the rest, without building the rest (as
-        # ModelPrinter._fast_mul)
-        args = e.args
-        if args[0].is_Number:
-            coeff, rest = args[0], args[1:]
-            if len(rest) == 1 and rest[0].is_Mul:
-                rest = rest[0].args
-        else:
-            coeff, rest = _ONE, args
+        coeff, rest = _coeff_and_factors(e)
         negative = negative_number(coeff)
         coeff = -coeff if negative else coeff
         count, factors, den = 0, (0 if coeff is _ONE else 1), 0
