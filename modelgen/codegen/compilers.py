@@ -17,6 +17,19 @@ FIX_COMPILER = "install a C compiler (e.g. apt install gcc) or set CC to one"
 #: stores of a large routine (a seventh of the compile time of the derivatives'
 #: part).  clang has no such flags.
 GCC_FLAGS = ("-fno-tree-dse", "-fno-dse")
+#: Added to -O2 (not -O1, which runs none of these passes) when the compiler is
+#: gcc: RTL passes that cost compile time in proportion to a routine's size and
+#: give generated code nothing it keeps.  The tree passes (FRE, PRE, the
+#: forward propagation) have already removed the redundancy that RTL GCSE and
+#: the second CSE (``-frerun-cse-after-loop``) look for; code hoisting moves
+#: expressions out of branches, of which the straight-line code has few; the
+#: x86 peephole2 patterns split memory operands of the arithmetic into separate
+#: loads, lengthening straight-line code; the second scheduling pass only
+#: reorders instructions, which an out-of-order CPU does by itself.  Without
+#: them the same results are computed by no more instructions (docs/benchmarks.md,
+#: bench/derivatives.py, "Session 12").  clang has none of these flags.
+GCC_O2_FLAGS = ("-fno-gcse", "-fno-rerun-cse-after-loop", "-fno-code-hoisting",
+                "-fno-peephole2", "-fno-schedule-insns2")
 
 
 @functools.lru_cache(maxsize=4)
