@@ -319,3 +319,23 @@ def test_the_host_isa_flag_changes_the_encoding_never_a_result(monkeypatch, tmp_
         assert a.tobytes() == b.tobytes()
         a, b = (models[k].mass_matrix(x[:4]) for k in ("1", "0"))
         assert a.tobytes() == b.tobytes()
+
+
+def test_gcc_only_flags_follow_the_compiler_and_the_level(monkeypatch, tmp_path):
+    """The flags only gcc knows go to gcc alone (clang rejects unknown -f flags
+    under -Werror), and the -O2 ones only to the parts compiled at -O2."""
+    from modelgen.codegen.compilers import GCC_FLAGS, GCC_O2_FLAGS
+    fake = tmp_path / "clang"
+    fake.write_text("#!/bin/sh\necho 'clang version 15.0.7'\n")
+    fake.chmod(0o755)
+    monkeypatch.setenv("CC", str(fake))
+    for statements, part in ((100, 2), (100, 4), (5000, 4), (100, 0)):
+        flags = build.compile_flags(statements, part)
+        assert not set(GCC_FLAGS + GCC_O2_FLAGS) & set(flags), (statements, part, flags)
+    if shutil.which("gcc") is None:
+        return
+    monkeypatch.setenv("CC", "gcc")
+    o2, o1, o0 = (build.compile_flags(s, p) for s, p in ((100, 4), (5000, 4), (100, 1)))
+    assert o2[0] == "-O2" and set(GCC_FLAGS + GCC_O2_FLAGS) <= set(o2)
+    assert o1[0] == "-O1" and set(GCC_FLAGS) <= set(o1) and not set(GCC_O2_FLAGS) & set(o1)
+    assert o0[0] == "-O0" and not set(GCC_FLAGS + GCC_O2_FLAGS) & set(o0)
