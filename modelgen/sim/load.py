@@ -10,16 +10,24 @@ inside the functions below, only when the index has no verified build.
 """
 from __future__ import annotations
 
+import importlib
+import sys
+import threading
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 from modelgen.codegen import index
 from modelgen.codegen.build import Generated
 from modelgen.codegen.options import BuildOptions, KinematicsOptions
-from modelgen.sim.runtime import CompiledModel, check_mass_matrix
 
 if TYPE_CHECKING:
+    from modelgen.sim.runtime import CompiledModel
     from modelgen.sim.scene import Scene
+
+#: What loading a compiled model imports (numpy, cffi's backend), imported in the
+#: functions below, so that a generation imports it while its compilers run
+#: (:class:`_ImportAtCompile`), not before them.
+RUNTIME = ("modelgen.sim.runtime", "cffi", "_cffi_backend")
 
 
 def generate_model(source, out_dir=None, *, force: bool = False,
@@ -43,19 +51,64 @@ def generate_model(source, out_dir=None, *, force: bool = False,
                               inertia=inertia, min_mass=min_mass, min_inertia=min_inertia,
                               mimic=mimic, kinematics=_kinematics(kinematics, frames),
                               derivatives=derivatives)
-    generated = _generate(source, out_dir, force, options, progress, max_operations)
-    _loaded(generated)
-    index.record(_fast_key(source, options, out_dir), generated.build, _runtime())
+    importing = _ImportAtCompile(progress)
+    try:
+        generated = _generate(source, out_dir, force, options, importing, max_operations)
+    finally:
+        importing.join()
+    location = _runtime()
+    _loaded(generated, location)
+    index.record(_fast_key(source, options, out_dir), generated.build, location)
     return generated
 
 
-def _loaded(generated: Generated) -> CompiledModel:
-    """The compiled model of a build, checked for a mass matrix singular by construction.
+class _ImportAtCompile:
+    """``progress(stage)`` for a build: the caller's ``progress`` (if any), and as the
+    compile stage starts, the import of :data:`RUNTIME` in a thread.
+
+    The compilers are other processes: while they run, this process only waits for
+    them, so the import, needed once they are done to load and check the library,
+    runs then instead of after them (on a machine with a core to spare it costs no
+    wall time).  A failed import is left to the caller's own import of the module,
+    which raises the error where it belongs; the thread is joined before the
+    caller goes on, failed build or not."""
+
+    def __init__(self, progress=None):
+        self.progress = progress
+        self.thread = None
+
+    def __call__(self, stage: str) -> None:
+        if self.progress is not None:
+            self.progress(stage)
+        if stage == "compile" and self.thread is None and RUNTIME[0] not in sys.modules:
+            self.thread = threading.Thread(target=_import_quietly, args=RUNTIME,
+                                           name="modelgen-import", daemon=True)
+            self.thread.start()
+
+    def join(self) -> None:
+        if self.thread is not None:
+            self.thread.join()
+
+
+def _import_quietly(*names: str) -> None:
+    """Import ``names``; an error is raised again by the caller's next import of the
+    module (a module whose import failed is not in ``sys.modules``)."""
+    for name in names:
+        try:
+            importlib.import_module(name)
+        except Exception:       # raised again by the caller's import
+            pass
+
+
+def _loaded(generated: Generated, runtime: tuple | None = None) -> CompiledModel:
+    """The compiled model of a build, checked for a mass matrix singular by construction
+    (``runtime``: the runtime module's (name, path), else found here).
 
     The check runs on every load, cached build or not (three evaluations of A:
     microseconds), so a build cache never hides a model that cannot be solved.
     """
-    cm = CompiledModel(generated.manifest, generated.build.module_path)
+    from modelgen.sim.runtime import CompiledModel, check_mass_matrix
+    cm = CompiledModel(generated.manifest, generated.build.module_path, runtime)
     check_mass_matrix(cm)
     return cm
 
@@ -111,12 +164,18 @@ def load(source, out_dir=None, *, force: bool = False, options: BuildOptions | N
     key = _fast_key(source, options, out_dir)
     hit = None if force else index.lookup(key)
     if hit is not None:
+        from modelgen.sim.runtime import CompiledModel, check_mass_matrix
         cm = CompiledModel(hit.build.manifest, hit.build.module_path, hit.runtime)
         check_mass_matrix(cm)
         return cm
-    generated = _generate(source, out_dir, force, options, progress, max_operations)
-    cm = _loaded(generated)
-    index.record(key, generated.build, _runtime())
+    importing = _ImportAtCompile(progress)
+    try:
+        generated = _generate(source, out_dir, force, options, importing, max_operations)
+    finally:
+        importing.join()
+    location = _runtime()
+    cm = _loaded(generated, location)
+    index.record(key, generated.build, location)
     return cm
 
 
