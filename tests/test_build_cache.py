@@ -319,3 +319,25 @@ def test_the_host_isa_flag_changes_the_encoding_never_a_result(monkeypatch, tmp_
         assert a.tobytes() == b.tobytes()
         a, b = (models[k].mass_matrix(x[:4]) for k in ("1", "0"))
         assert a.tobytes() == b.tobytes()
+
+
+def test_meanwhile_runs_while_the_commands_run_and_failures_still_raise(tmp_path):
+    """``run_commands(..., meanwhile=f)`` calls ``f`` once, after the first ``jobs``
+    commands started and before they finish: each command here waits for the file
+    ``go`` that only ``f`` writes (and fails after 20 s without it)."""
+    from modelgen.codegen.compilers import run_commands
+    wait = "for i in $(seq 2000); do [ -e go ] && exit {}; sleep 0.01; done; exit 9"
+    calls = []
+
+    def meanwhile():
+        calls.append(sorted(p.name for p in tmp_path.iterdir()))
+        (tmp_path / "go").write_text("")
+    run_commands([["sh", "-c", wait.format(0)], ["sh", "-c", wait.format(0)]], tmp_path,
+                 jobs=2, meanwhile=meanwhile)
+    assert calls == [[]]
+    (tmp_path / "go").unlink()
+    calls.clear()
+    with pytest.raises(BuildError) as err:
+        run_commands([["sh", "-c", wait.format(0)], ["sh", "-c", wait.format(3)],
+                      ["sh", "-c", wait.format(0)]], tmp_path, jobs=2, meanwhile=meanwhile)
+    assert calls == [[]] and err.value.returncode == 3

@@ -11,8 +11,6 @@ inside the functions below, only when the index has no verified build.
 from __future__ import annotations
 
 import importlib
-import sys
-import threading
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -26,7 +24,7 @@ if TYPE_CHECKING:
 
 #: What loading a compiled model imports (numpy, cffi's backend), imported in the
 #: functions below, so that a generation imports it while its compilers run
-#: (:class:`_ImportAtCompile`), not before them.
+#: (:func:`_import_runtime`), not before them.
 RUNTIME = ("modelgen.sim.runtime", "cffi", "_cffi_backend")
 
 
@@ -51,53 +49,19 @@ def generate_model(source, out_dir=None, *, force: bool = False,
                               inertia=inertia, min_mass=min_mass, min_inertia=min_inertia,
                               mimic=mimic, kinematics=_kinematics(kinematics, frames),
                               derivatives=derivatives)
-    importing = _ImportAtCompile(progress)
-    try:
-        generated = _generate(source, out_dir, force, options, importing, max_operations)
-    finally:
-        importing.join()
+    generated = _generate(source, out_dir, force, options, progress, max_operations)
     location = _runtime()
     _loaded(generated, location)
     index.record(_fast_key(source, options, out_dir), generated.build, location)
     return generated
 
 
-class _ImportAtCompile:
-    """``progress(stage)`` for a build: the caller's ``progress`` (if any), and as the
-    compile stage starts, the import of :data:`RUNTIME` in a thread.
-
-    The compilers are other processes: while they run, this process only waits for
-    them, so the import, needed once they are done to load and check the library,
-    runs then instead of after them (on a machine with a core to spare it costs no
-    wall time).  A failed import is left to the caller's own import of the module,
-    which raises the error where it belongs; the thread is joined before the
-    caller goes on, failed build or not."""
-
-    def __init__(self, progress=None):
-        self.progress = progress
-        self.thread = None
-
-    def __call__(self, stage: str) -> None:
-        if self.progress is not None:
-            self.progress(stage)
-        if stage == "compile" and self.thread is None and RUNTIME[0] not in sys.modules:
-            self.thread = threading.Thread(target=_import_quietly, args=RUNTIME,
-                                           name="modelgen-import", daemon=True)
-            self.thread.start()
-
-    def join(self) -> None:
-        if self.thread is not None:
-            self.thread.join()
-
-
-def _import_quietly(*names: str) -> None:
-    """Import ``names``; an error is raised again by the caller's next import of the
-    module (a module whose import failed is not in ``sys.modules``)."""
-    for name in names:
-        try:
-            importlib.import_module(name)
-        except Exception:       # raised again by the caller's import
-            pass
+def _import_runtime() -> None:
+    """Import what loading a compiled model needs (:data:`RUNTIME`): called by a build
+    while its compilers run (this process only waits for them then), so it does
+    not follow them."""
+    for name in RUNTIME:
+        importlib.import_module(name)
 
 
 def _loaded(generated: Generated, runtime: tuple | None = None) -> CompiledModel:
@@ -168,11 +132,7 @@ def load(source, out_dir=None, *, force: bool = False, options: BuildOptions | N
         cm = CompiledModel(hit.build.manifest, hit.build.module_path, hit.runtime)
         check_mass_matrix(cm)
         return cm
-    importing = _ImportAtCompile(progress)
-    try:
-        generated = _generate(source, out_dir, force, options, importing, max_operations)
-    finally:
-        importing.join()
+    generated = _generate(source, out_dir, force, options, progress, max_operations)
     location = _runtime()
     cm = _loaded(generated, location)
     index.record(key, generated.build, location)
@@ -208,7 +168,7 @@ def _generate(source, out_dir, force: bool, options: BuildOptions, progress,
     from modelgen.model import as_spec
     return generate(as_spec(source, **options.reading()), out_dir,
                     force=force, options=options, progress=progress,
-                    max_operations=max_operations)
+                    max_operations=max_operations, while_compiling=_import_runtime)
 
 
 def _runtime() -> tuple:
