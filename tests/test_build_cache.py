@@ -339,3 +339,25 @@ def test_gcc_only_flags_follow_the_compiler_and_the_level(monkeypatch, tmp_path)
     assert o2[0] == "-O2" and set(GCC_FLAGS + GCC_O2_FLAGS) <= set(o2)
     assert o1[0] == "-O1" and set(GCC_FLAGS) <= set(o1) and not set(GCC_O2_FLAGS) & set(o1)
     assert o0[0] == "-O0" and not set(GCC_FLAGS + GCC_O2_FLAGS) & set(o0)
+
+
+def test_meanwhile_runs_while_the_commands_run_and_failures_still_raise(tmp_path):
+    """``run_commands(..., meanwhile=f)`` calls ``f`` once, after the first ``jobs``
+    commands started and before they finish: each command here waits for the file
+    ``go`` that only ``f`` writes (and fails after 20 s without it)."""
+    from modelgen.codegen.compilers import run_commands
+    wait = "for i in $(seq 2000); do [ -e go ] && exit {}; sleep 0.01; done; exit 9"
+    calls = []
+
+    def meanwhile():
+        calls.append(sorted(p.name for p in tmp_path.iterdir()))
+        (tmp_path / "go").write_text("")
+    run_commands([["sh", "-c", wait.format(0)], ["sh", "-c", wait.format(0)]], tmp_path,
+                 jobs=2, meanwhile=meanwhile)
+    assert calls == [[]]
+    (tmp_path / "go").unlink()
+    calls.clear()
+    with pytest.raises(BuildError) as err:
+        run_commands([["sh", "-c", wait.format(0)], ["sh", "-c", wait.format(3)],
+                      ["sh", "-c", wait.format(0)]], tmp_path, jobs=2, meanwhile=meanwhile)
+    assert calls == [[]] and err.value.returncode == 3

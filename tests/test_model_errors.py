@@ -565,3 +565,24 @@ def test_failed_load_leaves_nothing_behind():
         parse_model("name: m\ncoordinates: [q]\nbases: {B: {parent: X, axis: 3, angle: q}}\n")
     # a later, valid load is unaffected by the failed one
     assert parse_model("name: m\ncoordinates: [q]\n").coordinates == ("q",)
+
+
+def test_principal_moments_are_the_eigenvalues_numpy_gives_bit_for_bit():
+    """A diagonal inertia is checked without numpy; its scaled eigenvalues are the
+    ones ``numpy.linalg.eigvalsh`` returns, to the last bit, at every scale."""
+    import numpy as np
+
+    from modelgen.model.inertia import _scaled_eigenvalues
+    rng = np.random.default_rng(7)
+    for _ in range(2000):
+        moments = [float(v) for v in rng.uniform(-1, 1, 3) * 10.0 ** rng.integers(-300, 300, 3)]
+        moments[rng.integers(3)] = rng.choice([0.0, -0.0, moments[0]])
+        values = [[moments[i] if i == j else 0.0 for j in range(3)] for i in range(3)]
+        matrix = np.array(values)
+        scale = float(np.max(np.abs(matrix))) or 1.0
+        d, got_scale = _scaled_eigenvalues(values)
+        assert got_scale == scale
+        assert [repr(v) for v in d] == [repr(float(v)) for v in np.linalg.eigvalsh(matrix / scale)]
+    full = [[2.0, 0.5, 0.0], [0.5, 1.0, 0.25], [0.0, 0.25, 1.5]]
+    d, scale = _scaled_eigenvalues(full)
+    assert np.allclose(np.array(d) * scale, np.linalg.eigvalsh(np.array(full)), rtol=1e-14)

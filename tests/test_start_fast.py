@@ -201,3 +201,49 @@ def test_an_edited_model_makes_the_card_stale(scene_copy):
         assert spec is not None and card == read_card(path, out)[0]
     finally:
         model.write_text(text)
+
+
+# -- a generation imports numpy while its compilers run --------------------------------
+
+def test_a_generation_imports_numpy_only_once_its_compilers_run(tmp_path):
+    """``modelgen.generate_model`` of a YAML model (principal moments and a diagonal
+    3x3 inertia, no constraints) needs no numpy before its C is compiled: symengine
+    gets a stand-in (:func:`modelgen.codegen.cse.import_symengine`) and the loader
+    is imported while the compilers run (``meanwhile`` of
+    :func:`modelgen.codegen.compilers.run_commands`)."""
+    path = tmp_path / "double_pendulum.yaml"
+    shutil.copy(MODEL, path)
+    code = (
+        "import sys, traceback\n"
+        "stages, seen = [], []\n"
+        "class Finder:\n"
+        "    def find_spec(self, name, path=None, target=None):\n"
+        "        if name == 'numpy' and not seen:\n"
+        "            calls = [f.name for f in traceback.extract_stack()]\n"
+        "            seen.append((stages[-1:], 'run_commands' in calls))\n"
+        "sys.meta_path.insert(0, Finder())\n"
+        "import modelgen\n"
+        f"modelgen.generate_model({str(path)!r}, {str(tmp_path / 'out')!r}, force=True, "
+        "progress=stages.append)\n"
+        "print(seen)")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          cwd=REPO, env=dict(os.environ, PYTHONPATH=str(REPO)), timeout=600)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert proc.stdout.strip().splitlines()[-1] == "[(['compile'], True)]"
+
+
+def test_symengine_imported_without_numpy_gets_numpy_on_first_use():
+    code = ("import sys, sympy\n"
+            "from modelgen.codegen.cse import import_symengine\n"
+            "se = import_symengine()\n"
+            "before = 'numpy' in sys.modules\n"
+            "x = sympy.Symbol('x')\n"
+            "e = se.sympify(2 * x + 1)\n"       # reaches symengine's numpy scalar check
+            "import numpy\n"
+            "f = se.lambdify([se.Symbol('x')], [e])\n"
+            "print(before, type(sys.modules['numpy']).__name__, float(f(3.0)), "
+            "se.sympify(numpy.float32(0.5)))")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          cwd=REPO, env=dict(os.environ, PYTHONPATH=str(REPO)), timeout=600)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert proc.stdout.split() == ["False", "module", "7.0", "0.5"]

@@ -716,7 +716,7 @@ def link_command(objects: list, output: str) -> list:
 
 
 def build_module(directory: Path, name: str, sources: dict, manifest: dict,
-                 statements: dict, integrator: dict) -> BuildResult:
+                 statements: dict, integrator: dict, while_compiling=None) -> BuildResult:
     """Compile ``sources`` (``<name>.c``, ``<name>.h``) into a shared library in
     ``directory``, linked with the cached object of ``integrator``
     (``mg_integrate.h``, ``mg_integrate.c`` and ``mg_integrate/*.c``), which are
@@ -729,7 +729,9 @@ def build_module(directory: Path, name: str, sources: dict, manifest: dict,
     routine's statement count, which chooses its optimisation level
     (:data:`OPT_LEVELS`; see :func:`modelgen.codegen.pipeline.part_statements`)
     and its place in the order the parts start in
-    (:func:`~modelgen.codegen.compilers.part_order`).
+    (:func:`~modelgen.codegen.compilers.part_order`).  ``while_compiling()`` (if
+    given) is called while the parts compile (``meanwhile`` of
+    :func:`~modelgen.codegen.compilers.run_commands`).
     """
     import shutil
     start = time.perf_counter()
@@ -753,7 +755,7 @@ def build_module(directory: Path, name: str, sources: dict, manifest: dict,
         model_objs = [[*cc, *compile_flags(by_part[part], part, host=True), "-Werror",
                        *([f"-DMG_PART={part}"] if part else []), "-c", f"{name}.c",
                        "-o", f"{name}_{part}.o"] for part in parts]
-        run_commands(model_objs, tmp, jobs=cores)
+        run_commands(model_objs, tmp, jobs=cores, meanwhile=while_compiling)
         run_commands([link_command([*(f"{name}_{part}.o" for part in parts), str(integrator_obj)],
                            module_file)], tmp)
 

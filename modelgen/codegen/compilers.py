@@ -79,13 +79,20 @@ def part_order(parts: dict) -> tuple:
 
 
 def run_commands(commands: list, cwd: Path, what: str = "C compiler failed",
-                 jobs: int | None = None) -> None:
+                 jobs: int | None = None, meanwhile=None) -> None:
     """Run compiler commands in parallel, at most ``jobs`` at once (default: all),
     each started in ``commands``' order as soon as one before it has finished;
     raise BuildError (``what``, the command, its full output and exit status) on
-    the first failure in that order, once all have finished."""
+    the first failure in that order, once all have finished.
+
+    ``meanwhile()`` (if given) is called in this thread once the first commands
+    (``jobs`` of them, or all) have started, while they run: work of the caller's
+    that waits for no compiler, e.g. an import, then takes no wall time from them
+    on a core they leave free (and none of Python's from starting them)."""
     import subprocess
+    import threading
     from concurrent.futures import ThreadPoolExecutor
+    started = threading.Semaphore(0)
 
     def run(cmd: list) -> BuildError | None:
         try:
@@ -94,15 +101,22 @@ def run_commands(commands: list, cwd: Path, what: str = "C compiler failed",
         except OSError as exc:
             return BuildError(f"the C compiler {cmd[0]!r} cannot be run "
                               f"({exc.strerror or exc})", cmd, fix=FIX_COMPILER)
+        finally:
+            started.release()
         out, _ = proc.communicate()
         return BuildError(what, cmd, out, returncode=proc.returncode) \
             if proc.returncode != 0 else None
 
     if not commands:
         return
-    with ThreadPoolExecutor(max_workers=max(1, min(jobs or len(commands),
-                                                   len(commands)))) as pool:
-        failures = list(pool.map(run, commands))
+    workers = max(1, min(jobs or len(commands), len(commands)))
+    with ThreadPoolExecutor(max_workers=workers) as pool:
+        results = pool.map(run, commands)
+        if meanwhile is not None:
+            for _ in range(workers):
+                started.acquire()
+            meanwhile()
+        failures = list(results)
     failure = next((f for f in failures if f is not None), None)
     if failure:
         raise failure

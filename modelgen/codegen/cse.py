@@ -15,6 +15,9 @@ determinism comes from the program order and the numbered symbols).
 """
 from __future__ import annotations
 
+import importlib
+import sys
+import types
 from dataclasses import dataclass
 
 import sympy
@@ -164,7 +167,7 @@ def _cse(exprs, shared=None):
     ``shared``: the conversions' memo of :func:`_converters`.
     """
     try:
-        import symengine
+        symengine = import_symengine()
     except ImportError:   # pragma: no cover - symengine is a declared dependency
         return sympy.cse(exprs, symbols=_numbered("mg_c"), order="none")
     to_symengine, to_sympy = _converters(symengine, shared)
@@ -179,6 +182,37 @@ def _cse(exprs, shared=None):
     # sympy original (converting back costs ten times the cse itself)
     reduced = [e if r == o else to_sympy(r) for e, o, r in zip(exprs, originals, reduced)]
     return replacements, reduced
+
+
+class _NumpyOnFirstUse(types.ModuleType):
+    """What symengine's import binds as ``numpy`` when numpy is not imported yet: a
+    stand-in that imports numpy (the one module of that name) on first use."""
+
+    def __getattr__(self, name: str):
+        if sys.modules.get("numpy") is self:
+            del sys.modules["numpy"]
+        return getattr(importlib.import_module("numpy"), name)
+
+
+def import_symengine():
+    """symengine, imported without importing numpy with it.
+
+    symengine's import only binds numpy, for its ``lambdify`` and numpy's scalars,
+    which nothing here uses; a model read from YAML needs no numpy before its
+    compile, and the loader imports it while the compilers run
+    (:mod:`modelgen.sim.load`).  So while symengine is imported, ``numpy`` in
+    ``sys.modules`` is a stand-in (:class:`_NumpyOnFirstUse`), which symengine
+    keeps and which imports numpy, the real module, when anything of it is used.
+    """
+    if "symengine" not in sys.modules and "numpy" not in sys.modules:
+        sys.modules["numpy"] = _NumpyOnFirstUse("numpy")
+        try:
+            import symengine
+        finally:
+            if isinstance(sys.modules.get("numpy"), _NumpyOnFirstUse):
+                del sys.modules["numpy"]
+    import symengine
+    return symengine
 
 
 def _numbered(prefix):

@@ -285,7 +285,8 @@ def _check_generable(spec: ModelSpec) -> None:
 def generate(spec: ModelSpec, out_dir=None, *, force: bool = False,
              options: BuildOptions | None = None, progress=None, outputs=None,
              jacobian: bool | None = None, formulation: str | None = None,
-             linearize: bool | None = None, max_operations: int | None = None) -> Generated:
+             linearize: bool | None = None, max_operations: int | None = None,
+             while_compiling=None) -> Generated:
     """Generate, compile and cache the model; reuse an unchanged build.
 
     ``out_dir`` defaults to :func:`default_output` (the per-user cache).
@@ -307,6 +308,8 @@ def generate(spec: ModelSpec, out_dir=None, *, force: bool = False,
     model over it is refused with a ModelError before deriving (by an estimate
     from its size) or after CSE, never after minutes of compiling.  The seconds
     of the result (``check``, then each stage) add up to the whole call.
+    ``while_compiling()`` (if given) is called once the compilers have started,
+    while they run (not at all when the build is reused).
 
     >>> g = generate(load_model("models/double_pendulum.yaml"))   # doctest: +SKIP
     >>> g.manifest["n"]                                             # doctest: +SKIP
@@ -340,7 +343,8 @@ def generate(spec: ModelSpec, out_dir=None, *, force: bool = False,
         with clock("emit"):
             emitted = _emit(spec, options, derived, routines, model_key)
     with clock("compile"):
-        return _compile(directory, spec, options, derived, emitted, key, clock.seconds, damage)
+        return _compile(directory, spec, options, derived, emitted, key, clock.seconds, damage,
+                        while_compiling)
 
 
 # -- the stages ------------------------------------------------------------------------
@@ -684,12 +688,13 @@ def _constraint_manifest(spec: ModelSpec, terms) -> dict:
 
 
 def _compile(directory: Path, spec: ModelSpec, options: BuildOptions, derived: Derived,
-             emitted: Emitted, key: str, seconds: dict, damage: str) -> Generated:
+             emitted: Emitted, key: str, seconds: dict, damage: str,
+             while_compiling=None) -> Generated:
     """Compile and cache the sources (the caller times it into ``seconds``).
     ``damage`` says why a cached build was not reused (recorded in the result)."""
     manifest = _manifest(spec, options, derived, emitted, key)
     statements = part_statements({f.name: f.statements for f in emitted.functions.values()})
     build = build_module(directory, spec.name, emitted.sources, dict(manifest, seconds=seconds),
-                         statements, integrator_sources())
+                         statements, integrator_sources(), while_compiling)
     build = replace(build, rebuilt_because=damage)
     return Generated(build, dict(build.manifest, seconds=seconds))

@@ -24,8 +24,8 @@ for, at seeded random configurations.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
-import numpy as np
 import sympy
 
 from modelgen.derive.calculus import diff
@@ -34,6 +34,11 @@ from modelgen.derive.kinematics import Kinematics
 from modelgen.derive.spatial import ZERO3, add, cross, dot, sub
 from modelgen.errors import ModelError
 from modelgen.model.spec import symbol
+
+if TYPE_CHECKING:
+    # imported by the functions that evaluate G, which only a constrained model
+    # calls: an unconstrained model is generated without importing numpy
+    import numpy as np
 
 __all__ = [
     "RANK_SAMPLES",
@@ -196,6 +201,7 @@ def derive_constraints(kin: Kinematics, graph: Graph | None = None) -> Constrain
 def _pivots(M: np.ndarray, count: int) -> tuple:
     """The first ``count`` columns chosen by Gaussian elimination with complete
     pivoting (largest remaining entry first)."""
+    import numpy as np
     M = np.array(M, dtype=float)
     chosen = []
     for _ in range(count):
@@ -216,6 +222,7 @@ def choose_dependent(graph: Graph, G, m_h: int, spec, seed: int = 0) -> tuple:
     with every angle zero).  Only plain coordinates and their speeds are
     candidates (the first columns; a ball or free joint's are not, see
     :func:`modelgen.model.resolve.build_spec`)."""
+    import numpy as np
     rng = np.random.default_rng(seed)
     values = {symbol(p): v for p, v in zip(spec.parameter_names, spec.parameter_defaults)}
     values.update(_configuration(spec, rng))
@@ -227,6 +234,7 @@ def choose_dependent(graph: Graph, G, m_h: int, spec, seed: int = 0) -> tuple:
 def _configuration(spec, rng) -> dict:
     """Seeded random coordinates in [-pi, pi], each joint's quaternion then scaled
     to unit length (a rotation; the draws are those of a model without joints)."""
+    import numpy as np
     values = {symbol(c): rng.uniform(-np.pi, np.pi) for c in spec.coordinates}
     for j in spec.joints:
         quat = [symbol(c) for c in j.quaternion]
@@ -288,6 +296,7 @@ class _Wheel:
 
 def _evaluate(graph: Graph, exprs, values: dict) -> np.ndarray:
     """``exprs`` at ``values`` (symbol -> float), through the graph's statements."""
+    import numpy as np
     values = dict(values)
     for sym, expr in graph.closure(exprs):
         values[sym] = float(expr.xreplace(values))
@@ -299,6 +308,7 @@ def check_constraints(terms: ConstraintTerms, spec, samples: int = RANK_SAMPLES,
     """Refuse redundant constraints (G rank-deficient at every one of ``samples``
     seeded random configurations) and dependent speeds whose columns of G are
     singular there (the rhs could never solve for them)."""
+    import numpy as np
     m, n = terms.m, spec.n
     flat = [e for row in terms.G for e in row]
     rng = np.random.default_rng(seed)

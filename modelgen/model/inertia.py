@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
 import sympy
 
 from modelgen.model.expr import format_expression
@@ -47,12 +46,16 @@ def read_inertia(builder, value, key: str, body: str) -> tuple:
                              f"{describe(row)}, not a list of 3 items", key, shape)
     matrix = [[builder.expression(item, f"{key}[{i}][{j}]", "constant")
                for j, item in enumerate(row)] for i, row in enumerate(rows)]
-    samples = [sample_values(builder, matrix, k) for k in range(SYMMETRY_SAMPLES)]
+    # sampled once a pair differs (a symmetric matrix, the usual one, needs none),
+    # from the matrix as written
+    written, samples = [row[:] for row in matrix], []
     for i in range(3):
         for j in range(i + 1, 3):
             upper, lower = matrix[i][j], matrix[j][i]
             if upper == lower:
                 continue
+            samples = samples or [sample_values(builder, written, k)
+                                  for k in range(SYMMETRY_SAMPLES)]
             for values in samples:
                 if values is None:
                     continue
@@ -75,6 +78,7 @@ def sample_values(builder, matrix, k: int):
     if k == 0:
         values = builder.defaults
     else:
+        import numpy as np      # here: a model of principal moments never samples
         rng = np.random.default_rng(k)
         values = {s: sympy.Float(float(v) * rng.uniform(0.5, 2.0))
                   for s, v in builder.defaults.items()}
@@ -94,11 +98,9 @@ def check_physical_inertia(builder, body: str, inertia: tuple, key: str) -> None
                          "parameters", key, "check the inertia expressions")
     # scaled by the largest entry first, so that squares inside the eigen solver
     # cannot overflow (entries near 1e308) and the test is the same at any scale
-    matrix = np.array(values, dtype=float)
-    scale = float(np.max(np.abs(matrix))) or 1.0
-    d = np.linalg.eigvalsh(matrix / scale)
-    moments = d * scale
-    tol = 1e-9 * max(1.0 / scale, float(np.max(np.abs(d))))
+    d, scale = _scaled_eigenvalues(values)
+    moments = [v * scale for v in d]
+    tol = 1e-9 * max(1.0 / scale, max(abs(v) for v in d))
     shown = "[" + ", ".join(f"{m:.6g}" for m in moments) + "]"
     if d[0] < -tol:
         raise builder.error(f"inertia of body '{body}' has a negative principal moment "
@@ -110,3 +112,23 @@ def check_physical_inertia(builder, body: str, inertia: tuple, key: str) -> None
                          f"{moments[0]:.6g} + {moments[1]:.6g} < {moments[2]:.6g}", key,
                          "no rigid body has these moments; each principal moment must "
                          "be at most the sum of the other two")
+
+
+def _scaled_eigenvalues(values: list) -> tuple:
+    """``(eigenvalues of values / scale in ascending order, scale)``, ``scale`` the
+    largest absolute entry of the 3x3 ``values`` (1 if all are zero).
+
+    A diagonal matrix (principal moments, the usual inertia) is its own answer:
+    its sorted diagonal, which is what LAPACK's symmetric solver returns for it
+    to the last bit, without importing numpy, which a model read to be generated
+    would otherwise import for this check alone; any other matrix goes to
+    ``numpy.linalg.eigvalsh``."""
+    m = [[float(v) for v in row] for row in values]
+    if all(m[i][j] == 0 for i in range(3) for j in range(3) if i != j) \
+            and all(math.isfinite(m[i][i]) for i in range(3)):
+        scale = max(abs(m[i][i]) for i in range(3)) or 1.0
+        return sorted(m[i][i] / scale for i in range(3)), scale
+    import numpy as np          # here: see above
+    matrix = np.array(values, dtype=float)
+    scale = float(np.max(np.abs(matrix))) or 1.0
+    return [float(v) for v in np.linalg.eigvalsh(matrix / scale)], scale

@@ -10,16 +10,22 @@ inside the functions below, only when the index has no verified build.
 """
 from __future__ import annotations
 
+import importlib
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 from modelgen.codegen import index
 from modelgen.codegen.build import Generated
 from modelgen.codegen.options import BuildOptions, KinematicsOptions
-from modelgen.sim.runtime import CompiledModel, check_mass_matrix
 
 if TYPE_CHECKING:
+    from modelgen.sim.runtime import CompiledModel
     from modelgen.sim.scene import Scene
+
+#: What loading a compiled model imports (numpy, cffi's backend), imported in the
+#: functions below, so that a generation imports it while its compilers run
+#: (:func:`_generate`), not before them.
+RUNTIME = ("modelgen.sim.runtime", "cffi", "_cffi_backend")
 
 
 def generate_model(source, out_dir=None, *, force: bool = False,
@@ -43,19 +49,22 @@ def generate_model(source, out_dir=None, *, force: bool = False,
                               inertia=inertia, min_mass=min_mass, min_inertia=min_inertia,
                               mimic=mimic, kinematics=_kinematics(kinematics, frames),
                               derivatives=derivatives)
-    generated = _generate(source, out_dir, force, options, progress, max_operations)
-    _loaded(generated)
-    index.record(_fast_key(source, options, out_dir), generated.build, _runtime())
+    generated, location = _generate(source, out_dir, force, options, progress,
+                                    max_operations)
+    _loaded(generated, location)
+    index.record(_fast_key(source, options, out_dir), generated.build, location)
     return generated
 
 
-def _loaded(generated: Generated) -> CompiledModel:
-    """The compiled model of a build, checked for a mass matrix singular by construction.
+def _loaded(generated: Generated, runtime: tuple | None = None) -> CompiledModel:
+    """The compiled model of a build, checked for a mass matrix singular by construction
+    (``runtime``: the runtime module's (name, path), else found here).
 
     The check runs on every load, cached build or not (three evaluations of A:
     microseconds), so a build cache never hides a model that cannot be solved.
     """
-    cm = CompiledModel(generated.manifest, generated.build.module_path)
+    from modelgen.sim.runtime import CompiledModel, check_mass_matrix
+    cm = CompiledModel(generated.manifest, generated.build.module_path, runtime)
     check_mass_matrix(cm)
     return cm
 
@@ -111,12 +120,14 @@ def load(source, out_dir=None, *, force: bool = False, options: BuildOptions | N
     key = _fast_key(source, options, out_dir)
     hit = None if force else index.lookup(key)
     if hit is not None:
+        from modelgen.sim.runtime import CompiledModel, check_mass_matrix
         cm = CompiledModel(hit.build.manifest, hit.build.module_path, hit.runtime)
         check_mass_matrix(cm)
         return cm
-    generated = _generate(source, out_dir, force, options, progress, max_operations)
-    cm = _loaded(generated)
-    index.record(key, generated.build, _runtime())
+    generated, location = _generate(source, out_dir, force, options, progress,
+                                    max_operations)
+    cm = _loaded(generated, location)
+    index.record(key, generated.build, location)
     return cm
 
 
@@ -141,21 +152,26 @@ def _fast_key(source, options: BuildOptions, out_dir) -> str | None:
 
 
 def _generate(source, out_dir, force: bool, options: BuildOptions, progress,
-              max_operations: int | None = None) -> Generated:
-    """The full path: read the model, then generate (or find by the build key)."""
+              max_operations: int | None = None) -> tuple:
+    """The full path: read the model, then generate (or find by the build key).
+    Returns the :class:`Generated` and the runtime module's (name, path)."""
     # imported here, not at the top: the reader and the symbolic pipeline (about a
     # second of imports) are needed only when the fast index has no build
-    from modelgen.codegen.pipeline import generate
+    from modelgen.codegen.pipeline import generate, runtime
     from modelgen.model import as_spec
-    return generate(as_spec(source, **options.reading()), out_dir,
-                    force=force, options=options, progress=progress,
-                    max_operations=max_operations)
+    found = []
 
-
-def _runtime() -> tuple:
-    """(name, path) of the runtime module, for an index entry (the pipeline is loaded)."""
-    from modelgen.codegen.pipeline import runtime
-    return runtime()
+    def while_compiling():
+        # what loading the library needs, while this process only waits for the
+        # compilers: the loader's imports and the runtime module's place (which
+        # builds the runtime module on first use, beside them)
+        for name in RUNTIME:
+            importlib.import_module(name)
+        found.append(runtime())
+    generated = generate(as_spec(source, **options.reading()), out_dir,
+                         force=force, options=options, progress=progress,
+                         max_operations=max_operations, while_compiling=while_compiling)
+    return generated, found[0] if found else runtime()
 
 
 def load_scene(path, out_dir=None, *, force: bool = False, progress=None,
