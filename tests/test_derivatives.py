@@ -422,6 +422,34 @@ def test_derivatives_of_a_branched_tree_with_effects_match_central_differences(t
     _check_against_differences(cm, seed=1)
 
 
+def _has_avx512f() -> bool:
+    try:
+        with open("/proc/cpuinfo", encoding="ascii", errors="replace") as f:
+            return any(line.startswith("flags") and "avx512f" in line.split() for line in f)
+    except OSError:
+        return False
+
+
+@pytest.mark.skipif(not _has_avx512f(), reason="the wide solve runs only with AVX-512")
+def test_articulated_solve_gives_the_same_bits_at_both_vector_widths(tmp_path, monkeypatch):
+    # the wide solve (8 columns a vector, taken at run time on this CPU) against the
+    # library built without it (4 columns): the same operations on every column
+    from modelgen.derive import rnea_partials
+    monkeypatch.setattr(rnea_partials, "ARTICULATED_SOLVE_ABOVE", 0)
+    spec = spatial_chain(11).spec()
+    wide = modelgen.load(spec, tmp_path / "wide", derivatives=True)
+    monkeypatch.setenv("MODELGEN_CFLAGS", "-DMG_NO_WIDE")
+    narrow = modelgen.load(spec, tmp_path / "narrow", derivatives=True)
+    source = (Path(wide.path).parent / f"{wide.name}.c").read_text()
+    assert f"{wide.name}_aba_solve_wide" in source
+    rng = np.random.default_rng(7)
+    for _ in range(3):
+        x = np.concatenate([wide.project(rng.uniform(-3, 3, wide.nq)), rng.uniform(-2, 2, wide.n)])
+        for a, b in zip(wide.derivatives(0.0, x), narrow.derivatives(0.0, x), strict=True):
+            assert a.tobytes() == b.tobytes()
+    _check_against_differences(wide, seed=8)
+
+
 @pytest.mark.parametrize("model, formulation", [("cart_pole", "crba"), ("heavy_top", "auto"),
                                                 ("spring_chain", "auto")])
 def test_derivatives_match_central_differences_on_shipped_models(model, formulation, tmp_path):
