@@ -323,22 +323,29 @@ def test_the_host_isa_flag_changes_the_encoding_never_a_result(monkeypatch, tmp_
 
 def test_gcc_only_flags_follow_the_compiler_and_the_level(monkeypatch, tmp_path):
     """The flags only gcc knows go to gcc alone (clang rejects unknown -f flags
-    under -Werror), and the -O2 ones only to the parts compiled at -O2."""
-    from modelgen.codegen.compilers import GCC_FLAGS, GCC_O2_FLAGS
+    under -Werror), the -O2 ones only to the parts compiled at -O2 and the -O1
+    ones only to the parts compiled at -O1."""
+    from modelgen.codegen.compilers import GCC_FLAGS, GCC_O1_FLAGS, GCC_O2_FLAGS
+    only_gcc = set(GCC_FLAGS + GCC_O1_FLAGS + GCC_O2_FLAGS)
     fake = tmp_path / "clang"
     fake.write_text("#!/bin/sh\necho 'clang version 15.0.7'\n")
     fake.chmod(0o755)
     monkeypatch.setenv("CC", str(fake))
-    for statements, part in ((100, 2), (100, 4), (5000, 4), (100, 0)):
+    for statements, part in ((100, 2), (100, 4), (5000, 4), (500, 0), (100, 0)):
         flags = build.compile_flags(statements, part)
-        assert not set(GCC_FLAGS + GCC_O2_FLAGS) & set(flags), (statements, part, flags)
+        assert not only_gcc & set(flags), (statements, part, flags)
     if shutil.which("gcc") is None:
         return
     monkeypatch.setenv("CC", "gcc")
     o2, o1, o0 = (build.compile_flags(s, p) for s, p in ((100, 4), (5000, 4), (100, 1)))
+    assert GCC_O1_FLAGS and not set(GCC_O1_FLAGS) & set(GCC_O2_FLAGS + GCC_FLAGS)
     assert o2[0] == "-O2" and set(GCC_FLAGS + GCC_O2_FLAGS) <= set(o2)
-    assert o1[0] == "-O1" and set(GCC_FLAGS) <= set(o1) and not set(GCC_O2_FLAGS) & set(o1)
-    assert o0[0] == "-O0" and not set(GCC_FLAGS + GCC_O2_FLAGS) & set(o0)
+    assert not set(GCC_O1_FLAGS) & set(o2)
+    assert o1[0] == "-O1" and set(GCC_FLAGS + GCC_O1_FLAGS) <= set(o1)
+    assert not set(GCC_O2_FLAGS) & set(o1)
+    assert build.compile_flags(500, 0)[0] == "-O1" and set(GCC_O1_FLAGS) <= set(
+        build.compile_flags(500, 0))
+    assert o0[0] == "-O0" and not only_gcc & set(o0)
 
 
 def test_meanwhile_runs_while_the_commands_run_and_failures_still_raise(tmp_path):

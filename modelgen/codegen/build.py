@@ -76,8 +76,8 @@ try:
 except ImportError:   # not POSIX: builds are not serialised
     fcntl = None
 
-from modelgen.codegen.compilers import (FIX_COMPILER, GCC_FLAGS, GCC_O2_FLAGS, core_count,
-                                        is_gcc, part_order, run_commands)
+from modelgen.codegen.compilers import (FIX_COMPILER, GCC_FLAGS, GCC_O1_FLAGS, GCC_O2_FLAGS,
+                                        core_count, is_gcc, part_order, run_commands)
 from modelgen.errors import BuildError
 
 # shutil, subprocess and tempfile are imported where a build needs them:
@@ -192,7 +192,7 @@ def compile_flags(statements: int, part: int = 2, *, host: bool = False) -> list
     """
     opt = _opt_level(statements, part)
     gcc = () if opt[0] == "-O0" or not is_gcc(tuple(compiler())) else \
-        (*GCC_FLAGS, *(GCC_O2_FLAGS if opt[0] == "-O2" else ()))
+        (*GCC_FLAGS, *{"-O2": GCC_O2_FLAGS, "-O1": GCC_O1_FLAGS}.get(opt[0], ()))
     return [*opt, *gcc, *BASE_FLAGS, *(host_flags() if host else ()),
             *_split_env("MODELGEN_CFLAGS", "")]
 

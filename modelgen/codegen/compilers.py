@@ -30,6 +30,17 @@ GCC_FLAGS = ("-fno-tree-dse", "-fno-dse")
 #: bench/derivatives.py, "Session 12").  clang has none of these flags.
 GCC_O2_FLAGS = ("-fno-gcse", "-fno-rerun-cse-after-loop", "-fno-code-hoisting",
                 "-fno-peephole2", "-fno-schedule-insns2")
+#: Added to -O1 (the parts above 4,000 statements) when the compiler is gcc:
+#: tree passes that visit every statement of a large routine and find nothing
+#: to do in generated code.  Conditional constant propagation looks for
+#: constants the generator already folded; scalar replacement of aggregates
+#: looks for small structures and arrays to split into scalars, and the arrays
+#: of generated routines are the caller's or large work arrays.  Without them gcc
+#: writes the same instructions, computing the same bits, on the chains and the
+#: largest robots (docs/benchmarks.md, "Session 12"), in less time.  The other
+#: -O1 passes that find nothing either cost too little to be worth a flag.
+#: clang has none of these flags.
+GCC_O1_FLAGS = ("-fno-tree-ccp", "-fno-tree-sra")
 
 
 @functools.lru_cache(maxsize=4)
