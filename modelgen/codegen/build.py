@@ -76,8 +76,8 @@ try:
 except ImportError:   # not POSIX: builds are not serialised
     fcntl = None
 
-from modelgen.codegen.compilers import (FIX_COMPILER, GCC_FLAGS, GCC_O1_FLAGS, GCC_O2_FLAGS,
-                                        core_count, is_gcc, part_order, run_commands)
+from modelgen.codegen.compilers import (FIX_COMPILER, core_count, gcc_flags, is_gcc,
+                                        part_order, run_commands)
 from modelgen.errors import BuildError
 
 # shutil, subprocess and tempfile are imported where a build needs them:
@@ -191,8 +191,8 @@ def compile_flags(statements: int, part: int = 2, *, host: bool = False) -> list
     ('-O0', ['-O2', '-fno-tree-slp-vectorize'], '-O1')
     """
     opt = _opt_level(statements, part)
-    gcc = () if opt[0] == "-O0" or not is_gcc(tuple(compiler())) else \
-        (*GCC_FLAGS, *{"-O2": GCC_O2_FLAGS, "-O1": GCC_O1_FLAGS}.get(opt[0], ()))
+    gcc = gcc_flags(opt[0])
+    gcc = gcc if gcc and is_gcc(tuple(compiler())) else ()
     return [*opt, *gcc, *BASE_FLAGS, *(host_flags() if host else ()),
             *_split_env("MODELGEN_CFLAGS", "")]
 

@@ -43,6 +43,19 @@ GCC_O2_FLAGS = ("-fno-gcse", "-fno-rerun-cse-after-loop", "-fno-code-hoisting",
 GCC_O1_FLAGS = ("-fno-tree-ccp", "-fno-tree-sra")
 
 
+
+def gcc_flags(level: str) -> tuple:
+    """The gcc-only flags of an optimisation ``level`` ("-O0", "-O1", "-O2"):
+    :data:`GCC_FLAGS` and the level's own (:data:`GCC_O1_FLAGS`,
+    :data:`GCC_O2_FLAGS`); none at -O0, which runs none of their passes.
+
+    >>> gcc_flags("-O0"), gcc_flags("-O1")[-2:]
+    ((), ('-fno-tree-ccp', '-fno-tree-sra'))
+    """
+    if level == "-O0":
+        return ()
+    return (*GCC_FLAGS, *{"-O1": GCC_O1_FLAGS, "-O2": GCC_O2_FLAGS}.get(level, ()))
+
 @functools.lru_cache(maxsize=4)
 def is_gcc(command: tuple) -> bool:
     """True if the C compiler ``command`` is gcc (its ``--version`` names the Free

@@ -51,20 +51,21 @@ def generate_model(source, out_dir=None, *, force: bool = False,
                               derivatives=derivatives)
     generated, location = _generate(source, out_dir, force, options, progress,
                                     max_operations)
-    _loaded(generated, location)
+    _loaded(generated.manifest, generated.build.module_path, location)
     index.record(_fast_key(source, options, out_dir), generated.build, location)
     return generated
 
 
-def _loaded(generated: Generated, runtime: tuple | None = None) -> CompiledModel:
-    """The compiled model of a build, checked for a mass matrix singular by construction
-    (``runtime``: the runtime module's (name, path), else found here).
+def _loaded(manifest: dict, module_path, runtime: tuple | None = None) -> CompiledModel:
+    """The compiled model of a build (its manifest and library), checked for a mass
+    matrix singular by construction (``runtime``: the runtime module's (name, path),
+    else found here).
 
     The check runs on every load, cached build or not (three evaluations of A:
     microseconds), so a build cache never hides a model that cannot be solved.
     """
     from modelgen.sim.runtime import CompiledModel, check_mass_matrix
-    cm = CompiledModel(generated.manifest, generated.build.module_path, runtime)
+    cm = CompiledModel(manifest, module_path, runtime)
     check_mass_matrix(cm)
     return cm
 
@@ -120,13 +121,10 @@ def load(source, out_dir=None, *, force: bool = False, options: BuildOptions | N
     key = _fast_key(source, options, out_dir)
     hit = None if force else index.lookup(key)
     if hit is not None:
-        from modelgen.sim.runtime import CompiledModel, check_mass_matrix
-        cm = CompiledModel(hit.build.manifest, hit.build.module_path, hit.runtime)
-        check_mass_matrix(cm)
-        return cm
+        return _loaded(hit.build.manifest, hit.build.module_path, hit.runtime)
     generated, location = _generate(source, out_dir, force, options, progress,
                                     max_operations)
-    cm = _loaded(generated, location)
+    cm = _loaded(generated.manifest, generated.build.module_path, location)
     index.record(key, generated.build, location)
     return cm
 
