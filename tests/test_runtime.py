@@ -174,11 +174,11 @@ def test_plot_returns_a_figure_and_leaves_pyplot_alone(dp, tmp_path):
     assert matplotlib.get_backend() == backend
 
 
-def test_everywhere_singular_model_is_refused_fresh_and_cached(tmp_path):
+def test_everywhere_singular_model_is_refused_fresh_and_cached(tmp_path, capsys):
     """A double pendulum whose second base turns with q1 too: q2 moves nothing.
 
     Refused on the first load, on a second load from the same build cache,
-    by generate_model, and by `modelgen generate` (exit status 2)."""
+    by generate_model, and by `modelgen generate` (exit status 2), in one message."""
     from conftest import MODELS
     from modelgen.cli import main
     text = (MODELS / "double_pendulum.yaml").read_text()
@@ -187,11 +187,16 @@ def test_everywhere_singular_model_is_refused_fresh_and_cached(tmp_path):
     path.write_text(text.replace("B2: {parent: B1, axis: 3, angle: q2}",
                                  "B2: {parent: B1, axis: 3, angle: q1}"))
     for _ in range(2):
-        with pytest.raises(DerivationError, match="coordinate 'q2'"):
+        with pytest.raises(DerivationError, match="coordinate 'q2'") as loaded:
             modelgen.load(path, tmp_path / "out")
-    with pytest.raises(DerivationError, match="coordinate 'q2'"):
+    # generate_model checks through ctypes, not a CompiledModel: the same words
+    with pytest.raises(DerivationError, match="coordinate 'q2'") as exc:
         modelgen.generate_model(path, tmp_path / "out")
-    assert main(["generate", str(path), "-o", str(tmp_path / "out")]) == 2
+    assert str(exc.value) == str(loaded.value)
+    for force in ([], ["--force"]):
+        capsys.readouterr()
+        assert main(["generate", str(path), "-o", str(tmp_path / "out"), *force]) == 2
+        assert capsys.readouterr().err.strip() == f"modelgen: error: {exc.value}"
 
 
 def test_compiled_model_pickles_and_runs_in_another_process(dp):
@@ -209,7 +214,8 @@ def test_compiled_model_pickles_and_runs_in_another_process(dp):
     ("1.7e308", "overflows double precision"),
     ("5e-324", "too small for double precision"),
 ])
-def test_defaults_beyond_double_range_are_named_not_called_massless(tmp_path, mass, message):
+def test_defaults_beyond_double_range_are_named_not_called_massless(tmp_path, mass, message,
+                                                                   capsys):
     """A mass of 1e308 overflows A, one of 5e-324 underflows it: the error says so and
     names the parameter, instead of "coordinate 'q' moves no mass"."""
     from conftest import MODELS
@@ -220,3 +226,7 @@ def test_defaults_beyond_double_range_are_named_not_called_massless(tmp_path, ma
     with pytest.raises(DerivationError, match=message) as exc:
         modelgen.load(path, tmp_path / "out")
     assert "m1 = " in str(exc.value) and "moves no mass" not in str(exc.value)
+    # `modelgen generate` checks through ctypes, not a CompiledModel: the same words
+    from modelgen.cli import main
+    assert main(["generate", str(path), "-o", str(tmp_path / "out")]) == 2
+    assert capsys.readouterr().err.strip() == f"modelgen: error: {exc.value}"

@@ -23,8 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 
-#: relative pivot tolerance (the generated C's ``<NAME>_PIVOT_TOL``)
-PIVOT_TOL = 1e-13
+from modelgen.sim.massmatrix import PIVOT_TOL
 #: a failure note names the configuration when cond(A) grew by this factor
 GROWTH = 1e3
 
@@ -57,22 +56,6 @@ def failing_pivot(A, tol: float = PIVOT_TOL):
     ratios = pivot_ratios(A)
     for j, r in enumerate(ratios):
         if not r > tol:
-            return j
-    return None
-
-
-def negligible_diagonal(A, tol: float = PIVOT_TOL):
-    """0-based index of the first diagonal entry ``A_jj <= tol * max_i A_ii``, or None.
-
-    Not a run-time test (a mass ratio of 1e-15 is well defined): the load-time
-    check of a mass matrix singular by construction uses it, because a
-    coordinate that moves no mass leaves a diagonal that is zero only up to
-    rounding, which the pivot test alone can let through.
-    """
-    diag = np.diag(np.asarray(A, dtype=float))
-    largest = max(float(np.max(diag)), 0.0)
-    for j, a in enumerate(diag):
-        if not a > tol * largest:
             return j
     return None
 

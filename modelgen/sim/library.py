@@ -26,7 +26,10 @@ import tempfile
 import warnings
 from pathlib import Path
 
+from modelgen.codegen.build import manifest_problem
+from modelgen.codegen.capi import ABI_VERSION
 from modelgen.errors import BuildError
+from modelgen.sim.massmatrix import default_parameters
 
 
 def runtime_module(location: tuple | None = None):
@@ -76,19 +79,83 @@ def _import_runtime(module_name: str, path):
     return module
 
 
+def open_library(manifest: dict, path: Path) -> ctypes.CDLL:
+    """The model's shared library at ``path``, opened with :mod:`ctypes`, once its
+    manifest's structure and ABI version, and the library's own ABI version and
+    sizes, agree with this modelgen and the manifest (every buffer is sized by
+    names from the manifest, so a count that differs would overrun one).
+    Raises :class:`~modelgen.errors.BuildError` saying to rebuild otherwise."""
+    problem = manifest_problem(manifest)
+    if problem:
+        raise BuildError(f"{path}: {problem}; rebuild the model (force=True)")
+    if manifest["abi_version"] != ABI_VERSION:
+        raise BuildError(f"{path}: built for ABI version {manifest['abi_version']}, "
+                         f"this modelgen expects {ABI_VERSION}; rebuild the model "
+                         f"(force=True)")
+    try:
+        dll = ctypes.CDLL(str(path))
+    except OSError as exc:
+        raise BuildError(f"{path} cannot be loaded ({exc}); rebuild the model "
+                         f"(force=True)") from None
+    name = manifest["name"]
+    got = _function(dll, path, f"{name}_abi_version")()
+    if got != ABI_VERSION:
+        raise BuildError(f"{path}: generated ABI version {got}, this modelgen "
+                         f"expects {ABI_VERSION}; regenerate the model")
+    dims = (ctypes.c_int * 7)()
+    _function(dll, path, f"{name}_dimensions")(dims)
+    nq, n = len(manifest["coordinates"]), len(manifest.get("speeds") or
+                                               manifest["coordinates"])
+    expected = {"NQ": nq, "NX": nq + n, "NP": len(manifest["parameters"]),
+                "NU": len(manifest["inputs"]), "NBODIES": len(manifest["bodies"]),
+                "NY": sum(len(o["columns"]) for o in manifest["outputs"]), "NV": n}
+    for got, (key, value) in zip(dims, expected.items()):
+        if got != value:
+            raise BuildError(f"{path}: the library's {name.upper()}_{key} is {got}, the "
+                             f"manifest says {value}; the build is damaged, rebuild "
+                             f"the model (force=True)")
+    return dll
+
+
+def mass_matrix_function(manifest: dict, path: Path):
+    """``A(q)`` of the model's library at ``path`` with the default parameters, called
+    through :mod:`ctypes` alone (no runtime module, cffi or numpy): ``q`` a list
+    of ``nq`` floats, A returned as ``n`` lists of ``n`` floats.  What
+    :func:`modelgen.sim.massmatrix.check` needs of a library just built.
+
+    >>> A = mass_matrix_function(manifest, path)([0.1, 0.2])   # doctest: +SKIP
+    """
+    dll = open_library(manifest, path)
+    function = _function(dll, path, f"{manifest['name']}_mass_matrix")
+    double = ctypes.c_double
+    nq, n = len(manifest["coordinates"]), len(manifest.get("speeds") or
+                                               manifest["coordinates"])
+    p = (double * len(manifest["parameters"]))(*default_parameters(manifest))
+
+    def mass_matrix(q) -> list:
+        A = (double * (n * n))()
+        function((double * nq)(*q), p, A)
+        return [A[i * n:(i + 1) * n] for i in range(n)]
+    return mass_matrix
+
+
+def _function(dll: ctypes.CDLL, path: Path, symbol: str):
+    try:
+        return getattr(dll, symbol)
+    except AttributeError:
+        raise BuildError(f"{path}: the library has no function {symbol!r}; rebuild the "
+                         f"model (force=True)") from None
+
+
 class ModelLibrary:
     """The functions of one model's shared library, as cffi callables."""
 
     def __init__(self, manifest: dict, path: Path, runtime: tuple | None = None):
         """``runtime``: where the runtime module is (see :func:`runtime_module`)."""
+        self.path = Path(path)
+        self._dll = open_library(manifest, self.path)
         module = runtime_module(runtime)
         self.ffi, self._runtime = module.ffi, module.lib
-        self.path = Path(path)
-        try:
-            self._dll = ctypes.CDLL(str(self.path))
-        except OSError as exc:
-            raise BuildError(f"{self.path} cannot be loaded ({exc}); rebuild the model "
-                             f"(force=True)") from None
         functions = manifest.get("functions")
         if not isinstance(functions, dict):
             raise BuildError(f"{self.path}: the manifest lists no functions; rebuild the "

@@ -17,6 +17,8 @@ from typing import TYPE_CHECKING
 from modelgen.codegen import index
 from modelgen.codegen.build import Generated
 from modelgen.codegen.options import BuildOptions, KinematicsOptions
+from modelgen.sim import massmatrix
+from modelgen.sim.library import mass_matrix_function
 
 if TYPE_CHECKING:
     from modelgen.sim.runtime import CompiledModel
@@ -49,10 +51,14 @@ def generate_model(source, out_dir=None, *, force: bool = False,
                               inertia=inertia, min_mass=min_mass, min_inertia=min_inertia,
                               mimic=mimic, kinematics=_kinematics(kinematics, frames),
                               derivatives=derivatives)
+    key = _fast_key(source, options, out_dir)
+    # the runtime module's place only for the index entry (a spec or Model has none)
     generated, location = _generate(source, out_dir, force, options, progress,
-                                    max_operations)
-    _loaded(generated.manifest, generated.build.module_path, location)
-    index.record(_fast_key(source, options, out_dir), generated.build, location)
+                                    max_operations, load=False, locate=key is not None)
+    manifest = generated.manifest
+    # the check of a load, through ctypes: no numpy, cffi or runtime module to import
+    massmatrix.check(manifest, mass_matrix_function(manifest, generated.build.module_path))
+    index.record(key, generated.build, location)
     return generated
 
 
@@ -150,9 +156,12 @@ def _fast_key(source, options: BuildOptions, out_dir) -> str | None:
 
 
 def _generate(source, out_dir, force: bool, options: BuildOptions, progress,
-              max_operations: int | None = None) -> tuple:
+              max_operations: int | None = None, *, load: bool = True,
+              locate: bool = True) -> tuple:
     """The full path: read the model, then generate (or find by the build key).
-    Returns the :class:`Generated` and the runtime module's (name, path)."""
+    Returns the :class:`Generated` and the runtime module's (name, path), or None
+    without ``locate``.  With ``load``, what loading the library imports
+    (:data:`RUNTIME`) is imported while the compilers run."""
     # imported here, not at the top: the reader and the symbolic pipeline (about a
     # second of imports) are needed only when the fast index has no build
     from modelgen.codegen.pipeline import generate, runtime
@@ -163,12 +172,16 @@ def _generate(source, out_dir, force: bool, options: BuildOptions, progress,
         # what loading the library needs, while this process only waits for the
         # compilers: the loader's imports and the runtime module's place (which
         # builds the runtime module on first use, beside them)
-        for name in RUNTIME:
+        for name in RUNTIME if load else ():
             importlib.import_module(name)
-        found.append(runtime())
+        if locate:
+            found.append(runtime())
     generated = generate(as_spec(source, **options.reading()), out_dir,
                          force=force, options=options, progress=progress,
-                         max_operations=max_operations, while_compiling=while_compiling)
+                         max_operations=max_operations,
+                         while_compiling=while_compiling if load or locate else None)
+    if not locate:
+        return generated, None
     return generated, found[0] if found else runtime()
 
 

@@ -14,16 +14,14 @@ from typing import NamedTuple
 
 import numpy as np
 
-from modelgen.codegen.build import manifest_problem
-from modelgen.codegen.capi import ABI_VERSION
 from modelgen.errors import (ArgumentTypeError, ArgumentValueError, BuildError,
-                             DerivationError, MassMatrixError, SimulationError)
+                             MassMatrixError, SimulationError)
 from modelgen.sim import assemble, integrate
 from modelgen.sim.kinematics import FrameKinematics
 from modelgen.sim.library import ModelLibrary
 from modelgen.sim import linearize as linearization
-from modelgen.sim.conditioning import (PIVOT_TOL, failing_pivot, failure_kind,
-                                       negligible_diagonal)
+from modelgen.sim import massmatrix
+from modelgen.sim.conditioning import failure_kind
 from modelgen.sim.result import DenseOutput, Result
 
 
@@ -52,13 +50,9 @@ class CompiledModel(FrameKinematics):
     """
 
     def __init__(self, manifest: dict, module_path: Path, runtime: tuple | None = None):
-        problem = manifest_problem(manifest)
-        if problem:
-            raise BuildError(f"{module_path}: {problem}; rebuild the model (force=True)")
-        if manifest["abi_version"] != ABI_VERSION:
-            raise BuildError(f"{module_path}: built for ABI version {manifest['abi_version']}, "
-                             f"this modelgen expects {ABI_VERSION}; rebuild the model "
-                             f"(force=True)")
+        self.path = Path(module_path)
+        # first: it checks the manifest the attributes below are read from
+        self.lib = ModelLibrary(manifest, self.path, runtime)
         self.manifest = manifest
         self.name = manifest["name"]
         self.coordinates = tuple(manifest["coordinates"])
@@ -79,12 +73,8 @@ class CompiledModel(FrameKinematics):
         self.state_names = self.coordinates + self.speeds
         #: one name per degree of freedom (the rows of A): a simple coordinate's
         #: own name, a joint's speed name
-        simple = manifest.get("n_simple", self.nq)
-        self.dof_names = self.coordinates[:simple] + self.speeds[simple:]
-        self.path = Path(module_path)
-        self.lib = ModelLibrary(manifest, self.path, runtime)
+        self.dof_names = massmatrix.dof_names(manifest)
         self.ffi = self.lib.ffi
-        self._check_module()
         fn = lambda suffix: getattr(self.lib, f"{self.name}_{suffix}")   # noqa: E731
         self._mass_matrix = fn("mass_matrix")
         self._velocity_terms = fn("velocity_terms")
@@ -98,26 +88,6 @@ class CompiledModel(FrameKinematics):
         self._outputs = fn("outputs") if self.output_columns else None
         self._p_default = np.array(list(self.parameters.values()), dtype=float)
         self._param_index = {name: i for i, name in enumerate(self.parameters)}
-
-    def _check_module(self) -> None:
-        """The library's own sizes against the manifest: every buffer is sized by
-        names from the manifest, so a count that differs would overrun one."""
-        got = getattr(self.lib, f"{self.name}_abi_version")()
-        if got != ABI_VERSION:
-            raise BuildError(f"{self.path}: generated ABI version {got}, this modelgen "
-                             f"expects {ABI_VERSION}; regenerate the model")
-        dims = self.ffi.new("int[7]")
-        getattr(self.lib, f"{self.name}_dimensions")(dims)
-        prefix = self.name.upper()
-        expected = {"NQ": self.nq, "NX": self.nx, "NP": len(self.parameters),
-                    "NU": len(self.inputs), "NBODIES": len(self.bodies),
-                    "NY": sum(len(o["columns"]) for o in self.manifest["outputs"]),
-                    "NV": self.n}
-        for got, (key, value) in zip(dims, expected.items()):
-            if got != value:
-                raise BuildError(f"{self.path}: the library's {prefix}_{key} is {got}, the "
-                                 f"manifest says {value}; the build is damaged, rebuild "
-                                 f"the model (force=True)")
 
     def __reduce__(self):
         """Pickle as (manifest, library path): the unpickled model loads the same
@@ -664,70 +634,10 @@ class CompiledModel(FrameKinematics):
 
 
 def check_mass_matrix(cm: CompiledModel, samples: int = 3, seed: int = 0) -> None:
-    """Detect a mass matrix that is singular by construction, and name the coordinate.
-
-    A is evaluated at a few scattered configurations with the default
-    parameters; a coordinate whose Cholesky pivot vanishes at all of them
-    moves no mass or inertia (e.g. a body with zero inertia about a terminal
-    joint axis, or an unused coordinate).
-    """
-    failing = None
-    for k in range(samples):
-        A = cm.mass_matrix(cm.project(scattered(cm.nq, k + seed)))
-        _check_representable(cm, A)
-        pivot = _cholesky_pivot(A)
-        if pivot is None:
-            pivot = negligible_diagonal(A)    # zero up to rounding
-        if pivot is None:
-            return
-        failing = pivot
-    name = cm.dof_names[failing]
-    raise DerivationError(
-        f"{cm.name}: the mass matrix is singular for every configuration tried: coordinate "
-        f"{name!r} (row {failing + 1} of A) moves no mass or inertia independently of "
-        f"the coordinates before it; give the bodies it moves mass and inertia about its "
-        f"axis, or remove the coordinate")
-
-
-def scattered(n: int, k: int) -> np.ndarray:
-    """The ``k``-th of a sequence of configurations spread over [-pi, pi)^n: a Weyl
-    sequence with irrational steps, so no coordinate repeats a value or another
-    coordinate's (without numpy.random, whose import a cached load would pay).
-
-    >>> scattered(3, 0).round(3).tolist()
-    [-2.939, 2.022, 0.45]
-    """
-    i = np.arange(1, n + 1)
-    steps = np.modf(i * 0.6180339887498949 + (k + 1) * 0.41421356237309515 * np.sqrt(i))[0]
-    return np.pi * (2.0 * steps - 1.0)
-
-
-#: a mass matrix whose largest entry is below this cannot be factorized meaningfully
-#: in double precision (its pivots underflow to subnormal numbers)
-TINY_MASS_MATRIX = 1e-250
-
-
-def _check_representable(cm: CompiledModel, A) -> None:
-    """Refuse default parameters whose mass matrix overflows or underflows double
-    precision, saying so (not "moves no mass")."""
-    extremes = ", ".join(f"{name} = {value:g}" for name, value in cm.parameters.items()
-                         if value != 0 and not 1e-100 < abs(value) < 1e100) or "none"
-    if not np.all(np.isfinite(A)):
-        raise DerivationError(
-            f"{cm.name}: the mass matrix overflows double precision with the default "
-            f"parameters (parameters beyond 1e+-100: {extremes}); choose units in which "
-            f"masses, lengths and inertias are nearer 1")
-    if np.max(np.abs(A)) < TINY_MASS_MATRIX:
-        raise DerivationError(
-            f"{cm.name}: the mass matrix is below {TINY_MASS_MATRIX:g} with the default "
-            f"parameters, too small for double precision (parameters beyond 1e+-100: "
-            f"{extremes}); choose units in which masses, lengths and inertias are nearer 1")
-
-
-def _cholesky_pivot(A, tol=PIVOT_TOL):
-    """Index of the first failing pivot of the generated solve's test, or None
-    (see :mod:`modelgen.sim.conditioning`)."""
-    return failing_pivot(A, tol)
+    """Detect a mass matrix that is singular by construction, and name the coordinate
+    (:func:`modelgen.sim.massmatrix.check`: A at a few scattered configurations with
+    the default parameters)."""
+    massmatrix.check(cm.manifest, lambda q: cm.mass_matrix(q).tolist(), samples, seed)
 
 
 #: |h lambda| where each explicit method's stability region ends on the negative real
