@@ -368,3 +368,32 @@ def test_meanwhile_runs_while_the_commands_run_and_failures_still_raise(tmp_path
         run_commands([["sh", "-c", wait.format(0)], ["sh", "-c", wait.format(3)],
                       ["sh", "-c", wait.format(0)]], tmp_path, jobs=2, meanwhile=meanwhile)
     assert calls == [[]] and err.value.returncode == 3
+
+
+def test_a_probed_compiler_is_asked_once_in_the_background(tmp_path):
+    """``probe_compiler`` starts ``--version`` at once (the script's mark appears
+    before ``is_gcc`` is asked), ``is_gcc`` reads that run's answer, and once the
+    answer is known a probe starts nothing.  A compiler that cannot run is not gcc,
+    probed or not."""
+    from modelgen.codegen.compilers import is_gcc, probe_compiler
+    mark = tmp_path / "ran"
+    for banner, expected in (("gcc (GCC) 12.2.0 Free Software Foundation, Inc.", True),
+                             ("clang version 15.0.7", False)):
+        fake = tmp_path / f"cc{int(expected)}"
+        fake.write_text(f"#!/bin/sh\necho run >> {mark}\necho '{banner}'\n")
+        fake.chmod(0o755)
+        command = (str(fake),)
+        probe_compiler(command)
+        for _ in range(2000):
+            if mark.exists():
+                break
+            time.sleep(0.01)
+        assert mark.read_text() == "run\n"
+        assert is_gcc(command) is expected and is_gcc(command) is expected
+        probe_compiler(command)
+        time.sleep(0.2)
+        assert mark.read_text() == "run\n"       # neither is_gcc nor the probe ran it again
+        mark.unlink()
+    missing = (str(tmp_path / "no-such-cc"),)
+    probe_compiler(missing)
+    assert is_gcc(missing) is False

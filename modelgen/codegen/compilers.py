@@ -60,18 +60,53 @@ def gcc_flags(level: str) -> tuple:
 def is_gcc(command: tuple) -> bool:
     """True if the C compiler ``command`` is gcc (its ``--version`` names the Free
     Software Foundation; clang, Apple's cc and Intel's icx do not); False if it
-    does not run.
+    does not run.  Reads the run :func:`probe_compiler` started, if any.
 
     >>> is_gcc(("no-such-compiler-xyz",))
     False
     """
     import subprocess     # imported by a build only (a cached load needs none)
+    _answered.add(command)
+    pid, proc = _probes.pop(command, (None, None))
+    if pid != os.getpid():          # none, or a forked parent's child
+        proc = _version(command)
+    if proc is None:
+        return False
     try:
-        out = subprocess.run([*command, "--version"], capture_output=True, text=True,
-                             timeout=30).stdout
-    except (OSError, subprocess.SubprocessError):
+        out = proc.communicate(timeout=30)[0]
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.communicate()
+        return False
+    except OSError:
         return False
     return "Free Software Foundation" in out
+
+
+def probe_compiler(command: tuple) -> None:
+    """Start ``command --version`` in the background for :func:`is_gcc`, which a
+    build first asks when it needs the compile flags: the run then overlaps the
+    derivation instead of delaying the first compile.  Nothing if the answer is
+    known or the run under way."""
+    if command not in _answered and command not in _probes:
+        _probes[command] = (os.getpid(), _version(command))
+
+
+#: the ``--version`` runs :func:`probe_compiler` started, by command: (pid, Popen or None)
+_probes: dict = {}
+#: the commands :func:`is_gcc` was asked about
+_answered: set = set()
+
+
+def _version(command: tuple):
+    """The running ``command --version`` (its output piped), or None if it cannot start."""
+    import subprocess
+    try:
+        return subprocess.Popen([*command, "--version"], stdout=subprocess.PIPE,
+                                stderr=subprocess.DEVNULL, stdin=subprocess.DEVNULL,
+                                text=True)
+    except (OSError, subprocess.SubprocessError):
+        return None
 
 
 def core_count() -> int:

@@ -18,6 +18,7 @@ from modelgen.codegen import budget
 from modelgen.codegen.build import (Generated, build_module, cache_dir, cache_lookup,
                                     compiler, host_flags, integrator_hash, runtime_module)
 from modelgen.codegen.capi import signature_of
+from modelgen.codegen.compilers import probe_compiler
 from modelgen.codegen.cse import hoist_parameters, make_routines
 from modelgen.derive.frames import FrameTerms, derive_frames
 from modelgen.derive.aba import ForwardDynamics, derive_aba, derive_aba_jacobian
@@ -332,6 +333,8 @@ def generate(spec: ModelSpec, out_dir=None, *, force: bool = False,
         if hit is not None:
             return Generated(hit, hit.manifest)
     budget.check_estimate(spec, tree, limit)
+    # the compiler's --version (is it gcc?) runs while the model is derived
+    probe_compiler(tuple(compiler()))
     clock = _Clock(progress)
     clock.seconds["check"] = time.perf_counter() - start    # hashes, formulation, cache
     with _collector_paused():
