@@ -397,3 +397,16 @@ def test_a_probed_compiler_is_asked_once_in_the_background(tmp_path):
     missing = (str(tmp_path / "no-such-cc"),)
     probe_compiler(missing)
     assert is_gcc(missing) is False
+
+
+def test_a_probe_no_build_read_is_ended_at_exit():
+    """A build that stops before compiling leaves its probe unread: the process
+    ends it at exit, without waiting for it or a ResourceWarning."""
+    code = ("from modelgen.codegen.compilers import probe_compiler\n"
+            "probe_compiler(('sh', '-c', 'sleep 60', '--'))")
+    start = time.perf_counter()
+    proc = subprocess.run([sys.executable, "-X", "dev", "-W", "error", "-c", code],
+                          capture_output=True, text=True, timeout=60,
+                          env=dict(os.environ, PYTHONPATH=str(Path(__file__).parent.parent)))
+    assert proc.returncode == 0 and proc.stderr == "", proc.stderr
+    assert time.perf_counter() - start < 30

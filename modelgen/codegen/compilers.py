@@ -2,6 +2,7 @@
 commands run: in parallel, at most one per core."""
 from __future__ import annotations
 
+import atexit
 import functools
 import os
 from pathlib import Path
@@ -96,6 +97,19 @@ def probe_compiler(command: tuple) -> None:
 _probes: dict = {}
 #: the commands :func:`is_gcc` was asked about
 _answered: set = set()
+
+
+def _reap_probes() -> None:
+    """End and wait for the probes of builds that stopped before compiling (a model
+    over the budget, an error), so no run outlives this process unwaited."""
+    for pid, proc in _probes.values():
+        if pid == os.getpid() and proc is not None:
+            proc.kill()
+            proc.communicate()
+    _probes.clear()
+
+
+atexit.register(_reap_probes)
 
 
 def _version(command: tuple):
