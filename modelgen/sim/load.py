@@ -25,8 +25,8 @@ if TYPE_CHECKING:
     from modelgen.sim.scene import Scene
 
 #: What loading a compiled model imports (numpy, cffi's backend), imported in the
-#: functions below, so that a generation imports it while its compilers run
-#: (:func:`_generate`), not before them.
+#: functions below, so that a load's generation imports it while its compilers run
+#: (:func:`_generate`), not before them; :func:`generate_model` needs none of it.
 RUNTIME = ("modelgen.sim.runtime", "cffi", "_cffi_backend")
 
 
@@ -43,7 +43,9 @@ def generate_model(source, out_dir=None, *, force: bool = False,
 
     ``options`` and the shorthand keywords are those of :func:`load`.
     Like :func:`load`, it refuses (:class:`~modelgen.errors.DerivationError`)
-    a model whose mass matrix is singular for every configuration, cached or not.
+    a model whose mass matrix is singular for every configuration, cached or not,
+    by the same check (:func:`modelgen.sim.massmatrix.check`), on the library
+    opened with ctypes: it imports neither numpy nor cffi.
     ``progress(stage)`` is called as each stage of a build starts.
     """
     options = BuildOptions.of(options, jacobian=jacobian, formulation=formulation,
