@@ -692,9 +692,9 @@ def build_module(directory: Path, name: str, sources: dict, manifest: dict,
     and its place in the order the parts start in
     (:func:`~modelgen.codegen.compilers.part_order`).  ``while_compiling()`` (if
     given) is called while the parts compile (``meanwhile`` of
-    :func:`~modelgen.codegen.compilers.run_commands`).  ``early``
-    (:class:`~modelgen.codegen.parts.EarlyPart`, if given) is a part already
-    compiling, whose object is used if it is that of these sources.
+    :func:`~modelgen.codegen.compilers.run_commands`).  ``early`` (part ->
+    :class:`~modelgen.codegen.parts.EarlyPart`, if given): parts already
+    compiling, whose objects are used where they are those of these sources.
     """
     import shutil
     start = time.perf_counter()
@@ -715,13 +715,13 @@ def build_module(directory: Path, name: str, sources: dict, manifest: dict,
         parts = part_order({part: (count, _opt_level(count, part)[0])
                             for part, count in statements.items()}) if cores > 1 else (0,)
         model_objs = [part_command(name, part, by_part[part]) for part in parts]
-        adopted = early is not None and early.part in parts and early.matches(
-            {**sources, "mg_integrate.h": integrator["mg_integrate.h"]}, name,
-            model_objs[parts.index(early.part)])
-        run_commands([c for p, c in zip(parts, model_objs) if not (adopted and p == early.part)],
+        final = {**sources, "mg_integrate.h": integrator["mg_integrate.h"]}
+        adopted = sorted(p for p, e in (early or {}).items()
+                         if p in parts and e.matches(final, name, model_objs[parts.index(p)]))
+        run_commands([c for p, c in zip(parts, model_objs) if p not in adopted],
                      tmp, jobs=cores, meanwhile=while_compiling)
-        if adopted:
-            early.finish(tmp / f"{name}_{early.part}.o")
+        for part in adopted:
+            early[part].finish(tmp / f"{name}_{part}.o")
         run_commands([link_command([*(f"{name}_{part}.o" for part in parts), str(integrator_obj)],
                            module_file)], tmp)
 
@@ -729,7 +729,7 @@ def build_module(directory: Path, name: str, sources: dict, manifest: dict,
                         module_size=(tmp / module_file).stat().st_size,
                         module_sha256=file_sha256(tmp / module_file),
                         compile_commands=[" ".join(c) for c in model_objs],
-                        early_part=early.part if adopted else None,
+                        early_parts=adopted,
                         integrators={"path": str(integrator_obj), "cached": integrator_cached})
         manifest["manifest_sha256"] = manifest_digest(manifest)
         (tmp / "manifest.json").write_text(json.dumps(manifest, indent=2, sort_keys=True))
@@ -754,8 +754,8 @@ def build_module(directory: Path, name: str, sources: dict, manifest: dict,
                          f"({exc.strerror or exc}: {exc.filename or ''})",
                          fix="choose a writable output directory") from None
     finally:
-        if early is not None:
-            early.stop()
+        for started in (early or {}).values():
+            started.stop()
         shutil.rmtree(tmp, ignore_errors=True)
     return BuildResult(directory, module_name, directory / module_file, manifest, False,
                        time.perf_counter() - start)

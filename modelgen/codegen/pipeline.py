@@ -592,14 +592,18 @@ def _eliminate(derived: Derived, ready=None) -> tuple:
 
 
 class _EarlyStart:
-    """The ``ready`` of :func:`_eliminate` that starts the compile of the largest
-    part once its routines are eliminated (:mod:`modelgen.codegen.parts`), on a
-    machine with two cores or more: the derivatives' straight line (part 4) once
-    it and the rhs are (the rhs gives the header its ``NPD``), else the rhs's
-    part 2 when the rhs is all it holds; not when they alone are over the build
-    budget ``limit`` (the whole model is then refused after its elimination).
-    ``printed``: the routines it printed, for :func:`_emit`; ``started``: the
-    :class:`~modelgen.codegen.parts.EarlyPart`, or None."""
+    """The ``ready`` of :func:`_eliminate` that starts the compile of a part as
+    soon as the routines it needs are eliminated (:mod:`modelgen.codegen.parts`),
+    on a machine with two cores or more: its own, the rhs (which gives the
+    header its ``NPD``) and, for part 3, the derivatives' straight line (whose
+    work array its API declares).  The routines eliminated on their own are
+    all some parts hold (part 2: the rhs and prepare; 3: the inverse dynamics;
+    4: the derivatives' straight line), so those parts compile while the joint
+    elimination of the others runs; part 1 and any part with a routine of the
+    joint elimination are compiled with the rest.  Nothing starts once the
+    routines known are alone over the build budget ``limit`` (the model is then
+    refused after its elimination).  ``printed``: the routines it printed, for
+    :func:`_emit`; ``started``: part -> :class:`~modelgen.codegen.parts.EarlyPart`."""
 
     def __init__(self, spec: ModelSpec, options: BuildOptions, derived: Derived,
                  model_key: str, directory: Path, limit: int):
@@ -607,33 +611,40 @@ class _EarlyStart:
         self.model_key, self.directory, self.limit = model_key, directory, limit
         self.routines = _routine_list(derived)
         names = {name for name, _, _ in self.routines}
-        second = {name for name in names if routine_part(name) == 2}
-        self.part = None if core_count() < 2 else 4 if "derivative_terms" in names \
-            else 2 if second == {"rhs"} else None
-        self.printed, self.started = {}, None
+        self.needs = {} if core_count() < 2 else {
+            part: {name for name in names if routine_part(name) == part} | {"rhs"}
+            | ({"derivative_terms"} & names if part == 3 else set())
+            for part in (2, 3, 4) if any(routine_part(name) == part for name in names)}
+        self.printed, self.started = {}, {}
 
     def __call__(self, built: dict) -> None:
-        need = {"rhs", "derivative_terms"} if self.part == 4 else {"rhs"}
-        if self.part is None or self.printed or not need <= built.keys():
+        ready = [part for part, need in self.needs.items() if need <= built.keys()]
+        if not ready:
             return
+        for part in ready:
+            del self.needs[part]
         known = {r.name: r for r in _hoisted(tuple(built.values()))}
         if budget.build_cost(tuple(known.values())).weighted > self.limit:
-            self.part = None
+            self.needs = {}
             return
         order = [r for name, inputs, _ in self.routines
                  for r in ((known["prepare"], known["rhs"]) if name == "rhs" else
                            (known.get(name) or Routine(name, inputs, (), (), 0, 0),))]
-        emitted = _emit(self.spec, self.options, self.derived, tuple(order), self.model_key)
+        emitted = _emit(self.spec, self.options, self.derived, tuple(order), self.model_key,
+                        self.printed)
         self.printed = {name: emitted.functions[name] for name in known}
         statements = part_statements({f.name: f.statements for f in self.printed.values()})
         name = self.spec.name
         sources = {**emitted.sources, "mg_integrate.h": integrator_sources()["mg_integrate.h"]}
-        self.started = parts.start(self.directory, name, sources, self.part,
-                                   part_command(name, self.part, statements[self.part]))
+        for part in ready:
+            started = parts.start(self.directory, name, sources, part,
+                                  part_command(name, part, statements[part]))
+            if started is not None:
+                self.started[part] = started
 
     def stop(self) -> None:
-        if self.started is not None:
-            self.started.stop()
+        for started in self.started.values():
+            started.stop()
 
 
 @dataclass(frozen=True)
@@ -753,7 +764,7 @@ def _compile(directory: Path, spec: ModelSpec, options: BuildOptions, derived: D
              while_compiling=None, early=None) -> Generated:
     """Compile and cache the sources (the caller times it into ``seconds``).
     ``damage`` says why a cached build was not reused (recorded in the result);
-    ``early``: a part already compiling (:class:`_EarlyStart`)."""
+    ``early``: part -> the parts already compiling (:class:`_EarlyStart`)."""
     manifest = _manifest(spec, options, derived, emitted, key)
     statements = part_statements({f.name: f.statements for f in emitted.functions.values()})
     build = build_module(directory, spec.name, emitted.sources, dict(manifest, seconds=seconds),
