@@ -300,7 +300,7 @@ def make_routines(graph: Graph, routines, *, cse: bool = True, alone=(), ready=N
     routines share, and can split one routine's sums and products where that
     routine alone would not (the ABA rhs of the 20-link chain: 229.1
     operations a coordinate after a joint pass, 226.8 after its own).  Those
-    passes come first, each routine's as it is listed, and ``ready(built)`` (if
+    passes come first, in the order of ``alone``, and ``ready(built)`` (if
     given) is called after each with the routines built so far (name ->
     Routine), before the joint pass.
 
@@ -321,7 +321,8 @@ def _make_routines(graph: Graph, routines, cse: bool, alone, ops: dict, shared: 
     routines = [(name, tuple(inputs), tuple(outputs)) for name, inputs, outputs in routines]
     if alone:
         built = {}
-        for group in [[r] for r in routines if r[0] in alone]:
+        for group in sorted(([r] for r in routines if r[0] in alone),
+                            key=lambda group: list(alone).index(group[0][0])):
             built.update((r.name, r) for r in _make_routines(graph, group, cse, (), ops, shared))
             if ready is not None:
                 ready(dict(built))

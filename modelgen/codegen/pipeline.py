@@ -583,12 +583,13 @@ def _routine_list(derived: Derived) -> list:
 
 
 def _eliminate(derived: Derived, ready=None) -> tuple:
-    """CSE of every routine; the rhs (what an integration runs), the inverse
-    dynamics and the derivatives' straight line are eliminated on their own
-    (first, each followed by ``ready``, see make_routines), and the rhs's
-    parameter-only part hoisted."""
+    """CSE of every routine; the rhs (what an integration runs), the derivatives'
+    straight line and the inverse dynamics are eliminated on their own (first,
+    in that order: the largest compiles first, see :class:`_EarlyStart`; each
+    followed by ``ready``, see make_routines), and the rhs's parameter-only
+    part hoisted."""
     return _hoisted(make_routines(derived.graph, _routine_list(derived), ready=ready,
-                                  alone=("rhs", "inverse_dynamics", "derivative_terms")))
+                                  alone=("rhs", "derivative_terms", "inverse_dynamics")))
 
 
 class _EarlyStart:
