@@ -240,7 +240,7 @@ def test_killed_builds_temporary_folders_are_cleaned_by_the_next_build(cache):
 
 
 def test_a_builds_own_temporary_folder_names_its_process(cache):
-    made = build._private_dir(cache, ".build-")
+    made = build.private_dir(cache, ".build-")
     try:
         assert made.name.startswith(f".build-{os.getpid()}-{build.host_tag()}-")
         assert build.remove_stale_builds(cache) == []

@@ -63,7 +63,6 @@ import hashlib
 import json
 import os
 import re
-import shlex
 import sys
 import sysconfig
 import time
@@ -76,8 +75,9 @@ try:
 except ImportError:   # not POSIX: builds are not serialised
     fcntl = None
 
-from modelgen.codegen.compilers import (FIX_COMPILER, core_count, gcc_flags, is_gcc,
-                                        part_order, run_commands)
+from modelgen.codegen.compilers import (FIX_COMPILER, compiler, core_count, gcc_flags, is_gcc,
+                                        library_suffix, link_command, part_order, run_commands,
+                                        split_env)
 from modelgen.errors import BuildError
 
 # shutil, subprocess and tempfile are imported where a build needs them:
@@ -159,26 +159,6 @@ class Generated:
         return self.manifest["ops"]
 
 
-def _split_env(variable: str, default: str) -> list:
-    """``$variable`` split as a shell would; BuildError if it cannot be."""
-    value = os.environ.get(variable, default)
-    try:
-        return shlex.split(value)
-    except ValueError as exc:
-        raise BuildError(f"${variable}={value!r} cannot be split into arguments ({exc})",
-                         fix=f"quote {variable} as in a shell, e.g. "
-                             f"{variable}='-DNAME=\\\"text\\\"'") from None
-
-
-def compiler() -> list:
-    """The C compiler command: ``$CC`` if set, else ``cc``."""
-    command = _split_env("CC", "cc")
-    if not command:
-        raise BuildError("$CC is set but empty, so there is no C compiler to run",
-                         fix="unset CC or set it to a C compiler, e.g. CC=gcc")
-    return command
-
-
 def compile_flags(statements: int, part: int = 2, *, host: bool = False) -> list:
     """Compiler flags for one part of a model whose largest routine (in that part)
     has ``statements``; see :data:`OPT_LEVELS`.  With ``host`` (code that only
@@ -194,7 +174,7 @@ def compile_flags(statements: int, part: int = 2, *, host: bool = False) -> list
     gcc = gcc_flags(opt[0])
     gcc = gcc if gcc and is_gcc(tuple(compiler())) else ()
     return [*opt, *gcc, *BASE_FLAGS, *(host_flags() if host else ()),
-            *_split_env("MODELGEN_CFLAGS", "")]
+            *split_env("MODELGEN_CFLAGS", "")]
 
 
 def _opt_level(statements: int, part: int) -> tuple:
@@ -255,7 +235,7 @@ def cache_dir() -> Path:
 
 def integrator_flags() -> list:
     """Compiler flags of mg_integrate.c (``$MODELGEN_CFLAGS`` appended)."""
-    return [*INTEGRATOR_FLAGS, *_split_env("MODELGEN_CFLAGS", "")]
+    return [*INTEGRATOR_FLAGS, *split_env("MODELGEN_CFLAGS", "")]
 
 
 def integrator_hash(sources: dict) -> str:
@@ -292,7 +272,7 @@ def integrator_object(sources: dict) -> tuple:
     remove_stale_builds(directory, ".mg-")
     if _reusable(target, directory):
         return target, True
-    tmp = _private_dir(directory, ".mg-")
+    tmp = private_dir(directory, ".mg-")
     try:
         write_sources(tmp, sources)
         try:
@@ -484,7 +464,7 @@ def host_tag() -> str:
     return hashlib.sha256(os.uname().nodename.encode()).hexdigest()[:8]
 
 
-def _private_dir(directory: Path, prefix: str) -> Path:
+def private_dir(directory: Path, prefix: str) -> Path:
     """A new private temporary directory in ``directory`` (created with its parents),
     named ``<prefix><pid>-<host tag>-...`` so a later build can tell when its
     owner is gone; BuildError naming the path if it cannot be written."""
@@ -520,7 +500,7 @@ def _process_gone(pid: int) -> bool:
 def remove_stale_builds(directory: Path, prefix: str = ".build-",
                         age: float = STALE_SECONDS) -> list:
     """Remove the ``prefix*`` temporary directories of killed builds: those whose
-    name records a process of this machine that is gone (:func:`_private_dir`),
+    name records a process of this machine that is gone (:func:`private_dir`),
     and any older than ``age`` seconds; returns their paths."""
     import shutil
     removed, now = [], time.time()
@@ -636,7 +616,7 @@ def runtime_module(integrator: dict, runtime: dict, *, rebuild: bool = False) ->
     if not rebuild and _reusable(target, directory):
         return module_name, target
     damaged = rebuild or target.exists()
-    tmp = _private_dir(directory, ".build-")
+    tmp = private_dir(directory, ".build-")
     remove_stale_builds(directory)
     try:
         with _locked(directory):
@@ -688,35 +668,16 @@ def _build_runtime(tmp: Path, module_name: str, integrator: dict, runtime: dict,
     record_file(target)
 
 
-def library_suffix() -> str:
-    """File suffix of a model's shared library on this platform."""
-    return sysconfig.get_config_var("SHLIB_SUFFIX") or ".so"
-
-
-def link_command(objects: list, output: str) -> list:
-    """The command linking ``objects`` into the shared library ``output``: the
-    platform's shared-object link as this Python was configured (sysconfig's
-    ``LDSHARED``: ``gcc -shared ...`` on Linux, ``clang -bundle -undefined
-    dynamic_lookup ...`` on macOS), or ``$LDSHARED``; with ``$CC`` set (and not
-    ``$LDSHARED``) its compiler takes the configured one's place, as distutils does.
-
-    >>> link_command(["m.o"], "libm.so")[-4:]
-    ['m.o', '-o', 'libm.so', '-lm']
-    """
-    command = _split_env("LDSHARED", sysconfig.get_config_var("LDSHARED") or "")
-    if not command:
-        raise BuildError("this Python's configuration names no command to link a shared "
-                         "library (sysconfig's LDSHARED is empty)",
-                         fix="set LDSHARED to one, e.g. LDSHARED='gcc -shared'")
-    configured = shlex.split(sysconfig.get_config_var("CC") or "")
-    if "CC" in os.environ and "LDSHARED" not in os.environ and configured \
-            and command[:len(configured)] == configured:
-        command = [*compiler(), *command[len(configured):]]
-    return [*command, *objects, "-o", output, "-lm"]
+def part_command(name: str, part: int, statements: int) -> list:
+    """The command compiling ``part`` of ``<name>.c`` (0: all of it) into
+    ``<name>_<part>.o``, its largest routine having ``statements``."""
+    return [*compiler(), *compile_flags(statements, part, host=True), "-Werror",
+            *([f"-DMG_PART={part}"] if part else []), "-c", f"{name}.c", "-o", f"{name}_{part}.o"]
 
 
 def build_module(directory: Path, name: str, sources: dict, manifest: dict,
-                 statements: dict, integrator: dict, while_compiling=None) -> BuildResult:
+                 statements: dict, integrator: dict, while_compiling=None,
+                 early=None) -> BuildResult:
     """Compile ``sources`` (``<name>.c``, ``<name>.h``) into a shared library in
     ``directory``, linked with the cached object of ``integrator``
     (``mg_integrate.h``, ``mg_integrate.c`` and ``mg_integrate/*.c``), which are
@@ -731,7 +692,9 @@ def build_module(directory: Path, name: str, sources: dict, manifest: dict,
     and its place in the order the parts start in
     (:func:`~modelgen.codegen.compilers.part_order`).  ``while_compiling()`` (if
     given) is called while the parts compile (``meanwhile`` of
-    :func:`~modelgen.codegen.compilers.run_commands`).
+    :func:`~modelgen.codegen.compilers.run_commands`).  ``early`` (part ->
+    :class:`~modelgen.codegen.parts.EarlyPart`, if given): parts already
+    compiling, whose objects are used where they are those of these sources.
     """
     import shutil
     start = time.perf_counter()
@@ -739,7 +702,7 @@ def build_module(directory: Path, name: str, sources: dict, manifest: dict,
     module_name = f"lib_mg_{name}_{manifest['build_hash'][:16]}"
     module_file = module_name + library_suffix()
 
-    tmp = _private_dir(directory, ".build-")
+    tmp = private_dir(directory, ".build-")
     remove_stale_builds(directory)
     remove_stale_builds(cache_dir() / "runtime")
     try:
@@ -747,15 +710,18 @@ def build_module(directory: Path, name: str, sources: dict, manifest: dict,
         for fname in (f"{name}.c", f"{name}.h"):
             (tmp / fname).write_text(sources[fname])
         (tmp / "mg_integrate.h").write_text(integrator["mg_integrate.h"])
-        cc = compiler()
         cores = core_count()
         by_part = {**statements, 0: max(statements.values())}
         parts = part_order({part: (count, _opt_level(count, part)[0])
                             for part, count in statements.items()}) if cores > 1 else (0,)
-        model_objs = [[*cc, *compile_flags(by_part[part], part, host=True), "-Werror",
-                       *([f"-DMG_PART={part}"] if part else []), "-c", f"{name}.c",
-                       "-o", f"{name}_{part}.o"] for part in parts]
-        run_commands(model_objs, tmp, jobs=cores, meanwhile=while_compiling)
+        model_objs = [part_command(name, part, by_part[part]) for part in parts]
+        final = {**sources, "mg_integrate.h": integrator["mg_integrate.h"]}
+        adopted = sorted(p for p, e in (early or {}).items()
+                         if p in parts and e.matches(final, name, model_objs[parts.index(p)]))
+        run_commands([c for p, c in zip(parts, model_objs) if p not in adopted],
+                     tmp, jobs=cores, meanwhile=while_compiling)
+        for part in adopted:
+            early[part].finish(tmp / f"{name}_{part}.o")
         run_commands([link_command([*(f"{name}_{part}.o" for part in parts), str(integrator_obj)],
                            module_file)], tmp)
 
@@ -763,6 +729,7 @@ def build_module(directory: Path, name: str, sources: dict, manifest: dict,
                         module_size=(tmp / module_file).stat().st_size,
                         module_sha256=file_sha256(tmp / module_file),
                         compile_commands=[" ".join(c) for c in model_objs],
+                        early_parts=adopted,
                         integrators={"path": str(integrator_obj), "cached": integrator_cached})
         manifest["manifest_sha256"] = manifest_digest(manifest)
         (tmp / "manifest.json").write_text(json.dumps(manifest, indent=2, sort_keys=True))
@@ -787,6 +754,8 @@ def build_module(directory: Path, name: str, sources: dict, manifest: dict,
                          f"({exc.strerror or exc}: {exc.filename or ''})",
                          fix="choose a writable output directory") from None
     finally:
+        for started in (early or {}).values():
+            started.stop()
         shutil.rmtree(tmp, ignore_errors=True)
     return BuildResult(directory, module_name, directory / module_file, manifest, False,
                        time.perf_counter() - start)

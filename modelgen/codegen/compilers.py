@@ -1,15 +1,65 @@
-"""Which C compiler a build runs, for flags only one compiler knows, and how its
-commands run: in parallel, at most one per core."""
+"""Which C compiler a build runs (``$CC``), for flags only one compiler knows, how it
+links a shared library (``$LDSHARED``), and how its commands run: in parallel, at
+most one per core."""
 from __future__ import annotations
 
 import atexit
 import functools
 import os
+import shlex
+import sysconfig
 from pathlib import Path
 
 from modelgen.errors import BuildError
 
 FIX_COMPILER = "install a C compiler (e.g. apt install gcc) or set CC to one"
+
+
+def split_env(variable: str, default: str) -> list:
+    """``$variable`` split as a shell would; BuildError if it cannot be."""
+    value = os.environ.get(variable, default)
+    try:
+        return shlex.split(value)
+    except ValueError as exc:
+        raise BuildError(f"${variable}={value!r} cannot be split into arguments ({exc})",
+                         fix=f"quote {variable} as in a shell, e.g. "
+                             f"{variable}='-DNAME=\\\"text\\\"'") from None
+
+
+def compiler() -> list:
+    """The C compiler command: ``$CC`` if set, else ``cc``."""
+    command = split_env("CC", "cc")
+    if not command:
+        raise BuildError("$CC is set but empty, so there is no C compiler to run",
+                         fix="unset CC or set it to a C compiler, e.g. CC=gcc")
+    return command
+
+
+def library_suffix() -> str:
+    """File suffix of a model's shared library on this platform."""
+    return sysconfig.get_config_var("SHLIB_SUFFIX") or ".so"
+
+
+def link_command(objects: list, output: str) -> list:
+    """The command linking ``objects`` into the shared library ``output``: the
+    platform's shared-object link as this Python was configured (sysconfig's
+    ``LDSHARED``: ``gcc -shared ...`` on Linux, ``clang -bundle -undefined
+    dynamic_lookup ...`` on macOS), or ``$LDSHARED``; with ``$CC`` set (and not
+    ``$LDSHARED``) its compiler takes the configured one's place, as distutils does.
+
+    >>> link_command(["m.o"], "libm.so")[-4:]
+    ['m.o', '-o', 'libm.so', '-lm']
+    """
+    command = split_env("LDSHARED", sysconfig.get_config_var("LDSHARED") or "")
+    if not command:
+        raise BuildError("this Python's configuration names no command to link a shared "
+                         "library (sysconfig's LDSHARED is empty)",
+                         fix="set LDSHARED to one, e.g. LDSHARED='gcc -shared'")
+    configured = shlex.split(sysconfig.get_config_var("CC") or "")
+    if "CC" in os.environ and "LDSHARED" not in os.environ and configured \
+            and command[:len(configured)] == configured:
+        command = [*compiler(), *command[len(configured):]]
+    return [*command, *objects, "-o", output, "-lm"]
 
 #: Added to an optimised level when the compiler is gcc: its dead-store passes,
 #: which find no dead store in generated code (the same machine code with and

@@ -291,7 +291,7 @@ def _propagate_copies(statements, outputs, graph: Graph):
     return Graph(tuple(kept), graph.free), outputs
 
 
-def make_routines(graph: Graph, routines, *, cse: bool = True, alone=()) -> tuple:
+def make_routines(graph: Graph, routines, *, cse: bool = True, alone=(), ready=None) -> tuple:
     """Build several routines from one program with a single CSE pass.
 
     ``routines`` is a sequence of ``(name, inputs, outputs)`` where ``outputs``
@@ -299,7 +299,10 @@ def make_routines(graph: Graph, routines, *, cse: bool = True, alone=()) -> tupl
     a CSE pass of its own: a joint pass names subexpressions that several
     routines share, and can split one routine's sums and products where that
     routine alone would not (the ABA rhs of the 20-link chain: 229.1
-    operations a coordinate after a joint pass, 226.8 after its own).
+    operations a coordinate after a joint pass, 226.8 after its own).  Those
+    passes come first, in the order of ``alone``, and ``ready(built)`` (if
+    given) is called after each with the routines built so far (name ->
+    Routine), before the joint pass.
 
     >>> import sympy
     >>> from modelgen.derive.graph import GraphBuilder
@@ -310,19 +313,22 @@ def make_routines(graph: Graph, routines, *, cse: bool = True, alone=()) -> tupl
     (['x*y', 'mg_c0 + x', '(mg_c0 + 1)**2'], 5, 4)
     """
     # expression -> operations, for every routine: the groups share statements
-    return _make_routines(graph, routines, cse, alone, {}, {})
+    return _make_routines(graph, routines, cse, alone, {}, {}, ready)
 
 
-def _make_routines(graph: Graph, routines, cse: bool, alone, ops: dict, shared: dict) -> tuple:
+def _make_routines(graph: Graph, routines, cse: bool, alone, ops: dict, shared: dict,
+                   ready=None) -> tuple:
     routines = [(name, tuple(inputs), tuple(outputs)) for name, inputs, outputs in routines]
     if alone:
-        groups = [[r] for r in routines if r[0] in alone]
-        groups.append([r for r in routines if r[0] not in alone])
         built = {}
-        for group in groups:
-            if group:
-                built.update((r.name, r) for r in _make_routines(graph, group, cse, (), ops,
-                                                                   shared))
+        for group in sorted(([r] for r in routines if r[0] in alone),
+                            key=lambda group: list(alone).index(group[0][0])):
+            built.update((r.name, r) for r in _make_routines(graph, group, cse, (), ops, shared))
+            if ready is not None:
+                ready(dict(built))
+        rest = [r for r in routines if r[0] not in alone]
+        if rest:
+            built.update((r.name, r) for r in _make_routines(graph, rest, cse, (), ops, shared))
         return tuple(built[name] for name, _, _ in routines)
     all_outputs = [e for _, _, outs in routines for _, items in outs for e in items]
     before = {}

@@ -140,12 +140,15 @@ def _substitutions(plan: Elimination, entry, sign: str) -> list:
     return lines
 
 
-def unrolled_factor(n: int, tol: str, plan: Elimination) -> list:
+def unrolled_factor(n: int, tol: str, plan: Elimination, stored: bool = False) -> list:
     """The factorization half of :func:`unrolled_ldlt`: locals ``d{j}``, ``inv{j}``
     (1 / d) and ``L{i}_{j}`` from the lower triangle of ``A``; a failing pivot
-    returns its 1-based index."""
+    returns its 1-based index.  With ``stored``, each ``L{i}_{j}`` is also written
+    to the arrays ``Lf`` and ``Lb`` at :func:`factor_offsets`' places, which
+    :func:`unrolled_apply` reads."""
     earlier = plan.earlier()
     earlier_sets = {v: set(ks) for v, ks in earlier.items()}
+    forward, backward = factor_offsets(plan) if stored else ({}, {})
 
     def a(i, j):
         return f"A[{max(i, j) * n + min(i, j)}]"
@@ -165,7 +168,33 @@ def unrolled_factor(n: int, tol: str, plan: Elimination) -> list:
             # a fill-in entry: A is zero there, only the updates remain
             first = "" if frozenset((i, j)) in plan.fill else a(i, j)
             lines.append(f"const double L{i}_{j} = ({first}{terms}) * inv{j};")
+            if stored:
+                lines.append(f"Lf[{forward[i] + earlier[i].index(j)}] = "
+                             f"Lb[{backward[j] + plan.below[j].index(i)}] = L{i}_{j};")
     return lines
+
+
+def factor_offsets(plan: Elimination) -> tuple:
+    """``(forward, backward)``: where each row's and each column's entries of L
+    start in the arrays ``Lf`` (row ``i``: ``L[i][k]`` for ``k`` in ``earlier()[i]``)
+    and ``Lb`` (column ``j``: ``L[i][j]`` for ``i`` in ``below[j]``), each packed in
+    elimination order, ``nonzeros(plan)`` long.
+
+    >>> factor_offsets(elimination([[1, 1, 1], [1, 1, 1], [1, 1, 1]]))
+    ({0: 0, 1: 0, 2: 1}, {0: 0, 1: 2, 2: 3})
+    """
+    earlier = plan.earlier()
+    forward, backward, f, b = {}, {}, 0, 0
+    for v in plan.order:
+        forward[v], backward[v] = f, b
+        f += len(earlier[v])
+        b += len(plan.below[v])
+    return forward, backward
+
+
+def nonzeros(plan: Elimination) -> int:
+    """The entries of L below its diagonal that are not structurally zero."""
+    return sum(len(w) for w in plan.below.values())
 
 
 @functools.lru_cache(maxsize=None)
@@ -226,29 +255,35 @@ def unrolled_columns(plan: Elimination, array: str, stride: str) -> list:
 
 def unrolled_apply(plan: Elimination, name: str) -> list:
     """Straight-line C that overwrites the rows of ``B`` (all the columns at once,
-    rows ``<NAME>_DS`` apart) with ``-A^-1 B``, from the locals of
-    :func:`unrolled_factor`: one call of ``<name>_derivatives_rows`` per row
-    forwards (``y_i = b_i - sum L_ik y_k``) and backwards (``x_i = -y_i / d_i -
-    sum L_ki x_k``), each a fused update that reads row i once and every row it
-    subtracts once, keeping row i in registers.
+    rows ``<NAME>_DS`` apart) with ``-A^-1 B``, from the factor of
+    :func:`unrolled_factor` stored in ``Lf`` and ``Lb``: one call of
+    ``<name>_derivatives_rows`` per row forwards (``y_i = b_i - sum L_ik y_k``) and
+    backwards (``x_i = -y_i / d_i - sum L_ki x_k``), each a fused update that reads
+    row i once and every row it subtracts once, keeping row i in registers.
+
+    Each call reads its coefficients where the factorization stored them, so
+    none of L has to live in a register (or a spill slot) from the
+    factorization to its last use: with the coefficients as locals the
+    compiler's register allocation of this function grew with the square of
+    their number.
 
     >>> unrolled_apply(elimination([[1, 1], [1, 1]]), "m")[0]
-    '{ static const int r[1] = {0 * M_DS}; const double a[1] = {L1_0}; \
-m_derivatives_rows(B + 1 * M_DS, B, r, a, 1, 1.0); }'
+    '{ static const int r[1] = {0 * M_DS}; m_derivatives_rows(B + 1 * M_DS, B, r, Lf + 0, 1, 1.0); }'
     """
     stride = f"{name.upper()}_DS"
     earlier = plan.earlier()
+    forward, backward = factor_offsets(plan)
 
     def call(i, rows, coefs, scale):
         if not rows:
             return f"{name}_derivatives_rows(B + {i} * {stride}, B, NULL, NULL, 0, {scale});"
         offsets = ", ".join(f"{k} * {stride}" for k in rows)
         return (f"{{ static const int r[{len(rows)}] = {{{offsets}}}; "
-                f"const double a[{len(rows)}] = {{{', '.join(coefs)}}}; "
-                f"{name}_derivatives_rows(B + {i} * {stride}, B, r, a, {len(rows)}, {scale}); }}")
-    lines = [call(i, earlier[i], [f"L{i}_{k}" for k in earlier[i]], "1.0")
+                f"{name}_derivatives_rows(B + {i} * {stride}, B, r, {coefs}, {len(rows)}, "
+                f"{scale}); }}")
+    lines = [call(i, earlier[i], f"Lf + {forward[i]}", "1.0")
              for i in plan.order if earlier[i]]
-    lines += [call(i, plan.below[i], [f"L{k}_{i}" for k in plan.below[i]], f"-inv{i}")
+    lines += [call(i, plan.below[i], f"Lb + {backward[i]}", f"-inv{i}")
               for i in reversed(plan.order)]
     return lines
 
@@ -285,8 +320,10 @@ def derivative_solve(n: int, tol: str, pattern, nu: int, name: str = "model") ->
     plan = elimination(pattern)
     unrolled = None
     if n <= UNROLL_SOLVE or plan.products() <= _dense_products(SPARSE_UNROLL_SIZE):
-        unrolled = {"factor": unrolled_factor(n, tol, plan), "by_column": n <= BY_COLUMN_SOLVE}
-        if unrolled["by_column"]:
+        by_column = n <= BY_COLUMN_SOLVE
+        unrolled = {"factor": unrolled_factor(n, tol, plan, stored=not by_column),
+                    "by_column": by_column, "nonzeros": max(nonzeros(plan), 1)}
+        if by_column:
             unrolled |= {"X": unrolled_columns(plan, "X", "N"),
                          "Y": unrolled_columns(plan, "Y", "N"),
                          "U": unrolled_columns(plan, "U", str(nu)) if nu else []}

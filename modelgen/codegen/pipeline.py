@@ -15,11 +15,13 @@ from pathlib import Path
 
 from modelgen.version import __version__
 from modelgen.codegen import budget
+from modelgen.codegen import parts
 from modelgen.codegen.build import (Generated, build_module, cache_dir, cache_lookup,
-                                    compiler, host_flags, integrator_hash, runtime_module)
+                                    compiler, host_flags, integrator_hash, part_command,
+                                    runtime_module)
 from modelgen.codegen.capi import signature_of
-from modelgen.codegen.compilers import probe_compiler
-from modelgen.codegen.cse import hoist_parameters, make_routines
+from modelgen.codegen.compilers import core_count, probe_compiler
+from modelgen.codegen.cse import Routine, hoist_parameters, make_routines
 from modelgen.derive.frames import FrameTerms, derive_frames
 from modelgen.derive.aba import ForwardDynamics, derive_aba, derive_aba_jacobian
 from modelgen.derive.dynamics import Equations, derive_equations
@@ -337,17 +339,23 @@ def generate(spec: ModelSpec, out_dir=None, *, force: bool = False,
     probe_compiler(tuple(compiler()))
     clock = _Clock(progress)
     clock.seconds["check"] = time.perf_counter() - start    # hashes, formulation, cache
-    with _collector_paused():
-        with clock("derive"):
-            derived = _derive(spec, options, tree)
-        with clock("cse"):
-            routines = _eliminate(derived)
-            budget.check_cost(spec, budget.build_cost(routines), limit)
-        with clock("emit"):
-            emitted = _emit(spec, options, derived, routines, model_key)
-    with clock("compile"):
-        return _compile(directory, spec, options, derived, emitted, key, clock.seconds, damage,
-                        while_compiling)
+    early = None
+    try:
+        with _collector_paused():
+            with clock("derive"):
+                derived = _derive(spec, options, tree)
+            with clock("cse"):
+                early = _EarlyStart(spec, options, derived, model_key, directory, limit)
+                routines = _eliminate(derived, early)
+                budget.check_cost(spec, budget.build_cost(routines), limit)
+            with clock("emit"):
+                emitted = _emit(spec, options, derived, routines, model_key, early.printed)
+        with clock("compile"):
+            return _compile(directory, spec, options, derived, emitted, key, clock.seconds,
+                            damage, while_compiling, early.started)
+    finally:
+        if early is not None:
+            early.stop()
 
 
 # -- the stages ------------------------------------------------------------------------
@@ -566,18 +574,80 @@ def _derive_frames(spec: ModelSpec, options: BuildOptions, kin, graph) -> FrameT
                          k.bias_acceleration and bool(k.frames), k.com, k.centroidal)
 
 
-def _eliminate(derived: Derived) -> tuple:
-    """CSE of every routine; the rhs (what an integration runs) and the inverse
-    dynamics are eliminated on their own, and the rhs's parameter-only part hoisted."""
+def _routine_list(derived: Derived) -> list:
+    """``(name, inputs, outputs)`` of every routine of the model, for make_routines."""
     d = derived
     output_lam = multipliers(d.constraints.m) \
         if d.columns is not None and d.columns.reads_multipliers else ()
-    routines = make_routines(d.graph, routines_for(d.eqs, d.output_exprs, d.terms, d.forward,
-                                                   d.linearization, d.inverse, d.constraints,
-                                                   d.derivatives, output_lam)
-                             + frame_routines(d.frames, d.eqs),
-                             alone=("rhs", "inverse_dynamics", "derivative_terms"))
-    return _hoisted(routines)
+    return routines_for(d.eqs, d.output_exprs, d.terms, d.forward, d.linearization, d.inverse,
+                        d.constraints, d.derivatives, output_lam) \
+        + frame_routines(d.frames, d.eqs)
+
+
+def _eliminate(derived: Derived, ready=None) -> tuple:
+    """CSE of every routine; the rhs (what an integration runs), the derivatives'
+    straight line and the inverse dynamics are eliminated on their own (first,
+    in that order: the largest compiles first, see :class:`_EarlyStart`; each
+    followed by ``ready``, see make_routines), and the rhs's parameter-only
+    part hoisted."""
+    return _hoisted(make_routines(derived.graph, _routine_list(derived), ready=ready,
+                                  alone=("rhs", "derivative_terms", "inverse_dynamics")))
+
+
+class _EarlyStart:
+    """The ``ready`` of :func:`_eliminate` that starts the compile of a part as
+    soon as the routines it needs are eliminated (:mod:`modelgen.codegen.parts`),
+    on a machine with two cores or more: its own, the rhs (which gives the
+    header its ``NPD``) and, for part 3, the derivatives' straight line (whose
+    work array its API declares).  The routines eliminated on their own are
+    all some parts hold (part 2: the rhs and prepare; 3: the inverse dynamics;
+    4: the derivatives' straight line), so those parts compile while the joint
+    elimination of the others runs; part 1 and any part with a routine of the
+    joint elimination are compiled with the rest.  Nothing starts once the
+    routines known are alone over the build budget ``limit`` (the model is then
+    refused after its elimination).  ``printed``: the routines it printed, for
+    :func:`_emit`; ``started``: part -> :class:`~modelgen.codegen.parts.EarlyPart`."""
+
+    def __init__(self, spec: ModelSpec, options: BuildOptions, derived: Derived,
+                 model_key: str, directory: Path, limit: int):
+        self.spec, self.options, self.derived = spec, options, derived
+        self.model_key, self.directory, self.limit = model_key, directory, limit
+        self.routines = _routine_list(derived)
+        names = {name for name, _, _ in self.routines}
+        self.needs = {} if core_count() < 2 else {
+            part: {name for name in names if routine_part(name) == part} | {"rhs"}
+            | ({"derivative_terms"} & names if part == 3 else set())
+            for part in (2, 3, 4) if any(routine_part(name) == part for name in names)}
+        self.printed, self.started = {}, {}
+
+    def __call__(self, built: dict) -> None:
+        ready = [part for part, need in self.needs.items() if need <= built.keys()]
+        if not ready:
+            return
+        for part in ready:
+            del self.needs[part]
+        known = {r.name: r for r in _hoisted(tuple(built.values()))}
+        if budget.build_cost(tuple(known.values())).weighted > self.limit:
+            self.needs = {}
+            return
+        order = [r for name, inputs, _ in self.routines
+                 for r in ((known["prepare"], known["rhs"]) if name == "rhs" else
+                           (known.get(name) or Routine(name, inputs, (), (), 0, 0),))]
+        emitted = _emit(self.spec, self.options, self.derived, tuple(order), self.model_key,
+                        self.printed)
+        self.printed = {name: emitted.functions[name] for name in known}
+        statements = part_statements({f.name: f.statements for f in self.printed.values()})
+        name = self.spec.name
+        sources = {**emitted.sources, "mg_integrate.h": integrator_sources()["mg_integrate.h"]}
+        for part in ready:
+            started = parts.start(self.directory, name, sources, part,
+                                  part_command(name, part, statements[part]))
+            if started is not None:
+                self.started[part] = started
+
+    def stop(self) -> None:
+        for started in self.started.values():
+            started.stop()
 
 
 @dataclass(frozen=True)
@@ -590,10 +660,12 @@ class Emitted:
 
 
 def _emit(spec: ModelSpec, options: BuildOptions, derived: Derived, routines: tuple,
-          model_key: str) -> Emitted:
-    """Print every routine to C and render ``<name>.h`` and ``<name>.c``."""
+          model_key: str, printed=None) -> Emitted:
+    """Print every routine to C (``printed``: name -> those already printed) and
+    render ``<name>.h`` and ``<name>.c``."""
     eqs, columns, forward = derived.eqs, derived.columns, derived.forward
-    functions = {r.name: print_routine(r) for r in routines}
+    printed = printed or {}
+    functions = {r.name: printed.get(r.name) or print_routine(r) for r in routines}
     context = template_context(
         name=spec.name, description=spec.description,
         model_hash=model_key[:16],
@@ -692,12 +764,13 @@ def _constraint_manifest(spec: ModelSpec, terms) -> dict:
 
 def _compile(directory: Path, spec: ModelSpec, options: BuildOptions, derived: Derived,
              emitted: Emitted, key: str, seconds: dict, damage: str,
-             while_compiling=None) -> Generated:
+             while_compiling=None, early=None) -> Generated:
     """Compile and cache the sources (the caller times it into ``seconds``).
-    ``damage`` says why a cached build was not reused (recorded in the result)."""
+    ``damage`` says why a cached build was not reused (recorded in the result);
+    ``early``: part -> the parts already compiling (:class:`_EarlyStart`)."""
     manifest = _manifest(spec, options, derived, emitted, key)
     statements = part_statements({f.name: f.statements for f in emitted.functions.values()})
     build = build_module(directory, spec.name, emitted.sources, dict(manifest, seconds=seconds),
-                         statements, integrator_sources(), while_compiling)
+                         statements, integrator_sources(), while_compiling, early)
     build = replace(build, rebuilt_because=damage)
     return Generated(build, dict(build.manifest, seconds=seconds))
