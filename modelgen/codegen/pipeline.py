@@ -34,7 +34,7 @@ from modelgen.codegen import tree_derivatives as plan
 from modelgen.codegen.tree_derivatives import (derivative_loop, derivative_method,
                                                derivative_routine, derivatives_pattern,
                                                time_free)
-from modelgen.errors import ModelError
+from modelgen.errors import ModelError, ModelgenError
 from modelgen.codegen.emit import (ABI_VERSION, constraint_context, emit_sources,
                                    integrator_sources, print_routine, runtime_sources,
                                    template_context, templates_digest)
@@ -633,8 +633,14 @@ class _EarlyStart:
         order = [r for name, inputs, _ in self.routines
                  for r in ((known["prepare"], known["rhs"]) if name == "rhs" else
                            (known.get(name) or Routine(name, inputs, (), (), 0, 0),))]
-        emitted = _emit(self.spec, self.options, self.derived, tuple(order), self.model_key,
-                        self.printed)
+        try:
+            emitted = _emit(self.spec, self.options, self.derived, tuple(order),
+                            self.model_key, self.printed)
+        except ModelgenError:
+            # a routine that cannot be printed: the final emit refuses the model, in
+            # the order of every build (and on one core), not this one's
+            self.needs = {}
+            return
         self.printed = {name: emitted.functions[name] for name in known}
         statements = part_statements({f.name: f.statements for f in self.printed.values()})
         name = self.spec.name
