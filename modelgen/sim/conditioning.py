@@ -1,4 +1,4 @@
-"""How close a mass matrix is to singular: the pivot test, its wording, and its growth along a run.
+"""How close a mass matrix is to singular: the pivot test's wording, and its growth along a run.
 
 The generated solve factors A = L D L^T without pivoting and refuses pivot j
 when ``d_j <= tol * A_jj`` or ``A_jj <= 0`` (``PIVOT_TOL`` = 1e-13, the C's
@@ -11,8 +11,11 @@ are worded apart: a pivot with |d_j| <= tol * A_jj on a positive diagonal
 is *singular to working precision*; a pivot more negative than that, a
 diagonal A_jj <= 0, or NaN is *not positive definite*.
 
->>> A = np.array([[1.0, 0.0], [0.0, 1e-15]])          # a mass ratio of 1e15: well defined
->>> failing_pivot(A) is None
+The test itself is :func:`modelgen.sim.massmatrix.failing_pivot` (plain Python,
+which a build's check runs without numpy):
+
+>>> from modelgen.sim.massmatrix import failing_pivot
+>>> failing_pivot([[1.0, 0.0], [0.0, 1e-15]]) is None   # a mass ratio of 1e15: well defined
 True
 >>> failure_kind(np.array([[1.0, 1.0], [1.0, 1.0 + 1e-15]]), 1)
 'singular to working precision'
@@ -23,47 +26,15 @@ from __future__ import annotations
 
 import numpy as np
 
-from modelgen.sim.massmatrix import PIVOT_TOL
+from modelgen.sim.massmatrix import PIVOT_TOL, pivot_ratios
 #: a failure note names the configuration when cond(A) grew by this factor
 GROWTH = 1e3
-
-
-def pivot_ratios(A) -> np.ndarray:
-    """``d_j / A_jj`` of the LDL^T factorization, up to and including the first
-    pivot that fails the test (NaN after it)."""
-    A = np.array(A, dtype=float)
-    n = A.shape[0]
-    L, d = np.eye(n), np.zeros(n)
-    ratios = np.full(n, np.nan)
-    with np.errstate(invalid="ignore", over="ignore", divide="ignore"):   # inf or NaN in A
-        return _ratios(A, L, d, ratios)
-
-
-def _ratios(A, L, d, ratios) -> np.ndarray:
-    for j in range(A.shape[0]):
-        d[j] = A[j, j] - (L[j, :j] * L[j, :j]) @ d[:j]
-        # a diagonal that is zero, negative or NaN: the coordinate moves no mass (or
-        # the parameters are not physical): not positive definite
-        ratios[j] = d[j] / A[j, j] if A[j, j] > 0 else -np.inf
-        if not ratios[j] > PIVOT_TOL:
-            break
-        L[j + 1:, j] = (A[j + 1:, j] - L[j + 1:, :j] @ (L[j, :j] * d[:j])) / d[j]
-    return ratios
-
-
-def failing_pivot(A, tol: float = PIVOT_TOL):
-    """0-based index of the first pivot with ``d_j <= tol * A_jj`` (or NaN), or None."""
-    ratios = pivot_ratios(A)
-    for j, r in enumerate(ratios):
-        if not r > tol:
-            return j
-    return None
 
 
 def failure_kind(A, pivot: int, tol: float = PIVOT_TOL) -> str:
     """Why pivot ``pivot`` (0-based) of A fails: 'singular to working precision'
     (|d_j| <= tol A_jj) or 'not positive definite' (below that, or NaN)."""
-    r = pivot_ratios(A)[pivot]
+    r = pivot_ratios(np.asarray(A, dtype=float).tolist())[pivot]
     return "singular to working precision" if r >= -tol else "not positive definite"
 
 
