@@ -27,8 +27,9 @@ for the children, as for an installed package):
     ``modelgen generate chain.yaml -o DIR --force``, against PyDy on the same
     model (``modelgen/bench/pydy_models.py``: sympy's ``KanesMethod`` and
     PyDy's Cython backend, ``generate_ode_function(..., generator="cython")``),
-    each in a fresh process into a fresh directory, in the same run; the ratio
-    PyDy / modelgen.  Skipped, with the reason, when pydy or cython is missing.
+    each in a fresh process into a fresh directory, the two alternated in the
+    same run; the ratio PyDy / modelgen.  Skipped, with the reason, when pydy or
+    cython is missing.
 
 The figures of the issue (before the work) and the targets are printed beside
 the measurement.  A shared machine is noisy: compare the minimum, and rerun
@@ -81,14 +82,9 @@ def run(argv, env, cwd=REPO) -> tuple:
     return wall, cpu, proc.stdout
 
 
-def timed(argv, env, rounds: int, fresh=None) -> list:
-    """(wall, CPU) seconds of ``rounds`` runs; ``fresh(k)`` (if given) prepares round k."""
-    times = []
-    for k in range(rounds):
-        if fresh:
-            fresh(k)
-        times.append(run(argv, env)[:2])
-    return times
+def timed(argv, env, rounds: int) -> list:
+    """(wall, CPU) seconds of ``rounds`` runs."""
+    return [run(argv, env)[:2] for _ in range(rounds)]
 
 
 def python(code: str) -> list:
@@ -148,15 +144,18 @@ def main(argv=None) -> int:
         chain = root / f"spatial_chain_{CHAIN_LINKS}.yaml"
         chain.write_text(spec_to_yaml(spatial_chain(CHAIN_LINKS).spec()))
         generate = modelgen_cli("generate", chain, "-o", root / "chain", "--force")
-        gen_times = timed(generate, env, chain_rounds)
+        pydy = [sys.executable, "-m", "modelgen.bench.pydy_models", str(CHAIN_LINKS),
+                str(root / "pydy")]
         missing = pydy_missing()
-        pydy_times = []
-        if not missing:
-            def fresh(k):
+        gen_times, pydy_times = [], []
+        # alternated, so that a machine that slows down or speeds up during the
+        # run moves both sides of the ratio alike
+        for _ in range(chain_rounds):
+            gen_times.append(run(generate, env)[:2])
+            if not missing:
                 shutil.rmtree(root / "pydy", ignore_errors=True)
                 (root / "pydy").mkdir()
-            pydy_times = timed([sys.executable, "-m", "modelgen.bench.pydy_models",
-                                str(CHAIN_LINKS), str(root / "pydy")], env, chain_rounds, fresh)
+                pydy_times.append(run(pydy, env)[:2])
 
         load_avg = ", ".join(f"{v:.2f}" for v in os.getloadavg())
         print(f"# Start-up and generation time ({rounds} rounds, chain {chain_rounds}; "
@@ -184,7 +183,10 @@ def main(argv=None) -> int:
         if pydy_times:
             ratio = min(t[0] for t in pydy_times) / min(t[0] for t in gen_times)
             ratio_cpu = min(t[1] for t in pydy_times) / min(t[1] for t in gen_times)
-            print(f"\nPyDy / modelgen = {ratio:.1f}x wall, {ratio_cpu:.1f}x CPU (min over min); "
+            medians = statistics.median(t[0] for t in pydy_times) \
+                / statistics.median(t[0] for t in gen_times)
+            print(f"\nPyDy / modelgen = {ratio:.1f}x wall, {ratio_cpu:.1f}x CPU (min over min), "
+                  f"{medians:.1f}x wall (median over median); "
                   f"{verdict('chain ratio', ratio, higher_is_better=True)} (wall)")
         else:
             print(f"\nPyDy not measured: {missing} not installed "
