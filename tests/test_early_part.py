@@ -85,3 +85,25 @@ def test_part_text_keeps_the_common_lines_and_the_part():
     # blocks that do not pair up: nothing is assumed
     assert parts.part_text(src.replace("#endif /* MG_PART 1 */\n", ""), 2) is None
     assert parts.part_text("#if !defined(MG_PART) || MG_PART == 1\n", 2) is None
+
+
+def test_a_failed_early_compile_is_a_build_error_with_its_output(tmp_path):
+    """The early part's own compile failing (what run_commands reports for the
+    others): the command, the compiler's output and its exit status."""
+    from modelgen.errors import BuildError
+    sources = {"m.c": "int x;\n", "m.h": ""}
+    command = ["sh", "-c", "echo 'm.c:1: error: boom'; exit 3", "-o", "m_2.o"]
+    early = parts.start(tmp_path, "m", sources, 2, command)
+    assert early is not None and early.matches(sources, "m", command)
+    with pytest.raises(BuildError, match="C compiler failed") as info:
+        early.finish(tmp_path / "m_2.o")
+    assert "boom" in str(info.value) and info.value.returncode == 3
+    assert info.value.command == command
+    assert not early.tmp.exists() and not (tmp_path / "m_2.o").exists()
+
+
+def test_an_early_part_that_cannot_start_leaves_nothing(tmp_path):
+    """A compiler that cannot run: no early part (the build then reports it, see
+    tests/test_build_cache.py) and no directory left."""
+    assert parts.start(tmp_path, "m", {"m.c": ""}, 2, [str(tmp_path / "no-such-cc")]) is None
+    assert not list(tmp_path.glob(".build-*"))
