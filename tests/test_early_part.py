@@ -107,3 +107,13 @@ def test_an_early_part_that_cannot_start_leaves_nothing(tmp_path):
     tests/test_build_cache.py) and no directory left."""
     assert parts.start(tmp_path, "m", {"m.c": ""}, 2, [str(tmp_path / "no-such-cc")]) is None
     assert not list(tmp_path.glob(".build-*"))
+
+
+def test_a_part_whose_text_cannot_be_told_is_never_kept(tmp_path):
+    """Blocks that do not pair up: part_text cannot say what the part reads, so
+    the early object is not used even when the two files are the same."""
+    sources = {"m.c": "#if !defined(MG_PART) || MG_PART == 1\nint x;\n", "m.h": ""}
+    command = ["sh", "-c", "exit 0", "-o", "m_2.o"]
+    early = parts.start(tmp_path, "m", sources, 2, command)
+    assert early is not None and not early.matches(sources, "m", command)
+    assert not early.tmp.exists()

@@ -1,17 +1,19 @@
-"""One part of a model's C compiled early, while Python still derives the rest.
+"""Parts of a model's C compiled early, while Python still eliminates the rest.
 
 A model's ``<name>.c`` is compiled once per part (``-DMG_PART=k``, see
-:data:`modelgen.codegen.build.OPT_LEVELS`), and the largest part is ready to
-compile before the rest of the file is: the rhs, or with the derivatives
-their straight line, is eliminated on its own, before the routines that
-share one elimination (the mass matrix, the energies...).  :func:`start`
-compiles that part from a file rendered with the routines known so far (the
-others empty); :meth:`EarlyPart.matches` keeps its object only when the final
-file gives the part the same text (:func:`part_text`), the same header and
-the same command, so the library is always the final file compiled; if
-anything differs the object is discarded and the part compiled again with
-the others.  The compiler then runs on one core while the derivation runs on
-the other.
+:data:`modelgen.codegen.build.OPT_LEVELS`), and parts 2, 3 and 4 are ready to
+compile before the rest of the file is: they hold only the routines
+eliminated on their own (the rhs, the derivatives' straight line, the
+inverse dynamics), which come before the routines that share one
+elimination (the mass matrix, the energies...), see
+:class:`modelgen.codegen.pipeline._EarlyStart`.  :func:`start` compiles a part
+from a file rendered with the routines known so far (the others empty);
+:meth:`EarlyPart.matches` keeps its object only when the final file gives
+the part the same text (:func:`part_text`), the same headers and the same
+command, so the library is always the final file compiled; if anything
+differs, or the text cannot be told, the object is discarded and the part
+compiled again with the others.  The compilers then run on the cores the
+elimination leaves.
 """
 from __future__ import annotations
 
@@ -69,8 +71,10 @@ class EarlyPart:
 
     def matches(self, sources: dict, name: str, command: list) -> bool:
         """True if the final ``sources`` (file name -> text) and ``command`` of the
-        part are those it compiles; else it is stopped."""
-        if command == self.command and _texts(sources, name, self.part) == self.texts:
+        part are those it compiles (a text :func:`part_text` cannot tell is
+        not); else it is stopped."""
+        known = self.texts.get(f"{name}.c") is not None
+        if known and command == self.command and _texts(sources, name, self.part) == self.texts:
             return True
         self.stop()
         return False
