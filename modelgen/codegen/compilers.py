@@ -61,6 +61,7 @@ def link_command(objects: list, output: str) -> list:
         command = [*compiler(), *command[len(configured):]]
     return [*command, *objects, "-o", output, "-lm"]
 
+
 #: Added to an optimised level when the compiler is gcc: its dead-store passes,
 #: which find no dead store in generated code (the same machine code with and
 #: without, up to the stack slots of spills, on the 20- and 50-link chains with
@@ -94,7 +95,6 @@ GCC_O2_FLAGS = ("-fno-gcse", "-fno-rerun-cse-after-loop", "-fno-code-hoisting",
 GCC_O1_FLAGS = ("-fno-tree-ccp", "-fno-tree-sra")
 
 
-
 def gcc_flags(level: str) -> tuple:
     """The gcc-only flags of an optimisation ``level`` ("-O0", "-O1", "-O2"):
     :data:`GCC_FLAGS` and the level's own (:data:`GCC_O1_FLAGS`,
@@ -106,6 +106,7 @@ def gcc_flags(level: str) -> tuple:
     if level == "-O0":
         return ()
     return (*GCC_FLAGS, *{"-O1": GCC_O1_FLAGS, "-O2": GCC_O2_FLAGS}.get(level, ()))
+
 
 @functools.lru_cache(maxsize=4)
 def is_gcc(command: tuple) -> bool:
@@ -212,23 +213,19 @@ def run_commands(commands: list, cwd: Path, what: str = "C compiler failed",
     (``jobs`` of them, or all) have started, while they run: work of the caller's
     that waits for no compiler, e.g. an import, then takes no wall time from them
     on a core they leave free (and none of Python's from starting them)."""
-    import subprocess
     import threading
     from concurrent.futures import ThreadPoolExecutor
     started = threading.Semaphore(0)
 
     def run(cmd: list) -> BuildError | None:
         try:
-            proc = subprocess.Popen(cmd, cwd=cwd, stdout=subprocess.PIPE,
-                                    stderr=subprocess.STDOUT, text=True)
+            proc = start_command(cmd, cwd)
         except OSError as exc:
             return BuildError(f"the C compiler {cmd[0]!r} cannot be run "
                               f"({exc.strerror or exc})", cmd, fix=FIX_COMPILER)
         finally:
             started.release()
-        out, _ = proc.communicate()
-        return BuildError(what, cmd, out, returncode=proc.returncode) \
-            if proc.returncode != 0 else None
+        return command_failure(proc, cmd, what)
 
     if not commands:
         return
@@ -243,3 +240,19 @@ def run_commands(commands: list, cwd: Path, what: str = "C compiler failed",
     failure = next((f for f in failures if f is not None), None)
     if failure:
         raise failure
+
+
+def start_command(cmd: list, cwd: Path):
+    """``cmd`` started in ``cwd``, its output and errors in one pipe (OSError if it
+    cannot start)."""
+    import subprocess
+    return subprocess.Popen(cmd, cwd=cwd, stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True)
+
+
+def command_failure(proc, cmd: list, what: str = "C compiler failed") -> BuildError | None:
+    """Wait for ``proc`` (``cmd``, from :func:`start_command`): None if it succeeded,
+    else the BuildError (``what``, the command, its full output and exit status)."""
+    out, _ = proc.communicate()
+    return BuildError(what, cmd, out, returncode=proc.returncode) \
+        if proc.returncode != 0 else None

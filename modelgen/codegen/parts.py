@@ -23,6 +23,7 @@ import subprocess
 from pathlib import Path
 
 from modelgen.codegen.build import private_dir
+from modelgen.codegen.compilers import command_failure, start_command
 from modelgen.errors import BuildError
 
 #: The first and last line of a block that only part k compiles (model.c.j2,
@@ -83,10 +84,9 @@ class EarlyPart:
         """Wait for the compile and move its object to ``target`` (BuildError, as
         for any compile, if it failed)."""
         try:
-            out, _ = self.proc.communicate()
-            if self.proc.returncode != 0:
-                raise BuildError("C compiler failed", self.command, out,
-                                 returncode=self.proc.returncode)
+            failure = command_failure(self.proc, self.command)
+            if failure is not None:
+                raise failure
             (self.tmp / self.command[-1]).replace(target)
         finally:
             self.stop()
@@ -119,8 +119,7 @@ def start(directory: Path, name: str, sources: dict, part: int,
     try:
         for fname, text in sources.items():
             (tmp / fname).write_text(text)
-        proc = subprocess.Popen(command, cwd=tmp, stdout=subprocess.PIPE,
-                                stderr=subprocess.STDOUT, text=True)
+        proc = start_command(command, tmp)
     except OSError:
         shutil.rmtree(tmp, ignore_errors=True)
         return None

@@ -263,13 +263,13 @@ def frame_routines(terms: FrameTerms | None, eqs: Equations) -> list:
     return [(name, inputs, ((out, exprs),)) for name, inputs, out, exprs in table if exprs]
 
 
-def _hoisted(routines) -> tuple:
+def _hoisted(routines, split=hoist_parameters) -> tuple:
     """``routines`` with ``rhs`` split into ``prepare`` (its parameter-only
     statements, written into ``pd``) and the ``rhs`` that reads ``pd``
-    (:func:`modelgen.codegen.cse.hoist_parameters`)."""
+    (:func:`modelgen.codegen.cse.hoist_parameters`, or ``split``)."""
     out = []
     for r in routines:
-        out.extend(hoist_parameters(r) if r.name == "rhs" else (r,))
+        out.extend(split(r) if r.name == "rhs" else (r,))
     return tuple(out)
 
 
@@ -345,8 +345,10 @@ def generate(spec: ModelSpec, out_dir=None, *, force: bool = False,
             with clock("derive"):
                 derived = _derive(spec, options, tree)
             with clock("cse"):
-                early = _EarlyStart(spec, options, derived, model_key, directory, limit)
-                routines = _eliminate(derived, early)
+                listed = _routine_list(derived)
+                early = _EarlyStart(spec, options, derived, listed, model_key, directory,
+                                    limit)
+                routines = _eliminate(derived, early, listed)
                 budget.check_cost(spec, budget.build_cost(routines), limit)
             with clock("emit"):
                 emitted = _emit(spec, options, derived, routines, model_key, early.printed)
@@ -584,14 +586,26 @@ def _routine_list(derived: Derived) -> list:
         + frame_routines(d.frames, d.eqs)
 
 
-def _eliminate(derived: Derived, ready=None) -> tuple:
-    """CSE of every routine; the rhs (what an integration runs), the derivatives'
-    straight line and the inverse dynamics are eliminated on their own (first,
-    in that order: the largest compiles first, see :class:`_EarlyStart`; each
-    followed by ``ready``, see make_routines), and the rhs's parameter-only
-    part hoisted."""
-    return _hoisted(make_routines(derived.graph, _routine_list(derived), ready=ready,
-                                  alone=("rhs", "derivative_terms", "inverse_dynamics")))
+def _eliminate(derived: Derived, ready=None, listed=None) -> tuple:
+    """CSE of every routine (``listed``: :func:`_routine_list`'s, if known); the rhs
+    (what an integration runs), the derivatives' straight line and the inverse
+    dynamics are eliminated on their own (first, in that order: the largest
+    compiles first, see :class:`_EarlyStart`), and the rhs's parameter-only
+    part hoisted.  ``ready(known)`` (if given) is called after each of those
+    passes with the routines known so far, hoisted (name -> Routine)."""
+    splits = {}             # id(rhs) -> (rhs, its split), by identity: no hash of it
+
+    def split(rhs):         # once, for the early starts and the result alike
+        if id(rhs) not in splits:
+            splits[id(rhs)] = (rhs, hoist_parameters(rhs))
+        return splits[id(rhs)][1]
+
+    def hoisted_ready(built: dict) -> None:
+        ready({r.name: r for r in _hoisted(built.values(), split)})
+    return _hoisted(make_routines(derived.graph, listed or _routine_list(derived),
+                                  ready=hoisted_ready if ready is not None else None,
+                                  alone=("rhs", "derivative_terms", "inverse_dynamics")),
+                    split)
 
 
 class _EarlyStart:
@@ -609,10 +623,10 @@ class _EarlyStart:
     :func:`_emit`; ``started``: part -> :class:`~modelgen.codegen.parts.EarlyPart`."""
 
     def __init__(self, spec: ModelSpec, options: BuildOptions, derived: Derived,
-                 model_key: str, directory: Path, limit: int):
+                 listed: list, model_key: str, directory: Path, limit: int):
         self.spec, self.options, self.derived = spec, options, derived
         self.model_key, self.directory, self.limit = model_key, directory, limit
-        self.routines = _routine_list(derived)
+        self.routines = listed          # _routine_list(derived)
         names = {name for name, _, _ in self.routines}
         self.needs = {} if core_count() < 2 else {
             part: {name for name in names if routine_part(name) == part} | {"rhs"}
@@ -620,13 +634,12 @@ class _EarlyStart:
             for part in (2, 3, 4) if any(routine_part(name) == part for name in names)}
         self.printed, self.started = {}, {}
 
-    def __call__(self, built: dict) -> None:
-        ready = [part for part, need in self.needs.items() if need <= built.keys()]
+    def __call__(self, known: dict) -> None:
+        ready = [part for part, need in self.needs.items() if need <= known.keys()]
         if not ready:
             return
         for part in ready:
             del self.needs[part]
-        known = {r.name: r for r in _hoisted(tuple(built.values()))}
         if budget.build_cost(tuple(known.values())).weighted > self.limit:
             self.needs = {}
             return
