@@ -150,6 +150,21 @@ def test_make_routines_without_cse_keeps_the_program():
     assert r.ops_before == r.ops_after == 5
 
 
+def test_plain_routine_keeps_its_program_beside_eliminated_ones():
+    x, y = sympy.symbols("x y")
+    g = graph_module.GraphBuilder()
+    a = g.name(x * y + x)
+    b = g.name((x * y + 1) ** 2)
+    graph = g.freeze()
+    routines = [(name, (("in", (x, y)),), (("out", (a, b)),)) for name in ("f", "g")]
+    seen = []
+    f, h = make_routines(graph, routines, alone=("g", "f"), plain=("f",),
+                         ready=lambda built: seen.append(sorted(built)))
+    assert f.statements == graph.assignments and f.ops_before == f.ops_after == 5
+    assert h.ops_after == 4 < h.ops_before       # x*y named once in "g" alone
+    assert seen == [["g"], ["f", "g"]]
+
+
 def _pool():
     x, y = sympy.symbols("x y")
     # names whose string order is not their creation order, assumptions (which

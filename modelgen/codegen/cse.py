@@ -291,7 +291,8 @@ def _propagate_copies(statements, outputs, graph: Graph):
     return Graph(tuple(kept), graph.free), outputs
 
 
-def make_routines(graph: Graph, routines, *, cse: bool = True, alone=(), ready=None) -> tuple:
+def make_routines(graph: Graph, routines, *, cse: bool = True, alone=(), plain=(),
+                  ready=None) -> tuple:
     """Build several routines from one program with a single CSE pass.
 
     ``routines`` is a sequence of ``(name, inputs, outputs)`` where ``outputs``
@@ -302,7 +303,10 @@ def make_routines(graph: Graph, routines, *, cse: bool = True, alone=(), ready=N
     operations a coordinate after a joint pass, 226.8 after its own).  Those
     passes come first, in the order of ``alone``, and ``ready(built)`` (if
     given) is called after each with the routines built so far (name ->
-    Routine), before the joint pass.
+    Routine), before the joint pass.  A routine named in ``alone`` and in
+    ``plain`` keeps its program as derived, with no CSE pass: one whose
+    derivation already names every quantity it shares, where what a pass
+    would find the compiler's value numbering finds too.
 
     >>> import sympy
     >>> from modelgen.derive.graph import GraphBuilder
@@ -313,17 +317,18 @@ def make_routines(graph: Graph, routines, *, cse: bool = True, alone=(), ready=N
     (['x*y', 'mg_c0 + x', '(mg_c0 + 1)**2'], 5, 4)
     """
     # expression -> operations, for every routine: the groups share statements
-    return _make_routines(graph, routines, cse, alone, {}, {}, ready)
+    return _make_routines(graph, routines, cse, alone, {}, {}, ready, plain)
 
 
 def _make_routines(graph: Graph, routines, cse: bool, alone, ops: dict, shared: dict,
-                   ready=None) -> tuple:
+                   ready=None, plain=()) -> tuple:
     routines = [(name, tuple(inputs), tuple(outputs)) for name, inputs, outputs in routines]
     if alone:
         built = {}
         for group in sorted(([r] for r in routines if r[0] in alone),
                             key=lambda group: list(alone).index(group[0][0])):
-            built.update((r.name, r) for r in _make_routines(graph, group, cse, (), ops, shared))
+            built.update((r.name, r) for r in _make_routines(
+                graph, group, cse and group[0][0] not in plain, (), ops, shared))
             if ready is not None:
                 ready(dict(built))
         rest = [r for r in routines if r[0] not in alone]

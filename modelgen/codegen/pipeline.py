@@ -602,9 +602,13 @@ def _eliminate(derived: Derived, ready=None, listed=None) -> tuple:
 
     def hoisted_ready(built: dict) -> None:
         ready({r.name: r for r in _hoisted(built.values(), split)})
+    # the recursive derivatives' program names every per-dof vector as it is
+    # built: a CSE pass over it is costly and finds nothing gcc does not
+    plain = ("derivative_terms",) if isinstance(derived.derivatives, RneaPartials) else ()
     return _hoisted(make_routines(derived.graph, listed or _routine_list(derived),
                                   ready=hoisted_ready if ready is not None else None,
-                                  alone=("rhs", "derivative_terms", "inverse_dynamics")),
+                                  alone=("rhs", "derivative_terms", "inverse_dynamics"),
+                                  plain=plain),
                     split)
 
 
