@@ -1,37 +1,29 @@
-"""The derivatives' per-dof vectors as a loop over the links: a hand-written
-prototype against modelgen's generated straight line, for issue 25's generation
-targets.
+"""The derivatives' per-dof vectors looped over the joints (kernels per joint
+signature, ``derive/link_kernels.py``) against one straight line, in one run.
 
 Run from the repository root (valgrind for the instruction counts)::
 
-    .venv/bin/python bench/looped_derivatives.py            # n = 20 and 50
-    .venv/bin/python bench/looped_derivatives.py --n 20
+    .venv/bin/python bench/looped_derivatives.py              # n = 20 and 50
+    .venv/bin/python bench/looped_derivatives.py --n 20 50 100
 
 Method
-    ``<name>_derivative_terms_eval`` of ``spatial_chain(n)`` built with
-    ``derivatives=True`` writes, for every dof, the 51 numbers of
-    :data:`modelgen.derive.rnea_partials.VECTORS` (58 with the articulated-body
-    factor above 30 dofs) into W, as one straight line of O(n) statements.
-    ``prototypes/looped_derivatives/looped.c`` computes the same W by hand as a
-    generator could emit it: a table of per-link constants filled from p once
-    (what ``prepare`` does for the rhs), a forward kernel per joint signature
-    (revolute about z, about y, and the root with the ground as parent), one
-    backward kernel, called in loops over the links.  Both are compiled with
-    the model's own part-4 command from the manifest; *looped, calls* keeps the
-    kernels as functions, *looped, inlined* inlines them into the loops
-    (``-DPROTO_INLINE``).  *agree*: the largest difference over all of W over
-    the largest entry, at 10 random states (5 with random masses and lengths).
-    *instr.*: callgrind, 200 calls minus none.  *compile s*: minimum of 3 runs
-    of the compiler, the straight line's being the model's whole part 4 (with
-    the dot products' loops, a few hundred lines).  *µs*: the driver's minimum
-    over 15 repeats of 2,000 calls, unrolled and looped in one process.
-    Prints the table; the ratios are looped / unrolled.
+    ``spatial_chain(n)`` built with ``derivatives=True`` both ways
+    (``modelgen.codegen.tree_derivatives.LOOPED`` True or False), each in a
+    fresh process (after one of a 2-link chain, which builds the shared runtime):
+    *generate* is its wall and CPU seconds (the process and its compilers) of
+    ``modelgen.load(..., force=True)``; *part 4 s* the minimum of
+    3 runs of the compile command of the part that holds the vectors (from the
+    manifest).  ``<name>_derivatives`` at the state x0 of ``bench/derivatives.py``
+    through ``harness/model_bench.c``: *instr.*, callgrind, 200 calls minus none;
+    *µs*, the harness's minimum, the two forms alternating ``--rounds`` times
+    and the minimum kept.  *agree*: the largest difference of d qdd / d q and
+    d qdd / d v over their largest entry, looped against straight, at x0.
 """
 from __future__ import annotations
 
 import argparse
+import json
 import shlex
-import shutil
 import subprocess
 import sys
 import tempfile
@@ -41,119 +33,104 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
-import modelgen  # noqa: E402
-from modelgen.bench.harnesses import instructions_per_call  # noqa: E402
-from modelgen.codegen.build import compile_flags, compiler  # noqa: E402
-from modelgen.model.chains import spatial_chain  # noqa: E402
+CHILD = """
+import json, resource, sys, time
+start = time.perf_counter()
+sys.path.insert(0, {repo!r})
+import modelgen
+from modelgen.codegen import tree_derivatives
+from modelgen.model.chains import spatial_chain
+tree_derivatives.LOOPED = {looped!r}
+modelgen.load(spatial_chain({n}).spec(), {out!r}, derivatives=True, force=True)
+me, kids = (resource.getrusage(w) for w in (resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN))
+print(json.dumps({{"wall": time.perf_counter() - start,
+                  "cpu": me.ru_utime + me.ru_stime + kids.ru_utime + kids.ru_stime}}))
+"""
 
-PROTO = REPO / "bench" / "prototypes" / "looped_derivatives"
-TRIG_END = "/* ---- end mg_sin, mg_cos ---- */"
-VARIANTS = {"looped, calls": ["-DPROTO_ROOT", "-DPROTO_EARLY", "-DPROTO_NORESTRICT"],
-            "looped, inlined": ["-DPROTO_ROOT", "-DPROTO_EARLY", "-DPROTO_NORESTRICT",
-                                "-DPROTO_INLINE"]}
+
+def generate(n: int, looped: bool, out: Path) -> dict:
+    """Wall and CPU seconds of one fresh build, in a child process."""
+    code = CHILD.format(repo=str(REPO), looped=looped, n=n, out=str(out))
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          check=True)
+    return json.loads(done.stdout.strip().splitlines()[-1])
 
 
-def compile_seconds(cmd, rounds: int = 3) -> float:
-    """The minimum wall time of ``rounds`` runs of the compile command ``cmd``."""
-    best = float("inf")
-    for _ in range(rounds):
-        start = time.perf_counter()
-        subprocess.run(cmd, check=True)
-        best = min(best, time.perf_counter() - start)
+def part4_seconds(cm, rounds: int = 3) -> float:
+    """The minimum of ``rounds`` runs of the model's part-4 compile command."""
+    command = next(c for c in cm.manifest["compile_commands"] if "-DMG_PART=4" in c)
+    args = shlex.split(command)
+    with tempfile.TemporaryDirectory() as tmp:
+        args[args.index("-o") + 1] = str(Path(tmp) / "part4.o")
+        best = float("inf")
+        for _ in range(rounds):
+            start = time.perf_counter()
+            subprocess.run(args, cwd=Path(cm.path).parent, check=True)
+            best = min(best, time.perf_counter() - start)
     return best
 
 
-def part4_flags(cm) -> list:
-    """The model's part-4 compile command without its source and output."""
-    command = next(c for c in cm.manifest["compile_commands"] if "-DMG_PART=4" in c)
-    args = shlex.split(command)
-    out = args.index("-o")
-    del args[out:out + 2]
-    return [a for a in args if not a.endswith(".c") and a != "-c"]
+def measure(n: int, work: Path, rounds: int) -> list:
+    """The table's two rows for the n-link chain."""
+    import numpy as np
+
+    import modelgen
+    from modelgen.bench.harnesses import (build_model_harness, instructions_per_call,
+                                          run_model_harness)
+    rng = np.random.default_rng(1000 + n)
+    x0 = np.concatenate([rng.uniform(-np.pi, np.pi, n), rng.uniform(-2, 2, n)])
+    rows = {}
+    for looped in (True, False):
+        out = work / f"{'looped' if looped else 'straight'}{n}"
+        gen = generate(n, looped, out)
+        cm = modelgen.load(_spec(n), out, derivatives=True)     # the child's build
+        exe, _ = build_model_harness(cm, x0, out / "harness", "derivatives")
+        rows[looped] = {"n": n, "form": "looped" if looped else "straight line", "gen": gen,
+                        "part4": part4_seconds(cm), "exe": exe, "cm": cm,
+                        "instr": instructions_per_call([str(exe)], 200), "us": float("inf")}
+    for _ in range(rounds):
+        for row in rows.values():
+            row["us"] = min(row["us"], run_model_harness(row["exe"]))
+    a, b = rows[True]["cm"].derivatives(0.0, x0), rows[False]["cm"].derivatives(0.0, x0)
+    agree = max(float(np.max(np.abs(x - y)) / np.max(np.abs(y)))
+                for x, y in zip(a[:2], b[:2], strict=True))
+    for row in rows.values():
+        row["agree"] = agree
+    return [rows[True], rows[False]]
 
 
-def build(n: int, work: Path, rounds: int = 3) -> tuple:
-    """Generate the n-link chain into ``work`` and compile its straight line
-    (``rounds`` times); returns (the model, the compile command's prefix, the
-    straight line's object, its compile s)."""
-    gen = work / f"gen{n}"
-    cm = modelgen.load(spatial_chain(n).spec(), gen, derivatives=True, force=True)
-    source = gen / f"{cm.name}.c"
-    text = source.read_text()
-    (work / "mgtrig.h").write_text(text[:text.index(TRIG_END) + len(TRIG_END)] + "\n")
-    command = part4_flags(cm) + [f"-I{work}", f"-I{gen}"]
-    wrap = work / f"wrap{n}.c"
-    wrap.write_text(f'#include "{source}"\n'
-                    "void gen_eval(const double *x, const double *p, const double *a, "
-                    "double *W)\n{\n"
-                    f"    {cm.name}_derivative_terms_eval(0.0, x, 0, p, a, W);\n}}\n")
-    wrap_o = work / f"wrap{n}.o"
-    seconds = compile_seconds([*command, "-c", str(wrap), "-o", str(wrap_o)], rounds)
-    return cm, command, wrap_o, seconds
-
-
-def driver(n: int, work: Path, command, wrap_o: Path, defines, rounds: int = 3) -> tuple:
-    """Compile the prototype with ``defines`` and link it with the straight line
-    into the driver; returns (the driver, the prototype's compile s)."""
-    obj, exe = work / f"looped{n}.o", work / f"driver{n}"
-    # a few hundred statements: the flags modelgen gives a part of that size
-    small = [*compiler(), *compile_flags(600, 4, host=True), *command[-2:]]
-    seconds = compile_seconds([*small, *defines, f"-DN={n}", "-c", str(PROTO / "looped.c"),
-                               "-o", str(obj)], rounds)
-    subprocess.run([command[0], "-O2", "-std=gnu99", f"-DN={n}", str(PROTO / "driver.c"),
-                    str(wrap_o), str(obj), "-lm", "-o", str(exe)], check=True)
-    return exe, seconds
-
-
-def agreement(exe: Path) -> float:
-    """The driver's worst difference of W over the largest entry."""
-    check = subprocess.run([str(exe), "check"], capture_output=True, text=True)
-    return float(check.stdout.split("worst ratio")[1].split()[0])
-
-
-def measure(n: int, work: Path) -> list:
-    """The table's rows for the n-link chain."""
-    _, command, wrap_o, unrolled_s = build(n, work)
-    rows = []
-    for variant, defines in VARIANTS.items():
-        exe, looped_s = driver(n, work, command, wrap_o, defines)
-        agree = agreement(exe)
-        if not agree <= 1e-12:
-            raise SystemExit(f"n = {n}, {variant}: W differs, {agree:.1e}")
-        instr = {mode: instructions_per_call([str(exe), mode], 200)
-                 for mode in ("gen", "proto")}
-        timed = subprocess.run([str(exe), "time", "2000"], capture_output=True, text=True,
-                               check=True).stdout.split("\n")
-        us = {line.split(":")[0]: float(line.split()[1]) for line in timed if "us/call" in line}
-        rows.append({"n": n, "variant": variant, "agree": agree, "instr": instr,
-                     "compile": (unrolled_s, looped_s), "us": (us["unrolled"], us["looped"])})
-    return rows
+def _spec(n: int):
+    from modelgen.model.chains import spatial_chain
+    return spatial_chain(n).spec()
 
 
 def table(rows) -> str:
-    def num(x, fmt):
-        return "–" if x is None else format(x, fmt)
-    lines = ["| n | form | instr. unrolled | instr. looped | looped / unrolled | "
-             "compile s unrolled / looped | µs unrolled / looped | agree |",
-             "|---|---|---|---|---|---|---|---|"]
+    lines = ["| n | form | generate s (wall / CPU) | part 4 s | instr. | µs | agree |",
+             "|---|---|---|---|---|---|---|"]
     for r in rows:
-        g, p = r["instr"]["gen"], r["instr"]["proto"]
-        ratio = p / g if g and p else None
-        lines.append(f"| {r['n']} | {r['variant']} | {num(g, ',.0f')} | {num(p, ',.0f')} | "
-                     f"{num(ratio, '.3f')} | {r['compile'][0]:.2f} / {r['compile'][1]:.2f} | "
-                     f"{r['us'][0]:.2f} / {r['us'][1]:.2f} | {r['agree']:.1e} |")
+        instr = "–" if r["instr"] is None else f"{r['instr']:,.0f}"
+        lines.append(f"| {r['n']} | {r['form']} | {r['gen']['wall']:.2f} / "
+                     f"{r['gen']['cpu']:.2f} | {r['part4']:.2f} | {instr} | {r['us']:.2f} | "
+                     f"{r['agree']:.1e} |")
     return "\n".join(lines)
 
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--n", type=int, nargs="+", default=[20, 50], help="chain sizes")
+    parser.add_argument("--rounds", type=int, default=3, help="alternating timing rounds")
     args = parser.parse_args(argv)
-    if shutil.which("cc") is None:
-        raise SystemExit("no C compiler (cc) on PATH")
     with tempfile.TemporaryDirectory() as tmp:
-        rows = [row for n in args.n for row in measure(n, Path(tmp))]
+        generate(2, True, Path(tmp) / "warm-up")     # the shared runtime, built once
+        rows = [row for n in args.n for row in measure(n, Path(tmp), args.rounds)]
     print(table(rows))
+    for n in args.n:
+        looped, straight = (r for r in rows if r["n"] == n)
+        if looped["instr"] and straight["instr"]:
+            print(f"n = {n}: looped / straight line: instructions "
+                  f"{looped['instr'] / straight['instr']:.3f}, time "
+                  f"{looped['us'] / straight['us']:.3f}, generation CPU "
+                  f"{looped['gen']['cpu'] / straight['gen']['cpu']:.3f}")
     return 0
 
 

@@ -17,7 +17,9 @@ from dataclasses import dataclass
 import sympy
 
 from modelgen.derive.dynamics import Equations
+from modelgen.codegen.kernels import kernel_context
 from modelgen.derive.joint_tree import JointTree
+from modelgen.derive.link_kernels import BACKWARD_VECTORS, FACTOR_VECTORS, FORWARD_VECTORS
 from modelgen.derive.rnea_derivatives import (InverseDynamicsDerivatives,
                                               derive_inverse_dynamics_derivatives)
 from modelgen.derive.rnea_partials import VECTORS, RneaPartials, derive_rnea_partials
@@ -32,6 +34,12 @@ def derivative_routine(inputs, d) -> tuple:
     dofs turns into those matrices."""
     def flat(rows):
         return tuple(e for row in rows for e in row)
+    if isinstance(d, RneaPartials) and d.kernels is not None:
+        # the vectors come from the kernels' loops (derivative_loop); the routine
+        # computes their table of constants and the effects
+        effects = tuple(e for _, _, e in d.effect_entries())
+        return ("derivative_terms", inputs + (("a", d.a),),
+                (("C", d.kernels.table),) + ((("E", effects),) if effects else ()))
     if isinstance(d, RneaPartials):
         effects = tuple(e for _, _, e in d.effect_entries())
         # component-major, W[c * n + k]: a component of every dof is one row,
@@ -64,6 +72,12 @@ def time_free(tree: JointTree) -> bool:
 #: forward mode costs more per entry and its derivation grows with n^2, and the
 #: dot products are a vectorized C loop.
 FORWARD_DERIVATIVES_MAX = 10
+#: Above :data:`FORWARD_DERIVATIVES_MAX` speeds, a tree the kernels take has its
+#: per-dof vectors computed by loops over the joints calling one kernel per joint
+#: signature (:mod:`modelgen.derive.link_kernels`) instead of a straight line:
+#: about as many instructions, a fraction of the code and of its compile time
+#: (``bench/looped_derivatives.py``).
+LOOPED = True
 
 
 @dataclass(frozen=True)
@@ -112,9 +126,9 @@ def tree_derivatives(eqs: Equations, tree: JointTree, spec: ModelSpec, graph):
     """The derivatives of inverse dynamics of a joint tree: the recursive ones
     (:func:`derive_rnea_partials`), for a few speeds with their dot products
     unrolled, or forward mode where that has fewer operations."""
-    recursive = derive_rnea_partials(eqs, tree, spec, graph)
     if spec.n > FORWARD_DERIVATIVES_MAX:
-        return recursive
+        return derive_rnea_partials(eqs, tree, spec, graph, looped=LOOPED)
+    recursive = derive_rnea_partials(eqs, tree, spec, graph)
     forward = derive_inverse_dynamics_derivatives(eqs, tree, spec, graph)
     return forward if forward.operations() < recursive.operations() else \
         unrolled_partials(recursive)
@@ -189,8 +203,12 @@ def derivative_loop(d: RneaPartials) -> dict:
             "runs": c_list(runs), "nruns": len(runs), "runs_size": max(3 * len(runs), 1),
             "npairs": len(d.pairs),
             "effects": c_list(effects), "neffects": len(effects),
-            "nw": sum(len(v) for v in d.vectors) + sum(len(f) for f in d.factor),
-            "aba": bool(d.factor),
+            "nw": (len(d.pattern()) * (FORWARD_VECTORS + BACKWARD_VECTORS
+                                       + (FACTOR_VECTORS if d.articulated() else 0))
+                   if d.kernels else
+                   sum(len(v) for v in d.vectors) + sum(len(f) for f in d.factor)),
+            "aba": d.articulated(),
+            "kernels": kernel_context(d.kernels) if d.kernels else None,
             # every entry written by the loops: no zeros to set first
             "dense": all(all(row) for row in d.pattern()) and not d.programmed,
             "flags": ", ".join(map(str, solve_flags(d.dof_order, d.dof_parent))),

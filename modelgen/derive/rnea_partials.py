@@ -20,7 +20,7 @@ products of 6-vectors that each joint computes once:
 * inwards, with the composite ``oYc_i``, ``doYc_i`` and ``of_i`` of the
   subtree: per dof ``dFda = oYc J``, ``dFdq0 = doYc dVdq + oYc dAdq``,
   ``dFdq = dFdq0 + J x* of``, ``dFdv = doYc J + oYc dAdv``, ``dYtJ = doYc^T J``
-  (``doY`` has only two non-zero 3x3 blocks, :func:`_variation`, so ``dYtJ``
+  (``doY`` has only two non-zero 3x3 blocks, :func:`variation`, so ``dYtJ``
   has no linear part).
 
 Then for a dof k of a joint and a dof l of a strict descendant
@@ -59,12 +59,16 @@ from modelgen.derive.dynamics import Equations
 from modelgen.derive.graph import Graph, GraphBuilder
 from modelgen.derive.jacobian import accelerations, differentiate
 from modelgen.derive.joint_tree import JointTree
+from modelgen.derive.link_kernels import LinkKernels, derive_link_kernels, loopable
 from modelgen.derive.kinematics import quaternion_columns
 from modelgen.derive.recursion import action_force, ground_acceleration
 from modelgen.derive.rnea_derivatives import tangent_rows
-from modelgen.derive.spatial import (IDENTITY3, PAIRS, ZERO, ZERO3, add, cross, cross_motion,
+from modelgen.derive.ground_frame import (force_cross, force_to_ground, ground_inertia,
+                                         inertia_times, motion_to_ground, sym6, variation,
+                                         variation_T_times, variation_times)
+from modelgen.derive.spatial import (IDENTITY3, ZERO, ZERO3, add, cross_motion,
                                      dot, is_identity, matmul, matvec, name_vec, named,
-                                     rotation, skew, sub, symmetric, times, total, transpose)
+                                     rotation, sub, times, total, transpose)
 from modelgen.model.spec import ModelSpec
 
 #: the per-dof 6-vectors of :attr:`RneaPartials.vectors`, in their order
@@ -113,6 +117,15 @@ class RneaPartials:
     #: in the C loop: a floating root's (:func:`floating_root`), whose ``J_k``
     #: are constant in its frame: each dot product is an entry of the other vector
     programmed: tuple = ()
+    #: the vectors (and the factor) as kernels per joint signature
+    #: (:class:`~modelgen.derive.link_kernels.LinkKernels`), when derived with
+    #: ``looped``: then ``vectors`` and ``factor`` are empty
+    kernels: LinkKernels | None = None
+
+    def articulated(self) -> bool:
+        """Whether ``-M^-1`` is applied by the articulated-body factor."""
+        return bool(self.factor) or (self.kernels is not None
+                                     and self.kernels.factor is not None)
 
     def looped_same(self) -> tuple:
         """The pairs of :attr:`same` the C loop computes."""
@@ -121,7 +134,7 @@ class RneaPartials:
 
     def pattern(self) -> tuple:
         """n x n booleans: the entries of M that can be non-zero (one branch)."""
-        n = len(self.vectors)
+        n = len(self.a)
         out = [[False] * n for _ in range(n)]
         for k, l in self.same + self.pairs:
             out[k][l] = out[l][k] = True
@@ -154,71 +167,9 @@ class RneaPartials:
         of the dot products of the C loop (11 per dot product of two 6-vectors)."""
         flat = [e for v in self.vectors for e in v] + \
             [e for m in self.effects for row in m for e in row]
-        return self.graph.operations(flat) + 11 * (3 * len(self.looped_same())
-                                                   + 8 * len(self.pairs))
-
-
-# -- the ground-frame algebra --------------------------------------------------------
-
-def _motion_to_ground(R, p, m):
-    """A link's motion vector ``m`` (link components) in E: ``(R w, R v + p x R w)``."""
-    w = matvec(R, m[:3])
-    return tuple(w) + add(matvec(R, m[3:]), cross(p, w))
-
-
-def _force_cross(v, f):
-    """``v x* f`` (Featherstone's crf)."""
-    return add(cross(v[:3], f[:3]), cross(v[3:], f[3:])) + cross(v[:3], f[3:])
-
-
-def _inertia_times(Y, x) -> tuple:
-    """``Y x`` for a spatial inertia ``Y = (I_O, h, m)``: ``(I_O w + h x v, m v - h x w)``."""
-    I, h, m = Y
-    w, v = x[:3], x[3:]
-    return add(matvec(I, w), cross(h, v)) + sub(tuple(times(m, c) for c in v), cross(h, w))
-
-
-def _variation(builder, Y, v, oh) -> tuple:
-    """``doY = v x* Y - Y v x + B(oh)`` with ``B(oh) x = x x* oh`` and ``oh = Y v``
-    (Pinocchio's ``Inertia::variation`` plus ``addForceCrossMatrix``), as ``(A, F)``:
-    its blocks are ``[[A, 0], [-2 F x, 0]]``.
-
-    With ``W = w x``, ``U = u x``, ``H = h x`` for ``v = (w, u)``: the top left block
-    is ``W I - I W - (U H + H U) - (n x)`` (``n`` the angular part of ``oh``),
-    the top right ``W H - H W + m U - (f x) = 0`` since ``f = m u + w x h``, and
-    the bottom left ``-(W H - H W + m U) - (f x) = -2 (f x)``.
-    """
-    I, h, m = Y
-    w, u = v[:3], v[3:]
-    n, f = oh[:3], oh[3:]
-    P = tuple(tuple(builder.name(x) for x in cross(w, tuple(I[r][c] for r in range(3))))
-              for c in range(3))              # P[c] = column c of W I
-    nx = skew(n)
-    # the symmetric part once per pair of entries, the skew part -(n x) on each
-    A = [[None] * 3 for _ in range(3)]
-    for r in range(3):
-        # W I - I W - (U H + H U) on the diagonal: 2 ((W I)_rr + u . h - u_r h_r)
-        others = tuple(times(u[c], h[c]) for c in range(3) if c != r)
-        A[r][r] = builder.factor(times(2, named(builder, total((P[r][r],) + others))))
-        for c in range(r + 1, 3):
-            sym = named(builder, total((P[c][r], P[r][c], -times(h[r], u[c]),
-                                        -times(u[r], h[c]))))
-            A[r][c] = named(builder, total((sym, -nx[r][c])))
-            A[c][r] = named(builder, total((sym, -nx[c][r])))
-    return tuple(tuple(row) for row in A), f
-
-
-def _variation_times(dY, x) -> tuple:
-    """``doY x`` for ``doY = (A, F)`` of :func:`_variation`."""
-    A, F = dY
-    w = x[:3]
-    return matvec(A, w) + tuple(times(-2, c) for c in cross(F, w))
-
-
-def _variation_T_times(dY, x) -> tuple:
-    """The angular part of ``doY^T x`` (its linear part is 0): ``A^T w + 2 F x v``."""
-    A, F = dY
-    return add(matvec(transpose(A), x[:3]), tuple(times(2, c) for c in cross(F, x[3:])))
+        kernels = self.kernels.operations(Graph.operations) if self.kernels else 0
+        return self.graph.operations(flat) + kernels + 11 * (3 * len(self.looped_same())
+                                                             + 8 * len(self.pairs))
 
 
 def floating_root(tree: JointTree) -> bool:
@@ -273,66 +224,16 @@ def _root_rotation(builder, joint) -> tuple:
     return tuple(name_vec(builder, row) for row in R)
 
 
-def _rotated_inertia(builder, I, R, orthogonal: bool) -> tuple:
-    """The 6 entries (as :data:`PAIRS`) of ``R I R^T`` for the 6 entries ``I``.
-
-    With R ``orthogonal`` (a product of the joints' cos/sin rotations, exactly
-    orthogonal, where a quaternion's matrix is only when its norm is 1) a
-    diagonal ``I`` (principal axes along the link's: rods, boxes, cylinders) is
-    ``d 1 + sum_k (I_k - d) r_k r_k^T`` over the columns ``r_k`` of R, with ``d``
-    the moment most axes share: one term less per axis of symmetry."""
-    if not orthogonal or any(x != 0 for x in I[3:]):
-        RI = tuple(name_vec(builder, row) for row in matmul(R, symmetric(I)))
-        return tuple(dot(RI[a], R[b]) for a, b in PAIRS)
-    # the moment most axes share, a zero on a tie (no d 1 to add, no I_k - 0)
-    d = max(I[:3], key=lambda x: (sum(1 for y in I[:3] if y == x), x == 0))
-    out = [d, d, d, ZERO, ZERO, ZERO]
-    for k in range(3):
-        if I[k] == d:
-            continue
-        s = builder.name(total((I[k], -d)))
-        r = tuple(R[a][k] for a in range(3))
-        sr = name_vec(builder, tuple(times(s, x) for x in r))
-        out = [total((e, times(sr[a], r[b]))) for e, (a, b) in zip(out, PAIRS, strict=True)]
-    return tuple(out)
-
-
-def _ground_inertia(builder, body, R, p, orthogonal: bool) -> tuple:
-    """The link's spatial inertia ``(I_O, h, m)`` about E's origin in E components.
-
-    ``I_O = R I R^T - m p^ p^ - p^ hr^ - hr^ p^`` (``x^`` the cross-product matrix,
-    ``hr = R h``), its translation part arranged around ``h_O = hr + m p``, the
-    first moment about E's origin, which the link needs anyway: an off-diagonal
-    entry ``(a, b)`` is ``(R I R^T)_ab - p_a h_O,b - hr_a p_b``, a diagonal one
-    ``(R I R^T)_aa + t_b + t_c`` over the two other axes, ``t_b = p_b (h_O,b +
-    hr_b)`` (that is ``m p_b^2 + 2 p_b hr_b``).  ``orthogonal``: see
-    :func:`_rotated_inertia`.
-    """
-    Ir = _rotated_inertia(builder, name_vec(builder, body.I), R, orthogonal)
-    h = name_vec(builder, body.h)
-    m = builder.name(body.m)
-    hr = name_vec(builder, matvec(R, h))
-    h_O = name_vec(builder, add(hr, tuple(times(m, x) for x in p)))
-    t = name_vec(builder, tuple(times(x, total((y, z))) for x, y, z in zip(p, h_O, hr,
-                                                                           strict=True)))
-    entries = []
-    for (a, b), Iab in zip(PAIRS, Ir, strict=True):
-        if a == b:
-            e = total((Iab,) + tuple(t[c] for c in range(3) if c != a))
-        else:
-            e = total((Iab, -times(p[a], h_O[b]), -times(hr[a], p[b])))
-        entries.append(e)
-    I_O = symmetric(name_vec(builder, entries))
-    return I_O, h_O, m
-
-
 # -- the algorithm ---------------------------------------------------------------------
 
 def derive_rnea_partials(eqs: Equations, tree: JointTree, spec: ModelSpec,
-                         graph: Graph | None = None) -> RneaPartials:
+                         graph: Graph | None = None, looped: bool = False) -> RneaPartials:
     """The per-dof vectors of the recursive derivatives of inverse dynamics of a
     joint tree, and the effects' derivatives, built over ``graph`` (default
-    ``eqs.graph``).
+    ``eqs.graph``).  With ``looped``, a tree the kernels take
+    (:func:`~modelgen.derive.link_kernels.loopable`, no body-fixed actions)
+    gets its vectors as kernels per joint signature instead
+    (:attr:`RneaPartials.kernels`).
 
     >>> from modelgen.model.chains import spatial_chain
     >>> from modelgen.derive.kinematics import derive_kinematics
@@ -351,6 +252,17 @@ def derive_rnea_partials(eqs: Equations, tree: JointTree, spec: ModelSpec,
     a0, gravity_labels = ground_acceleration(spec)
     count = len(tree.joints)
     root_frame = floating_root(tree)
+    if looped and not root_frame and loopable(tree, eqs.q):
+        loads, moved, _ = _body_fixed_actions(builder, eqs, tree, spec)
+        if not loads:
+            same, pairs = _dof_pairs(tree)
+            order, parent = _dof_chain(tree)
+            kernels = derive_link_kernels(tree, a0, n > ARTICULATED_SOLVE_ABOVE)
+            none = tuple(tuple(ZERO for _ in eqs.u) for _ in range(n))
+            graph, effects = _effects(builder.freeze(), eqs, tree, set(gravity_labels) | moved,
+                                      none)
+            return RneaPartials(graph, a, (), same, pairs, effects, (), order, parent,
+                                kernels=kernels)
     poses, R0 = _poses(builder, tree, root_frame)
     loads, moved, load_du = _body_fixed_actions(builder, eqs, tree, spec)
     if root_frame and any(x != 0 for x in a0[3:]):
@@ -368,7 +280,7 @@ def derive_rnea_partials(eqs: Equations, tree: JointTree, spec: ModelSpec,
         ov_p = ov[par] if par >= 0 else (ZERO,) * 6
         oa_p = oa[par] if par >= 0 else tuple(a0)
         for k, S in joint.dofs:
-            J[k] = name_vec(builder, _motion_to_ground(R, p, S))
+            J[k] = name_vec(builder, motion_to_ground(R, p, S))
             dVdq[k] = name_vec(builder, cross_motion(ov_p, J[k]))
         vJ = tuple(total(times(J[k][r], qd[k]) for k, _ in joint.dofs) for r in range(6))
         aJ = tuple(total(times(J[k][r], a[k]) for k, _ in joint.dofs) for r in range(6))
@@ -377,12 +289,12 @@ def derive_rnea_partials(eqs: Equations, tree: JointTree, spec: ModelSpec,
         vJ = name_vec(builder, vJ)
         ov[i] = name_vec(builder, add(ov_p, vJ))
         oa[i] = name_vec(builder, add(add(oa_p, aJ), cJ))
-        Y[i] = _ground_inertia(builder, tree.inertias[i], R, p, not turned[i])
-        oh = name_vec(builder, _inertia_times(Y[i], ov[i]))
-        of[i] = name_vec(builder, add(_inertia_times(Y[i], oa[i]), _force_cross(ov[i], oh)))
+        Y[i] = ground_inertia(builder, tree.inertias[i], R, p, not turned[i])
+        oh = name_vec(builder, inertia_times(Y[i], ov[i]))
+        of[i] = name_vec(builder, add(inertia_times(Y[i], oa[i]), force_cross(ov[i], oh)))
         if i in loads:                  # Q = RNEA's forces less the actions'
-            of[i] = name_vec(builder, sub(of[i], _force_to_ground(R, p, loads[i])))
-        doY[i] = _variation(builder, Y[i], ov[i], oh)
+            of[i] = name_vec(builder, sub(of[i], force_to_ground(R, p, loads[i])))
+        doY[i] = variation(builder, Y[i], ov[i], oh)
         for k, _ in joint.dofs:
             dV = dVdq[k]
             dAdq[k] = name_vec(builder, add(cross_motion(oa_p, J[k]), cross_motion(ov_p, dV)))
@@ -396,13 +308,13 @@ def derive_rnea_partials(eqs: Equations, tree: JointTree, spec: ModelSpec,
     for i in reversed(range(count)):
         joint = tree.joints[i]
         for k, _ in joint.dofs:
-            dFda = name_vec(builder, _inertia_times(Yc[i], J[k]))
-            dFdq0 = name_vec(builder, add(_variation_times(dYc[i], dVdq[k]),
-                                          _inertia_times(Yc[i], dAdq[k])))
-            dFdq = name_vec(builder, add(dFdq0, _force_cross(J[k], fc[i])))
-            dFdv = name_vec(builder, add(_variation_times(dYc[i], J[k]),
-                                         _inertia_times(Yc[i], dAdv[k])))
-            dYtJ = name_vec(builder, _variation_T_times(dYc[i], J[k]))
+            dFda = name_vec(builder, inertia_times(Yc[i], J[k]))
+            dFdq0 = name_vec(builder, add(variation_times(dYc[i], dVdq[k]),
+                                          inertia_times(Yc[i], dAdq[k])))
+            dFdq = name_vec(builder, add(dFdq0, force_cross(J[k], fc[i])))
+            dFdv = name_vec(builder, add(variation_times(dYc[i], J[k]),
+                                         inertia_times(Yc[i], dAdv[k])))
+            dYtJ = name_vec(builder, variation_T_times(dYc[i], J[k]))
             vectors[k] = (J[k], dAdq[k], dVdq[k], dAdv[k], dFda, dYtJ, dFdq0, dFdq, dFdv)
         par = joint.parent
         if par >= 0:
@@ -463,15 +375,6 @@ def _dof_chain(tree: JointTree) -> tuple:
     return tuple(order), tuple(parent[k] for k in range(len(order)))
 
 
-def _sym6(Y) -> list:
-    """The 6x6 rows of a rigid-body inertia ``(I_O, h, m)``."""
-    I, h, m = Y
-    hx = skew(h)
-    return [list(I[r]) + list(hx[r]) for r in range(3)] + \
-        [[-hx[r][c] if hx[r][c] != 0 else ZERO for c in range(3)]
-         + [m if r == c else ZERO for c in range(3)] for r in range(3)]
-
-
 def articulated_factor(builder, order, parent, J, Y, tree: JointTree) -> dict:
     """{speed k: (U_k (6), 1 / D_k)}: the articulated-body inertias in E
     (Featherstone §7.3, every quantity in one frame, so no transforms) with the
@@ -484,7 +387,7 @@ def articulated_factor(builder, order, parent, J, Y, tree: JointTree) -> dict:
     link = {}
     for i, joint in enumerate(tree.joints):
         link[joint.dofs[-1][0]] = i
-    IA = {k: _sym6(Y[link[k]]) for k in link}
+    IA = {k: sym6(Y[link[k]]) for k in link}
     out = {}
     for k in reversed(order):
         A = IA.pop(k)
@@ -507,7 +410,7 @@ def articulated_factor(builder, order, parent, J, Y, tree: JointTree) -> dict:
                      for ra, rb in zip(IA[p], child, strict=True)]
         elif p in link:
             child = [[total((x, y)) for x, y in zip(ra, rb, strict=True)]
-                     for ra, rb in zip(_sym6(Y[link[p]]), child, strict=True)]
+                     for ra, rb in zip(sym6(Y[link[p]]), child, strict=True)]
         named6 = [[None] * 6 for _ in range(6)]
         for r in range(6):
             for c in range(r, 6):
@@ -530,13 +433,6 @@ def _dof_pairs(tree: JointTree) -> tuple:
         pairs.extend((k, l) for k in dofs
                      for l in sorted(m for j in below[i] for m, _ in tree.joints[j].dofs))
     return tuple(same), tuple(pairs)
-
-
-def _force_to_ground(R, p, f):
-    """A link's force ``f`` (link components, at its origin) in E at E's origin:
-    ``(R n + p x R f, R f)``."""
-    F = matvec(R, f[3:])
-    return add(matvec(R, f[:3]), cross(p, F)) + tuple(F)
 
 
 def _body_fixed_actions(builder, eqs: Equations, tree: JointTree, spec: ModelSpec) -> tuple:
@@ -593,7 +489,7 @@ def _loads_du(builder, load_du, poses, J, tree: JointTree, nu: int) -> tuple:
         R, p = poses[i]
         here = dict(below[i])
         for j, d in own.items():
-            f = _force_to_ground(R, p, d)
+            f = force_to_ground(R, p, d)
             here[j] = name_vec(builder, add(here[j], f)) if j in here else name_vec(builder, f)
         for k, S in joint.dofs:
             for j in here:

@@ -1,0 +1,137 @@
+"""The recursive derivatives' per-dof vectors by kernels per joint signature
+(derive/link_kernels.py): the same derivatives as the straight line they
+replace, and as Pinocchio's, on chains, URDF robots (fixed rotations between
+joints, full inertias, joint damping) and the 29-dof G1 humanoid on a fixed
+base; the trees they do not take keep the straight line."""
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+import sympy
+
+import modelgen
+from modelgen.codegen import tree_derivatives
+from modelgen.derive import rnea_partials
+from modelgen.derive.dynamics import derive_equations
+from modelgen.derive.joint_tree import extract_joint_tree
+from modelgen.derive.kinematics import derive_kinematics
+from modelgen.derive.rnea_partials import derive_rnea_partials
+from modelgen.model.chains import spatial_chain
+from modelgen.model.urdf import import_urdf
+
+from test_derivatives import TOL, URDF, _check_against_pinocchio, _relative
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def _kernels_of(spec):
+    tree = extract_joint_tree(spec)
+    eqs = derive_equations(derive_kinematics(spec))
+    return derive_rnea_partials(eqs, tree, spec, looped=True).kernels
+
+
+def _looped(cm) -> bool:
+    return f"{cm.name}_derivative_forward0" in (Path(cm.path).parent / f"{cm.name}.c").read_text()
+
+
+@pytest.mark.parametrize("articulated", [False, True])
+def test_looped_derivatives_are_the_straight_lines(articulated, tmp_path, monkeypatch):
+    if articulated:
+        monkeypatch.setattr(rnea_partials, "ARTICULATED_SOLVE_ABOVE", 0)
+    spec = spatial_chain(12).spec()
+    looped = modelgen.load(spec, tmp_path / "looped", derivatives=True)
+    monkeypatch.setattr(tree_derivatives, "LOOPED", False)
+    straight = modelgen.load(spec, tmp_path / "straight", derivatives=True)
+    assert _looped(looped) and not _looped(straight)
+    rng = np.random.default_rng(5)
+    for _ in range(3):
+        x = np.concatenate([rng.uniform(-3, 3, 12), rng.uniform(-2, 2, 12)])
+        for got, want in zip(looped.derivatives(0.0, x), straight.derivatives(0.0, x),
+                             strict=True):
+            assert _relative(got, want) <= 1e-12
+        a = rng.uniform(-2, 2, 12)
+        for got, want in zip(looped.inverse_dynamics_derivatives(0.0, x, a),
+                             straight.inverse_dynamics_derivatives(0.0, x, a), strict=True):
+            assert _relative(got, want) <= 1e-12
+
+
+def test_joints_of_one_signature_share_a_kernel():
+    # the root (the ground folded in), then joints about z and about y alternating
+    k = _kernels_of(spatial_chain(20).spec())
+    assert len(k.forward) == 3
+    assert k.signature == (0,) + (1, 2) * 9 + (1,)
+    assert k.parent == tuple(range(-1, 19)) and k.dof == tuple(range(20))
+    # each joint's constants follow the ground's state (R = 1, p = 0, ov = 0, oa)
+    assert k.offset[0] == 24 and len(k.table) > 24
+
+
+def test_a_slot_is_never_the_number_of_its_index():
+    # E with entries 0 and 1 against E with two constants first seen there: the
+    # slots numbered 0 and 1 must not make the same key as those numbers
+    from types import SimpleNamespace
+    from modelgen.derive.joint_tree import LinkInertia
+    from modelgen.derive.link_kernels import signature
+    c, s = sympy.Rational(3, 5), sympy.Rational(4, 5)
+    body = LinkInertia((1, 1, 1, 0, 0, 0), (0, 0, 0), 1, ())
+
+    def joint(E):
+        return SimpleNamespace(axis=3, fixed=(E, (0, 0, 0)), S=(0, 0, 1, 0, 0, 0))
+    plain, _ = signature(joint(((1, 0, 0), (0, 0, 1), (0, 1, 0))), body)
+    turned, values = signature(joint(((1, 0, 0), (0, c, s), (0, s, c))), body)
+    assert values == (c, s) and plain != turned
+
+
+def test_trees_the_kernels_do_not_take_keep_the_straight_line():
+    from test_aba import branched_tree
+    from test_armature import TUMBLER
+    from modelgen.model import parse_model
+    assert _kernels_of(spatial_chain(3).spec()) is not None
+    # an action on a link (its force enters the recursion), a prismatic joint,
+    # an armature, a free joint
+    assert _kernels_of(branched_tree().spec()) is None
+    assert _kernels_of(parse_model(TUMBLER)) is None
+    solo = import_urdf(URDF / "solo12.urdf", floating_base=True)
+    assert _kernels_of(solo.model.spec()) is None
+
+
+@pytest.fixture(scope="module")
+def pin():
+    return pytest.importorskip("pinocchio")
+
+
+def _unactuated(imp):
+    """The imported robot without its joints' motors (and their inputs), which
+    the kernels do not take."""
+    return replace(imp.model.spec(), actions=(), inputs=())
+
+
+@pytest.mark.parametrize("robot", ["ur5_robot", "kinova"])
+def test_looped_derivatives_of_urdf_robots_match_pinocchio(robot, pin, tmp_path, monkeypatch):
+    from test_urdf import _pinocchio_maps
+    # a few dofs: kept on the recursive derivatives, which then take the loops
+    monkeypatch.setattr(tree_derivatives, "FORWARD_DERIVATIVES_MAX", 0)
+    imp = import_urdf(URDF / f"{robot}.urdf")
+    assert _kernels_of(imp.model.spec()) is None        # its motors
+    cm = modelgen.load(_unactuated(imp), tmp_path / "build", derivatives=True)
+    assert _looped(cm)
+    model = pin.buildModelFromUrdf(str(URDF / f"{robot}.urdf"))
+    q_of, jmap = _pinocchio_maps(model, imp)
+    damping = np.array([j.damping for j in imp.joints if j.coordinate is not None])
+    assert _check_against_pinocchio(pin, cm, model, P=jmap, q_pin=q_of,
+                                    damping=damping) <= TOL
+
+
+def test_looped_derivatives_of_the_g1_humanoid_match_pinocchio(pin, tmp_path):
+    from test_urdf import _pinocchio_maps
+    path = URDF / "g1_29dof_rev_1_0.urdf"
+    imp = import_urdf(path)
+    cm = modelgen.load(_unactuated(imp), tmp_path / "build", derivatives=True)
+    assert cm.n == 29 and _looped(cm)
+    model = pin.buildModelFromUrdf(str(path))
+    q_of, jmap = _pinocchio_maps(model, imp)
+    damping = np.array([j.damping for j in imp.joints if j.coordinate is not None])
+    assert _check_against_pinocchio(pin, cm, model, P=jmap, q_pin=q_of, damping=damping,
+                                    states=2) <= TOL
