@@ -1,11 +1,11 @@
 """The recursive derivatives' per-dof vectors by kernels per joint signature
 (derive/link_kernels.py): the same derivatives as the straight line they
 replace, and as Pinocchio's, on chains, URDF robots (fixed rotations between
-joints, full inertias, joint damping) and the 29-dof G1 humanoid on a fixed
-base; the trees they do not take keep the straight line."""
+joints, full inertias, joint damping, a motor on every joint: d qdd / d u) and
+the 29-dof G1 humanoid on a fixed base; the trees they do not take keep the
+straight line."""
 from __future__ import annotations
 
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -89,8 +89,7 @@ def test_trees_the_kernels_do_not_take_keep_the_straight_line():
     from test_armature import TUMBLER
     from modelgen.model import parse_model
     assert _kernels_of(spatial_chain(3).spec()) is not None
-    # an action on a link (its force enters the recursion), a prismatic joint,
-    # an armature, a free joint
+    # a prismatic joint and an angle q + 3/10, an armature, a free joint
     assert _kernels_of(branched_tree().spec()) is None
     assert _kernels_of(parse_model(TUMBLER)) is None
     solo = import_urdf(URDF / "solo12.urdf", floating_base=True)
@@ -102,20 +101,14 @@ def pin():
     return pytest.importorskip("pinocchio")
 
 
-def _unactuated(imp):
-    """The imported robot without its joints' motors (and their inputs), which
-    the kernels do not take."""
-    return replace(imp.model.spec(), actions=(), inputs=())
-
-
 @pytest.mark.parametrize("robot", ["ur5_robot", "kinova"])
 def test_looped_derivatives_of_urdf_robots_match_pinocchio(robot, pin, tmp_path, monkeypatch):
     from test_urdf import _pinocchio_maps
     # a few dofs: kept on the recursive derivatives, which then take the loops
     monkeypatch.setattr(tree_derivatives, "FORWARD_DERIVATIVES_MAX", 0)
     imp = import_urdf(URDF / f"{robot}.urdf")
-    assert _kernels_of(imp.model.spec()) is None        # its motors
-    cm = modelgen.load(_unactuated(imp), tmp_path / "build", derivatives=True)
+    cm = modelgen.load(imp.model, tmp_path / "build", derivatives=True)
+    assert len(cm.inputs) == cm.n                       # a motor on every joint
     assert _looped(cm)
     model = pin.buildModelFromUrdf(str(URDF / f"{robot}.urdf"))
     q_of, jmap = _pinocchio_maps(model, imp)
@@ -128,8 +121,8 @@ def test_looped_derivatives_of_the_g1_humanoid_match_pinocchio(pin, tmp_path):
     from test_urdf import _pinocchio_maps
     path = URDF / "g1_29dof_rev_1_0.urdf"
     imp = import_urdf(path)
-    cm = modelgen.load(_unactuated(imp), tmp_path / "build", derivatives=True)
-    assert cm.n == 29 and _looped(cm)
+    cm = modelgen.load(imp.model, tmp_path / "build", derivatives=True)
+    assert cm.n == 29 and len(cm.inputs) == 29 and _looped(cm)
     model = pin.buildModelFromUrdf(str(path))
     q_of, jmap = _pinocchio_maps(model, imp)
     damping = np.array([j.damping for j in imp.joints if j.coordinate is not None])

@@ -73,7 +73,8 @@ def kernel_context(kernels: LinkKernels) -> dict:
     return {"forward": forward, "backward": backward, "factor": factor,
             "joints": len(kernels.signature), "signature": c_list(kernels.signature),
             "parent": c_list(kernels.parent), "dof": c_list(kernels.dof),
-            "offset": c_list(kernels.offset), "table": len(kernels.table)}
+            "offset": c_list(kernels.offset), "table": len(kernels.table),
+            "du": c_list(x for row in kernels.du for x in row) or "0", "ndu": len(kernels.du)}
 
 
 __all__ = ["kernel_context", "kernel_lines"]

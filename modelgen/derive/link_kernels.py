@@ -19,8 +19,9 @@ arithmetic is :func:`~modelgen.derive.rnea_partials.derive_rnea_partials`'s,
 step for step (:mod:`modelgen.derive.ground_frame`).
 
 Joints the kernels take (:func:`loopable`): revolute joints whose angle is
-their own coordinate, on a fixed base, without armature; the caller also
-leaves out trees with body-fixed actions (their forces enter ``of``).
+their own coordinate, on a fixed base, without armature.  Actions fixed to a
+link (a joint's motor and its reaction) enter its force ``of`` as constants
+of its signature, evaluated with the inputs at every call.
 """
 from __future__ import annotations
 
@@ -29,12 +30,12 @@ from dataclasses import dataclass
 import sympy
 
 from modelgen.derive.graph import Graph, GraphBuilder
-from modelgen.derive.ground_frame import (force_cross, ground_inertia, inertia_times,
-                                          motion_to_ground, sym6, variation, variation_T_times,
-                                          variation_times)
+from modelgen.derive.ground_frame import (force_cross, force_to_ground, ground_inertia,
+                                          inertia_times, motion_to_ground, sym6, variation,
+                                          variation_T_times, variation_times)
 from modelgen.derive.joint_tree import JointTree, LinkInertia
 from modelgen.derive.spatial import (IDENTITY3, PAIRS, ZERO3, add, cross_motion, dot,
-                                     is_identity, matmul, matvec, name_vec, named, rotation,
+                                     is_identity, matmul, matvec, name_vec, named, rotation, sub,
                                      symmetric, times, total, transpose)
 
 #: a link's state for its children: R (9, by rows), p (3), ov (6), oa (6)
@@ -84,6 +85,11 @@ class LinkKernels:
     dof: tuple
     offset: tuple
     table: tuple
+    #: the actions fixed to links along the inputs: ``(joint, input, offset)``, the
+    #: 6 entries of d force / d u (link components) at ``offset`` in ``table``;
+    #: the loop adds ``-J_k . d force / d u`` (in E) to dQ_du of every dof k at or
+    #: above the joint
+    du: tuple = ()
 
     def operations(self, graph_operations) -> int:
         """Operations of one call: each joint's kernels (``graph_operations(graph,
@@ -114,12 +120,14 @@ def _slot_symbols(count: int) -> tuple:
     return tuple(sympy.Symbol(f"mg_slot{i}") for i in range(count))
 
 
-def signature(joint, body: LinkInertia, ground=None) -> tuple:
+def signature(joint, body: LinkInertia, ground=None, load=None) -> tuple:
     """``(key, values)``: the joint and its link with every constant that is not
     0, 1 or -1 a slot (one per distinct value, numbered as they appear), and the
     slots' values.  Joints of one key share a forward kernel.  ``ground``: the
     ground's spatial acceleration, for a root joint, whose kernel then has the
-    ground's state folded in (its slots too)."""
+    ground's state folded in (its slots too).  ``load``: the force of the
+    actions fixed to the link (link components, at its origin; of the inputs
+    and parameters: the table is filled at every call)."""
     values = []
 
     def slot(x):
@@ -136,7 +144,8 @@ def signature(joint, body: LinkInertia, ground=None) -> tuple:
     key = (joint.axis, tuple(tuple(slot(x) for x in row) for row in E),
            tuple(slot(x) for x in r), tuple(slot(x) for x in joint.S),
            tuple(slot(x) for x in body.I), tuple(slot(x) for x in body.h), slot(body.m),
-           None if ground is None else tuple(slot(x) for x in ground))
+           None if ground is None else tuple(slot(x) for x in ground),
+           None if load is None else tuple(slot(x) for x in load))
     return key, tuple(values)
 
 
@@ -158,10 +167,11 @@ def _fill(key, slots) -> tuple:
     """``key`` with each slot index replaced by its symbol."""
     def one(x):
         return slots[x] if type(x) is _Slot else x
-    axis, E, r, S, I, h, m, ground = key
+    axis, E, r, S, I, h, m, ground, load = key
     return (axis, tuple(tuple(one(x) for x in row) for row in E), tuple(one(x) for x in r),
             tuple(one(x) for x in S), tuple(one(x) for x in I), tuple(one(x) for x in h),
-            one(m), None if ground is None else tuple(one(x) for x in ground))
+            one(m), None if ground is None else tuple(one(x) for x in ground),
+            None if load is None else tuple(one(x) for x in load))
 
 
 def _inputs(prefix: str, count: int) -> tuple:
@@ -175,7 +185,7 @@ def forward_kernel(key) -> Kernel:
     in E, and ``dVdq``, ``dAdq``, ``dAdv``."""
     count = 1 + max([int(x) for x in _flat(key) if type(x) is _Slot], default=-1)
     slots = _slot_symbols(count)
-    axis, E, r, S, I, h, m, ground = _fill(key, slots)
+    axis, E, r, S, I, h, m, ground, load = _fill(key, slots)
     P = _inputs("par", KIN)
     q, qd, qdd = sympy.symbols("mg_q mg_qd mg_qdd")
     builder = GraphBuilder()
@@ -199,6 +209,8 @@ def forward_kernel(key) -> Kernel:
     Y = ground_inertia(builder, LinkInertia(I, h, m, ()), R, p, True)
     oh = name_vec(builder, inertia_times(Y, ov))
     of = name_vec(builder, add(inertia_times(Y, oa), force_cross(ov, oh)))
+    if load is not None:                # Q = RNEA's forces less the actions'
+        of = name_vec(builder, sub(of, force_to_ground(R, p, load)))
     A, F = variation(builder, Y, ov, oh)
     dAdq = name_vec(builder, add(cross_motion(oa_p, J), cross_motion(ov_p, dV)))
     dAdv = tuple(builder.factor(times(2, x)) for x in dV)
@@ -211,9 +223,9 @@ def forward_kernel(key) -> Kernel:
 
 
 def _flat(key):
-    axis, E, r, S, I, h, m, ground = key
+    axis, E, r, S, I, h, m, ground, load = key
     return [x for row in E for x in row] + list(r) + list(S) + list(I) + list(h) + [m] + \
-        list(ground or ())
+        list(ground or ()) + list(load or ())
 
 
 def backward_kernel() -> Kernel:
@@ -257,25 +269,35 @@ def factor_kernel() -> Kernel:
                   (("V", U + (inv,)), ("H", child)))
 
 
-def derive_link_kernels(tree: JointTree, a0, articulated: bool) -> LinkKernels:
+def derive_link_kernels(tree: JointTree, a0, articulated: bool, loads=None,
+                        load_du=None) -> LinkKernels:
     """The kernels of ``tree`` (:func:`loopable`) and their tables; ``a0`` is the
     ground's spatial acceleration (minus gravity) in E; ``articulated`` adds the
-    factor's kernel."""
+    factor's kernel.  ``loads`` ({joint index: 6-vector}) and ``load_du`` ({joint
+    index: {input index: 6-vector}}) are the actions fixed to links and their
+    derivatives along the inputs, in link components."""
+    loads, load_du = loads or {}, load_du or {}
     keys, forward, signature_of, offset = {}, [], [], []
     table = [sympy.Integer(1) if i in (0, 4, 8) else sympy.Integer(0) for i in range(18)]
     table += [sympy.sympify(x) for x in a0]
-    for joint, body in zip(tree.joints, tree.inertias, strict=True):
-        key, values = signature(joint, body, a0 if joint.parent < 0 else None)
+    for i, (joint, body) in enumerate(zip(tree.joints, tree.inertias, strict=True)):
+        key, values = signature(joint, body, a0 if joint.parent < 0 else None, loads.get(i))
         if key not in keys:
             keys[key] = len(forward)
             forward.append(forward_kernel(key))
         signature_of.append(keys[key])
         offset.append(len(table))
         table.extend(values)
+    du = []
+    for i in sorted(load_du):
+        for j in sorted(load_du[i]):
+            du.append((i, j, len(table)))
+            table.extend(sympy.sympify(x) for x in load_du[i][j])
     return LinkKernels(tuple(forward), backward_kernel(),
                        factor_kernel() if articulated else None, tuple(signature_of),
                        tuple(j.parent for j in tree.joints),
-                       tuple(j.coordinate for j in tree.joints), tuple(offset), tuple(table))
+                       tuple(j.coordinate for j in tree.joints), tuple(offset), tuple(table),
+                       tuple(du))
 
 
 __all__ = ["BACKWARD_VECTORS", "DYN", "FACTOR_VECTORS", "FORWARD_VECTORS", "KIN", "Kernel", "LinkKernels", "TRIANGLE", "backward_kernel",

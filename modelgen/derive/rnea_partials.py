@@ -231,9 +231,8 @@ def derive_rnea_partials(eqs: Equations, tree: JointTree, spec: ModelSpec,
     """The per-dof vectors of the recursive derivatives of inverse dynamics of a
     joint tree, and the effects' derivatives, built over ``graph`` (default
     ``eqs.graph``).  With ``looped``, a tree the kernels take
-    (:func:`~modelgen.derive.link_kernels.loopable`, no body-fixed actions)
-    gets its vectors as kernels per joint signature instead
-    (:attr:`RneaPartials.kernels`).
+    (:func:`~modelgen.derive.link_kernels.loopable`) gets its vectors as
+    kernels per joint signature instead (:attr:`RneaPartials.kernels`).
 
     >>> from modelgen.model.chains import spatial_chain
     >>> from modelgen.derive.kinematics import derive_kinematics
@@ -253,16 +252,16 @@ def derive_rnea_partials(eqs: Equations, tree: JointTree, spec: ModelSpec,
     count = len(tree.joints)
     root_frame = floating_root(tree)
     if looped and not root_frame and loopable(tree, eqs.q):
-        loads, moved, _ = _body_fixed_actions(builder, eqs, tree, spec)
-        if not loads:
-            same, pairs = _dof_pairs(tree)
-            order, parent = _dof_chain(tree)
-            kernels = derive_link_kernels(tree, a0, n > ARTICULATED_SOLVE_ABOVE)
-            none = tuple(tuple(ZERO for _ in eqs.u) for _ in range(n))
-            graph, effects = _effects(builder.freeze(), eqs, tree, set(gravity_labels) | moved,
-                                      none)
-            return RneaPartials(graph, a, (), same, pairs, effects, (), order, parent,
-                                kernels=kernels)
+        loads, moved, load_du = _body_fixed_actions(builder, eqs, tree, spec)
+        same, pairs = _dof_pairs(tree)
+        order, parent = _dof_chain(tree)
+        kernels = derive_link_kernels(tree, a0, n > ARTICULATED_SOLVE_ABOVE, loads, load_du)
+        # the body-fixed actions' d Q / d u comes from the kernels' loop (its du)
+        none = tuple(tuple(ZERO for _ in eqs.u) for _ in range(n))
+        graph, effects = _effects(builder.freeze(), eqs, tree, set(gravity_labels) | moved,
+                                  none)
+        return RneaPartials(graph, a, (), same, pairs, effects, (), order, parent,
+                            kernels=kernels)
     poses, R0 = _poses(builder, tree, root_frame)
     loads, moved, load_du = _body_fixed_actions(builder, eqs, tree, spec)
     if root_frame and any(x != 0 for x in a0[3:]):
