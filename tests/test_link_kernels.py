@@ -58,6 +58,28 @@ def test_looped_derivatives_are_the_straight_lines(articulated, tmp_path, monkey
             assert _relative(got, want) <= 1e-12
 
 
+def test_actions_fixed_to_links_take_the_loop_over_their_inputs(tmp_path, monkeypatch):
+    # a thrust across the tip link and a torque on a middle link about its own x
+    # axis: body-fixed forces that are not a joint's motor, whose d Q / d u the
+    # loop adds up the tree at run time
+    model = spatial_chain(12).add_inputs("F", "T")
+    model.add_action("thrust", body="rod12", point="G12", base="B12", force=[0, "F", 0])
+    model.add_action("twist", body="rod6", point="G6", base="B6", torque=["T", 0, 0])
+    spec = model.spec()
+    looped = modelgen.load(spec, tmp_path / "looped", derivatives=True)
+    source = (Path(looped.path).parent / f"{looped.name}.c").read_text()
+    assert _looped(looped) and f"{looped.name}_ddu[" in source
+    monkeypatch.setattr(tree_derivatives, "LOOPED", False)
+    straight = modelgen.load(spec, tmp_path / "straight", derivatives=True)
+    rng = np.random.default_rng(6)
+    for _ in range(3):
+        x = np.concatenate([rng.uniform(-3, 3, 12), rng.uniform(-2, 2, 12)])
+        u = rng.uniform(-2, 2, 2)
+        for got, want in zip(looped.derivatives(0.0, x, u), straight.derivatives(0.0, x, u),
+                             strict=True):
+            assert _relative(got, want) <= 1e-12
+
+
 def test_joints_of_one_signature_share_a_kernel():
     # the root (the ground folded in), then joints about z and about y alternating
     k = _kernels_of(spatial_chain(20).spec())

@@ -67,7 +67,7 @@ from modelgen.derive.ground_frame import (force_cross, force_to_ground, ground_i
                                          inertia_times, motion_to_ground, sym6, variation,
                                          variation_T_times, variation_times)
 from modelgen.derive.spatial import (IDENTITY3, ZERO, ZERO3, add, cross_motion,
-                                     dot, is_identity, matmul, matvec, name_vec, named,
+                                     dot, is_identity, is_zero, matmul, matvec, name_vec, named,
                                      rotation, sub, times, total, transpose)
 from modelgen.model.spec import ModelSpec
 
@@ -255,11 +255,11 @@ def derive_rnea_partials(eqs: Equations, tree: JointTree, spec: ModelSpec,
         loads, moved, load_du = _body_fixed_actions(builder, eqs, tree, spec)
         same, pairs = _dof_pairs(tree)
         order, parent = _dof_chain(tree)
+        motors, load_du = _motor_columns(tree, load_du, n, len(eqs.u))
+        # the other body-fixed actions' d Q / d u comes from the kernels' loop
         kernels = derive_link_kernels(tree, a0, n > ARTICULATED_SOLVE_ABOVE, loads, load_du)
-        # the body-fixed actions' d Q / d u comes from the kernels' loop (its du)
-        none = tuple(tuple(ZERO for _ in eqs.u) for _ in range(n))
         graph, effects = _effects(builder.freeze(), eqs, tree, set(gravity_labels) | moved,
-                                  none)
+                                  motors)
         return RneaPartials(graph, a, (), same, pairs, effects, (), order, parent,
                             kernels=kernels)
     poses, R0 = _poses(builder, tree, root_frame)
@@ -340,6 +340,51 @@ def derive_rnea_partials(eqs: Equations, tree: JointTree, spec: ModelSpec,
                                         for k in range(n)), same, pairs, effects,
                         tuple(factor[k] for k in range(n)) if factor else (), order, parent,
                         programmed)
+
+
+def _motor_columns(tree: JointTree, load_du, n: int, nu: int) -> tuple:
+    """``(du, rest)``: the inputs that act as a motor of a revolute joint (a torque
+    along its axis on its link, and the opposite torque on its parent's link unless
+    the parent is the ground) as their constant columns of d Q / d u (n x nu:
+    ``-S . d torque / d u`` at the joint's dof, 0 above it, where the torque and
+    its reaction cancel exactly), and ``load_du`` without them."""
+    du = [[ZERO] * nu for _ in range(n)]
+    by_input = {}
+    for i, row in load_du.items():
+        for j, d in row.items():
+            by_input.setdefault(j, {})[i] = d
+    rest = {}
+    for j, entries in by_input.items():
+        motor = _motor_of(tree, entries)
+        if motor is None:
+            for i, d in entries.items():
+                rest.setdefault(i, {})[j] = d
+            continue
+        joint = tree.joints[motor]
+        du[joint.coordinate][j] = -dot(joint.S[:3], entries[motor][:3])
+    return tuple(tuple(row) for row in du), rest
+
+
+def _motor_of(tree: JointTree, entries) -> int | None:
+    """The joint of which ``entries`` ({link: d force / d u}) is a motor, or None."""
+    def torque_along(d, axis):
+        return all(is_zero(x) for x in d[3:]) and \
+            all(is_zero(x) for c, x in enumerate(d[:3]) if c != axis - 1)
+    for m, d in entries.items():
+        joint = tree.joints[m]
+        if joint.kind != "revolute" or not torque_along(d, joint.axis):
+            continue
+        others = {i: e for i, e in entries.items() if i != m}
+        if not others and joint.parent < 0:
+            return m
+        if set(others) == {joint.parent} and joint.parent >= 0:
+            E = joint.fixed[0]
+            reaction = others[joint.parent]
+            back = tuple(-sum(E[r][c] * d[r] for r in range(3)) for c in range(3))
+            if all(is_zero(x) for x in reaction[3:]) and \
+                    all(sympy.expand(x - y) == 0 for x, y in zip(reaction[:3], back, strict=True)):
+                return m
+    return None
 
 
 def _constant_pairs(builder, programmed, vectors, n) -> tuple:
