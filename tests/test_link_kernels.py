@@ -46,6 +46,9 @@ def test_looped_derivatives_are_the_straight_lines(articulated, tmp_path, monkey
     monkeypatch.setattr(tree_derivatives, "LOOPED", False)
     straight = modelgen.load(spec, tmp_path / "straight", derivatives=True)
     assert _looped(looped) and not _looped(straight)
+    kernels = looped.manifest["derivative_kernels"]
+    assert (kernels["signatures"], kernels["joints"]) == (3, 12) and kernels["operations"] > 0
+    assert "derivative_kernels" not in straight.manifest
     rng = np.random.default_rng(5)
     for _ in range(3):
         x = np.concatenate([rng.uniform(-3, 3, 12), rng.uniform(-2, 2, 12)])

@@ -31,7 +31,7 @@ from modelgen.derive.rnea import derive_inverse_dynamics, derive_velocity_terms
 from modelgen.derive.rnea_derivatives import differentiate_inverse_dynamics
 from modelgen.derive.rnea_partials import RneaPartials
 from modelgen.codegen import tree_derivatives as plan
-from modelgen.codegen.tree_derivatives import (derivative_loop, derivative_method,
+from modelgen.codegen.tree_derivatives import (derivative_loop, derivative_manifest,
                                                derivative_routine, derivatives_pattern,
                                                time_free)
 from modelgen.errors import ModelError, ModelgenError
@@ -745,7 +745,7 @@ def _manifest(spec: ModelSpec, options: BuildOptions, derived: Derived, emitted:
         "jacobian": options.jacobian,
         "linearize": options.linearize,
         "derivatives": options.derivatives,
-        "derivative_method": derivative_method(derived.derivatives),
+        **derivative_manifest(derived.derivatives),
         "jacobian_method": derived.jacobian_method,
         "formulation": options.formulation,
         **({"constraints": _constraint_manifest(spec, derived.constraints)}

@@ -18,6 +18,7 @@ import sympy
 
 from modelgen.derive.dynamics import Equations
 from modelgen.codegen.kernels import kernel_context
+from modelgen.derive.graph import Graph
 from modelgen.derive.joint_tree import JointTree
 from modelgen.derive.link_kernels import BACKWARD_VECTORS, FACTOR_VECTORS, FORWARD_VECTORS
 from modelgen.derive.rnea_derivatives import (InverseDynamicsDerivatives,
@@ -182,6 +183,18 @@ def derivative_method(d) -> str | None:
     return "recursive" if isinstance(d, (RneaPartials, UnrolledPartials)) else "forward"
 
 
+def derivative_manifest(d) -> dict:
+    """The manifest's ``derivative_method`` and, when the per-dof vectors are loops
+    over the joints, ``derivative_kernels``: the joint signatures, the joints and
+    the kernels' operations in one call (before CSE)."""
+    out = {"derivative_method": derivative_method(d)}
+    if isinstance(d, RneaPartials) and d.kernels is not None:
+        k = d.kernels
+        out["derivative_kernels"] = {"signatures": len(k.forward), "joints": len(k.signature),
+                                     "operations": k.operations(Graph.operations)}
+    return out
+
+
 def derivatives_pattern(d):
     """The structure of the mass matrix of the derivatives (n x n booleans), or None."""
     if d is None:
@@ -243,4 +256,4 @@ def solve_flags(order, parent) -> list:
     return flags
 
 
-__all__ = ["FORWARD_DERIVATIVES_MAX", "FORWARD_JACOBIAN_MAX", "DERIVATIVES_CALL", "UnrolledPartials", "derivative_loop", "derivative_method", "derivative_routine", "derivatives_operations", "derivatives_pattern", "jacobian_candidate", "jacobian_operations", "solve_flags", "time_free", "tree_derivatives", "unrolled_partials"]
+__all__ = ["FORWARD_DERIVATIVES_MAX", "FORWARD_JACOBIAN_MAX", "DERIVATIVES_CALL", "UnrolledPartials", "derivative_loop", "derivative_manifest", "derivative_method", "derivative_routine", "derivatives_operations", "derivatives_pattern", "jacobian_candidate", "jacobian_operations", "solve_flags", "time_free", "tree_derivatives", "unrolled_partials"]
