@@ -75,7 +75,8 @@ class LinkKernels:
     (what it hands its parent).  Per joint: ``signature``, ``parent`` (-1:
     the ground), ``dof`` (its speed and coordinate) and ``offset`` of its slots
     in ``table``, which starts with the ground's state (R = 1, p = 0, ov = 0,
-    oa = the ground's acceleration), expressions of the parameters.
+    oa = the ground's acceleration), expressions of the parameters (and of the
+    inputs, for the actions fixed to links).
     """
     forward: tuple
     backward: Kernel
