@@ -103,19 +103,54 @@ def test_a_slot_is_never_the_number_of_its_index():
     body = LinkInertia((1, 1, 1, 0, 0, 0), (0, 0, 0), 1, ())
 
     def joint(E):
-        return SimpleNamespace(axis=3, fixed=(E, (0, 0, 0)), S=(0, 0, 1, 0, 0, 0))
+        return SimpleNamespace(name="q", kind="revolute", axis=3, angle=sympy.Symbol("q"),
+                               fixed=(E, (0, 0, 0)), S=(0, 0, 1, 0, 0, 0))
     plain, _ = signature(joint(((1, 0, 0), (0, 0, 1), (0, 1, 0))), body)
     turned, values = signature(joint(((1, 0, 0), (0, c, s), (0, s, c))), body)
     assert values == (c, s) and plain != turned
 
 
-def test_trees_the_kernels_do_not_take_keep_the_straight_line():
+def _same_derivatives(spec, tmp_path, monkeypatch, seed=0, states=3):
+    """Build ``spec`` looped and as a straight line; the derivatives agree."""
+    looped = modelgen.load(spec, tmp_path / "looped", derivatives=True)
+    assert _looped(looped)
+    with monkeypatch.context() as m:
+        m.setattr(tree_derivatives, "LOOPED", False)
+        straight = modelgen.load(spec, tmp_path / "straight", derivatives=True)
+    assert not _looped(straight)
+    rng = np.random.default_rng(seed)
+    for _ in range(states):
+        x = np.concatenate([rng.uniform(-1, 1, looped.nq), rng.uniform(-1, 1, looped.n)])
+        u = rng.uniform(-1, 1, len(looped.inputs))
+        for got, want in zip(looped.derivatives(0.0, x, u), straight.derivatives(0.0, x, u),
+                             strict=True):
+            assert _relative(got, want) <= 1e-12
+
+
+@pytest.mark.parametrize("articulated", [False, True])
+def test_a_branched_tree_with_a_prismatic_joint_and_offsets_takes_the_loops(
+        articulated, tmp_path, monkeypatch):
+    # a prismatic joint, an angle q2 + 3/10, two branches, a force along the input F
     from test_aba import branched_tree
+    monkeypatch.setattr(tree_derivatives, "FORWARD_DERIVATIVES_MAX", 0)
+    if articulated:
+        monkeypatch.setattr(rnea_partials, "ARTICULATED_SOLVE_ABOVE", 0)
+    _same_derivatives(branched_tree().spec(), tmp_path, monkeypatch, seed=2)
+
+
+def test_armature_enters_the_looped_articulated_factor(tmp_path, monkeypatch):
+    monkeypatch.setattr(rnea_partials, "ARTICULATED_SOLVE_ABOVE", 0)
+    model = spatial_chain(12)
+    model.set_armature({f"q{i}": 0.05 * i for i in range(1, 13)})
+    assert len(_kernels_of(model.spec()).armature) == 12
+    _same_derivatives(model.spec(), tmp_path, monkeypatch, seed=3)
+
+
+def test_trees_the_kernels_do_not_take_keep_the_straight_line():
     from test_armature import TUMBLER
     from modelgen.model import parse_model
     assert _kernels_of(spatial_chain(3).spec()) is not None
-    # a prismatic joint and an angle q + 3/10, an armature, a free joint
-    assert _kernels_of(branched_tree().spec()) is None
+    # a free joint (a floating base), with its quaternion
     assert _kernels_of(parse_model(TUMBLER)) is None
     solo = import_urdf(URDF / "solo12.urdf", floating_base=True)
     assert _kernels_of(solo.model.spec()) is None

@@ -68,13 +68,15 @@ def kernel_context(kernels: LinkKernels) -> dict:
                             {"D": _slot("D"), "V": _slot("Wk")},
                             {"V": _slot("Wk", BACKWARD_FIRST)})
     factor = None if kernels.factor is None else kernel_lines(
-        kernels.factor, "derivative_factor", {"Y": _slot("Y"), "A": _slot("A"), "J": _slot("Wk")},
+        kernels.factor, "derivative_factor",
+        {"Y": _slot("Y"), "A": _slot("A"), "J": _slot("Wk"), "arm": ("arm",)},
         {"V": _slot("Wk", FACTOR_FIRST), "H": _slot("H")})
     return {"forward": forward, "backward": backward, "factor": factor,
             "joints": len(kernels.signature), "signature": c_list(kernels.signature),
             "parent": c_list(kernels.parent), "dof": c_list(kernels.dof),
             "offset": c_list(kernels.offset), "table": len(kernels.table),
-            "du": c_list(x for row in kernels.du for x in row) or "0", "ndu": len(kernels.du)}
+            "du": c_list(x for row in kernels.du for x in row) or "0", "ndu": len(kernels.du),
+            "armature": c_list(kernels.armature)}
 
 
 __all__ = ["kernel_context", "kernel_lines"]

@@ -34,6 +34,7 @@ from modelgen.derive.ground_frame import (force_cross, force_to_ground, ground_i
                                           inertia_times, motion_to_ground, sym6, variation,
                                           variation_T_times, variation_times)
 from modelgen.derive.joint_tree import JointTree, LinkInertia
+from modelgen.model.spec import symbol
 from modelgen.derive.spatial import (IDENTITY3, PAIRS, ZERO3, add, cross_motion, dot,
                                      is_identity, matmul, matvec, name_vec, named, rotation, sub,
                                      symmetric, times, total, transpose)
@@ -91,6 +92,9 @@ class LinkKernels:
     #: the loop adds ``-J_k . d force / d u`` (in E) to dQ_du of every dof k at or
     #: above the joint
     du: tuple = ()
+    #: per joint, where its dof's armature is in ``table`` (for the factor's D);
+    #: empty without armature
+    armature: tuple = ()
 
     def operations(self, graph_operations) -> int:
         """Operations of one call: each joint's kernels (``graph_operations(graph,
@@ -104,15 +108,22 @@ class LinkKernels:
 
 
 def loopable(tree: JointTree, q) -> bool:
-    """Whether :func:`derive_link_kernels` takes ``tree``: revolute joints, each
-    turning by its own coordinate (``q``: the coordinates' symbols), a root
-    fixed to the ground, no armature."""
-    if tree.armature and any(x != 0 for x in tree.armature):
-        return False
+    """Whether :func:`derive_link_kernels` takes ``tree``: revolute joints turning
+    by ``a q + c`` and prismatic joints moving by ``q d`` (``q`` the joint's own
+    coordinate, of ``q``, the coordinates' symbols; ``a``, ``c`` and ``d``
+    constants), so no ball or free joint."""
     for joint in tree.joints:
-        if joint.kind != "revolute" or joint.angle != q[joint.coordinate]:
+        if joint.kind not in ("revolute", "prismatic") or \
+                joint.dofs != ((joint.coordinate, joint.S),):
             return False
-        if joint.dofs != ((joint.coordinate, joint.S),):
+        own = q[joint.coordinate]
+        if own != symbol(joint.name):
+            return False
+        if joint.kind == "revolute":
+            if own in sympy.sympify(_angle_offset(joint)).free_symbols:
+                return False
+        elif any(sympy.expand(o - d * own) != 0
+                 for o, d in zip(joint.offset, joint.S[3:], strict=True)):
             return False
     return True
 
@@ -146,8 +157,14 @@ def signature(joint, body: LinkInertia, ground=None, load=None) -> tuple:
            tuple(slot(x) for x in r), tuple(slot(x) for x in joint.S),
            tuple(slot(x) for x in body.I), tuple(slot(x) for x in body.h), slot(body.m),
            None if ground is None else tuple(slot(x) for x in ground),
-           None if load is None else tuple(slot(x) for x in load))
+           None if load is None else tuple(slot(x) for x in load),
+           slot(_angle_offset(joint)) if joint.kind == "revolute" else None)
     return key, tuple(values)
+
+
+def _angle_offset(joint):
+    """``c`` of a revolute joint's angle ``a q + c`` (``a`` is its S entry)."""
+    return sympy.expand(joint.angle - joint.S[joint.axis - 1] * symbol(joint.name))
 
 
 class _Slot(int):
@@ -168,11 +185,11 @@ def _fill(key, slots) -> tuple:
     """``key`` with each slot index replaced by its symbol."""
     def one(x):
         return slots[x] if type(x) is _Slot else x
-    axis, E, r, S, I, h, m, ground, load = key
+    axis, E, r, S, I, h, m, ground, load, offset = key
     return (axis, tuple(tuple(one(x) for x in row) for row in E), tuple(one(x) for x in r),
             tuple(one(x) for x in S), tuple(one(x) for x in I), tuple(one(x) for x in h),
             one(m), None if ground is None else tuple(one(x) for x in ground),
-            None if load is None else tuple(one(x) for x in load))
+            None if load is None else tuple(one(x) for x in load), one(offset))
 
 
 def _inputs(prefix: str, count: int) -> tuple:
@@ -186,7 +203,7 @@ def forward_kernel(key) -> Kernel:
     in E, and ``dVdq``, ``dAdq``, ``dAdv``."""
     count = 1 + max([int(x) for x in _flat(key) if type(x) is _Slot], default=-1)
     slots = _slot_symbols(count)
-    axis, E, r, S, I, h, m, ground, load = _fill(key, slots)
+    axis, E, r, S, I, h, m, ground, load, offset = _fill(key, slots)
     P = _inputs("par", KIN)
     q, qd, qdd = sympy.symbols("mg_q mg_qd mg_qdd")
     builder = GraphBuilder()
@@ -199,8 +216,13 @@ def forward_kernel(key) -> Kernel:
         p = name_vec(builder, add(p, matvec(R, r)))
     if not is_identity(E):
         R = tuple(name_vec(builder, row) for row in matmul(R, transpose(E)))
-    c, s = builder.name(sympy.cos(q)), builder.name(sympy.sin(q))
-    R = tuple(name_vec(builder, row) for row in matmul(R, transpose(rotation(axis, c, s))))
+    if axis:                            # revolute: turned by a q + c
+        angle = total((times(S[axis - 1], q), offset))
+        c, s = builder.name(sympy.cos(angle)), builder.name(sympy.sin(angle))
+        R = tuple(name_vec(builder, row) for row in matmul(R, transpose(rotation(axis, c, s))))
+    else:                               # prismatic: moved by q along S's linear part
+        p = name_vec(builder, add(p, matvec(R, name_vec(builder, tuple(times(d, q)
+                                                                     for d in S[3:])))))
     J = name_vec(builder, motion_to_ground(R, p, S))
     dV = name_vec(builder, cross_motion(ov_p, J))
     vJ = name_vec(builder, tuple(times(x, qd) for x in J))
@@ -224,9 +246,9 @@ def forward_kernel(key) -> Kernel:
 
 
 def _flat(key):
-    axis, E, r, S, I, h, m, ground, load = key
+    axis, E, r, S, I, h, m, ground, load, offset = key
     return [x for row in E for x in row] + list(r) + list(S) + list(I) + list(h) + [m] + \
-        list(ground or ()) + list(load or ())
+        list(ground or ()) + list(load or ()) + [offset]
 
 
 def backward_kernel() -> Kernel:
@@ -248,11 +270,13 @@ def backward_kernel() -> Kernel:
                   (("V", dFda + dYtJ + dFdq0 + dFdq + dFdv),))
 
 
-def factor_kernel() -> Kernel:
+def factor_kernel(armature: bool = False) -> Kernel:
     """One dof of ``articulated_factor``: its articulated inertia (its link's own
     plus what its children handed it), ``U = IA J``, ``1 / D`` and what it hands
-    its predecessor, ``IA - U U^T / D``."""
+    its predecessor, ``IA - U U^T / D``; with ``armature``, ``D = J . U`` plus
+    the dof's armature (input ``arm``)."""
     Yin, Ain, J = _inputs("own", 10), _inputs("acc", TRIANGLE), _inputs("col", 6)
+    arm = sympy.Symbol("mg_arm")
     builder = GraphBuilder()
     own = sym6((symmetric(Yin[0:6]), Yin[6:9], Yin[9]))
     upper = {}
@@ -262,11 +286,12 @@ def factor_kernel() -> Kernel:
     A = [[named(builder, total((own[r][c], upper[min(r, c), max(r, c)]))) for c in range(6)]
          for r in range(6)]
     U = name_vec(builder, [dot(row, J) for row in A])
-    d = builder.name(dot(J, U))
+    d = builder.name(total((dot(J, U), arm)) if armature else dot(J, U))
     inv = builder.name(1 / d)
     Uw = name_vec(builder, [times(inv, x) for x in U])
     child = tuple(total((A[r][c], -times(U[r], Uw[c]))) for r in range(6) for c in range(r, 6))
-    return Kernel(builder.freeze(), (("Y", Yin), ("A", Ain), ("J", J)),
+    return Kernel(builder.freeze(), (("Y", Yin), ("A", Ain), ("J", J))
+                  + ((("arm", (arm,)),) if armature else ()),
                   (("V", U + (inv,)), ("H", child)))
 
 
@@ -289,16 +314,21 @@ def derive_link_kernels(tree: JointTree, a0, articulated: bool, loads=None,
         signature_of.append(keys[key])
         offset.append(len(table))
         table.extend(values)
+    armature = bool(tree.armature) and any(x != 0 for x in tree.armature)
+    arm = []
+    for joint in tree.joints if armature else ():
+        arm.append(len(table))
+        table.append(sympy.sympify(tree.armature[joint.coordinate]))
     du = []
     for i in sorted(load_du):
         for j in sorted(load_du[i]):
             du.append((i, j, len(table)))
             table.extend(sympy.sympify(x) for x in load_du[i][j])
     return LinkKernels(tuple(forward), backward_kernel(),
-                       factor_kernel() if articulated else None, tuple(signature_of),
+                       factor_kernel(armature) if articulated else None, tuple(signature_of),
                        tuple(j.parent for j in tree.joints),
                        tuple(j.coordinate for j in tree.joints), tuple(offset), tuple(table),
-                       tuple(du))
+                       tuple(du), tuple(arm))
 
 
 __all__ = ["BACKWARD_VECTORS", "DYN", "FACTOR_VECTORS", "FORWARD_VECTORS", "KIN", "Kernel", "LinkKernels", "TRIANGLE", "backward_kernel",
