@@ -12,11 +12,14 @@ from __future__ import annotations
 from modelgen.codegen.cse import make_routines
 from modelgen.codegen.printer import ModelPrinter
 from modelgen.derive.graph import free_symbols
-from modelgen.derive.link_kernels import FORWARD_VECTORS, Kernel, LinkKernels
+from modelgen.derive.link_kernels import BACKWARD_VECTORS, FORWARD_VECTORS, Kernel, LinkKernels
 
 #: W's first component each kernel writes
 BACKWARD_FIRST = FORWARD_VECTORS
-FACTOR_FIRST = FORWARD_VECTORS + 27
+FACTOR_FIRST = FORWARD_VECTORS + BACKWARD_VECTORS
+#: the last kernels printed and their context: the early renders of a build's
+#: parts and its final one print them once (id(kernels) -> (kernels, context))
+_PRINTED: dict = {}
 
 
 def _slot(array: str, first: int = 0):
@@ -57,6 +60,16 @@ def kernel_lines(kernel: Kernel, name: str, inputs: dict, outputs: dict) -> tupl
 def kernel_context(kernels: LinkKernels) -> dict:
     """The template's ``derivative_loop.kernels``: each kernel's lines and the
     per-joint tables as C initialiser lists."""
+    hit = _PRINTED.get(id(kernels))
+    if hit is not None and hit[0] is kernels:
+        return hit[1]
+    context = _context(kernels)
+    _PRINTED.clear()
+    _PRINTED[id(kernels)] = (kernels, context)
+    return context
+
+
+def _context(kernels: LinkKernels) -> dict:
     def c_list(values):
         return ", ".join(str(v) for v in values)
     forward = tuple(

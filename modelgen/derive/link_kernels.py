@@ -11,16 +11,17 @@ joint is abstracted to a *signature* (its axis and the constants, each a slot
 ``c[i]`` unless it is 0, 1 or -1), and the forward step is derived once per
 signature over symbols for the parent's state (:data:`KIN`), the slots and
 the joint's q, qd and qdd; the backward step and the articulated-body factor
-do not depend on the joint at all.  The C calls them in loops over the joints
-(``templates/model.c.j2``), with the ground as the root's parent and the
-slots' values (expressions of the parameters) in a table, so what is derived
-and compiled grows with the number of signatures, not with n.  The
+do not depend on the joint at all; a root joint's signature has the ground's
+state folded in.  The C calls them in loops over the joints
+(``templates/model.c.j2``), with the slots' values (expressions of the
+parameters) in a table, so what is derived and compiled grows with the number
+of signatures, not with n.  The
 arithmetic is :func:`~modelgen.derive.rnea_partials.derive_rnea_partials`'s,
 step for step (:mod:`modelgen.derive.ground_frame`).
 
-Joints the kernels take (:func:`loopable`): revolute joints whose angle is
-their own coordinate, on a fixed base, without armature.  Actions fixed to a
-link (a joint's motor and its reaction) enter its force ``of`` as constants
+Joints the kernels take (:func:`loopable`): revolute and prismatic joints,
+so a fixed base; an armature enters the articulated factor.  Actions fixed to
+a link (a joint's motor and its reaction) enter its force ``of`` as constants
 of its signature, evaluated with the inputs at every call.
 """
 from __future__ import annotations
@@ -74,10 +75,10 @@ class LinkKernels:
     ``Y`` (the link's own first 10 of D), ``A`` (what its children handed it,
     :data:`TRIANGLE`) and ``J``; outputs ``V`` (components 51..57) and ``H``
     (what it hands its parent).  Per joint: ``signature``, ``parent`` (-1:
-    the ground), ``dof`` (its speed and coordinate) and ``offset`` of its slots
-    in ``table``, which starts with the ground's state (R = 1, p = 0, ov = 0,
-    oa = the ground's acceleration), expressions of the parameters (and of the
-    inputs, for the actions fixed to links).
+    the ground; a root's kernel reads no parent state, the ground's is folded
+    in), ``dof`` (its speed and coordinate) and ``offset`` of its slots in
+    ``table``: expressions of the parameters (and of the inputs, for the
+    actions fixed to links).
     """
     forward: tuple
     backward: Kernel
@@ -126,10 +127,6 @@ def loopable(tree: JointTree, q) -> bool:
                  for o, d in zip(joint.offset, joint.S[3:], strict=True)):
             return False
     return True
-
-
-def _slot_symbols(count: int) -> tuple:
-    return tuple(sympy.Symbol(f"mg_slot{i}") for i in range(count))
 
 
 def signature(joint, body: LinkInertia, ground=None, load=None) -> tuple:
@@ -202,7 +199,7 @@ def forward_kernel(key) -> Kernel:
     column J, velocity and acceleration, its inertia, force and their variation
     in E, and ``dVdq``, ``dAdq``, ``dAdv``."""
     count = 1 + max([int(x) for x in _flat(key) if type(x) is _Slot], default=-1)
-    slots = _slot_symbols(count)
+    slots = _inputs("slot", count)
     axis, E, r, S, I, h, m, ground, load, offset = _fill(key, slots)
     P = _inputs("par", KIN)
     q, qd, qdd = sympy.symbols("mg_q mg_qd mg_qdd")
@@ -303,9 +300,7 @@ def derive_link_kernels(tree: JointTree, a0, articulated: bool, loads=None,
     index: {input index: 6-vector}}) are the actions fixed to links and their
     derivatives along the inputs, in link components."""
     loads, load_du = loads or {}, load_du or {}
-    keys, forward, signature_of, offset = {}, [], [], []
-    table = [sympy.Integer(1) if i in (0, 4, 8) else sympy.Integer(0) for i in range(18)]
-    table += [sympy.sympify(x) for x in a0]
+    keys, forward, signature_of, offset, table = {}, [], [], [], []
     for i, (joint, body) in enumerate(zip(tree.joints, tree.inertias, strict=True)):
         key, values = signature(joint, body, a0 if joint.parent < 0 else None, loads.get(i))
         if key not in keys:

@@ -328,7 +328,8 @@ def derive_rnea_partials(eqs: Equations, tree: JointTree, spec: ModelSpec,
     order, parent = _dof_chain(tree)
     factor = (articulated_factor(builder, order, parent, J, Y, tree)
               if n > ARTICULATED_SOLVE_ABOVE else None)
-    du_loads = _loads_du(builder, load_du, poses, J, tree, len(eqs.u))
+    motors, load_du = _motor_columns(tree, load_du, n, len(eqs.u))
+    du_loads = _plus(_loads_du(builder, load_du, poses, J, tree, len(eqs.u)), motors)
     root_dofs = {k for joint in tree.joints if joint.parent < 0 for k, _ in joint.dofs}
     programmed = tuple((k, l) for k, l in same if root_frame and k in root_dofs)
     constant = _constant_pairs(builder, programmed, vectors, n)
@@ -360,8 +361,8 @@ def _motor_columns(tree: JointTree, load_du, n: int, nu: int) -> tuple:
             for i, d in entries.items():
                 rest.setdefault(i, {})[j] = d
             continue
-        joint = tree.joints[motor]
-        du[joint.coordinate][j] = -dot(joint.S[:3], entries[motor][:3])
+        (k, S), = tree.joints[motor].dofs
+        du[k][j] = -dot(S[:3], entries[motor][:3])
     return tuple(tuple(row) for row in du), rest
 
 
