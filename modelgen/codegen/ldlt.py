@@ -148,11 +148,12 @@ def unrolled_factor(n: int, tol: str, plan: Elimination, stored: bool = False) -
     :func:`unrolled_apply` reads."""
     earlier = plan.earlier()
     earlier_sets = {v: set(ks) for v, ks in earlier.items()}
-    forward, backward = factor_offsets(plan) if stored else ({}, {})
 
     def a(i, j):
         return f"A[{max(i, j) * n + min(i, j)}]"
 
+    if stored:
+        return _stored_factor(plan, tol, a, earlier, earlier_sets)
     lines = []
     for j in plan.order:
         # u{j}_{k} = L{j}_{k} * d{k}: reused by every row below j
@@ -168,9 +169,34 @@ def unrolled_factor(n: int, tol: str, plan: Elimination, stored: bool = False) -
             # a fill-in entry: A is zero there, only the updates remain
             first = "" if frozenset((i, j)) in plan.fill else a(i, j)
             lines.append(f"const double L{i}_{j} = ({first}{terms}) * inv{j};")
-            if stored:
-                lines.append(f"Lf[{forward[i] + earlier[i].index(j)}] = "
-                             f"Lb[{backward[j] + plan.below[j].index(i)}] = L{i}_{j};")
+    return lines
+
+
+def _stored_factor(plan: Elimination, tol: str, a, earlier, earlier_sets) -> list:
+    """:func:`unrolled_factor` with ``stored``: each ``L[i][j]`` and ``u[j][k] =
+    L[j][k] d[k]`` goes to the arrays ``Lf`` and ``Uf`` (and ``Lb``) and every later
+    use reads it back from there, with a compiler barrier (``MG_BARRIER``) before
+    each pivot.  Without the barrier gcc keeps every entry of L in a register
+    from its column to its last use, and the allocation of those registers is
+    most of the compile time of the derivatives' solve."""
+    forward, backward = factor_offsets(plan)
+    place = {(v, k): forward[v] + x for v in plan.order for x, k in enumerate(earlier[v])}
+    lines = []
+    for p, j in enumerate(plan.order):
+        if p:
+            lines.append("MG_BARRIER;")
+        for k in earlier[j]:
+            lines.append(f"Uf[{place[j, k]}] = Lf[{place[j, k]}] * d{k};")
+        terms = "".join(f" - Uf[{place[j, k]}] * Lf[{place[j, k]}]" for k in earlier[j])
+        lines.append(f"const double d{j} = {a(j, j)}{terms};")
+        lines.append(f"if (!(d{j} > {tol} * {a(j, j)}) || !({a(j, j)} > 0.0)) return {j + 1};")
+        lines.append(f"const double inv{j} = 1.0 / d{j};")
+        for i in plan.below[j]:
+            common = [k for k in earlier[j] if k in earlier_sets[i]]
+            terms = "".join(f" - Lf[{place[i, k]}] * Uf[{place[j, k]}]" for k in common)
+            first = "" if frozenset((i, j)) in plan.fill else a(i, j)
+            lines.append(f"Lf[{place[i, j]}] = ({first}{terms}) * inv{j};")
+            lines.append(f"Lb[{backward[j] + plan.below[j].index(i)}] = Lf[{place[i, j]}];")
     return lines
 
 
