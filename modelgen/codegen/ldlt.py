@@ -174,9 +174,9 @@ def unrolled_factor(n: int, tol: str, plan: Elimination, stored: bool = False) -
 
 def _stored_factor(plan: Elimination, tol: str, a, earlier, earlier_sets) -> list:
     """:func:`unrolled_factor` with ``stored``: each ``L[i][j]`` and ``u[j][k] =
-    L[j][k] d[k]`` goes to the arrays ``Lf`` and ``Uf`` (and ``Lb``) and every later
-    use reads it back from there, with a compiler barrier (``MG_BARRIER``) before
-    each pivot.  Without the barrier gcc keeps every entry of L in a register
+    L[j][k] d[k]`` goes to the arrays ``Lf`` and ``Uf`` (and ``Lb``), 1 / d to
+    ``inv``, and every later use reads it back from there, with a compiler
+    barrier (``MG_BARRIER``) before each pivot.  Without the barrier gcc keeps every entry of L in a register
     from its column to its last use, and the allocation of those registers is
     most of the compile time of the derivatives' solve."""
     forward, backward = factor_offsets(plan)
@@ -190,7 +190,8 @@ def _stored_factor(plan: Elimination, tol: str, a, earlier, earlier_sets) -> lis
         terms = "".join(f" - Uf[{place[j, k]}] * Lf[{place[j, k]}]" for k in earlier[j])
         lines.append(f"const double d{j} = {a(j, j)}{terms};")
         lines.append(f"if (!(d{j} > {tol} * {a(j, j)}) || !({a(j, j)} > 0.0)) return {j + 1};")
-        lines.append(f"const double inv{j} = 1.0 / d{j};")
+        lines.append(f"const double inv{j} = inv[{j}] = 1.0 / d{j};" if plan.below[j] else
+                     f"inv[{j}] = 1.0 / d{j};")
         for i in plan.below[j]:
             common = [k for k in earlier[j] if k in earlier_sets[i]]
             terms = "".join(f" - Lf[{place[i, k]}] * Uf[{place[j, k]}]" for k in common)
@@ -309,7 +310,7 @@ def unrolled_apply(plan: Elimination, name: str) -> list:
                 f"{scale}); }}")
     lines = [call(i, earlier[i], f"Lf + {forward[i]}", "1.0")
              for i in plan.order if earlier[i]]
-    lines += [call(i, plan.below[i], f"Lb + {backward[i]}", f"-inv{i}")
+    lines += [call(i, plan.below[i], f"Lb + {backward[i]}", f"-inv[{i}]")
               for i in reversed(plan.order)]
     return lines
 
