@@ -143,9 +143,15 @@ def _substitutions(plan: Elimination, entry, sign: str) -> list:
 def unrolled_factor(n: int, tol: str, plan: Elimination, stored: bool = False) -> list:
     """The factorization half of :func:`unrolled_ldlt`: locals ``d{j}``, ``inv{j}``
     (1 / d) and ``L{i}_{j}`` from the lower triangle of ``A``; a failing pivot
-    returns its 1-based index.  With ``stored``, each ``L{i}_{j}`` is also written
-    to the arrays ``Lf`` and ``Lb`` at :func:`factor_offsets`' places, which
-    :func:`unrolled_apply` reads."""
+    returns its 1-based index.
+
+    With ``stored``, each entry of L and each ``u[j][k] = L[j][k] d[k]`` goes to
+    the arrays ``Lf`` and ``Uf`` at :func:`factor_offsets`' places (L also to
+    ``Lb``, which :func:`unrolled_apply` reads with ``Lf``), 1 / d to ``inv``,
+    and every later use reads it back from there, after a compiler barrier
+    (``MG_BARRIER``) before each pivot: as locals, gcc keeps every entry of L in
+    a register from its column to its last use, and allocating those registers
+    was most of the compile time of the derivatives' solve."""
     earlier = plan.earlier()
     earlier_sets = {v: set(ks) for v, ks in earlier.items()}
 
@@ -153,51 +159,46 @@ def unrolled_factor(n: int, tol: str, plan: Elimination, stored: bool = False) -
         return f"A[{max(i, j) * n + min(i, j)}]"
 
     if stored:
-        return _stored_factor(plan, tol, a, earlier, earlier_sets)
-    lines = []
-    for j in plan.order:
-        # u{j}_{k} = L{j}_{k} * d{k}: reused by every row below j
-        for k in earlier[j]:
-            lines.append(f"const double u{j}_{k} = L{j}_{k} * d{k};")
-        terms = "".join(f" - u{j}_{k} * L{j}_{k}" for k in earlier[j])
-        lines.append(f"const double d{j} = {a(j, j)}{terms};")
-        lines.append(f"if (!(d{j} > {tol} * {a(j, j)}) || !({a(j, j)} > 0.0)) return {j + 1};")
-        lines.append(f"const double inv{j} = 1.0 / d{j};")
-        for i in plan.below[j]:
-            common = [k for k in earlier[j] if k in earlier_sets[i]]
-            terms = "".join(f" - L{i}_{k} * u{j}_{k}" for k in common)
-            # a fill-in entry: A is zero there, only the updates remain
-            first = "" if frozenset((i, j)) in plan.fill else a(i, j)
-            lines.append(f"const double L{i}_{j} = ({first}{terms}) * inv{j};")
-    return lines
+        forward, backward = factor_offsets(plan)
+        place = {(v, k): forward[v] + x for v in plan.order for x, k in enumerate(earlier[v])}
 
+        def L(i, k):
+            return f"Lf[{place[i, k]}]"
 
-def _stored_factor(plan: Elimination, tol: str, a, earlier, earlier_sets) -> list:
-    """:func:`unrolled_factor` with ``stored``: each ``L[i][j]`` and ``u[j][k] =
-    L[j][k] d[k]`` goes to the arrays ``Lf`` and ``Uf`` (and ``Lb``), 1 / d to
-    ``inv``, and every later use reads it back from there, with a compiler
-    barrier (``MG_BARRIER``) before each pivot.  Without the barrier gcc keeps every entry of L in a register
-    from its column to its last use, and the allocation of those registers is
-    most of the compile time of the derivatives' solve."""
-    forward, backward = factor_offsets(plan)
-    place = {(v, k): forward[v] + x for v in plan.order for x, k in enumerate(earlier[v])}
+        def u(j, k):
+            return f"Uf[{place[j, k]}]"
+        define = ""
+    else:
+        def L(i, k):
+            return f"L{i}_{k}"
+
+        def u(j, k):
+            return f"u{j}_{k}"
+        define = "const double "
     lines = []
     for p, j in enumerate(plan.order):
-        if p:
+        if stored and p:
             lines.append("MG_BARRIER;")
+        # u[j][k] = L[j][k] * d[k]: reused by every row below j
         for k in earlier[j]:
-            lines.append(f"Uf[{place[j, k]}] = Lf[{place[j, k]}] * d{k};")
-        terms = "".join(f" - Uf[{place[j, k]}] * Lf[{place[j, k]}]" for k in earlier[j])
+            lines.append(f"{define}{u(j, k)} = {L(j, k)} * d{k};")
+        terms = "".join(f" - {u(j, k)} * {L(j, k)}" for k in earlier[j])
         lines.append(f"const double d{j} = {a(j, j)}{terms};")
         lines.append(f"if (!(d{j} > {tol} * {a(j, j)}) || !({a(j, j)} > 0.0)) return {j + 1};")
-        lines.append(f"const double inv{j} = inv[{j}] = 1.0 / d{j};" if plan.below[j] else
-                     f"inv[{j}] = 1.0 / d{j};")
+        if not stored:
+            lines.append(f"const double inv{j} = 1.0 / d{j};")
+        elif plan.below[j]:
+            lines.append(f"const double inv{j} = inv[{j}] = 1.0 / d{j};")
+        else:
+            lines.append(f"inv[{j}] = 1.0 / d{j};")
         for i in plan.below[j]:
             common = [k for k in earlier[j] if k in earlier_sets[i]]
-            terms = "".join(f" - Lf[{place[i, k]}] * Uf[{place[j, k]}]" for k in common)
+            terms = "".join(f" - {L(i, k)} * {u(j, k)}" for k in common)
+            # a fill-in entry: A is zero there, only the updates remain
             first = "" if frozenset((i, j)) in plan.fill else a(i, j)
-            lines.append(f"Lf[{place[i, j]}] = ({first}{terms}) * inv{j};")
-            lines.append(f"Lb[{backward[j] + plan.below[j].index(i)}] = Lf[{place[i, j]}];")
+            lines.append(f"{define}{L(i, j)} = ({first}{terms}) * inv{j};")
+            if stored:
+                lines.append(f"Lb[{backward[j] + plan.below[j].index(i)}] = {L(i, j)};")
     return lines
 
 
