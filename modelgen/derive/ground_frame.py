@@ -141,5 +141,33 @@ def force_to_ground(R, p, f):
     return add(matvec(R, f[:3]), cross(p, F)) + tuple(F)
 
 
-__all__ = ["force_cross", "force_to_ground", "ground_inertia", "inertia_times", "motion_to_ground",
-           "rotated_inertia", "sym6", "variation", "variation_T_times", "variation_times"]
+# -- the steps the straight line and the kernels share ---------------------------------
+
+def link_dynamics(builder, body, R, p, ov, oa, orthogonal: bool, load=None) -> tuple:
+    """A link's ``(Y, of, doY)`` in E: its spatial inertia about E's origin
+    (:func:`ground_inertia`), its RNEA force ``Y oa + ov x* Y ov`` less the
+    force ``load`` of the actions fixed to it (link components, at its origin;
+    None: no such actions), and the variation of Y (:func:`variation`)."""
+    Y = ground_inertia(builder, body, R, p, orthogonal)
+    oh = name_vec(builder, inertia_times(Y, ov))
+    of = name_vec(builder, add(inertia_times(Y, oa), force_cross(ov, oh)))
+    if load is not None:                # Q = RNEA's forces less the actions'
+        of = name_vec(builder, sub(of, force_to_ground(R, p, load)))
+    return Y, of, variation(builder, Y, ov, oh)
+
+
+def dof_partials(builder, Y, dY, f, J, dAdq, dVdq, dAdv) -> tuple:
+    """The inward vectors of one dof, ``(dFda, dYtJ, dFdq0, dFdq, dFdv)``, from the
+    composite inertia ``Y``, variation ``dY`` and force ``f`` of the subtree at
+    its joint and the dof's outward ones (``J``, ``dAdq``, ``dVdq``, ``dAdv``)."""
+    dFda = name_vec(builder, inertia_times(Y, J))
+    dFdq0 = name_vec(builder, add(variation_times(dY, dVdq), inertia_times(Y, dAdq)))
+    dFdq = name_vec(builder, add(dFdq0, force_cross(J, f)))
+    dFdv = name_vec(builder, add(variation_times(dY, J), inertia_times(Y, dAdv)))
+    dYtJ = name_vec(builder, variation_T_times(dY, J))
+    return dFda, dYtJ, dFdq0, dFdq, dFdv
+
+
+__all__ = ["dof_partials", "force_cross", "force_to_ground", "ground_inertia", "inertia_times",
+           "link_dynamics", "motion_to_ground", "rotated_inertia", "sym6", "variation",
+           "variation_T_times", "variation_times"]

@@ -31,13 +31,12 @@ from dataclasses import dataclass
 import sympy
 
 from modelgen.derive.graph import Graph, GraphBuilder
-from modelgen.derive.ground_frame import (force_cross, force_to_ground, ground_inertia,
-                                          inertia_times, motion_to_ground, sym6, variation,
-                                          variation_T_times, variation_times)
+from modelgen.derive.ground_frame import (dof_partials, link_dynamics, motion_to_ground,
+                                          sym6)
 from modelgen.derive.joint_tree import JointTree, LinkInertia
 from modelgen.model.spec import symbol
 from modelgen.derive.spatial import (IDENTITY3, PAIRS, ZERO3, add, cross_motion, dot,
-                                     is_identity, matmul, matvec, name_vec, named, rotation, sub,
+                                     is_identity, matmul, matvec, name_vec, named, rotation,
                                      symmetric, times, total, transpose)
 
 #: a link's state for its children: R (9, by rows), p (3), ov (6), oa (6)
@@ -226,12 +225,7 @@ def forward_kernel(key) -> Kernel:
     ov = name_vec(builder, add(ov_p, vJ))
     oa = name_vec(builder, add(add(oa_p, tuple(times(x, qdd) for x in J)),
                                tuple(times(x, qd) for x in dV)))
-    Y = ground_inertia(builder, LinkInertia(I, h, m, ()), R, p, True)
-    oh = name_vec(builder, inertia_times(Y, ov))
-    of = name_vec(builder, add(inertia_times(Y, oa), force_cross(ov, oh)))
-    if load is not None:                # Q = RNEA's forces less the actions'
-        of = name_vec(builder, sub(of, force_to_ground(R, p, load)))
-    A, F = variation(builder, Y, ov, oh)
+    Y, of, (A, F) = link_dynamics(builder, LinkInertia(I, h, m, ()), R, p, ov, oa, True, load)
     dAdq = name_vec(builder, add(cross_motion(oa_p, J), cross_motion(ov_p, dV)))
     dAdv = tuple(builder.factor(times(2, x)) for x in dV)
     I_O, h_O, mass = Y
@@ -258,13 +252,9 @@ def backward_kernel() -> Kernel:
     dY = ((D[10:13], D[13:16], D[16:19]), D[19:22])
     f = D[22:28]
     J, dAdq, dV, dAdv = V[0:6], V[6:12], V[12:18], V[18:24]
-    dFda = name_vec(builder, inertia_times(Y, J))
-    dFdq0 = name_vec(builder, add(variation_times(dY, dV), inertia_times(Y, dAdq)))
-    dFdq = name_vec(builder, add(dFdq0, force_cross(J, f)))
-    dFdv = name_vec(builder, add(variation_times(dY, J), inertia_times(Y, dAdv)))
-    dYtJ = name_vec(builder, variation_T_times(dY, J))
+    partials = dof_partials(builder, Y, dY, f, J, dAdq, dV, dAdv)
     return Kernel(builder.freeze(), (("D", D), ("V", V)),
-                  (("V", dFda + dYtJ + dFdq0 + dFdq + dFdv),))
+                  (("V", tuple(x for vec in partials for x in vec)),))
 
 
 def factor_kernel(armature: bool = False) -> Kernel:

@@ -63,12 +63,11 @@ from modelgen.derive.link_kernels import LinkKernels, derive_link_kernels, loopa
 from modelgen.derive.kinematics import quaternion_columns
 from modelgen.derive.recursion import action_force, ground_acceleration
 from modelgen.derive.rnea_derivatives import tangent_rows
-from modelgen.derive.ground_frame import (force_cross, force_to_ground, ground_inertia,
-                                         inertia_times, motion_to_ground, sym6, variation,
-                                         variation_T_times, variation_times)
+from modelgen.derive.ground_frame import (dof_partials, force_to_ground, link_dynamics,
+                                          motion_to_ground, sym6)
 from modelgen.derive.spatial import (IDENTITY3, ZERO, ZERO3, add, cross_motion,
                                      dot, is_identity, is_zero, matmul, matvec, name_vec, named,
-                                     rotation, sub, times, total, transpose)
+                                     rotation, times, total, transpose)
 from modelgen.model.spec import ModelSpec
 
 #: the per-dof 6-vectors of :attr:`RneaPartials.vectors`, in their order
@@ -288,12 +287,8 @@ def derive_rnea_partials(eqs: Equations, tree: JointTree, spec: ModelSpec,
         vJ = name_vec(builder, vJ)
         ov[i] = name_vec(builder, add(ov_p, vJ))
         oa[i] = name_vec(builder, add(add(oa_p, aJ), cJ))
-        Y[i] = ground_inertia(builder, tree.inertias[i], R, p, not turned[i])
-        oh = name_vec(builder, inertia_times(Y[i], ov[i]))
-        of[i] = name_vec(builder, add(inertia_times(Y[i], oa[i]), force_cross(ov[i], oh)))
-        if i in loads:                  # Q = RNEA's forces less the actions'
-            of[i] = name_vec(builder, sub(of[i], force_to_ground(R, p, loads[i])))
-        doY[i] = variation(builder, Y[i], ov[i], oh)
+        Y[i], of[i], doY[i] = link_dynamics(builder, tree.inertias[i], R, p, ov[i], oa[i],
+                                            not turned[i], loads.get(i))
         for k, _ in joint.dofs:
             dV = dVdq[k]
             dAdq[k] = name_vec(builder, add(cross_motion(oa_p, J[k]), cross_motion(ov_p, dV)))
@@ -307,14 +302,8 @@ def derive_rnea_partials(eqs: Equations, tree: JointTree, spec: ModelSpec,
     for i in reversed(range(count)):
         joint = tree.joints[i]
         for k, _ in joint.dofs:
-            dFda = name_vec(builder, inertia_times(Yc[i], J[k]))
-            dFdq0 = name_vec(builder, add(variation_times(dYc[i], dVdq[k]),
-                                          inertia_times(Yc[i], dAdq[k])))
-            dFdq = name_vec(builder, add(dFdq0, force_cross(J[k], fc[i])))
-            dFdv = name_vec(builder, add(variation_times(dYc[i], J[k]),
-                                         inertia_times(Yc[i], dAdv[k])))
-            dYtJ = name_vec(builder, variation_T_times(dYc[i], J[k]))
-            vectors[k] = (J[k], dAdq[k], dVdq[k], dAdv[k], dFda, dYtJ, dFdq0, dFdq, dFdv)
+            vectors[k] = (J[k], dAdq[k], dVdq[k], dAdv[k]) + dof_partials(
+                builder, Yc[i], dYc[i], fc[i], J[k], dAdq[k], dVdq[k], dAdv[k])
         par = joint.parent
         if par >= 0:
             (Ip, hp, mp), (Ii, hi, mi) = Yc[par], Yc[i]
