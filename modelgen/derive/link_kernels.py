@@ -192,12 +192,12 @@ def _inputs(prefix: str, count: int) -> tuple:
     return tuple(sympy.Symbol(f"mg_{prefix}{i}") for i in range(count))
 
 
-def forward_kernel(key) -> Kernel:
-    """The forward step of a joint of signature ``key`` (:func:`signature`), as
-    the outward loop of ``derive_rnea_partials`` takes it: the link's pose, its
-    column J, velocity and acceleration, its inertia, force and their variation
-    in E, and ``dVdq``, ``dAdq``, ``dAdv``."""
-    count = 1 + max([int(x) for x in _flat(key) if type(x) is _Slot], default=-1)
+def forward_kernel(key, count: int) -> Kernel:
+    """The forward step of a joint of signature ``key`` with ``count`` slots
+    (:func:`signature`: the number of its values), as the outward loop of
+    ``derive_rnea_partials`` takes it: the link's pose, its column J, velocity
+    and acceleration, its inertia, force and their variation in E, and
+    ``dVdq``, ``dAdq``, ``dAdv``."""
     slots = _inputs("slot", count)
     axis, E, r, S, I, h, m, ground, load, offset = _fill(key, slots)
     P = _inputs("par", KIN)
@@ -234,12 +234,6 @@ def forward_kernel(key) -> Kernel:
         tuple(x for row in A for x in row) + tuple(F) + of
     return Kernel(builder.freeze(), (("P", P), ("c", slots), ("j", (q, qd, qdd))),
                   (("K", K), ("D", D), ("V", J + dAdq + dV + dAdv)))
-
-
-def _flat(key):
-    axis, E, r, S, I, h, m, ground, load, offset = key
-    return [x for row in E for x in row] + list(r) + list(S) + list(I) + list(h) + [m] + \
-        list(ground or ()) + list(load or ()) + [offset]
 
 
 def backward_kernel() -> Kernel:
@@ -295,7 +289,7 @@ def derive_link_kernels(tree: JointTree, a0, articulated: bool, loads=None,
         key, values = signature(joint, body, a0 if joint.parent < 0 else None, loads.get(i))
         if key not in keys:
             keys[key] = len(forward)
-            forward.append(forward_kernel(key))
+            forward.append(forward_kernel(key, len(values)))
         signature_of.append(keys[key])
         offset.append(len(table))
         table.extend(values)

@@ -250,11 +250,11 @@ def derive_rnea_partials(eqs: Equations, tree: JointTree, spec: ModelSpec,
     a0, gravity_labels = ground_acceleration(spec)
     count = len(tree.joints)
     root_frame = floating_root(tree)
+    loads, moved, load_du = _body_fixed_actions(builder, eqs, tree, spec)
+    motors, load_du = _motor_columns(tree, load_du, n, len(eqs.u))
+    same, pairs = _dof_pairs(tree)
+    order, parent = _dof_chain(tree)
     if looped and not root_frame and loopable(tree, eqs.q):
-        loads, moved, load_du = _body_fixed_actions(builder, eqs, tree, spec)
-        same, pairs = _dof_pairs(tree)
-        order, parent = _dof_chain(tree)
-        motors, load_du = _motor_columns(tree, load_du, n, len(eqs.u))
         # the other body-fixed actions' d Q / d u comes from the kernels' loop
         kernels = derive_link_kernels(tree, a0, n > ARTICULATED_SOLVE_ABOVE, loads, load_du)
         graph, effects = _effects(builder.freeze(), eqs, tree, set(gravity_labels) | moved,
@@ -262,7 +262,6 @@ def derive_rnea_partials(eqs: Equations, tree: JointTree, spec: ModelSpec,
         return RneaPartials(graph, a, (), same, pairs, effects, (), order, parent,
                             kernels=kernels)
     poses, R0 = _poses(builder, tree, root_frame)
-    loads, moved, load_du = _body_fixed_actions(builder, eqs, tree, spec)
     if root_frame and any(x != 0 for x in a0[3:]):
         # gravity (the ground's linear acceleration) in the root link's components
         a0 = ZERO3 + name_vec(builder, matvec(transpose(R0), a0[3:]))
@@ -313,11 +312,8 @@ def derive_rnea_partials(eqs: Equations, tree: JointTree, spec: ModelSpec,
             dYc[par] = (tuple(name_vec(builder, add(a, b)) for a, b in zip(Ap, Ai, strict=True)),
                         name_vec(builder, add(Fp, Fi)))
             fc[par] = name_vec(builder, add(fc[par], fc[i]))
-    same, pairs = _dof_pairs(tree)
-    order, parent = _dof_chain(tree)
     factor = (articulated_factor(builder, order, parent, J, Y, tree)
               if n > ARTICULATED_SOLVE_ABOVE else None)
-    motors, load_du = _motor_columns(tree, load_du, n, len(eqs.u))
     du_loads = _plus(_loads_du(builder, load_du, poses, J, tree, len(eqs.u)), motors)
     root_dofs = {k for joint in tree.joints if joint.parent < 0 for k, _ in joint.dofs}
     programmed = tuple((k, l) for k, l in same if root_frame and k in root_dofs)
