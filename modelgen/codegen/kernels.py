@@ -12,7 +12,8 @@ from __future__ import annotations
 from modelgen.codegen.cse import make_routines
 from modelgen.codegen.printer import ModelPrinter
 from modelgen.derive.graph import free_symbols
-from modelgen.derive.link_kernels import BACKWARD_VECTORS, FORWARD_VECTORS, Kernel, LinkKernels
+from modelgen.derive.link_kernels import (BACKWARD_VECTORS, DYN, FORWARD_VECTORS, INERTIA, KIN,
+                                          TRIANGLE, Kernel, LinkKernels)
 
 #: W's first component each kernel writes
 BACKWARD_FIRST = FORWARD_VECTORS
@@ -89,7 +90,8 @@ def _context(kernels: LinkKernels) -> dict:
             "parent": c_list(kernels.parent), "dof": c_list(kernels.dof),
             "offset": c_list(kernels.offset), "table": len(kernels.table),
             "du": c_list(x for row in kernels.du for x in row) or "0", "ndu": len(kernels.du),
-            "armature": c_list(kernels.armature)}
+            "armature": c_list(kernels.armature),
+            "kin": KIN, "dyn": DYN, "inertia": INERTIA, "triangle": TRIANGLE}
 
 
 __all__ = ["kernel_context", "kernel_lines"]

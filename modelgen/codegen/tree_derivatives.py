@@ -35,21 +35,20 @@ def derivative_routine(inputs, d) -> tuple:
     dofs turns into those matrices."""
     def flat(rows):
         return tuple(e for row in rows for e in row)
-    if isinstance(d, RneaPartials) and d.kernels is not None:
-        # the vectors come from the kernels' loops (derivative_loop); the routine
-        # computes their table of constants and the effects
-        effects = tuple(e for _, _, e in d.effect_entries())
-        return ("derivative_terms", inputs + (("a", d.a),),
-                (("C", d.kernels.table),) + ((("E", effects),) if effects else ()))
     if isinstance(d, RneaPartials):
         effects = tuple(e for _, _, e in d.effect_entries())
-        # component-major, W[c * n + k]: a component of every dof is one row,
-        # which the C's loops over consecutive dofs read as a vector
-        rows = [v + f for v, f in zip(d.vectors, d.factor or ((),) * len(d.vectors),
-                                      strict=True)]
-        W = tuple(v[c] for c in range(len(rows[0])) for v in rows)
+        if d.kernels is not None:
+            # the vectors come from the kernels' loops (derivative_loop); the
+            # routine computes their table of constants and the effects
+            first = ("C", d.kernels.table)
+        else:
+            # component-major, W[c * n + k]: a component of every dof is one row,
+            # which the C's loops over consecutive dofs read as a vector
+            rows = [v + f for v, f in zip(d.vectors, d.factor or ((),) * len(d.vectors),
+                                          strict=True)]
+            first = ("W", tuple(v[c] for c in range(len(rows[0])) for v in rows))
         return ("derivative_terms", inputs + (("a", d.a),),
-                (("W", W),) + ((("E", effects),) if effects else ()))
+                (first,) + ((("E", effects),) if effects else ()))
     du = (("dQ_du", flat(d.du)),) if d.du and d.du[0] else ()
     return ("derivative_terms", inputs + (("a", d.a),),
             (("dQ_dq", flat(d.dq)), ("dQ_dv", flat(d.dv))) + du + (("M", flat(d.M)),))
@@ -216,7 +215,7 @@ def derivative_loop(d: RneaPartials) -> dict:
             "runs": c_list(runs), "nruns": len(runs), "runs_size": max(3 * len(runs), 1),
             "npairs": len(d.pairs),
             "effects": c_list(effects), "neffects": len(effects),
-            "nw": (len(d.pattern()) * (FORWARD_VECTORS + BACKWARD_VECTORS
+            "nw": (len(d.a) * (FORWARD_VECTORS + BACKWARD_VECTORS
                                        + (FACTOR_VECTORS if d.articulated() else 0))
                    if d.kernels else
                    sum(len(v) for v in d.vectors) + sum(len(f) for f in d.factor)),

@@ -44,6 +44,9 @@ KIN = 24
 #: its dynamics: I_O (6, as PAIRS), h_O (3), m, doY's A (9, by rows) and F (3),
 #: of (6); the backward loop adds a child's 28 numbers into its parent's
 DYN = 28
+#: the first of them, the link's own inertia (I_O, h_O, m), which the
+#: articulated factor reads
+INERTIA = 10
 #: the articulated inertia a dof hands its predecessor: a symmetric 6x6 by its
 #: upper triangle, row by row
 TRIANGLE = 21
@@ -71,8 +74,8 @@ class LinkKernels:
     components 0..23 of its dof).  ``backward``: inputs ``D`` (the subtree's
     composite dynamics) and ``V``; outputs ``V`` (components 24..50).
     ``factor`` (above ``ARTICULATED_SOLVE_ABOVE`` speeds, else None): inputs
-    ``Y`` (the link's own first 10 of D), ``A`` (what its children handed it,
-    :data:`TRIANGLE`) and ``J``; outputs ``V`` (components 51..57) and ``H``
+    ``Y`` (the link's own inertia, the first :data:`INERTIA` of D), ``A``
+    (what its children handed it, :data:`TRIANGLE`) and ``J``; outputs ``V`` (components 51..57) and ``H``
     (what it hands its parent).  Per joint: ``signature``, ``parent`` (-1:
     the ground; a root's kernel reads no parent state, the ground's is folded
     in), ``dof`` (its speed and coordinate) and ``offset`` of its slots in
@@ -256,7 +259,7 @@ def factor_kernel(armature: bool = False) -> Kernel:
     plus what its children handed it), ``U = IA J``, ``1 / D`` and what it hands
     its predecessor, ``IA - U U^T / D``; with ``armature``, ``D = J . U`` plus
     the dof's armature (input ``arm``)."""
-    Yin, Ain, J = _inputs("own", 10), _inputs("acc", TRIANGLE), _inputs("col", 6)
+    Yin, Ain, J = _inputs("own", INERTIA), _inputs("acc", TRIANGLE), _inputs("col", 6)
     arm = sympy.Symbol("mg_arm")
     builder = GraphBuilder()
     own = sym6((symmetric(Yin[0:6]), Yin[6:9], Yin[9]))
@@ -310,5 +313,6 @@ def derive_link_kernels(tree: JointTree, a0, articulated: bool, loads=None,
                        tuple(du), tuple(arm))
 
 
-__all__ = ["BACKWARD_VECTORS", "DYN", "FACTOR_VECTORS", "FORWARD_VECTORS", "KIN", "Kernel", "LinkKernels", "TRIANGLE", "backward_kernel",
+__all__ = ["BACKWARD_VECTORS", "DYN", "FACTOR_VECTORS", "FORWARD_VECTORS", "INERTIA", "KIN",
+           "Kernel", "LinkKernels", "TRIANGLE", "backward_kernel",
            "derive_link_kernels", "factor_kernel", "forward_kernel", "loopable", "signature"]
