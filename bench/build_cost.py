@@ -28,15 +28,14 @@ from __future__ import annotations
 
 import argparse
 import json
-import shlex
 import subprocess
 import sys
 import tempfile
-import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(HERE))
 
 CHILD = """
 import json, resource, sys, time
@@ -69,43 +68,14 @@ def _part(command: str) -> int:
     return int(command.split("-DMG_PART=")[1].split()[0])
 
 
-def compiler_instructions(command: str, directory: Path) -> int:
-    """Instructions of every process ``command`` runs (callgrind), its output elsewhere."""
-    with tempfile.TemporaryDirectory() as tmp:
-        args = shlex.split(command)
-        args[args.index("-o") + 1] = str(Path(tmp) / "part.o")
-        subprocess.run(["valgrind", "--tool=callgrind", "--trace-children=yes",
-                        f"--callgrind-out-file={tmp}/cg.%p", *args], cwd=directory,
-                       check=True, capture_output=True)
-        total = 0
-        for out in Path(tmp).glob("cg.*"):
-            for line in out.read_text(errors="replace").splitlines():
-                if line.startswith(("summary:", "totals:")):
-                    total += int(line.split()[1])
-                    break
-        return total
-
-
-def seconds(command: str, directory: Path, rounds: int) -> float:
-    """The minimum of ``rounds`` runs of ``command``."""
-    args = shlex.split(command)
-    best = float("inf")
-    with tempfile.TemporaryDirectory() as tmp:
-        args[args.index("-o") + 1] = str(Path(tmp) / "part.o")
-        for _ in range(rounds):
-            start = time.perf_counter()
-            subprocess.run(args, cwd=directory, check=True)
-            best = min(best, time.perf_counter() - start)
-    return best
-
-
 def measure(repo: Path, arg: str, work: Path, derivatives: bool, rounds: int) -> dict:
+    from modelgen.bench.harnesses import command_instructions, command_seconds
     out = work / arg.replace("/", "_")
     row = generate(repo, arg, out, derivatives)
     commands = sorted(row["commands"], key=_part)
     with ThreadPoolExecutor(2) as pool:      # the two cores; the counts do not care
-        counts = list(pool.map(lambda c: compiler_instructions(c, out), commands))
-    row["parts"] = {_part(c): {"instr": n, "s": seconds(c, out, rounds)}
+        counts = list(pool.map(lambda c: command_instructions(c, out), commands))
+    row["parts"] = {_part(c): {"instr": n, "s": command_seconds(c, out, rounds)}
                     for c, n in zip(commands, counts, strict=True)}
     return row
 

@@ -23,11 +23,9 @@ from __future__ import annotations
 
 import argparse
 import json
-import shlex
 import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parent.parent
@@ -56,18 +54,11 @@ def generate(n: int, looped: bool, out: Path) -> dict:
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
-def part4_seconds(cm, rounds: int = 3) -> float:
-    """The minimum of ``rounds`` runs of the model's part-4 compile command."""
+def part4_seconds(cm) -> float:
+    """The minimum of 3 runs of the model's part-4 compile command."""
+    from modelgen.bench.harnesses import command_seconds
     command = next(c for c in cm.manifest["compile_commands"] if "-DMG_PART=4" in c)
-    args = shlex.split(command)
-    with tempfile.TemporaryDirectory() as tmp:
-        args[args.index("-o") + 1] = str(Path(tmp) / "part4.o")
-        best = float("inf")
-        for _ in range(rounds):
-            start = time.perf_counter()
-            subprocess.run(args, cwd=Path(cm.path).parent, check=True)
-            best = min(best, time.perf_counter() - start)
-    return best
+    return command_seconds(command, Path(cm.path).parent)
 
 
 def measure(n: int, work: Path, rounds: int) -> list:

@@ -187,15 +187,51 @@ def run_model_harness(exe: Path) -> float:
 
 # -- callgrind ----------------------------------------------------------------------
 
-def callgrind_total(cmd) -> int:
-    """Instructions that ``cmd`` executes, by valgrind's callgrind (no load dependence)."""
+def callgrind_total(cmd, cwd=None, children: bool = False) -> int:
+    """Instructions that ``cmd`` executes, by valgrind's callgrind (no load dependence);
+    with ``children``, summed over every process it starts (a compiler's driver,
+    ``cc1`` and ``as``)."""
     with tempfile.TemporaryDirectory() as tmp:
-        out = Path(tmp) / "callgrind.out"
-        run_checked(["valgrind", "--tool=callgrind", f"--callgrind-out-file={out}", *cmd])
-        for line in out.read_text().splitlines():
-            if line.startswith(("summary:", "totals:")):
-                return int(line.split()[1])
+        flags = ["--trace-children=yes", f"--callgrind-out-file={tmp}/callgrind.%p"] \
+            if children else [f"--callgrind-out-file={tmp}/callgrind.out"]
+        run_checked(["valgrind", "--tool=callgrind", *flags, *cmd], cwd=cwd)
+        totals = []
+        for out in Path(tmp).glob("callgrind.*"):
+            for line in out.read_text(errors="replace").splitlines():
+                if line.startswith(("summary:", "totals:")):
+                    totals.append(int(line.split()[1]))
+                    break
+        if totals:
+            return sum(totals)
     raise RuntimeError(f"no instruction total in callgrind's output of {shlex.join(cmd)}")
+
+
+def compile_command(command: str, output: Path) -> list:
+    """A part's compile command of a manifest (``compile_commands``) as arguments,
+    writing its object to ``output`` instead."""
+    args = shlex.split(command)
+    args[args.index("-o") + 1] = str(output)
+    return args
+
+
+def command_seconds(command: str, directory: Path, rounds: int = 3) -> float:
+    """The minimum wall seconds of ``rounds`` runs of a part's compile command in the
+    build ``directory`` (its object into a temporary directory)."""
+    best = float("inf")
+    with tempfile.TemporaryDirectory() as tmp:
+        args = compile_command(command, Path(tmp) / "part.o")
+        for _ in range(rounds):
+            start = timeit.default_timer()
+            subprocess.run(args, cwd=directory, check=True)
+            best = min(best, timeit.default_timer() - start)
+    return best
+
+
+def command_instructions(command: str, directory: Path) -> int:
+    """Instructions of every process of a part's compile command (callgrind)."""
+    with tempfile.TemporaryDirectory() as tmp:
+        return callgrind_total(compile_command(command, Path(tmp) / "part.o"), cwd=directory,
+                               children=True)
 
 
 def instructions_per_call(cmd, calls: int = COUNT_CALLS):
