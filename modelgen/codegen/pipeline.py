@@ -27,7 +27,7 @@ from modelgen.derive.aba import ForwardDynamics, derive_aba, derive_aba_jacobian
 from modelgen.derive.dynamics import Equations, derive_equations
 from modelgen.derive.graph import GraphBuilder
 from modelgen.derive.joint_tree import JointTree, extract_joint_tree
-from modelgen.derive.rnea import derive_inverse_dynamics, derive_velocity_terms
+from modelgen.derive.rnea import derive_model_inverse_dynamics, derive_velocity_terms
 from modelgen.derive.rnea_derivatives import differentiate_inverse_dynamics
 from modelgen.derive.rnea_partials import RneaPartials
 from modelgen.codegen import tree_derivatives as plan
@@ -490,10 +490,9 @@ def _derive(spec: ModelSpec, options: BuildOptions, tree: JointTree | None) -> D
         # velocity next to its forces)
         builder = GraphBuilder(graph)
         eqs = replace(eqs, h=derive_velocity_terms(builder, tree, eqs.qd))
-        # inverse dynamics A qdd + h - tau, A qdd + h by RNEA too, sharing the velocities
+        # inverse dynamics A qdd + h - tau by RNEA too, sharing the velocities
         qdd = accelerations(len(eqs.qd))
-        inverse = (qdd, tuple(e - tau for e, tau in
-                              zip(derive_inverse_dynamics(builder, tree, eqs.qd, qdd), eqs.tau)))
+        inverse = (qdd, derive_model_inverse_dynamics(builder, eqs, tree, spec, qdd))
         graph = builder.freeze()
         forward = replace(forward, graph=graph)
     else:       # minus the residual tau - h - A qdd of the composite-body equations

@@ -20,15 +20,18 @@ With accelerations (:func:`derive_inverse_dynamics`), pass 1 carries
 ``a_i = X_i a_p + c_i + S_i qdd_i`` instead and the result is ``A qdd + h``,
 the generalized inertia forces, in O(n) (Pinocchio's ``rnea`` without
 gravity, MuJoCo's ``mj_inverse`` without the passive forces: those are in
-``tau``).  A dof's armature (reflected rotor inertia) adds ``armature_k qdd_k``
+``tau``).  The model's inverse dynamics folds gravity into the ground's
+acceleration and the actions into the link forces, as the ABA does, which
+leaves far fewer operations than subtracting their generalized forces
+(``tau``, in E) afterwards.  A dof's armature (reflected rotor inertia) adds ``armature_k qdd_k``
 to its own generalized force, as in MuJoCo's ``mj_rne`` plus ``dof_armature``.
 """
 from __future__ import annotations
 
-from modelgen.derive.recursion import (joint_motion, joint_velocity, link_force,
+from modelgen.derive.recursion import (joint_motion, joint_velocity, link_force, link_loads,
                                        link_velocities, outward_pass, to_parent_force)
 from modelgen.derive.graph import GraphBuilder
-from modelgen.derive.spatial import ZERO, add, dot
+from modelgen.derive.spatial import ZERO, add, dot, sub
 from modelgen.derive.joint_tree import JointTree
 
 
@@ -47,10 +50,16 @@ def derive_velocity_terms(builder: GraphBuilder, tree: JointTree, qd) -> tuple:
     return _inward(builder, tree, outward_pass(builder, tree, qd).f, len(qd))
 
 
-def derive_inverse_dynamics(builder: GraphBuilder, tree: JointTree, qd, qdd) -> tuple:
+def derive_inverse_dynamics(builder: GraphBuilder, tree: JointTree, qd, qdd, a0=None,
+                            external=None) -> tuple:
     """``A qdd + h`` (in coordinate order) by RNEA, built in ``builder``: the generalized
     forces that give the accelerations ``qdd``, less those of gravity and the
-    effects (``tau``), which the caller subtracts.
+    effects (``tau``), which the caller subtracts.  With the ground's
+    acceleration ``a0`` (gravity as Featherstone's fictitious ``-g``) and
+    ``external`` (joint index -> spatial force on its link, in link components:
+    :func:`~modelgen.derive.recursion.link_loads`), the result is already less
+    those forces, Pinocchio's ``rnea`` with its ``fext``, and the caller
+    subtracts only the other effects'.
 
     >>> from modelgen.model.chains import spatial_chain
     >>> from modelgen.derive.joint_tree import extract_joint_tree
@@ -66,14 +75,29 @@ def derive_inverse_dynamics(builder: GraphBuilder, tree: JointTree, qd, qdd) -> 
     a, force = [None] * len(tree.joints), []
     for i, joint in enumerate(tree.joints):
         aJ = joint_velocity(builder, joint, qdd)          # S_i qdd_i
-        a[i] = builder.vec(add(add(joint_motion(builder, joint, a[joint.parent]), c[i]), aJ)
-                           if joint.parent >= 0 else add(c[i], aJ))
-        force.append(link_force(builder, tree.inertias[i], v[i], a[i]))
+        parent = a[joint.parent] if joint.parent >= 0 else a0
+        a[i] = builder.vec(add(add(joint_motion(builder, joint, parent), c[i]), aJ)
+                           if parent is not None else add(c[i], aJ))
+        f = link_force(builder, tree.inertias[i], v[i], a[i])
+        if external and i in external:
+            f = builder.vec(sub(f, external[i]))
+        force.append(f)
     out = _inward(builder, tree, force, len(qd))
     # a rotor's reflected inertia acts on its own dof only: armature_k qdd_k
     return tuple(builder.name(f + armature * qdd[k]) if armature != 0 else f
                  for k, (f, armature) in enumerate(zip(out, tree.armature or (0,) * len(out),
                                                        strict=True)))
+
+
+def derive_model_inverse_dynamics(builder: GraphBuilder, eqs, tree: JointTree, spec,
+                                  qdd) -> tuple:
+    """The model's inverse dynamics ``Q = A qdd + h - tau`` of ``eqs`` (its
+    :class:`~modelgen.derive.dynamics.Equations`), built in ``builder``: RNEA with
+    gravity and the actions as :func:`~modelgen.derive.recursion.link_loads`, less
+    the generalized forces of the other effects."""
+    a0, tau, external = link_loads(builder, eqs, tree, spec)
+    inverse = derive_inverse_dynamics(builder, tree, eqs.qd, qdd, a0, external)
+    return tuple(e - t for e, t in zip(inverse, tau, strict=True))
 
 
 def _inward(builder: GraphBuilder, tree: JointTree, force, n: int) -> tuple:
@@ -91,4 +115,5 @@ def _inward(builder: GraphBuilder, tree: JointTree, force, n: int) -> tuple:
     return tuple(out)
 
 
-__all__ = ["derive_velocity_terms", "derive_inverse_dynamics"]
+__all__ = ["derive_velocity_terms", "derive_inverse_dynamics",
+           "derive_model_inverse_dynamics"]

@@ -578,7 +578,7 @@ int double_pendulum_rhs(double t, const double *x, const double *u, const double
 
 #if !defined(MG_PART) || MG_PART == 3
 
-/* inverse_dynamics: 45 statements, 68 operations after CSE (72 before) */
+/* inverse_dynamics: 36 statements, 58 operations after CSE (60 before) */
 static void double_pendulum_inverse_dynamics_eval(double t, const double *x, const double *qdd, const double *u, const double *p, double *Q)
 {
     (void)t;
@@ -591,49 +591,40 @@ static void double_pendulum_inverse_dynamics_eval(double t, const double *x, con
     const double v1 = mg_sin(x[0]);
     const double v2 = mg_cos(x[1]);
     const double v3 = mg_sin(x[1]);
-    const double v4 = v0*v2 - v1*v3;
-    const double v5 = x[2] + x[3];
-    const double v6 = p[2]*v0;
+    const double v4 = x[2] + x[3];
+    const double v5 = 1.0/12.0*p[0]*(p[2]*p[2]);
+    const double v6 = 1.0/12.0*p[1]*(p[3]*p[3]);
     const double v7 = 1.0/2.0*p[2];
-    const double v8 = v0*v7;
-    const double v9 = 1.0/2.0*p[3];
-    const double v10 = v4*v9;
-    const double v11 = v10 + v6;
-    const double v12 = 1.0/12.0*p[0]*(p[2]*p[2]);
-    const double v13 = -p[4]*p[0];
-    const double v14 = v8*v13;
-    const double v15 = 1.0/12.0*p[1]*(p[3]*p[3]);
-    const double v16 = -p[4]*p[1];
-    const double v17 = v11*v16;
-    const double v18 = u[0] + v14;
-    const double v19 = v17 + v18;
-    const double v20 = v17 - v16*v6;
-    const double v21 = p[2]*x[2];
-    const double v22 = v3*v21;
-    const double v23 = v2*v21;
-    const double v24 = v23*x[3];
-    const double v25 = v22*x[3];
-    const double v26 = p[0]*v7;
-    const double v27 = p[1]*v9;
-    const double v28 = v23 + v5*v9;
-    const double v29 = v7*qdd[0];
-    const double v30 = v29*v26 + v12*qdd[0];
-    const double v31 = p[2]*qdd[0];
-    const double v32 = v31*v3;
-    const double v33 = v31*v2;
-    const double v34 = qdd[0] + qdd[1];
-    const double v35 = v32 + v24;
-    const double v36 = v33 - v25;
-    const double v37 = v35 - v28*v5;
-    const double v38 = v36 + v34*v9 + v5*v22;
-    const double v39 = p[1]*v37;
-    const double v40 = p[1]*v38;
-    const double v41 = v34*v15 + v38*v27;
-    const double v42 = v39*v3 + v40*v2;
-    const double v43 = v41 + p[2]*v42;
-    const double v44 = v30 + v43;
-    Q[0] = v44 - v19;
-    Q[1] = v41 - v20;
+    const double v8 = p[2]*x[2];
+    const double v9 = v3*v8;
+    const double v10 = v2*v8;
+    const double v11 = v10*x[3];
+    const double v12 = v9*x[3];
+    const double v13 = p[0]*v7;
+    const double v14 = 1.0/2.0*p[3];
+    const double v15 = p[1]*v14;
+    const double v16 = v10 + v4*v14;
+    const double v17 = p[4]*v1;
+    const double v18 = p[4]*v0;
+    const double v19 = v18 + v7*qdd[0];
+    const double v20 = v19*v13 + v5*qdd[0];
+    const double v21 = v20 - u[0];
+    const double v22 = v18 + p[2]*qdd[0];
+    const double v23 = v17*v2 + v22*v3;
+    const double v24 = v22*v2 - v17*v3;
+    const double v25 = qdd[0] + qdd[1];
+    const double v26 = v23 + v11;
+    const double v27 = v24 - v12;
+    const double v28 = v26 - v16*v4;
+    const double v29 = v27 + v25*v14 + v4*v9;
+    const double v30 = p[1]*v28;
+    const double v31 = p[1]*v29;
+    const double v32 = v25*v6 + v29*v15;
+    const double v33 = v30*v3 + v31*v2;
+    const double v34 = v32 + p[2]*v33;
+    const double v35 = v21 + v34;
+    Q[0] = v35;
+    Q[1] = v32;
 }
 
 void double_pendulum_inverse_dynamics(double t, const double *x, const double *qdd, const double *u,
