@@ -416,7 +416,9 @@ def test_generated_c_compiles_warning_free_as_c99_and_cxx(generated, tmp_path):
 
     Unoptimised compiles, to keep this fast: the shared builds already passed
     the build's own ``-O2 -Wall -Wextra -Werror``, which covers the warnings
-    that need optimisation.  Each model links three ways (C main + C object,
+    that need optimisation; the large chain's part 1 is compiled at -O1 too,
+    since a routine cut into parts is read only by optimizing compiles (at -O0
+    its flat text is).  Each model links three ways (C main + C object,
     C++ main + the C parts, C main + the C++-compiled parts), always with the
     ``mg_integrate.c`` of its output directory (compiled the same way), each
     program calls every function of the header, and ``nm`` shows that the
@@ -443,6 +445,9 @@ def test_generated_c_compiles_warning_free_as_c99_and_cxx(generated, tmp_path):
         for tag, flags in (("all", []), *((str(k), [f"-DMG_PART={k}"]) for k in PARTS)):
             compiles.append(([*C99, *flags, "-c", src / f"{name}.c", "-o", f"c_{tag}.o"], out))
             compiles.append(([*CXX11, *flags, "-c", src / f"{name}.c", "-o", f"cxx_{tag}.o"], out))
+        if name == large:   # the query routines' parts, which only optimizing compiles read
+            compiles.append(([*C99, "-O1", "-DMG_PART=1", "-c", src / f"{name}.c", "-o",
+                              "c_optimized_1.o"], out))
         compiles.append(([*C99, "-c", src / "mg_integrate.c", "-o", "c_mg.o"], out))
         compiles.append(([*CXX11, "-c", src / "mg_integrate.c", "-o", "cxx_mg.o"], out))
         compiles.append(([*C99, inc, "-c", "main.c", "-o", "main_c.o"], out))
@@ -772,3 +777,31 @@ def test_compiler_failure_raises_build_error_with_command_and_output(monkeypatch
     assert "error" in err.output.lower()
     # nothing half-built is left behind
     assert sorted(p.name for p in tmp_path.iterdir()) == []
+
+
+def test_routines_in_parts_and_flat_agree(tmp_path, monkeypatch):
+    """A query routine cut into noinline parts also carries its text as one function
+    of locals for compilers that do not optimize (``#ifdef __OPTIMIZE__``,
+    ``macros.j2``): the library's part 1, at -O0, compiles that one, and a build
+    whose ``$MODELGEN_CFLAGS`` ask for -O1 compiles the parts.  Both are the same
+    operations in the same order (the -O0 library's results are bitwise those
+    of the parts at -O0 before the flat text existed); they differ in the last
+    bit of a few entries only because gcc at -O0 takes libm's sin and cos, not
+    ``mg_sin`` and ``mg_cos`` (``model.c.j2``)."""
+    spec = spatial_chain(LARGE_CHAIN).spec()
+    flat = modelgen.load(spec, tmp_path / "flat", force=True)
+    source = (tmp_path / "flat" / f"{flat.name}.c").read_text()
+    assert "#ifdef __OPTIMIZE__" in source and f"{flat.name}_mass_matrix_part0(" in source
+    monkeypatch.setenv("MODELGEN_CFLAGS", "-O1")
+    parts = modelgen.load(spec, tmp_path / "parts", force=True)
+    part1 = [c for c in parts.manifest["compile_commands"] if "-DMG_PART=1" in c]
+    assert not part1 or part1[0].split().index("-O1") > part1[0].split().index("-O0")
+    rng = np.random.default_rng(12)
+    for _ in range(3):
+        q, qd = rng.uniform(-2, 2, flat.n), rng.uniform(-2, 2, flat.n)
+        for query, args in (("mass_matrix", (q,)), ("velocity_terms", (q, qd)),
+                            ("generalized_forces", (0.0, q, qd)), ("energy", (q, qd)),
+                            ("body_poses", (q,))):
+            a, b = getattr(flat, query)(*args), getattr(parts, query)(*args)
+            assert np.abs(a - b).max() <= 1e-14 * np.abs(a).max(), query
+            assert np.all(np.isfinite(a)) and np.any(a != 0), query

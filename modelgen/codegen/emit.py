@@ -8,13 +8,17 @@ Large routines are cut into ``noinline`` parts of about ``CHUNK`` statements
 that share a work array ``w`` on the caller's stack.  gcc's time grows faster
 than linearly with function size (register allocation), so this keeps builds
 of big models fast at no cost at run time.  Values used only inside one part
-stay ``const double`` locals.
+stay ``const double`` locals.  A compile at -O0 is linear in any case, and
+there the work array's accesses double its time: the query routines (part 1,
+at -O0 in a model's library) also carry their text as one function of locals,
+which the C reads when the compiler does not optimize.
 """
 from __future__ import annotations
 
 import contextlib
 import functools
 import hashlib
+import re
 import sys
 from dataclasses import dataclass, fields
 from pathlib import Path
@@ -207,6 +211,8 @@ class CFunction:
     outs: tuple = ()
     out_params: str = ""
     out_args: str = ""
+    #: with ``parts``, the same routine as one function of locals (or None)
+    flat: "CFunction | None" = None
 
 
 def _fields(f: CFunction) -> dict:
@@ -215,74 +221,97 @@ def _fields(f: CFunction) -> dict:
     return {field.name: getattr(f, field.name) for field in fields(f)}
 
 
-def print_routine(routine: Routine) -> CFunction:
-    """Print a routine; each output array keeps its name in C."""
+def print_routine(routine: Routine, flat: bool = False) -> CFunction:
+    """Print a routine; each output array keeps its name in C.  With ``flat``, a
+    routine cut into parts also carries its text as one function of locals
+    (``flat``), for compilers that do not optimize (see ``macros.j2``)."""
     statements = list(routine.statements)
-    inputs = tuple(a for a, _ in routine.inputs)
-    params = ", ".join(_PARAM[a] for a in inputs)
-    args = ", ".join(inputs)
-    n_parts = 1 if len(statements) <= SINGLE_LIMIT else -(-len(statements) // CHUNK)
-    size = CHUNK if n_parts > 1 else max(len(statements), 1)
-    part_of = {sym: i // size for i, (sym, _) in enumerate(statements)}
+    slots = _input_slots(routine)
+    slots.update((sym, f"v{i}") for i, (sym, _) in enumerate(statements))
+    printer = ModelPrinter(slots, routine.name)
+    codes = [printer.doprint(expr) for _, expr in statements]
+    outs = [(array, [printer.doprint(e) for e in items]) for array, items in routine.outputs]
+    whole = _whole(routine, codes, outs)
+    if len(statements) <= SINGLE_LIMIT:
+        return whole
+    parts = _parts(routine, codes, outs)
+    return CFunction(**{**_fields(parts), "flat": whole}) if flat else parts
 
-    # symbols used outside the part that defines them live in the work array
-    # (none when there is one part)
+
+def _signature(routine: Routine) -> tuple:
+    inputs = tuple(a for a, _ in routine.inputs)
+    return ", ".join(_PARAM[a] for a in inputs), ", ".join(inputs), inputs
+
+
+def _out_lines(outs, rename=None) -> list:
+    sub = (lambda code: _LOCAL.sub(rename, code)) if rename else (lambda code: code)
+    return [f"{array}[{j}] = {sub(code)};" for array, codes in outs
+            for j, code in enumerate(codes)]
+
+
+def _whole(routine: Routine, codes: list, outs: list) -> CFunction:
+    """The routine as one function whose intermediates are all locals ``v<i>``."""
+    lines = [f"const double v{i} = {code};" for i, code in enumerate(codes)]
+    return CFunction(routine.name, *_signature(routine), 0, (),
+                     tuple(lines + _out_lines(outs)), routine.ops_before,
+                     routine.ops_after, len(codes))
+
+
+def _parts(routine: Routine, codes: list, outs: list) -> CFunction:
+    """The routine in noinline parts of :data:`CHUNK` statements: the locals used
+    outside the part that defines them become entries of the work array."""
+    statements = routine.statements
+    part_of = {sym: i // CHUNK for i, (sym, _) in enumerate(statements)}
     shared = set()
-    for i, (_, expr) in enumerate(statements if n_parts > 1 else ()):
-        here = i // size
+    for i, (_, expr) in enumerate(statements):
+        here = i // CHUNK
         for s in free_symbols(expr):
             part = part_of.get(s)
             if part is not None and part != here:
                 shared.add(s)
-    if n_parts > 1:
-        for _, items in routine.outputs:
-            for e in items:
-                shared.update(s for s in free_symbols(e) if s in part_of)
-
-    slots = _input_slots(routine)
-    work = 0
+    for _, items in routine.outputs:
+        for e in items:
+            shared.update(s for s in free_symbols(e) if s in part_of)
+    work = {}
     for i, (sym, _) in enumerate(statements):
         if sym in shared:
-            slots[sym] = f"w[{work}]"
-            work += 1
-        else:
-            slots[sym] = f"v{i}"
-    printer = ModelPrinter(slots, routine.name)
+            work[f"v{i}"] = f"w[{len(work)}]"
 
-    parts = [[] for _ in range(n_parts)]
-    for i, (sym, expr) in enumerate(statements):
-        code = printer.doprint(expr)
-        if sym in shared and expr.func in (sympy.sin, sympy.cos):
+    def rename(match):
+        return work.get(match.group(0), match.group(0))
+
+    parts = [[] for _ in range(-(-len(statements) // CHUNK))]
+    for i, ((_, expr), code) in enumerate(zip(statements, codes, strict=True)):
+        code = _LOCAL.sub(rename, code) if "v" in code else code
+        slot = work.get(f"v{i}")
+        if slot is not None and expr.func in (sympy.sin, sympy.cos):
             # through a local, so gcc still pairs sin and cos into one sincos call
-            parts[i // size].append(f"const double v{i} = {code};")
-            parts[i // size].append(f"{slots[sym]} = v{i};")
-        elif sym in shared:
-            parts[i // size].append(f"{slots[sym]} = {code};")
+            parts[i // CHUNK].append(f"const double v{i} = {code};")
+            parts[i // CHUNK].append(f"{slot} = v{i};")
+        elif slot is not None:
+            parts[i // CHUNK].append(f"{slot} = {code};")
         else:
-            parts[i // size].append(f"const double {slots[sym]} = {code};")
-    out_lines = []
-    for array, items in routine.outputs:
-        for j, e in enumerate(items):
-            out_lines.append(f"{array}[{j}] = {printer.doprint(e)};")
-    if n_parts == 1:
-        return CFunction(routine.name, params, args, inputs, work, (),
-                         tuple(parts[0] + out_lines), routine.ops_before,
-                         routine.ops_after, len(statements))
+            parts[i // CHUNK].append(f"const double v{i} = {code};")
+    out_lines = _out_lines(outs, rename)
+    params, args, inputs = _signature(routine)
+    common = (routine.name, params, args, inputs, len(work), tuple(tuple(p) for p in parts))
     if len(out_lines) <= CHUNK:
-        return CFunction(routine.name, params, args, inputs, work,
-                         tuple(tuple(p) for p in parts), tuple(out_lines),
-                         routine.ops_before, routine.ops_after, len(statements))
+        return CFunction(*common, tuple(out_lines), routine.ops_before, routine.ops_after,
+                         len(statements))
     # thousands of output lines in one function (the derivatives' W) cost gcc
     # more than the statements that compute them: each load of w is checked
     # against every store to an output before it
     arrays = [array for array, _ in routine.outputs]
-    return CFunction(routine.name, params, args, inputs, work,
-                     tuple(tuple(p) for p in parts), (),
-                     routine.ops_before, routine.ops_after, len(statements),
+    return CFunction(*common, (), routine.ops_before, routine.ops_after, len(statements),
                      tuple(tuple([f"(void){a};" for a in ("w", *arrays)] + out_lines[k:k + CHUNK])
                            for k in range(0, len(out_lines), CHUNK)),
                      ", ".join(f"double *{a}" for a in arrays),
                      ", ".join(arrays))
+
+
+#: A routine's local ``v<i>`` in printed C (no other name the printer writes
+#: starts a word with ``v`` and digits).
+_LOCAL = re.compile(r"\bv\d+\b")
 
 
 def _comment_safe(text: str) -> str:

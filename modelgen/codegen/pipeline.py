@@ -687,7 +687,8 @@ def _emit(spec: ModelSpec, options: BuildOptions, derived: Derived, routines: tu
     render ``<name>.h`` and ``<name>.c``."""
     eqs, columns, forward = derived.eqs, derived.columns, derived.forward
     printed = printed or {}
-    functions = {r.name: printed.get(r.name) or print_routine(r) for r in routines}
+    functions = {r.name: printed.get(r.name) or print_routine(r, routine_part(r.name) == 1)
+                 for r in routines}
     context = template_context(
         name=spec.name, description=spec.description,
         model_hash=model_key[:16],
