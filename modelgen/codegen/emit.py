@@ -20,7 +20,7 @@ import functools
 import hashlib
 import re
 import sys
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, fields, replace
 from pathlib import Path
 
 import jinja2
@@ -235,7 +235,7 @@ def print_routine(routine: Routine, flat: bool = False) -> CFunction:
     if len(statements) <= SINGLE_LIMIT:
         return whole
     parts = _parts(routine, codes, outs)
-    return CFunction(**{**_fields(parts), "flat": whole}) if flat else parts
+    return replace(parts, flat=whole) if flat else parts
 
 
 def _signature(routine: Routine) -> tuple:
