@@ -177,6 +177,17 @@ def compile_flags(statements: int, part: int = 2, *, host: bool = False) -> list
             *split_env("MODELGEN_CFLAGS", "")]
 
 
+def unoptimized(part: int, statements: int) -> bool:
+    """Whether :data:`OPT_LEVELS` compiles ``part`` at -O0 when its largest routine
+    has ``statements`` (then a routine cut into parts is read as one function:
+    ``emit.print_routine``'s ``flat``).
+
+    >>> unoptimized(1, 5000), unoptimized(2, 100)
+    (True, False)
+    """
+    return _opt_level(statements, part) == ("-O0",)
+
+
 def _opt_level(statements: int, part: int) -> tuple:
     """The optimisation flags of :data:`OPT_LEVELS` for a part whose largest routine
     has ``statements``."""

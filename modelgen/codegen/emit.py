@@ -231,11 +231,10 @@ def print_routine(routine: Routine, flat: bool = False) -> CFunction:
     printer = ModelPrinter(slots, routine.name)
     codes = [printer.doprint(expr) for _, expr in statements]
     outs = [(array, [printer.doprint(e) for e in items]) for array, items in routine.outputs]
-    whole = _whole(routine, codes, outs)
     if len(statements) <= SINGLE_LIMIT:
-        return whole
+        return _whole(routine, codes, outs)
     parts = _parts(routine, codes, outs)
-    return replace(parts, flat=whole) if flat else parts
+    return replace(parts, flat=_whole(routine, codes, outs)) if flat else parts
 
 
 def _signature(routine: Routine) -> tuple:

@@ -18,7 +18,7 @@ from modelgen.codegen import budget
 from modelgen.codegen import parts
 from modelgen.codegen.build import (Generated, build_module, cache_dir, cache_lookup,
                                     compiler, host_flags, integrator_hash, part_command,
-                                    runtime_module)
+                                    runtime_module, unoptimized)
 from modelgen.codegen.capi import signature_of
 from modelgen.codegen.compilers import core_count, probe_compiler
 from modelgen.codegen.cse import Routine, hoist_parameters, make_routines
@@ -687,8 +687,8 @@ def _emit(spec: ModelSpec, options: BuildOptions, derived: Derived, routines: tu
     render ``<name>.h`` and ``<name>.c``."""
     eqs, columns, forward = derived.eqs, derived.columns, derived.forward
     printed = printed or {}
-    functions = {r.name: printed.get(r.name) or print_routine(r, routine_part(r.name) == 1)
-                 for r in routines}
+    functions = {r.name: printed.get(r.name) or print_routine(
+        r, unoptimized(routine_part(r.name), len(r.statements))) for r in routines}
     context = template_context(
         name=spec.name, description=spec.description,
         model_hash=model_key[:16],
