@@ -79,9 +79,13 @@ GCC_FLAGS = ("-fno-tree-dse", "-fno-dse")
 #: loads, lengthening straight-line code; the second scheduling pass only
 #: reorders instructions, which an out-of-order CPU does by itself.  Without
 #: them the same results are computed by no more instructions (docs/benchmarks.md,
-#: bench/derivatives.py, "Session 12").  clang has none of these flags.
+#: bench/derivatives.py, "Session 12").  Two tree and IPA passes likewise: value
+#: range propagation looks for integer ranges, and generated code is arithmetic
+#: on doubles; identical code folding compares every function with the others,
+#: and generated functions are never identical ("Session 17").  clang has none
+#: of these flags.
 GCC_O2_FLAGS = ("-fno-gcse", "-fno-rerun-cse-after-loop", "-fno-code-hoisting",
-                "-fno-peephole2", "-fno-schedule-insns2")
+                "-fno-peephole2", "-fno-schedule-insns2", "-fno-tree-vrp", "-fno-ipa-icf")
 #: Added to -O1 (the parts above 4,000 statements) when the compiler is gcc:
 #: tree passes that visit every statement of a large routine and find nothing
 #: to do in generated code.  Conditional constant propagation looks for
