@@ -160,7 +160,10 @@ def _reap_probes() -> None:
     for pid, proc in _probes.values():
         if pid == os.getpid() and proc is not None:
             proc.kill()
-            proc.communicate()
+            # wait for the process, not for its pipe's end: a wrapper's own child
+            # (a shell script's command) still holds the pipe after the kill
+            proc.wait()
+            proc.stdout.close()
     _probes.clear()
 
 
