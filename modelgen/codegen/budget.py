@@ -115,14 +115,21 @@ def _chain(n: int):
     return Tree()
 
 
-def build_cost(routines) -> Cost:
-    """The exact cost of CSE'd ``routines`` (:class:`modelgen.codegen.cse.Routine`)."""
+def build_cost(routines, memo: dict | None = None) -> Cost:
+    """The exact cost of CSE'd ``routines`` (:class:`modelgen.codegen.cse.Routine`).
+    ``memo`` (a dict kept by the caller) remembers each routine's calls of sin
+    and cos, for a build that asks again as its routines come in."""
     operations, trig, largest, most = 0, 0, "", -1
     for r in routines:
-        calls = 0
-        for expr in [e for _, e in r.statements] + [e for _, es in r.outputs for e in es]:
-            if isinstance(expr, sympy.Basic):
-                calls += _trig_calls(expr)
+        known = memo.get(id(r)) if memo is not None else None
+        if known is not None and known[0] is r:
+            calls = known[1]
+        else:
+            calls = sum(_trig_calls(expr) for expr in
+                        [e for _, e in r.statements] + [e for _, es in r.outputs for e in es]
+                        if isinstance(expr, sympy.Basic))
+            if memo is not None:
+                memo[id(r)] = (r, calls)     # the routine kept, so its id is not reused
         operations += r.ops_after
         trig += calls
         if r.ops_after + (TRIG_OPERATIONS - 1) * calls > most:

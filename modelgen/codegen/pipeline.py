@@ -349,7 +349,7 @@ def generate(spec: ModelSpec, out_dir=None, *, force: bool = False,
                 early = _EarlyStart(spec, options, derived, listed, model_key, directory,
                                     limit)
                 routines = _eliminate(derived, early, listed)
-                budget.check_cost(spec, budget.build_cost(routines), limit)
+                budget.check_cost(spec, budget.build_cost(routines, early.trig), limit)
             with clock("emit"):
                 emitted = _emit(spec, options, derived, routines, model_key, early.printed)
         with clock("compile"):
@@ -623,7 +623,8 @@ class _EarlyStart:
     joint elimination are compiled with the rest.  Nothing starts once the
     routines known are alone over the build budget ``limit`` (the model is then
     refused after its elimination).  ``printed``: the routines it printed, for
-    :func:`_emit`; ``started``: part -> :class:`~modelgen.codegen.parts.EarlyPart`."""
+    :func:`_emit`; ``started``: part -> :class:`~modelgen.codegen.parts.EarlyPart`;
+    ``trig``: the memo of :func:`~modelgen.codegen.budget.build_cost`."""
 
     def __init__(self, spec: ModelSpec, options: BuildOptions, derived: Derived,
                  listed: list, model_key: str, directory: Path, limit: int):
@@ -635,7 +636,7 @@ class _EarlyStart:
             part: {name for name in names if routine_part(name) == part} | {"rhs"}
             | ({"derivative_terms"} & names if part == 3 else set())
             for part in (2, 3, 4) if any(routine_part(name) == part for name in names)}
-        self.printed, self.started = {}, {}
+        self.printed, self.started, self.trig = {}, {}, {}
 
     def __call__(self, known: dict) -> None:
         ready = [part for part, need in self.needs.items() if need <= known.keys()]
@@ -643,7 +644,7 @@ class _EarlyStart:
             return
         for part in ready:
             del self.needs[part]
-        if budget.build_cost(tuple(known.values())).weighted > self.limit:
+        if budget.build_cost(tuple(known.values()), self.trig).weighted > self.limit:
             self.needs = {}
             return
         order = [r for name, inputs, _ in self.routines
