@@ -55,11 +55,10 @@ from modelgen.model.api import load_model
 from modelgen.model.chains import spatial_chain
 arg = {arg!r}
 spec = load_model(arg) if arg.endswith(".yaml") else spatial_chain(int(arg)).spec()
-wall, cpu = time.perf_counter(), time.process_time()
-if not {stop!r}:
-    cm = modelgen.load(spec, {out!r}, derivatives={derivatives!r}, force=True)
-else:
+if {stop!r}:
     raise SystemExit(0)
+wall, cpu = time.perf_counter(), time.process_time()
+cm = modelgen.load(spec, {out!r}, derivatives={derivatives!r}, force=True)
 kids = resource.getrusage(resource.RUSAGE_CHILDREN)
 print(json.dumps({{"wall": time.perf_counter() - wall, "python": time.process_time() - cpu,
                   "cpu": time.process_time() - cpu + kids.ru_utime + kids.ru_stime,
