@@ -548,6 +548,35 @@ def test_mujoco_compile_errors_are_model_errors():
                          "</worldbody></mujoco>", "bad.xml")
 
 
+#: MJCF that MuJoCo compiles (with a warning at most) into a NaN, an infinity or a
+#: zero quaternion that the import would read: the key of the ModelError
+NON_FINITE = {
+    '<option gravity="0 0 nan"/>': "option.gravity",
+    '<joint name="h" type="hinge" axis="0 1 0" damping="nan"/>': "joint[0].dof_damping",
+    '<joint name="h" type="hinge" axis="0 1 0" stiffness="1" springref="inf"/>':
+        "joint[0].qpos_spring",
+    '<joint name="h" type="hinge" axis="0 1 0" pos="0 nan 0"/>': "joint[0].jnt_pos",
+    '<geom type="capsule" size="0.1 0.5" quat="0.707 0 0.707 1e308"/>':
+        "body[1].body_iquat",
+}
+
+
+@pytest.mark.parametrize("element", list(NON_FINITE))
+def test_non_finite_compiled_numbers_are_model_errors(element):
+    """A NaN damping was dropped silently (NaN > 0 is false) and a NaN or infinite
+    position, or a zero inertia quaternion, ended in a raw ValueError (bench MJCF
+    mutation runs); each is now refused naming the element and the field."""
+    option = element if element.startswith("<option") else ""
+    joint = element if "<joint" in element else '<joint name="h" type="hinge" axis="0 1 0"/>'
+    geom = element if "<geom" in element else '<geom type="sphere" size="0.1" mass="1"/>'
+    text = (f'<mujoco>{option}<worldbody><body name="rod">{joint}{geom}</body>'
+            "</worldbody></mujoco>")
+    with pytest.raises(ModelError, match="nan|inf|no turn") as info:
+        import_mjcf_text(text, "bad.xml")
+    assert info.value.file == "bad.xml" and info.value.key == NON_FINITE[element]
+    assert "finite numbers in the MJCF" in str(info.value)
+
+
 def test_load_and_import_dispatch_on_xml(tmp_path, capsys):
     from modelgen.cli import main
     path = tmp_path / "robot.xml"

@@ -157,6 +157,19 @@ def _euler_zyx(R) -> tuple:
     return math.atan2(R[1, 0], R[0, 0]), pitch, math.atan2(R[2, 1], R[2, 2])
 
 
+#: The compiled numbers the import reads: (element, count, mjtObj, fields), a dof's or
+#: qpos's row named after its joint.  MuJoCo compiles NaN and infinities with a warning
+#: at most; the model would get nonsense, or drop them (a NaN damping is not > 0).
+_READ_FIELDS = (
+    ("body", "nbody", "mjOBJ_BODY", ("body_pos", "body_quat", "body_mass", "body_ipos",
+                                     "body_iquat", "body_inertia")),
+    ("joint", "njnt", "mjOBJ_JOINT", ("jnt_pos", "jnt_axis", "jnt_stiffness")),
+    ("dof", "nv", "mjOBJ_JOINT", ("dof_damping", "dof_armature", "dof_frictionloss")),
+    ("qpos", "nq", "mjOBJ_JOINT", ("qpos0", "qpos_spring")),
+    ("site", "nsite", "mjOBJ_SITE", ("site_pos", "site_quat")),
+    ("equality", "neq", "mjOBJ_EQUALITY", ("eq_data",)), ("wrap", "nwrap", None, ("wrap_prm",)),
+    ("tendon", "ntendon", "mjOBJ_TENDON", ("tendon_length0",)))
+
 #: hinges between two welded bodies (from their common ancestor) beyond which the
 #: orientation residual (up to 2^k terms per equation) is refused as too large
 WELD_MAX_HINGES = 12
@@ -615,6 +628,7 @@ class _Builder:
             self.notes.append("Tendon stiffness, damping and armature are ignored.")
 
     def build(self) -> MjcfImport:
+        self.check_numbers()
         self.gravity()
         frames = self.body_frames()
         self.bodies(frames)
@@ -636,6 +650,32 @@ class _Builder:
                      for jt in self.quaternion_joints if jt.type == "free")
         return MjcfImport(model, tuple(joints), self.source, tuple(self.notes),
                           qpos_index, dof_index, free, tuple(self.equality_rows))
+
+    def check_numbers(self) -> None:
+        """Refuse NaN and infinities (:data:`_READ_FIELDS`, gravity) and zero quaternions."""
+        m, mujoco = self.m, _mujoco()
+        fix = ("write finite numbers in the MJCF (no nan or inf, none whose compiled value "
+               "overflows) and nonzero quaternions")
+        if not np.all(np.isfinite(m.opt.gravity)):
+            raise self.error(f"the gravity {m.opt.gravity.tolist()} is not finite",
+                             "option.gravity", fix)
+        for kind, count, obj, fields in _READ_FIELDS:
+            for field in fields:
+                values = np.asarray(getattr(m, field), dtype=float).reshape(getattr(m, count), -1) \
+                    if getattr(m, count) else np.zeros((0, 1))
+                quat = field.endswith("quat")   # MuJoCo keeps a zero one: it turns nothing
+                bad = np.flatnonzero(~np.isfinite(values).all(axis=1)
+                                     | (~values.any(axis=1) if quat else False))
+                if bad.size:
+                    i = int(bad[0])
+                    owner, index = ("joint", int(m.dof_jntid[i])) if kind == "dof" else \
+                        ("joint", int(np.flatnonzero(m.jnt_qposadr <= i)[-1])) \
+                        if kind == "qpos" else (kind, i)
+                    label = self.name_of(getattr(mujoco.mjtObj, obj), index) if obj else ""
+                    raise self.error(
+                        f"{owner} {repr(label) if label else index} has {field} = "
+                        f"{values[i].tolist()}, {'no turn' if quat else 'not finite'} (MuJoCo "
+                        "compiles it with a warning at most)", f"{owner}[{index}].{field}", fix)
 
     def description(self) -> tuple:
         m = self.m
