@@ -542,10 +542,23 @@ def test_redundant_equalities_are_refused_when_generated(tmp_path):
         modelgen.generate_model(imp.model, tmp_path)
 
 
-def test_mujoco_compile_errors_are_model_errors():
-    with pytest.raises(ModelError, match="MuJoCo cannot compile"):
-        import_mjcf_text("<mujoco><worldbody><body><joint type='bogus'/></body>"
+def test_mujoco_compile_errors_are_model_errors_at_mujocos_line(tmp_path):
+    with pytest.raises(ModelError, match="MuJoCo cannot compile") as info:
+        import_mjcf_text("<mujoco><worldbody>\n<body>\n<joint type='bogus'/></body>"
                          "</worldbody></mujoco>", "bad.xml")
+    assert (info.value.file, info.value.line) == ("bad.xml", 3)
+    assert "\n" not in str(info.value)          # MuJoCo's message on one line
+    path = tmp_path / "bad.xml"
+    path.write_text("<mujoco>\n<worldbody>\n<body>\n<geom size='-1'/></body></worldbody></mujoco>")
+    with pytest.raises(ModelError, match="MuJoCo cannot compile the file") as info:
+        modelgen.as_spec(path)
+    assert (info.value.file, info.value.line) == (str(path), 4)
+    # no line from MuJoCo's engine, which names the body by its id
+    with pytest.raises(ModelError, match="body 1 is compiled as simple") as info:
+        import_mjcf_text('<mujoco><worldbody><body name="a"><joint name="h"/><geom '
+                         'type="sphere" size="0.1" pos="0 0 nan" mass="1"/></body>'
+                         "</worldbody></mujoco>", "bad.xml")
+    assert (info.value.line, info.value.key) == (None, "body[1]")
 
 
 #: MJCF that MuJoCo compiles (with a warning at most) into a NaN, an infinity or a

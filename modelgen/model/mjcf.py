@@ -77,8 +77,12 @@ import numpy as np
 import sympy
 
 from modelgen.errors import ModelError
-from modelgen.model.api import Model, check_name
+from modelgen.model.api import API_FILE, Model, check_name
+from modelgen.model.expr import MAX_LENGTH
 from modelgen.model.halfangle import POLY_NOISE, quat_conj, quat_const, quat_mul
+from modelgen.model.mjcf_state import (qacc_to_mujoco, qpos_from_mujoco, qpos_to_mujoco,
+                                      quat_matrix, qvel_from_mujoco, qvel_to_mujoco,
+                                      velocity_map)
 from modelgen.model.names import fresh_name, sanitize
 from modelgen.model.spec import CANONICAL_BASE, CANONICAL_POINT, JOINT_KINDS, symbol
 
@@ -140,14 +144,6 @@ def _num(x: float):
     return sympy.Rational(repr(x))
 
 
-def _quat_matrix(q) -> np.ndarray:
-    """Rotation matrix of a unit quaternion (w, x, y, z)."""
-    w, x, y, z = np.asarray(q, dtype=float) / np.linalg.norm(q)
-    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-                     [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-                     [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
-
-
 def _euler_zyx(R) -> tuple:
     """(yaw, pitch, roll) with R = Rz(yaw) Ry(pitch) Rx(roll); pitch by atan2, so a
     quarter turn about y is exact to rounding."""
@@ -192,8 +188,12 @@ class _Builder:
         return ModelError(problem, file=self.source, key=key, fix=fix)
 
     def name_of(self, kind, index: int) -> str:
-        mujoco = _mujoco()
-        return mujoco.mj_id2name(self.m, kind, index) or ""
+        try:
+            return _mujoco().mj_id2name(self.m, kind, index) or ""
+        except UnicodeDecodeError:      # MuJoCo keeps the file's bytes
+            what = kind.name[len("mjOBJ_"):].lower()
+            raise self.error(f"the name of {what} {index} is not UTF-8 text",
+                             f"{what}[{index}]", "write the names in UTF-8") from None
 
     def unique(self, wanted: str) -> str:
         """A fresh valid name close to ``wanted`` (suffix _2, _3... on a clash)."""
@@ -258,6 +258,8 @@ class _Builder:
                          body: str) -> tuple:
         """A ball or free joint named after the MuJoCo joint; returns (base, point)."""
         name = self.joint_name(j)
+        check_name(name, file=self.source, key=f"joint[{j}]",
+                   what=f"{kind} joint name (the sanitized joint name)")
         made = [name] + [f"{name}_{s}" for part in JOINT_KINDS[kind] for s in part]
         clash = [t for t in made if t in self.taken]
         if clash:
@@ -294,7 +296,7 @@ class _Builder:
                 frames.append((base, point, True))
                 continue
             point = self.offset(parent_point, parent_base, m.body_pos[b], f"P_{body}")
-            base = self.rotate(parent_base, _quat_matrix(m.body_quat[b]), f"B_{body}")
+            base = self.rotate(parent_base, quat_matrix(m.body_quat[b]), f"B_{body}")
             for j in joints:
                 base, point = self.apply_joint(j, base, point, body)
                 moving = True
@@ -340,7 +342,7 @@ class _Builder:
             body = self.unique(sanitize(self.name_of(_mujoco().mjtObj.mjOBJ_BODY, b))
                                or f"body{b}")
             G = self.offset(point, base, m.body_ipos[b], f"G_{body}")
-            R = _quat_matrix(m.body_iquat[b])
+            R = quat_matrix(m.body_iquat[b])
             inertia = R @ np.diag(principal) @ R.T
             inertia = (inertia + inertia.T) / 2
             # rounding of the turn, not data: off-diagonals at 1e-14 of the largest moment
@@ -366,7 +368,7 @@ class _Builder:
             base, point, _ = frames[m.site_bodyid[s]]
             label = self.name_of(mujoco.mjtObj.mjOBJ_SITE, s) or f"site{s}"
             point = self.offset(point, base, m.site_pos[s], f"S_{sanitize(label)}")
-            base = self.rotate(base, _quat_matrix(m.site_quat[s]), f"S_{sanitize(label)}")
+            base = self.rotate(base, quat_matrix(m.site_quat[s]), f"S_{sanitize(label)}")
             self.model.add_frame(name(label), point=point, base=base)
 
     def effects(self) -> None:
@@ -530,7 +532,7 @@ class _Builder:
             else:
                 q0 = quat_mul(q0, quat_const(data[6:10]))
             error = quat_mul(quat_conj(q1), q0)
-            rows += [(3 + k, {"expression": self.polynomial(error[1 + k], data[10])})
+            rows += [(3 + k, {"expression": self.polynomial(error[1 + k], data[10], key)})
                      for k in range(3)]
         self.constrain(name, e, rows, key)
 
@@ -578,23 +580,25 @@ class _Builder:
                              f"weld bodies fewer than {WELD_MAX_HINGES} hinges apart")
         return quat
 
-    def polynomial(self, poly: dict, scale: float) -> sympy.Expr:
+    def polynomial(self, poly: dict, scale: float, key: str) -> sympy.Expr:
         """A polynomial in half-angle cosines and sines, times ``scale``, as an
         expression of the coordinates (terms at rounding level left out)."""
         m = self.m
         big = max((abs(c) for c in poly.values()), default=0.0)
+        kept = [mono for mono in sorted(poly) if abs(poly[mono]) > POLY_NOISE * big]
+        # at least ' + ' between terms and '*cos(q/2)' a factor: refused before it is built
+        shortest = sum(3 + 9 * len(mono) for mono in kept)
+        if shortest > MAX_LENGTH:
+            raise self.error(f"a weld's orientation error would be over {shortest} characters "
+                             f"long, over the {MAX_LENGTH} of a model's expression", key,
+                             "weld bodies fewer hinges apart, or use a connect")
         names = {jt.id: jt.coordinates[0] for jt in self.coordinates}
-        out = sympy.S.Zero
-        for mono in sorted(poly):
-            c = poly[mono] * scale
-            if abs(poly[mono]) <= POLY_NOISE * big:
-                continue
-            term = _num(c)
-            for j, f in mono:
-                half = (symbol(names[j]) - _num(m.qpos0[m.jnt_qposadr[j]])) / 2
-                term *= sympy.cos(half) if f == "c" else sympy.sin(half)
-            out += term
-        return out
+        terms = []          # summed once: a growing sum re-sorts all of it each time
+        for mono in kept:
+            halves = [(symbol(names[j]) - _num(m.qpos0[m.jnt_qposadr[j]])) / 2 for j, _ in mono]
+            terms.append(sympy.Mul(_num(poly[mono] * scale), *(
+                sympy.cos(h) if f == "c" else sympy.sin(h) for h, (_, f) in zip(halves, mono))))
+        return sympy.Add(*terms)
 
     def gravity(self) -> None:
         mujoco, m = _mujoco(), self.m
@@ -698,7 +702,14 @@ def import_mjmodel(mjmodel, source: str = "<mjmodel>", *, name: Optional[str] = 
             or sanitize(Path(source).stem)
     if not re.match(r"[A-Za-z]", name):
         name = "robot_" + name
-    return _Builder(mjmodel, name[:63], source, frictionloss).build()
+    try:
+        return _Builder(mjmodel, name[:63], source, frictionloss).build()
+    except ModelError as exc:
+        if exc.file != API_FILE:
+            raise
+        # the model's own checks (a name, too many constraint equations...): in the
+        # generated model's terms, at the file they came from
+        raise ModelError(exc.problem, file=source, key=exc.key, fix=exc.fix) from None
 
 
 def import_mjcf(path, *, name: Optional[str] = None, frictionloss: str = "smooth") -> MjcfImport:
@@ -713,23 +724,41 @@ def import_mjcf(path, *, name: Optional[str] = None, frictionloss: str = "smooth
     if not path.is_file():
         raise ModelError("cannot read the MJCF file: no such file", file=str(path),
                          fix="check the path")
-    try:
-        mjmodel = mujoco.MjModel.from_xml_path(str(path))
-    except ValueError as exc:       # MuJoCo's compiler reports errors as ValueError
-        raise ModelError(f"MuJoCo cannot compile the file: {exc}", file=str(path),
-                         fix="fix the MJCF as MuJoCo's message says") from None
+    mjmodel = _compiled(lambda: mujoco.MjModel.from_xml_path(str(path)), str(path), "file",
+                        path)
     return import_mjmodel(mjmodel, str(path), name=name, frictionloss=frictionloss)
 
 
 def import_mjcf_text(text: str, source: str = "<string>", **options) -> MjcfImport:
     """Import MJCF text (no file includes or assets); options as :func:`import_mjmodel`."""
     mujoco = _mujoco()
-    try:
-        mjmodel = mujoco.MjModel.from_xml_string(text)
-    except ValueError as exc:
-        raise ModelError(f"MuJoCo cannot compile the text: {exc}", file=source,
-                         fix="fix the MJCF as MuJoCo's message says") from None
+    mjmodel = _compiled(lambda: mujoco.MjModel.from_xml_string(text), source, "text")
     return import_mjmodel(mjmodel, source, **options)
+
+
+def _compiled(compile_mjcf, source: str, what: str, path: Path | None = None):
+    """``compile_mjcf()``'s MjModel; MuJoCo's compile errors (ValueError) as a
+    ModelError at the line MuJoCo names (or, for bytes that are not UTF-8, which
+    fail MuJoCo's message itself, the line of the first in the file ``path``)."""
+    try:
+        return compile_mjcf()
+    except ValueError as exc:
+        message = " ".join(str(exc).split())
+        found = re.search(r"\bline(?: number=| )(\d+)", message, re.IGNORECASE)
+        line = int(found[1]) if found else None
+        if line is None and isinstance(exc, UnicodeDecodeError) and path is not None:
+            data = path.read_bytes()
+            try:
+                data.decode("utf-8")
+            except UnicodeDecodeError as bad:
+                line = data[:bad.start].count(b"\n") + 1
+                message = f"byte {data[bad.start]:#04x} is not UTF-8 text"
+        # without a line, MuJoCo's engine names the element by its id: "body 4 is..."
+        element = re.search(r"\b(body|joint|geom|site|equality|tendon|actuator) (\d+)\b",
+                            message) if line is None else None
+        raise ModelError(f"MuJoCo cannot compile the {what}: {message}", file=source,
+                         line=line, key=f"{element[1]}[{element[2]}]" if element else None,
+                         fix="fix the MJCF as MuJoCo's message says") from None
 
 
 def load_mjcf(path, **options) -> Model:
@@ -743,58 +772,3 @@ def mjcf_to_yaml(imported: MjcfImport) -> str:
              "# Edit freely; re-importing overwrites this file."]
     lines += [f"# Note: {note}" for note in imported.notes]
     return "\n".join(lines) + "\n" + imported.model.to_yaml()
-
-
-# -- state conversions: MuJoCo's qpos/qvel/qacc <-> modelgen's q/v/qdd -----------
-
-def qpos_from_mujoco(imported: MjcfImport, qpos) -> np.ndarray:
-    """modelgen's q from MuJoCo's ``qpos`` (a reordering: the values are the same)."""
-    return np.asarray(qpos, dtype=float)[list(imported.qpos_index)]
-
-
-def qpos_to_mujoco(imported: MjcfImport, q) -> np.ndarray:
-    """MuJoCo's ``qpos`` from modelgen's q."""
-    out = np.empty(len(imported.qpos_index))
-    out[list(imported.qpos_index)] = np.asarray(q, dtype=float)
-    return out
-
-
-def _free_rotations(imported: MjcfImport, q) -> list:
-    """(dof index of vx, R) of each free joint, R its body's rotation in E."""
-    q = np.asarray(q, dtype=float)
-    return [(dof, _quat_matrix(q[k:k + 4])) for k, dof in imported.free]
-
-
-def velocity_map(imported: MjcfImport, q) -> np.ndarray:
-    """T with MuJoCo's ``qvel = T v`` at modelgen's configuration q: a permutation,
-    with each free joint's linear velocity turned from its body frame to the world.
-    ``T^T M T`` is modelgen's A (M: MuJoCo's ``mj_fullM``)."""
-    n = len(imported.dof_index)
-    T = np.zeros((n, n))
-    T[list(imported.dof_index), range(n)] = 1.0
-    for dof, R in _free_rotations(imported, q):
-        rows = [imported.dof_index[dof + i] for i in range(3)]
-        T[np.ix_(rows, range(dof, dof + 3))] = R
-    return T
-
-
-def qvel_to_mujoco(imported: MjcfImport, q, v) -> np.ndarray:
-    """MuJoCo's ``qvel`` from modelgen's q and v."""
-    return velocity_map(imported, q) @ np.asarray(v, dtype=float)
-
-
-def qvel_from_mujoco(imported: MjcfImport, qpos, qvel) -> np.ndarray:
-    """modelgen's v from MuJoCo's ``qpos`` and ``qvel``."""
-    q = qpos_from_mujoco(imported, qpos)
-    return velocity_map(imported, q).T @ np.asarray(qvel, dtype=float)
-
-
-def qacc_to_mujoco(imported: MjcfImport, q, v, qdd) -> np.ndarray:
-    """MuJoCo's ``qacc`` from modelgen's q, v and qdd: ``T qdd + dT/dt v``; a free
-    joint's world-frame linear acceleration is ``R (dv/dt + w x v)``."""
-    v = np.asarray(v, dtype=float)
-    out = velocity_map(imported, q) @ np.asarray(qdd, dtype=float)
-    for dof, R in _free_rotations(imported, q):
-        rows = [imported.dof_index[dof + i] for i in range(3)]
-        out[rows] += R @ np.cross(v[dof + 3:dof + 6], v[dof:dof + 3])
-    return out
