@@ -27,6 +27,7 @@ from __future__ import annotations
 import glob
 import importlib
 import os
+import time
 
 import numpy as np
 import pytest
@@ -49,6 +50,12 @@ from modelgen.model.mjcf import (
 )
 
 TOL = 1e-10
+
+
+@pytest.fixture(autouse=True)
+def _mujoco_log_outside_the_checkout(tmp_path, monkeypatch):
+    """MuJoCo writes its warnings (a NaN in a file...) to ./MUJOCO_LOG.TXT."""
+    monkeypatch.chdir(tmp_path)
 
 
 # -- the models --------------------------------------------------------------------
@@ -360,6 +367,26 @@ def test_a_weld_through_a_ball_joint_is_refused():
     assert "connect" in info.value.fix
 
 
+@pytest.mark.parametrize("first, second, hinges", [(4, 30, 26), (5, 19, 14), (0, 20, 14)])
+def test_a_weld_too_many_hinges_apart_is_refused_at_once(first, second, hinges):
+    """The limit counts the hinges on both sides of the common ancestor (a weld 26
+    hinges down one branch built 2^26 terms before the count was checked: a hang
+    in bench/fuzz.py --mjcf), and the refusal comes before any term is built."""
+    def chain(prefix, n):
+        return "".join(f'<body name="{prefix}{k}" pos="0 0 -0.1"><joint name="{prefix}j{k}" '
+                       'axis="0 1 0"/><geom type="sphere" size="0.02" mass="0.1"/>'
+                       for k in range(n)) + "</body>" * n
+    text = (f"<mujoco><worldbody>{chain('d', 32)}</worldbody><equality><weld "
+            f"body1='d{first}' body2='d{second}'/></equality></mujoco>")
+    if first == 0:      # across two branches of the world: 14 = 7 + 7, each under 12
+        text = (f"<mujoco><worldbody>{chain('a', 7)}{chain('b', 7)}</worldbody><equality>"
+                "<weld body1='a6' body2='b6'/></equality></mujoco>")
+    start = time.perf_counter()
+    with pytest.raises(ModelError, match=f"through {hinges} hinges") as info:
+        import_mjcf_text(text, "weld.xml")
+    assert info.value.key == "equality[0]" and time.perf_counter() - start < 5.0
+
+
 # -- equality constraints ------------------------------------------------------------
 
 #: joint couplings (polycoef to the 4th power, refs, joint2 absent), a fixed-tendon
@@ -571,6 +598,8 @@ NON_FINITE = {
     '<joint name="h" type="hinge" axis="0 1 0" pos="0 nan 0"/>': "joint[0].jnt_pos",
     '<geom type="capsule" size="0.1 0.5" quat="0.707 0 0.707 1e308"/>':
         "body[1].body_iquat",
+    '<inertial pos="0 0 0" mass="1" diaginertia="1 2 3" quat="-1e-300 0 0 0"/>':
+        "body[1].body_iquat",
 }
 
 
@@ -581,10 +610,11 @@ def test_non_finite_compiled_numbers_are_model_errors(element):
     mutation runs); each is now refused naming the element and the field."""
     option = element if element.startswith("<option") else ""
     joint = element if "<joint" in element else '<joint name="h" type="hinge" axis="0 1 0"/>'
-    geom = element if "<geom" in element else '<geom type="sphere" size="0.1" mass="1"/>'
+    geom = element if "<geom" in element or "<inertial" in element else \
+        '<geom type="sphere" size="0.1" mass="1"/>'
     text = (f'<mujoco>{option}<worldbody><body name="rod">{joint}{geom}</body>'
             "</worldbody></mujoco>")
-    with pytest.raises(ModelError, match="nan|inf|no turn") as info:
+    with pytest.raises(ModelError, match="nan|inf|no unit quaternion") as info:
         import_mjcf_text(text, "bad.xml")
     assert info.value.file == "bad.xml" and info.value.key == NON_FINITE[element]
     assert "finite numbers in the MJCF" in str(info.value)

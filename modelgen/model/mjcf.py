@@ -525,6 +525,7 @@ class _Builder:
         rows = [(0, {"point_a": points[0], "point_b": points[1]})]
         if kind == "weld" and data[10] != 0:
             top = self.common_ancestor(*bodies)
+            self.weld_hinges(bodies, top, key)
             q0, q1 = (self.body_quaternion(b, top, key) for b in bodies)
             if sites:
                 q0 = quat_mul(q0, quat_const(m.site_quat[ids[0]]))
@@ -556,7 +557,6 @@ class _Builder:
             chain.append(b)
             b = int(m.body_parentid[b])
         quat = quat_const((1.0, 0.0, 0.0, 0.0))
-        hinges = 0
         for b in reversed(chain):
             quat = quat_mul(quat, quat_const(m.body_quat[b]))
             for j in range(m.body_jntadr[b], m.body_jntadr[b] + m.body_jntnum[b]):
@@ -569,16 +569,25 @@ class _Builder:
                         "connect (the anchors coincide; it takes any joints)")
                 if m.jnt_type[j] != _HINGE:
                     continue
-                hinges += 1
                 axis = m.jnt_axis[j]
                 turn = ({((j, "c"),): 1.0},) + tuple(
                     {((j, "s"),): float(a)} if a else {} for a in axis)
                 quat = quat_mul(quat, turn)
+        return quat
+
+    def weld_hinges(self, bodies, top: int, key: str) -> None:
+        """Refuse a weld whose bodies are more than WELD_MAX_HINGES hinges apart (both
+        sides of ``top``), before any of its 2^k terms is built."""
+        m, hinges = self.m, 0
+        for b in bodies:
+            while b != top:
+                joints = range(m.body_jntadr[b], m.body_jntadr[b] + m.body_jntnum[b])
+                hinges += sum(m.jnt_type[j] == _HINGE for j in joints)
+                b = int(m.body_parentid[b])
         if hinges > WELD_MAX_HINGES:
             raise self.error(f"a weld's orientation error through {hinges} hinges would be "
                              f"a sum of up to 2^{hinges} terms per equation", key,
-                             f"weld bodies fewer than {WELD_MAX_HINGES} hinges apart")
-        return quat
+                             f"weld bodies at most {WELD_MAX_HINGES} hinges apart")
 
     def polynomial(self, poly: dict, scale: float, key: str) -> sympy.Expr:
         """A polynomial in half-angle cosines and sines, times ``scale``, as an
@@ -656,10 +665,10 @@ class _Builder:
                           qpos_index, dof_index, free, tuple(self.equality_rows))
 
     def check_numbers(self) -> None:
-        """Refuse NaN and infinities (:data:`_READ_FIELDS`, gravity) and zero quaternions."""
+        """Refuse NaN, infinities (:data:`_READ_FIELDS`, gravity), non-unit quaternions."""
         m, mujoco = self.m, _mujoco()
         fix = ("write finite numbers in the MJCF (no nan or inf, none whose compiled value "
-               "overflows) and nonzero quaternions")
+               "overflows) and quaternions that are not near zero")
         if not np.all(np.isfinite(m.opt.gravity)):
             raise self.error(f"the gravity {m.opt.gravity.tolist()} is not finite",
                              "option.gravity", fix)
@@ -667,19 +676,22 @@ class _Builder:
             for field in fields:
                 values = np.asarray(getattr(m, field), dtype=float).reshape(getattr(m, count), -1) \
                     if getattr(m, count) else np.zeros((0, 1))
-                quat = field.endswith("quat")   # MuJoCo keeps a zero one: it turns nothing
-                bad = np.flatnonzero(~np.isfinite(values).all(axis=1)
-                                     | (~values.any(axis=1) if quat else False))
+                # MuJoCo normalizes a quaternion but keeps one too small to (zero, 1e-300)
+                quat = field.endswith("quat")
+                with np.errstate(all="ignore"):
+                    unit = np.abs(np.einsum("ij,ij->i", values, values) - 1) < 1e-9
+                bad = np.flatnonzero(~np.isfinite(values).all(axis=1) | (~unit if quat else False))
                 if bad.size:
                     i = int(bad[0])
                     owner, index = ("joint", int(m.dof_jntid[i])) if kind == "dof" else \
                         ("joint", int(np.flatnonzero(m.jnt_qposadr <= i)[-1])) \
                         if kind == "qpos" else (kind, i)
                     label = self.name_of(getattr(mujoco.mjtObj, obj), index) if obj else ""
+                    what = "no unit quaternion" if quat else "not finite"
                     raise self.error(
                         f"{owner} {repr(label) if label else index} has {field} = "
-                        f"{values[i].tolist()}, {'no turn' if quat else 'not finite'} (MuJoCo "
-                        "compiles it with a warning at most)", f"{owner}[{index}].{field}", fix)
+                        f"{values[i].tolist()}, {what} (MuJoCo compiles it with a warning at "
+                        "most)", f"{owner}[{index}].{field}", fix)
 
     def description(self) -> tuple:
         m = self.m
