@@ -1,11 +1,12 @@
 """Fuzz the model loader's expressions with thousands of generated inputs, or the URDF
-importer with mutated real robots (``--urdf``).
+and MJCF importers with mutated real robots (``--urdf``, ``--mjcf``).
 
 Run from the repository root::
 
     .venv/bin/python bench/fuzz.py                 # 3000 cases, compile 10 models
     .venv/bin/python bench/fuzz.py --cases 500 --compile 0 --seed 1
     .venv/bin/python bench/fuzz.py --urdf --cases 20000 --workers 2 --compile 5
+    .venv/bin/python bench/fuzz.py --mjcf --cases 20000 --workers 2 --compile 5
 
 Method
     The cases come from the generators of ``modelgen/bench/fuzz_cases.py``
@@ -32,6 +33,16 @@ URDF mode (``--urdf``)
     *wrong acceptance*.  A ModelError must name the file and a line.  The first
     ``--compile`` accepted files are also built with ``modelgen.load``.
 
+MJCF mode (``--mjcf``)
+    The same with MJCF files: ``modelgen/bench/fuzz_mjcf.py`` mutates a small
+    model of every joint kind and, when gymnasium is installed, its MuJoCo
+    assets (numbers, joint types, structure, equality constraints, names, XML),
+    written to a ``.xml`` file and read by ``modelgen.model.mjcf.import_mjcf``
+    (MuJoCo compiles it).  An accepted file is checked against MuJoCo's
+    compiled model (``check_accepted``: coordinates, speeds, moving mass).  A
+    ModelError must name the file and a line (MuJoCo's) or a key (an element
+    of the compiled model); only an empty file has neither.
+
 Output
     One table: cases tried, models that validated, clean errors (ModelgenError
     subclasses, by class; ModelErrors without a line counted apart), other
@@ -47,6 +58,7 @@ import os
 import select
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -89,57 +101,76 @@ for line in sys.stdin:
 """
 
 
-URDF_WORKER = r"""
+#: The worker of the import modes: {imports}, {suffix}, {read} (a spec from ``path``),
+#: {check} (problems of an accepted file) and {clean} (a ModelError that names the
+#: file and says where) are the format's.
+IMPORT_WORKER = r"""
 import base64, json, os, shutil, sys, tempfile, time, traceback, warnings
 warnings.simplefilter("ignore")
 from modelgen.errors import BuildError, ModelError, ModelgenError
-from modelgen.model import as_spec
-from modelgen.bench.fuzz_urdf import check_accepted
+{imports}
 import modelgen
 
-folder = tempfile.mkdtemp(prefix="mgfuzz_urdf")
-path = os.path.join(folder, "fuzz.urdf")
+folder = tempfile.mkdtemp(prefix="mgfuzz_import")
+path = os.path.join(folder, "fuzz{suffix}")
 for line in sys.stdin:
     case = json.loads(line)
     data = base64.b64decode(case["data"])
     with open(path, "wb") as f:
         f.write(data)
     start = time.perf_counter()
-    out = {"kind": "ok"}
+    out = {{"kind": "ok"}}
     try:
-        spec = as_spec(path, floating_base=case["floating_base"])
+        {read}
         out["seconds"] = time.perf_counter() - start
         try:
-            problems = check_accepted(spec, data, case["floating_base"])
+            problems = {check}
         except Exception as exc:
-            problems = [f"the check failed: {type(exc).__name__}: {exc}"[:200]]
+            problems = [f"the check failed: {{type(exc).__name__}}: {{exc}}"[:200]]
         if problems:
-            out = {"kind": "wrong", "site": problems[0][:200]}
+            out = {{"kind": "wrong", "site": problems[0][:200]}}
         elif case["compile"]:
             out["kind"] = "compiled"
             try:
                 modelgen.load(spec, os.path.join(folder, "build"))
             except BuildError as exc:
-                out = {"kind": "build_error", "site": str(exc).splitlines()[0][:100]}
+                out = {{"kind": "build_error", "site": str(exc).splitlines()[0][:100]}}
             except ModelgenError as exc:
                 reason = str(exc).split(": ", 1)[-1][:40]
-                out = {"kind": "after_validation", "site": f"{type(exc).__name__}: {reason}"}
+                out = {{"kind": "after_validation", "site": f"{{type(exc).__name__}}: {{reason}}"}}
     except ModelError as exc:
-        if exc.line and exc.file == path:
-            out = {"kind": "clean", "site": "ModelError"}
+        if exc.file == path and ({clean}):
+            out = {{"kind": "clean", "site": "ModelError"}}
         else:
-            out = {"kind": "noline", "site": str(exc)[:120]}
+            out = {{"kind": "noline", "site": str(exc)[:120]}}
     except ModelgenError as exc:
-        out = {"kind": "clean", "site": type(exc).__name__}
+        out = {{"kind": "clean", "site": type(exc).__name__}}
     except BaseException as exc:
         frame = traceback.extract_tb(exc.__traceback__)[-1]
-        out = {"kind": "other",
-               "site": f"{type(exc).__name__} at {frame.filename.split('site-packages/')[-1]}"
-                       f":{frame.lineno}"}
+        out = {{"kind": "other",
+               "site": f"{{type(exc).__name__}} at {{frame.filename.split('site-packages/')[-1]}}"
+                       f":{{frame.lineno}}"}}
     out.setdefault("seconds", time.perf_counter() - start)    # reading only, not the check
     print(json.dumps(out), flush=True)
 shutil.rmtree(folder, ignore_errors=True)
 """
+
+#: format -> its worker: a URDF's ModelError names a line; an MJCF's a line (MuJoCo's,
+#: when it refuses the file) or a key (an element of the compiled model), except for
+#: an empty file
+WORKERS = {
+    "urdf": IMPORT_WORKER.format(
+        imports="from modelgen.model import as_spec\n"
+                "from modelgen.bench.fuzz_urdf import check_accepted",
+        suffix=".urdf", read='spec = as_spec(path, floating_base=case["floating_base"])',
+        check='check_accepted(spec, data, case["floating_base"])', clean="exc.line"),
+    "mjcf": IMPORT_WORKER.format(
+        imports="import mujoco\nfrom modelgen.model.mjcf import import_mjcf\n"
+                "from modelgen.bench.fuzz_mjcf import check_accepted",
+        suffix=".xml", read="imported = import_mjcf(path); spec = imported.model.spec()",
+        check="check_accepted(imported, mujoco.MjModel.from_xml_path(path))",
+        clean="exc.line or exc.key or not data.strip()"),
+}
 
 
 class Worker:
@@ -147,9 +178,10 @@ class Worker:
 
     def __init__(self, script: str = WORKER):
         env = dict(os.environ, PYTHONPATH=str(ROOT))
+        # in the temporary directory: MuJoCo writes its warnings to MUJOCO_LOG.TXT there
         self.proc = subprocess.Popen([sys.executable, "-c", script], stdin=subprocess.PIPE,
                                      stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
-                                     text=True, cwd=ROOT, env=env)
+                                     text=True, cwd=tempfile.gettempdir(), env=env)
 
     def run(self, text: str, compile_: bool, timeout: float):
         """The worker's answer, ("hang", None) or ("crash", returncode)."""
@@ -189,8 +221,6 @@ class Worker:
 
 def urdf_cases(n: int, seed: int):
     """``n`` mutated URDFs (as worker cases), reproducibly."""
-    import base64
-    import random
     from modelgen.bench.fuzz_urdf import base_texts, mutate
     paths = sorted((ROOT / "tests" / "data" / "urdf").glob("*.urdf"))
     try:
@@ -204,19 +234,32 @@ def urdf_cases(n: int, seed: int):
             "quadruped_description/urdf/quadruped.urdf", "hector_description/robots/quadrotor_base.urdf",
             "z1_description/urdf/z1.urdf", "bolt_description/robots/bolt.urdf",
             "romeo_description/urdf/romeo_small.urdf", "panda_description/urdf/panda.urdf")]
-    texts = base_texts(paths)
-    # small robots more often: a case's cost grows with the file, the bugs do not
+    return _cases(base_texts(paths), mutate, n, seed, floating=0.2)
+
+
+def mjcf_cases(n: int, seed: int):
+    """``n`` mutated MJCF files (as worker cases), reproducibly."""
+    from modelgen.bench.fuzz_mjcf import base_texts, mutate
+    return _cases(base_texts(), mutate, n, seed, floating=0.0)
+
+
+def _cases(texts, mutate, n: int, seed: int, floating: float):
+    """``n`` worker cases, each ``mutate`` of one of ``texts`` ((name, text)), a
+    fraction ``floating`` of them read with a floating base."""
+    import base64
+    import random
+    # small files more often: a case's cost grows with the file, the bugs do not
     weights = [1 / len(text) for _, text in texts]
     rng = random.Random(seed)
     for _ in range(n):
         name, text = rng.choices(texts, weights)[0]
         data, what = mutate(text, rng)
         data = data.encode() if isinstance(data, str) else data
-        yield {"data": base64.b64encode(data).decode(), "floating_base": rng.random() < 0.2,
+        yield {"data": base64.b64encode(data).decode(), "floating_base": rng.random() < floating,
                "compile": False, "what": f"{name}: {what}"}
 
 
-def _pool(args, cases, workers, busy, counts, sites, examples, slow):
+def _pool(args, cases, workers, busy, counts, sites, examples, slow, script):
     """Run the cases on the workers, one case each at a time; (tried, compiled)."""
     t0 = time.perf_counter()
     tried = compiled = 0
@@ -262,7 +305,7 @@ def _pool(args, cases, workers, busy, counts, sites, examples, slow):
                 print(f"{kind}: {out.get('site', '')}: {case['what']}"[:400], flush=True)
             if kind in ("hang", "crash"):
                 workers[w].close()
-                workers[w] = Worker(URDF_WORKER)
+                workers[w] = Worker(script)
             if kind not in ("compiled", "after_validation", "build_error") \
                     and out["seconds"] > args.budget:
                 slow.append((out["seconds"], case["what"]))
@@ -276,18 +319,19 @@ def _pool(args, cases, workers, busy, counts, sites, examples, slow):
     return tried, compiled
 
 
-def run_urdf(args) -> int:
-    """The URDF mode: a pool of workers, one case each at a time."""
+def run_import(args, fmt: str) -> int:
+    """The URDF or MJCF mode (``fmt``): a pool of workers, one case each at a time."""
     t0 = time.perf_counter()
     counts = collections.Counter()
     sites = collections.Counter()
     examples = {}
     slow = []
-    cases = urdf_cases(args.cases, args.seed)
-    workers = [Worker(URDF_WORKER) for _ in range(args.workers)]
+    cases = (urdf_cases if fmt == "urdf" else mjcf_cases)(args.cases, args.seed)
+    workers = [Worker(WORKERS[fmt]) for _ in range(args.workers)]
     busy = {}                      # worker index -> (case, deadline)
     try:
-        tried, compiled = _pool(args, cases, workers, busy, counts, sites, examples, slow)
+        tried, compiled = _pool(args, cases, workers, busy, counts, sites, examples, slow,
+                                WORKERS[fmt])
     finally:
         for worker in workers:
             if worker.proc.poll() is None:
@@ -305,10 +349,12 @@ def run_urdf(args) -> int:
              counts["ok"] + counts["compiled"]),
             ("  of which built and loaded by modelgen.load", counts["compiled"])]
     rows += [(labels[kind] + ": " + site, k) for (kind, site), k in sorted(sites.items())]
-    rows += [("ModelError with file and line", counts["clean"]),
+    where, wrong = (("line", "axis or inertia differs from the file") if fmt == "urdf" else
+                    ("line or key", "sizes or moving mass differ from MuJoCo's"))
+    rows += [(f"ModelError with file and {where}", counts["clean"]),
              ("raw exceptions (not ModelgenError)", counts["other"]),
-             ("ModelErrors without file and line", counts["noline"]),
-             ("wrong acceptances (axis or inertia differs from the file)", counts["wrong"]),
+             (f"ModelErrors without file and {where}", counts["noline"]),
+             (f"wrong acceptances ({wrong})", counts["wrong"]),
              (f"hangs (> {args.hang:g} s)", counts["hang"]), ("crashes", counts["crash"]),
              (f"slower than the {args.budget:g} s budget", len(slow))]
     for label, k in rows:
@@ -325,8 +371,10 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--urdf", action="store_true",
                         help="fuzz the URDF importer with mutated real robots")
+    parser.add_argument("--mjcf", action="store_true",
+                        help="fuzz the MJCF importer with mutated MuJoCo models")
     parser.add_argument("--workers", type=int, default=1,
-                        help="(--urdf) worker processes run in parallel")
+                        help="(--urdf, --mjcf) worker processes run in parallel")
     parser.add_argument("--cases", type=int, default=3000)
     parser.add_argument("--compile", type=int, default=10,
                         help="build this many of the models that validate")
@@ -335,8 +383,8 @@ def main(argv=None) -> int:
                         help="seconds after which a case counts as a hang")
     parser.add_argument("--budget", type=float, default=2.0)
     args = parser.parse_args(argv)
-    if args.urdf:
-        return run_urdf(args)
+    if args.urdf or args.mjcf:
+        return run_import(args, "urdf" if args.urdf else "mjcf")
 
     from modelgen.bench.fuzz_cases import draw_cases
     t0 = time.perf_counter()

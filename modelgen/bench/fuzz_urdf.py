@@ -39,8 +39,8 @@ from pathlib import Path
 import mpmath
 import sympy
 
-__all__ = ["TINY", "HOSTILE_NUMBERS", "HOSTILE_NAMES", "mutate", "check_accepted",
-           "base_texts"]
+__all__ = ["TINY", "HOSTILE_NUMBERS", "HOSTILE_NAMES", "XML_MUTATIONS", "mutate",
+           "check_accepted", "base_texts"]
 
 #: a two-link robot with an unaligned axis, for the doctest and the quick tests
 TINY = """<robot name="tiny"><link name="world"/>
@@ -301,9 +301,13 @@ def _m_rotor(root, rng):
     return f"rotor on {joint}: {inertia} x {ratio}^2"
 
 
+#: the mutations that know nothing of URDF (an element or attribute deleted, an element
+#: duplicated, a joint or link copy renamed), shared with the MJCF fuzz
+XML_MUTATIONS = (_m_delete_element, _m_duplicate_element, _m_delete_attribute)
+
 TREE_MUTATIONS = [_m_rotor, _m_number, _m_number, _m_number, _m_scale, _m_axis, _m_axis,
-                  _m_delete_element, _m_duplicate_element, _m_delete_attribute,
-                  _m_joint_type, _m_cycle, _m_rename, _m_mimic, _m_deep, _m_unknown_element]
+                  *XML_MUTATIONS, _m_joint_type, _m_cycle, _m_rename, _m_mimic, _m_deep,
+                  _m_unknown_element]
 
 _ATTACKS = [
     '<!DOCTYPE robot [<!ENTITY a "aaaaaaaaaa"><!ENTITY b "&a;&a;&a;&a;&a;&a;&a;&a;&a;&a;">'
