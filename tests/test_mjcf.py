@@ -580,6 +580,16 @@ def test_mujoco_compile_errors_are_model_errors_at_mujocos_line(tmp_path):
     with pytest.raises(ModelError, match="MuJoCo cannot compile the file") as info:
         modelgen.as_spec(path)
     assert (info.value.file, info.value.line) == (str(path), 4)
+    # MuJoCo cuts its message at about 500 characters: after a long name, no line
+    # (and "element", not "Element"); the element's line in the file
+    name = "a" * 600
+    path.write_text('<mujoco>\n<worldbody>\n<body name="b"><joint name="h"/><geom '
+                    'type="sphere" size="0.1" mass="1"/></body>\n</worldbody>\n<equality>\n'
+                    f'<connect body1="{name}" body2="world" anchor="0 0 0"/>\n'
+                    "</equality></mujoco>")
+    with pytest.raises(ModelError, match="unknown element 'aaa") as info:
+        modelgen.as_spec(path)
+    assert info.value.line == 6
     # no line from MuJoCo's engine, which names the body by its id
     with pytest.raises(ModelError, match="body 1 is compiled as simple") as info:
         import_mjcf_text('<mujoco><worldbody><body name="a"><joint name="h"/><geom '

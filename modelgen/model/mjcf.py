@@ -750,8 +750,10 @@ def import_mjcf_text(text: str, source: str = "<string>", **options) -> MjcfImpo
 
 def _compiled(compile_mjcf, source: str, what: str, path: Path | None = None):
     """``compile_mjcf()``'s MjModel; MuJoCo's compile errors (ValueError) as a
-    ModelError at the line MuJoCo names (or, for bytes that are not UTF-8, which
-    fail MuJoCo's message itself, the line of the first in the file ``path``)."""
+    ModelError at the line MuJoCo names; when it names none, in the file ``path``,
+    at the first byte that is not UTF-8 (which fails MuJoCo's message itself) or
+    at the element it names (its message, cut at about 500 characters, loses the
+    line after a long name)."""
     try:
         return compile_mjcf()
     except ValueError as exc:
@@ -765,6 +767,11 @@ def _compiled(compile_mjcf, source: str, what: str, path: Path | None = None):
             except UnicodeDecodeError as bad:
                 line = data[:bad.start].count(b"\n") + 1
                 message = f"byte {data[bad.start]:#04x} is not UTF-8 text"
+        named = re.search(r"\belement '([^']+)", message) if line is None and path else None
+        if named:
+            text = path.read_bytes().decode("utf-8", "replace")
+            at = text.find(named[1][:100])
+            line = text.count("\n", 0, at) + 1 if at >= 0 else None
         # without a line, MuJoCo's engine names the element by its id: "body 4 is..."
         element = re.search(r"\b(body|joint|geom|site|equality|tendon|actuator) (\d+)\b",
                             message) if line is None else None
