@@ -668,7 +668,7 @@ class _Builder:
         """Refuse NaN, infinities (:data:`_READ_FIELDS`, gravity), non-unit quaternions."""
         m, mujoco = self.m, _mujoco()
         fix = ("write finite numbers in the MJCF (no nan or inf, none whose compiled value "
-               "overflows) and quaternions that are not near zero")
+               "overflows) and quaternions MuJoCo can normalize (none zero or near it)")
         if not np.all(np.isfinite(m.opt.gravity)):
             raise self.error(f"the gravity {m.opt.gravity.tolist()} is not finite",
                              "option.gravity", fix)
@@ -676,7 +676,7 @@ class _Builder:
             for field in fields:
                 values = np.asarray(getattr(m, field), dtype=float).reshape(getattr(m, count), -1) \
                     if getattr(m, count) else np.zeros((0, 1))
-                # MuJoCo normalizes a quaternion but keeps one too small to (zero, 1e-300)
+                # MuJoCo normalizes a quaternion but keeps one too small to: zero, 1e-300
                 quat = field.endswith("quat")
                 with np.errstate(all="ignore"):
                     unit = np.abs(np.einsum("ij,ij->i", values, values) - 1) < 1e-9
