@@ -31,6 +31,7 @@ from __future__ import annotations
 import random
 import re
 import xml.etree.ElementTree as ET
+from pathlib import Path
 
 from modelgen.bench.fuzz_urdf import HOSTILE_NAMES, HOSTILE_NUMBERS, XML_MUTATIONS
 
@@ -86,7 +87,6 @@ def base_texts() -> list:
         import gymnasium
     except ImportError:
         return out
-    from pathlib import Path
     folder = Path(gymnasium.__file__).parent / "envs" / "mujoco" / "assets"
     for path in sorted(folder.glob("*.xml")):
         text = path.read_text()

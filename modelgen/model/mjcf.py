@@ -676,11 +676,12 @@ class _Builder:
             for field in fields:
                 values = np.asarray(getattr(m, field), dtype=float).reshape(getattr(m, count), -1) \
                     if getattr(m, count) else np.zeros((0, 1))
-                # MuJoCo normalizes a quaternion but keeps one too small to: zero, 1e-300
+                bad = ~np.isfinite(values).all(axis=1)
                 quat = field.endswith("quat")
-                with np.errstate(all="ignore"):
-                    unit = np.abs(np.einsum("ij,ij->i", values, values) - 1) < 1e-9
-                bad = np.flatnonzero(~np.isfinite(values).all(axis=1) | (~unit if quat else False))
+                if quat:    # MuJoCo normalizes one but keeps one too small to: zero, 1e-300
+                    with np.errstate(all="ignore"):
+                        bad |= ~(np.abs(np.einsum("ij,ij->i", values, values) - 1) < 1e-9)
+                bad = np.flatnonzero(bad)
                 if bad.size:
                     i = int(bad[0])
                     owner, index = ("joint", int(m.dof_jntid[i])) if kind == "dof" else \
