@@ -7,6 +7,7 @@ numpy finite differences, and conserved energy.
 from __future__ import annotations
 
 import re
+import threading
 import warnings
 from pathlib import Path
 
@@ -375,6 +376,22 @@ def test_progress_hears_the_time_the_c_reached(dp, method):
                       **fixed_step(method), chunk=64)
     assert res.success and seen[-1] == res.t[-1] == 3.0
     assert len(seen) >= 2 and np.all(np.diff(seen) >= 0) and seen[0] > 0.5  # chunked: >1 call
+
+
+def test_an_exception_from_progress_stops_the_c_before_its_arrays_are_freed(dp):
+    """progress raises while the C run is under way in its worker thread: simulate
+    must stop and join that thread before the exception frees the arrays it writes
+    into (it used to keep running: a segfault on large t_eval).  The caller's own
+    interrupt flag is left as it was."""
+    flag = np.zeros(1, dtype=np.intc)
+    before = threading.active_count()
+
+    def progress(t):
+        raise RuntimeError("progress bar closed")
+    with pytest.raises(RuntimeError, match="progress bar closed"):
+        dp.simulate([1.0, 1.0, 0.0, 0.0], (0, 1e4), t_eval=np.linspace(0, 1e4, 200_000),
+                    max_step=1e-3, max_steps=10**9, progress=progress, interrupt=flag)
+    assert threading.active_count() == before and flag[0] == 0
 
 
 @pytest.mark.parametrize("method", ["rk4", "gauss4", "dop853"])

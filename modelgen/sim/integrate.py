@@ -464,8 +464,24 @@ def _interruptible(fn, args, flag, poll=None):
             if poll is not None:
                 poll()
     finally:
+        if worker.is_alive():
+            _stop(worker, flag)
         signal.signal(signal.SIGINT, previous)
     return box[0]
+
+
+def _stop(worker, flag) -> None:
+    """Stop the C run of ``worker`` and wait for it: an exception raised in the main
+    thread (by ``poll`` or a signal handler) is about to free the arrays it writes
+    into.  The caller's own ``interrupt`` array is left as it was."""
+    before = int(flag[0])
+    flag[0] = 1
+    while worker.is_alive():
+        try:
+            worker.join(0.05)
+        except BaseException:       # noqa: B036 - a second signal: the arrays still must live
+            continue
+    flag[0] = before
 
 
 def _mass_matrix_kind(cm, status, pivot, p_vec, x_start, at_start) -> str:
