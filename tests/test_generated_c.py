@@ -201,6 +201,17 @@ def example_binary(generated, tmp_path_factory) -> Path:
     return build / "double_pendulum_sim"
 
 
+def test_the_examples_generate_target_writes_the_model_it_builds(tmp_path):
+    """``make generate`` (the docs' first step) runs this checkout's modelgen: it
+    used to call ``python -m modelgen.cli``, which is not runnable."""
+    model_dir = tmp_path / "double_pendulum"
+    r = _run(["make", "-C", EXAMPLE, "generate", f"PYTHON={sys.executable}",
+              f"MODEL_DIR={model_dir}"])
+    assert r.returncode == 0, r.stdout
+    assert (model_dir / "double_pendulum.c").is_file()
+    assert (model_dir / "double_pendulum.h").is_file()
+
+
 def test_embedded_example_prints_what_its_readme_shows(example_binary):
     """The README's output block is the program's output, digit for digit (the model
     code computes the same bits on every machine: mg_sin/mg_cos, no libm)."""

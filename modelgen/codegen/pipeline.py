@@ -419,9 +419,9 @@ def _check_options(spec: ModelSpec, options: BuildOptions) -> None:
                          "a constrained model's accelerations also carry the constraint "
                          "forces, which depend on the state", file=spec.source,
                          key="derivatives",
-                         fix="build with jacobian=True instead: <name>_jacobian and "
-                             "<name>_linearize differentiate the constrained rhs, "
-                             "constraint forces included")
+                         fix="build with jacobian=True (<name>_jacobian) or linearize=True "
+                             "(<name>_linearize) instead: they differentiate the "
+                             "constrained rhs, constraint forces included")
     if options.jacobian and spec.joints and spec.constraints:
         raise ModelError("the Jacobian of a constrained model with ball or free joints is "
                          "not supported: its derivatives are taken in the coordinates, "
