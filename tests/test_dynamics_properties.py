@@ -89,3 +89,32 @@ def test_gravity_energy_is_conserved_for_chain(compiled):
     x0 = np.concatenate([np.full(4, 0.4), np.zeros(4)])
     drift = _energy_drift(cm, x0, 1e-3, None)
     assert drift < 1e-8
+
+
+TIME_VARYING_GRAVITY = """
+name: {name}
+coordinates: [q]
+parameters: {{l: 0.8, m: 1.5, g: 9.81}}
+bases: {{B: {{parent: E, axis: 3, angle: q}}}}
+points: {{P: {{from: O, base: B, coordinates: [l, 0, 0]}}}}
+bodies: {{bob: {{mass: m, G: P, base: B}}}}
+{field}
+"""
+
+
+@pytest.mark.parametrize("field", [
+    "gravity: [0, -g*(1 + sin(3*t)/10), 0]",
+    "effects: {pull: {type: gravity, vector: [0, -g*(1 + sin(3*t)/10), 0]}}"])
+def test_a_gravity_that_varies_in_time_acts_and_has_no_potential(tmp_path, field):
+    """A pendulum in the field g(t) = g (1 + sin(3t)/10) along -y: m l² q̈ = -m g(t) l
+    cos q.  Its potential is not counted (the field does work no potential accounts
+    for): the build used to fail on the energy's t, which has no storage."""
+    import modelgen
+    from modelgen.model.api import parse_model
+    spec = parse_model(TIME_VARYING_GRAVITY.format(name="gt", field=field))
+    cm = modelgen.load(spec, tmp_path / "gt")
+    l, g = 0.8, 9.81
+    for t, q, qd in [(0.0, 0.3, 0.4), (0.7, -1.1, 2.0), (2.0, 2.5, -0.3)]:
+        expected = -g * (1 + np.sin(3 * t) / 10) * np.cos(q) / l
+        assert cm.rhs(t, [q, qd])[1] == pytest.approx(expected, rel=1e-14)
+        assert cm.energy([q], [qd]) == pytest.approx([1.5 * (l * qd) ** 2 / 2, 0.0], rel=1e-14)

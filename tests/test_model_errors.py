@@ -152,14 +152,14 @@ def test_undefined_name_in_an_expression():
     assert message("bases:\n  B1: {parent: E, axis: 3, angle: 2*q3}\n") == (
         "m.yaml:7: bases.B1.angle: undefined name 'q3' in expression '2*q3'; "
         "fix: declare 'q3' under 'coordinates' or 'parameters'; "
-        "only coordinates, parameters and t may be used here")
+        "only coordinates and parameters may be used here")
 
 
 def test_undefined_name_suggests_a_close_allowed_name():
     assert message("points:\n  P: {coordinates: [l11/2, 0, 0]}\n") == (
         "m.yaml:7: points.P.coordinates[0]: undefined name 'l11' in expression 'l11/2'; "
         "fix: did you mean 'l1'? Otherwise declare 'l11' under 'coordinates' or "
-        "'parameters'; only coordinates, parameters and t may be used here")
+        "'parameters'; only coordinates and parameters may be used here")
 
 
 def test_undefined_name_in_gravity_points_to_parameters():
@@ -171,15 +171,15 @@ def test_undefined_name_in_gravity_points_to_parameters():
 def test_speed_in_a_position_expression():
     assert message("bases:\n  B1: {parent: E, axis: 3, angle: q1 + q1_dot}\n") == (
         "m.yaml:7: bases.B1.angle: speed 'q1_dot' is not allowed in expression "
-        "'q1 + q1_dot'; fix: use only coordinates, parameters and t here "
-        "(positions and angles cannot depend on speeds or inputs)")
+        "'q1 + q1_dot'; fix: use only coordinates and parameters here "
+        "(positions and angles cannot depend on speeds, inputs or t)")
 
 
 def test_input_in_a_point_coordinate():
     assert message("points:\n  P1: {coordinates: [0, T1, 0]}\n") == (
         "m.yaml:7: points.P1.coordinates[1]: input 'T1' is not allowed in expression 'T1'; "
-        "fix: use only coordinates, parameters and t here "
-        "(positions and angles cannot depend on speeds or inputs)")
+        "fix: use only coordinates and parameters here "
+        "(positions and angles cannot depend on speeds, inputs or t)")
 
 
 def test_coordinate_in_gravity():
@@ -513,7 +513,7 @@ def test_api_errors_name_the_api_and_the_key():
     assert api_message(lambda: m.add_base("B1", parent="E", axis=3, angle="q1*q9")) == (
         "<api>: bases.B1.angle: undefined name 'q9' in expression 'q1*q9'; "
         "fix: declare 'q9' under 'coordinates' or 'parameters'; "
-        "only coordinates, parameters and t may be used here")
+        "only coordinates and parameters may be used here")
 
 
 def test_api_unknown_reference_is_reported_by_spec():

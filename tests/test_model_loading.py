@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 import sympy
 
+from modelgen.errors import ModelError
 from modelgen.model.chains import spatial_chain
 from modelgen.model.api import Model, load_model, parse_model, spec_to_yaml
 from modelgen.model.spec import (TIME, ActionSpec, BaseSpec, BodySpec, FrameSpec, ModelSpec,
@@ -252,14 +253,28 @@ name: m
 coordinates: [q]
 parameters: {w: 2.0}
 inputs: [u]
-bases: {B: {parent: E, axis: 3, angle: q + sin(w*t)}}
+bases: {B: {parent: E, axis: 3, angle: q}}
 gravity: [0, 0, -9.81*cos(t)]
 bodies: {b: {mass: 1, G: O, base: B}}
 actions: {a: {body: b, point: O, base: B, torque: [0, 0, -w*q_dot + u*t]}}
 """)
     q, w, u, q_dot = S("q", "w", "u", "q_dot")
-    assert spec.bases[0].angle == q + sympy.sin(w * TIME)
+    assert spec.gravity[2] == -sympy.Rational(981, 100) * sympy.cos(TIME)
     assert spec.actions[0].torque[2] == -w * q_dot + u * TIME
+
+
+@pytest.mark.parametrize("key, entry", [
+    ("bases.B.angle", "bases: {B: {parent: E, axis: 3, angle: q + sin(w*t)}}"),
+    ("points.P.coordinates[0]", "points: {P: {from: O, base: E, coordinates: [t, 0, 0]}}")])
+def test_time_in_a_position_is_refused_where_it_is_read(key, entry):
+    """Prescribed motion is not supported (A, h, the energies and the poses take no
+    time): refused by the reader at its line, not later by the derivation."""
+    text = f"name: m\ncoordinates: [q]\nparameters: {{w: 2.0}}\n{entry}\n"
+    with pytest.raises(ModelError) as err:
+        parse_model(text, source="m.yaml")
+    e = err.value
+    assert (e.file, e.line, e.key) == ("m.yaml", 4, key)
+    assert "time 't' is not allowed" in str(e) and "drive it with an action" in e.fix
 
 
 def test_names_A_and_single_letters_are_legal_user_names():

@@ -33,7 +33,7 @@ from modelgen.derive.graph import Graph, GraphBuilder
 from modelgen.derive.spatial import (ZERO, ZERO3, add, cross, dot, matvec, scale, sub, times,
                                      total)
 from modelgen.derive.kinematics import Kinematics, quaternion_columns
-from modelgen.model.spec import TIME, symbol
+from modelgen.model.spec import TIME, symbol, time_free
 
 
 @dataclass(frozen=True)
@@ -257,6 +257,8 @@ def _body_terms(builder: GraphBuilder, kin: Kinematics) -> _BodyTerms:
     # summed once at the end: adding to a growing sum re-sorts all of it each time
     kinetic, potential = [], []
     gravity = spec.gravity
+    # a field that varies in time does work that no potential accounts for
+    gravity_potential = gravity is not None and time_free(gravity)
     for i, body in enumerate(spec.bodies):
         B = kin.bases[body.base]
         G = kin.points[body.G]
@@ -294,7 +296,8 @@ def _body_terms(builder: GraphBuilder, kin: Kinematics) -> _BodyTerms:
         if gravity is not None:
             Fg = builder.vec(scale(m, gravity))
             grav_forces[i] = builder.vec(cross(r, Fg)) + Fg
-            potential.append(-dot(Fg, r))
+            if gravity_potential:
+                potential.append(-dot(Fg, r))
         R = B.R
         poses.append(tuple(R[0]) + (r[0],) + tuple(R[1]) + (r[1],) + tuple(R[2]) + (r[2],)
                      + (ZERO, ZERO, ZERO, sympy.S.One))

@@ -24,7 +24,7 @@ import sympy
 from modelgen.derive.graph import GraphBuilder
 from modelgen.derive.spatial import ZERO, add, cross, dot, matvec, scale, sub
 from modelgen.derive.kinematics import Kinematics
-from modelgen.model.spec import (CANONICAL_BASE, ActionSpec, DamperEffect, DragEffect,
+from modelgen.model.spec import (ActionSpec, DamperEffect, DragEffect,
                                  FrictionEffect, GravityEffect, JointDampingEffect, SpringEffect,
                                  TorsionSpringEffect)
 
@@ -79,7 +79,9 @@ def _action(builder: GraphBuilder, kin: Kinematics, eff: ActionSpec) -> EffectTe
 
 
 def _gravity(builder: GraphBuilder, kin: Kinematics, eff: GravityEffect) -> EffectTerms:
-    """m * vector at every G; potential -m vector . r_G, counted only in base E."""
+    """m * vector at every G; potential -m vector . r_G, counted only for a field
+    constant in E (a field fixed in a moving base, or one that varies in time,
+    has none)."""
     vec = builder.vec(matvec(kin.bases[eff.base].R, eff.vector))
     forces = {}
     potential = ZERO
@@ -87,7 +89,7 @@ def _gravity(builder: GraphBuilder, kin: Kinematics, eff: GravityEffect) -> Effe
         r = kin.points[body.G].r
         Fg = builder.vec(scale(body.mass, vec))
         forces[i] = builder.vec(cross(r, Fg)) + Fg
-        if eff.base == CANONICAL_BASE:
+        if eff.in_energy:
             potential -= dot(Fg, r)
     return EffectTerms(body_forces=forces, potential=potential)
 

@@ -249,9 +249,11 @@ class ModelBuilder:
             name = exc.name
             kind = self.kind_of(name)
             if kind is not None:
+                motion = ("; for a prescribed motion, make it a coordinate and drive it "
+                          "with an action" if kind == "time" and rule_name == "position" else "")
                 return self.error(f"{kind} '{name}' is not allowed in expression "
                                   f"{quote_expression(value)}", key,
-                                  f"use only {rule.text} here{rule.why}")
+                                  f"use only {rule.text} here{rule.why}{motion}")
             close = closest(name, list(self.allowed(rule_name)))
             fix = f"did you mean '{close}'? Otherwise " if close else ""
             fix += (f"declare '{name}' under {rule.declare}; only {rule.text} "

@@ -57,9 +57,9 @@ class ExpressionRule(NamedTuple):
 #: Which symbols the expressions at each kind of key may use.
 EXPRESSION_RULES = {
     "position": ExpressionRule(
-        ("coordinate", "parameter", "time"), "coordinates, parameters and t",
+        ("coordinate", "parameter"), "coordinates and parameters",
         "'coordinates' or 'parameters'",
-        " (positions and angles cannot depend on speeds or inputs)"),
+        " (positions and angles cannot depend on speeds, inputs or t)"),
     "constant": ExpressionRule(
         ("parameter",), "parameters", "'parameters'", " (masses and inertias are constant)"),
     "gravity": ExpressionRule(

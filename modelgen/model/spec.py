@@ -209,6 +209,18 @@ class GravityEffect:
     stiff = False
     conservative = True
 
+    @property
+    def in_energy(self) -> bool:
+        """Its potential is part of the energy: only a field constant in E has one (a
+        field fixed in a moving base, or one that varies in time, does work that no
+        potential accounts for)."""
+        return self.base == CANONICAL_BASE and time_free(self.vector)
+
+
+def time_free(exprs) -> bool:
+    """No expression of ``exprs`` depends on the time ``t``."""
+    return not any(sympy.sympify(e).has(TIME) for e in exprs)
+
 
 @dataclass(frozen=True)
 class SpringEffect:
