@@ -476,8 +476,8 @@ def test_a_joint_coordinate_in_a_point_is_refused():
     assert message("joints:\n  J: {type: ball, parent: E, base: B}\n"
                    "points:\n  P: {from: O, base: B, coordinates: [J_qx, 0, 0]}\n") == (
         "m.yaml:6: points.P.coordinates[0]: joint coordinate 'J_qx' is not allowed in "
-        "expression 'J_qx'; fix: use only coordinates, parameters and t here (positions and "
-        "angles cannot depend on speeds or inputs)")
+        "expression 'J_qx'; fix: use only coordinates and parameters here (positions and "
+        "angles cannot depend on speeds, inputs or t)")
 
 
 def test_a_joint_coordinate_in_an_angle_is_refused_by_the_api():
@@ -487,8 +487,8 @@ def test_a_joint_coordinate_in_an_angle_is_refused_by_the_api():
             "B2", parent="B", axis=3, angle="2*J_qw")
     assert str(info.value) == (
         "<api>: bases.B2.angle: joint coordinate 'J_qw' is not allowed in expression "
-        "'2*J_qw'; fix: use only coordinates, parameters and t here (positions and angles "
-        "cannot depend on speeds or inputs)")
+        "'2*J_qw'; fix: use only coordinates and parameters here (positions and angles "
+        "cannot depend on speeds, inputs or t)")
 
 
 def test_a_joint_coordinate_in_an_angle_is_refused_naming_the_joint_coordinate():
