@@ -19,23 +19,13 @@ is reused whatever the budget.
 """
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass
 
 import sympy
 
+from modelgen.codegen.options import ENV, MAX_OPERATIONS, max_operations  # noqa: F401
 from modelgen.errors import ModelError
 
-#: Default budget, in operations after CSE (sin and cos weighted).  Calibrated on
-#: gcc 12 (the levels and parts of build.OPT_LEVELS), 2-core machine shared with
-#: other work: the 100-link spatial chain costs 196k, 297k with its derivatives
-#: (generated in 28 s of CPU); the 150-link chain 336k (refused: its derivation
-#: and CSE alone take about a minute).  Sums of ``c*sin(k*q)*cos(q)`` terms on a
-#: one-coordinate pendulum, the costliest C per operation (every sin inline):
-#: 206k weighted compile in 18 s of compiler CPU, 247k in 21 s, 384k in 34 s
-#: (58 s of wall at load 5).  320k admits the 100-link chain with its derivatives
-#: and keeps a build's compile under a minute on such a machine.
-MAX_OPERATIONS = 320_000
 #: Operations a ``sin`` or ``cos`` counts for: the inline ``mg_sin``'s kernels
 #: and reduction are about 40 operations that gcc compiles at every call.
 TRIG_OPERATIONS = 40
@@ -45,7 +35,6 @@ PER_MASS_ENTRY = 10
 #: Lower estimate per coordinate (a chain's routines cost about 1,400 a coordinate
 #: with sin and cos weighted; a one-link chain 301 in all).
 PER_COORDINATE = 250
-ENV = "MODELGEN_MAX_OPERATIONS"
 
 
 @dataclass(frozen=True)
@@ -58,29 +47,6 @@ class Cost:
     @property
     def weighted(self) -> int:
         return self.operations + (TRIG_OPERATIONS - 1) * self.trig
-
-
-def max_operations(value: int | None = None) -> int:
-    """The budget: ``value``, else ``$MODELGEN_MAX_OPERATIONS``, else
-    :data:`MAX_OPERATIONS`; a ModelError if it is not a positive integer.
-
-    >>> max_operations(1000)
-    1000
-    """
-    source = "max_operations"
-    if value is None:
-        text = os.environ.get(ENV, "").strip()
-        if not text:
-            return MAX_OPERATIONS
-        source = f"${ENV}"
-        try:
-            value = int(text.replace("_", ""))
-        except ValueError:
-            value = text
-    if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-        raise ModelError(f"{source} must be a positive integer, got {value!r}", key=source,
-                         fix=f"give a number of operations, e.g. {MAX_OPERATIONS}")
-    return value
 
 
 def estimated_operations(n: int, tree=None) -> int:

@@ -49,7 +49,7 @@ import sympy
 from markupsafe import Markup
 
 from modelgen.derive.kinematics import derive_kinematics
-from modelgen.errors import ModelError, ModelgenError, TemplateError
+from modelgen.errors import ArgumentTypeError, ModelError, ModelgenError, TemplateError
 from modelgen.model.spec import CANONICAL_BASE, CANONICAL_POINT, ModelSpec, symbol
 from modelgen.sim.result import replacing
 from modelgen.version import __version__
@@ -245,6 +245,9 @@ def motion(result, spec: ModelSpec, *, compiled=None, p=None, trace: Optional[Se
     >>> m.positions.shape                # (frames, points incl. O, 3)  # doctest: +SKIP
     """
     n = spec.nq
+    if not (hasattr(result, "t") and hasattr(result, "y")):
+        raise ArgumentTypeError(f"animation: the result must be the Result of a run (with t "
+                                f"and y), got {type(result).__name__}")
     if result.y.shape[0] < n:
         raise ModelgenError(f"animation: the result has {result.y.shape[0]} states, "
                             f"model {spec.name} has {n} coordinates")
@@ -356,7 +359,7 @@ def write_movie(m: Motion, path, *, dpi: int = 80) -> Path:
     if mp4 and shutil.which("ffmpeg") is None:
         raise ModelgenError(f"animation {path}: writing MP4 needs ffmpeg on PATH; fix: "
                             f"install ffmpeg or write a .gif")
-    path.parent.mkdir(parents=True, exist_ok=True)
+    _make_parent(path)
     fig = Figure(figsize=(5, 5), dpi=dpi)
     canvas = FigureCanvasAgg(fig)
     ax = fig.add_axes((0.02, 0.02, 0.96, 0.9))
@@ -477,6 +480,18 @@ def viewer_data(m: Motion) -> dict:
             "colours": list(AXIS_COLOURS)}
 
 
+def _make_parent(path: Path) -> None:
+    """Create the directory of ``path`` (with its parents), or say why it cannot be."""
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        what = "is under a file, not a directory" if isinstance(
+            exc, (FileExistsError, NotADirectoryError)) \
+            else f"cannot be created ({exc.strerror or exc})"
+        raise ModelgenError(f"animation {path}: its directory {path.parent} {what}; fix: "
+                            f"choose a path in a writable directory") from None
+
+
 def write_html(m: Motion, path) -> Path:
     """Write the self-contained 3D viewer of a :class:`Motion`: one HTML file, no
     network access at view time (data as JSON, a small canvas renderer inline).
@@ -492,7 +507,7 @@ def write_html(m: Motion, path) -> Path:
             name=m.name, version=__version__, data=script_json(viewer_data(m)))
     except jinja2.TemplateError as exc:
         raise TemplateError(f"template viewer.html.j2 failed: {exc}") from exc
-    path.parent.mkdir(parents=True, exist_ok=True)
+    _make_parent(path)
     with replacing(path) as part:
         part.write_text(text, encoding="utf-8")
     return path

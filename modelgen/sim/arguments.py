@@ -34,6 +34,8 @@ MIN_RTOL = 10.0 * np.finfo(float).eps
 MIN_ATOL = 1e-100
 #: the largest event count the C takes (an int)
 MAX_COUNT = int(np.iinfo(np.intc).max)
+#: the most rows one C call of a run records when every step is recorded
+MAX_CHUNK = 1 << 16
 
 
 def method_of(name: str) -> Method:
@@ -74,6 +76,8 @@ def span(t_span):
     t1 < t0: the run goes backwards in time, integrated forward in s = -t)."""
     try:
         t0, t1 = (float(v) for v in t_span)
+    except OverflowError:           # an int beyond a double
+        raise ArgumentValueError(f"t_span must be finite, got {t_span!r}") from None
     except (TypeError, ValueError) as exc:
         raise SimulationError(f"t_span must be (t0, t1), got {t_span!r}") from exc
     if not (np.isfinite(t0) and np.isfinite(t1)):
@@ -107,6 +111,19 @@ def whole_number(value, what: str) -> int:
     if not isinstance(value, numbers.Integral) and not float(value).is_integer():
         raise ArgumentValueError(f"{what} must be a whole number, got {value!r}")
     return int(value)
+
+
+def positive(value, what: str) -> float:
+    """``value`` as a float: a real number, finite and > 0 (a tolerance, a step)."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
+        raise ArgumentTypeError(f"{what} must be a number > 0, got {value!r}")
+    try:
+        number = float(value)
+    except OverflowError:           # an int beyond a double
+        number = np.inf
+    if not (np.isfinite(number) and number > 0):
+        raise ArgumentValueError(f"{what} must be finite and > 0, got {value!r}")
+    return number
 
 
 def floored(tol, least: float, name: str, stacklevel: int):
@@ -274,6 +291,33 @@ def check_step_count(fixed, t0, t1):
         raise ArgumentValueError(
             f"step={fixed!r} over t_span ({t0!r}, {t1!r}) needs {(t1 - t0) / fixed:.3g} steps, "
             f"more than the C integrator can count; give a larger step")
+
+
+def row_chunk(chunk) -> int:
+    """``chunk``, the rows of the first C call when every step is recorded (later ones
+    double up to :data:`MAX_CHUNK`), as an int from 1 to :data:`MAX_CHUNK`."""
+    rows = whole_number(chunk, "chunk")
+    if not 1 <= rows <= MAX_CHUNK:
+        raise ArgumentValueError(f"chunk must be from 1 to {MAX_CHUNK} rows per C call, got "
+                                 f"{chunk!r}")
+    return rows
+
+
+def progress_callback(progress):
+    """``progress``: None or a callable ``progress(t)``, refused before the C starts
+    (it is first called while the C runs)."""
+    if progress is not None and not callable(progress):
+        raise ArgumentTypeError(f"progress must be None or a callable progress(t), got "
+                                f"{progress!r}")
+    return progress
+
+
+def thread_count(threads, n_runs: int) -> int:
+    """``threads``, a whole number >= 1, as the threads a batch of ``n_runs`` uses."""
+    count = whole_number(threads, "threads")
+    if count < 1:
+        raise ArgumentValueError(f"threads must be >= 1, got {threads!r}")
+    return max(1, min(count, n_runs))
 
 
 def c_options(cm, m, rtol, atol, fixed, first, hmax, max_steps):

@@ -36,10 +36,10 @@ from modelgen.codegen.capi import (ALIASES, METHODS, STAT_NAMES, STATUS, STATUS_
                                    Method, define_values, work_size)
 from modelgen.errors import (ArgumentTypeError, ArgumentValueError, MassMatrixError,
                              SimulationError)
-from modelgen.sim.arguments import (LONG, MIN_ATOL, MIN_RTOL, Inputs, c_options,
+from modelgen.sim.arguments import (LONG, MAX_CHUNK, MIN_ATOL, MIN_RTOL, Inputs, c_options,
                                      check_step_count, crossing_direction, event_functions,
-                                     method_of, run_options, sample_times, span,
-                                     terminal_count)
+                                     method_of, progress_callback, row_chunk, run_options,
+                                     sample_times, span, terminal_count, thread_count)
 from modelgen.sim.conditioning import condition_number, failure_kind, growth_note
 from modelgen.sim.assemble import crossing_message
 from modelgen.sim.assemble import singular_message as constraint_message
@@ -95,9 +95,10 @@ def jacobian(cm, t, x, u=None, p=None) -> np.ndarray:
     the model has one, else central differences of the compiled rhs in C."""
     nx = cm.nx
     x = cm._vector(x, nx, "x")
+    t = cm._time(t)             # as rhs checks it: a real, finite number
     out = np.empty((nx, nx))
     fn = _lib_function(cm, "jacobian") or _lib_function(cm, "jacobian_fd")
-    status = fn(float(t), cm._ptr(x), cm._ptr(cm.input_vector(u)), cm._ptr(cm.params(p)),
+    status = fn(t, cm._ptr(x), cm._ptr(cm.input_vector(u)), cm._ptr(cm.params(p)),
                 cm._ptr(out))
     if status:
         raise MassMatrixError(status, cm.dof_names[status - 1], t, x,
@@ -151,10 +152,10 @@ def simulate(cm, x0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10
     :data:`MIN_ATOL` to them, with a warning.  ``step`` selects fixed steps.
     ``max_steps`` (attempted steps, a whole number) defaults
     to :data:`DEFAULT_MAX_STEPS`, or for fixed steps to the steps the span needs if
-    that is more.  ``chunk`` is the number of rows per C
-    call when every step is recorded.  ``interrupt`` is None or a writable
-    numpy ``intc`` array of one element that the C polls every step: set it
-    nonzero (from another thread, a signal handler or a callback) to stop with
+    that is more.  ``chunk`` is the number of rows of the first C call when every
+    step is recorded (a whole number from 1 to :data:`MAX_CHUNK`).  ``interrupt`` is
+    None or a writable numpy ``intc`` array of one element that the C polls every
+    step: set it nonzero (from another thread, a signal handler or a callback) to stop with
     status INTERRUPTED and the trajectory so far.  ``progress`` is None or a
     callable ``progress(t)`` given the time reached about every 0.05 s while the C
     runs (from the calling thread, when that is the main thread) and after each
@@ -181,6 +182,7 @@ def simulate(cm, x0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10
     times = None if t_eval is None else sample_times(t_eval, t0, t1, sign)
     t0, t1 = sign * t0, sign * t1          # from here on s = sign * t, increasing
     check_step_count(fixed, t0, t1)
+    chunk, progress = row_chunk(chunk), progress_callback(progress)
     if max_steps is None and fixed > 0:      # a fixed-step run's step count is known
         budget = max(budget, int(np.ceil((t1 - t0) / fixed)) + 2)
     max_steps = budget
@@ -290,7 +292,7 @@ def _drive(cm, opt, inputs, flag, poll, sign, t0, t1, x, p_vec, times, terminal,
     out = ffi.new("mg_output *")
     out.stop = ptr(run.stop)
     resume = None
-    capacity, ev_capacity = int(max(chunk, 2)), 64 * max(n_ev, 1)
+    capacity, ev_capacity = max(chunk, 2), 64 * max(n_ev, 1)
     remaining = times
     steps_left = max_steps
     while True:
@@ -336,7 +338,7 @@ def _drive(cm, opt, inputs, flag, poll, sign, t0, t1, x, p_vec, times, terminal,
         if times is not None:
             remaining = remaining[rows:]
         else:
-            capacity = min(capacity * 2, 1 << 16)
+            capacity = min(capacity * 2, MAX_CHUNK)
         for i in range(n_ev):
             if terminal[i]:
                 terminal[i] -= int(np.count_nonzero(run.ev_i[-1] == i))
@@ -507,7 +509,8 @@ def _conditioning_note(cm, p_vec, x_start, x_last) -> str:
 # -- batches ---------------------------------------------------------------------------
 
 def _parameter_rows(cm, P, n_runs):
-    """(array, stride): one parameter set for all runs (stride 0) or one per run."""
+    """(array, stride): one parameter set for all runs (stride 0) or one per run; the
+    values checked as ``cm.params`` checks one set (real, finite numbers)."""
     n_p = len(cm.parameters)
     if P is None:
         return cm.params(None).copy(), 0
@@ -517,10 +520,13 @@ def _parameter_rows(cm, P, n_runs):
             if key not in cm._param_index:
                 raise ArgumentValueError(f"{cm.name}: unknown parameter {key!r}; parameters are "
                                       f"{', '.join(cm.parameters)}")
-            rows[:, cm._param_index[key]] = np.broadcast_to(np.asarray(value, dtype=float),
-                                                            (n_runs,))
+            column = cm._real(value, f"P[{key!r}]")
+            if column.shape not in ((), (n_runs,)):
+                raise ArgumentValueError(f"{cm.name}: P[{key!r}] must be one value or one per "
+                                         f"run ({n_runs}), got shape {column.shape}")
+            rows[:, cm._param_index[key]] = column
     else:
-        rows = np.asarray(P, dtype=float)
+        rows = cm._real(P, "P")
         if rows.shape == (n_p,):
             return cm.params(rows).copy(), 0
         if rows.shape != (n_runs, n_p):
@@ -528,7 +534,9 @@ def _parameter_rows(cm, P, n_runs):
                                   f"got {rows.shape}")
     rows = np.ascontiguousarray(rows)
     if not np.all(np.isfinite(rows)):
-        raise ArgumentValueError(f"{cm.name}: parameters must be finite")
+        bad = [name for j, name in enumerate(cm.parameters)
+               if not np.all(np.isfinite(rows[:, j]))]
+        raise ArgumentValueError(f"{cm.name}: parameters must be finite; got {bad}")
     return rows, n_p
 
 
@@ -537,8 +545,8 @@ def simulate_batch(cm, X0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol
                    max_steps=100_000, threads=1, outputs=True) -> Result:
     """Integrate many initial states (rows of ``X0``), each with its own parameters.
 
-    One C call loops over the runs (``threads`` > 1 splits them between Python
-    threads; the C call releases the GIL, so they run in parallel).  ``P`` is
+    One C call loops over the runs (``threads`` > 1, a whole number, splits them
+    between Python threads; the C call releases the GIL, so they run in parallel).  ``P`` is
     None (defaults), one parameter vector, an array (n_runs, n_p) or a dict of
     parameter -> value or per-run values.  A row of ``X0`` may be a dict of state
     names (see :func:`simulate`'s ``x0``).  ``t_eval`` defaults to ``[t1]``
@@ -555,7 +563,7 @@ def simulate_batch(cm, X0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol
     t0, t1, sign = span(t_span)
     if isinstance(X0, (list, tuple)) and any(isinstance(row, dict) for row in X0):
         X0 = [cm.state_vector(row, f"X0[{r}]") for r, row in enumerate(X0)]
-    X0 = np.ascontiguousarray(X0, dtype=float)
+    X0 = np.ascontiguousarray(cm._real(X0, "X0"))
     if X0.ndim != 2 or X0.shape[1] != nx:
         raise SimulationError(f"{cm.name}: X0 must have shape (n_runs, {nx}), got {X0.shape}")
     if not np.all(np.isfinite(X0)):
@@ -566,7 +574,7 @@ def simulate_batch(cm, X0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol
     t0, t1 = sign * t0, sign * t1          # from here on s = sign * t, increasing
     inputs = Inputs(cm, u, sign)
     P_rows, p_stride = _parameter_rows(cm, P, n_runs)
-    threads = max(1, min(int(threads), max(n_runs, 1)))
+    threads = thread_count(threads, n_runs)
 
     check_step_count(fixed, t0, t1)
     n_t = len(times)

@@ -24,6 +24,10 @@ from modelgen.codegen.options import REFERENCES
 from modelgen.errors import SimulationError
 
 
+#: the routines that take the speeds v after q
+SPEED_ROUTINES = ("frame_velocities", "frame_bias_accelerations")
+
+
 def _to_aligned(reference: str, R, r, linear, angular):
     """(linear, angular) in ``reference`` -> in local_world_aligned (columns work too)."""
     if reference == "local":
@@ -54,7 +58,7 @@ class FrameKinematics:
                 "frames=[...])")
         return info
 
-    def _kin_call(self, routine: str, shape: tuple, q, p, qd=None) -> np.ndarray:
+    def _kin_call(self, routine: str, shape: tuple, q, p, v=None) -> np.ndarray:
         self._kinematics()
         fn = getattr(self.lib, f"{self.name}_{routine}", None)
         if fn is None:
@@ -68,8 +72,8 @@ class FrameKinematics:
         q = self._vector(q, self.nq, "q")
         out = np.empty(shape)
         args = [self._ptr(q)]
-        if qd is not None:
-            args.append(self._ptr(self._vector(qd, self.n, "v")))
+        if routine in SPEED_ROUTINES:       # v=None is no speeds, not zero speeds
+            args.append(self._ptr(self._vector(v, self.n, "v")))
         fn(*args, self._ptr(self.params(p)), self._ptr(out))
         return out
 

@@ -16,7 +16,9 @@ from pathlib import Path
 
 import numpy as np
 
-from modelgen.errors import ArgumentValueError, MassMatrixError, SimulationError
+from modelgen.errors import (ArgumentTypeError, ArgumentValueError, MassMatrixError,
+                             SimulationError)
+from modelgen.sim.arguments import positive, whole_number
 from modelgen.sim.assemble import (check_initial_state, consistent_speeds, constraint_jacobian,
                                    singular_message)
 from modelgen.sim.conditioning import failure_kind
@@ -201,8 +203,13 @@ def _rows(cm, outputs) -> list:
         return list(range(len(cm.output_columns)))
     if isinstance(outputs, str):
         outputs = [outputs]
+    what = "outputs must be None, a name or a sequence of names of outputs or output columns"
+    if isinstance(outputs, (bytes, dict)) or not np.iterable(outputs):
+        raise ArgumentTypeError(f"{cm.name}: {what}, got {outputs!r}")
     rows = []
     for name in outputs:
+        if not isinstance(name, str):
+            raise ArgumentTypeError(f"{cm.name}: {what}; got {name!r} in outputs")
         if name in cm.outputs:
             rows += [cm.output_columns.index(c) for c in cm.outputs[name]]
         elif name in cm.output_columns:
@@ -294,10 +301,16 @@ def equilibrium(cm, q_guess, u=None, p=None, t=0.0, *, tol=1e-10, max_iter=50) -
 
     Newton with the symbolic Jacobian's columns for q of the lower half of A
     (least squares, so neutral directions such as a cart's position stay
-    where they are) and a backtracking line search on |q_ddot|^2.  Raises
-    :class:`SimulationError` with the residual when it does not converge.
+    where they are) and a backtracking line search on |q_ddot|^2 (``tol`` > 0,
+    ``max_iter`` >= 1 Newton steps).  Raises :class:`SimulationError` with the
+    residual when it does not converge.
     """
     n = cm.n
+    # checked first: a bad option is the caller's error, not a failure to converge
+    tol = positive(tol, f"{cm.name}: tol")
+    max_iter = whole_number(max_iter, f"{cm.name}: max_iter")
+    if max_iter < 1:
+        raise ArgumentValueError(f"{cm.name}: max_iter must be >= 1, got {max_iter!r}")
     if cm.manifest.get("constraints"):
         # Newton on all of q would leave the constraints; a rest point on them needs
         # the reduced equations, which this search does not form

@@ -17,6 +17,8 @@ from typing import TYPE_CHECKING
 from modelgen.codegen import index
 from modelgen.codegen.build import Generated
 from modelgen.codegen.options import BuildOptions, KinematicsOptions
+from modelgen.codegen.options import max_operations as max_operations_of
+from modelgen.errors import ArgumentTypeError
 from modelgen.sim import massmatrix
 from modelgen.sim.library import mass_matrix_function
 
@@ -48,11 +50,12 @@ def generate_model(source, out_dir=None, *, force: bool = False,
     opened with ctypes: it imports neither numpy nor cffi.
     ``progress(stage)`` is called as each stage of a build starts.
     """
-    options = BuildOptions.of(options, jacobian=jacobian, formulation=formulation,
+    options = BuildOptions.of(_options(options), jacobian=jacobian, formulation=formulation,
                               linearize=linearize, floating_base=floating_base,
                               inertia=inertia, min_mass=min_mass, min_inertia=min_inertia,
                               mimic=mimic, kinematics=_kinematics(kinematics, frames),
                               derivatives=derivatives)
+    max_operations_of(max_operations)   # before the cache: a hit never builds
     key = _fast_key(source, options, out_dir)
     # the runtime module's place only for the index entry (a spec or Model has none)
     generated, location = _generate(source, out_dir, force, options, progress,
@@ -121,11 +124,12 @@ def load(source, out_dir=None, *, force: bool = False, options: BuildOptions | N
     ...           options=BuildOptions(formulation="crba", jacobian=True))
     >>> cm.rhs(0.0, [0.1, 0.2, 0.0, 0.0])                    # doctest: +SKIP
     """
-    options = BuildOptions.of(options, jacobian=jacobian, formulation=formulation,
+    options = BuildOptions.of(_options(options), jacobian=jacobian, formulation=formulation,
                               linearize=linearize, floating_base=floating_base,
                               inertia=inertia, min_mass=min_mass, min_inertia=min_inertia,
                               mimic=mimic, kinematics=_kinematics(kinematics, frames),
                               derivatives=derivatives)
+    max_operations_of(max_operations)   # before the cache: a hit never builds
     key = _fast_key(source, options, out_dir)
     hit = None if force else index.lookup(key)
     if hit is not None:
@@ -137,12 +141,24 @@ def load(source, out_dir=None, *, force: bool = False, options: BuildOptions | N
     return cm
 
 
+def _options(options):
+    """``options`` checked: None or a BuildOptions (a dict would fail deep in the cache)."""
+    if options is not None and not isinstance(options, BuildOptions):
+        raise ArgumentTypeError(
+            f"options must be a BuildOptions or None, got {type(options).__name__}; fix: "
+            "options=BuildOptions(jacobian=True, ...), or the keywords (jacobian=True, ...)")
+    return options
+
+
 def _kinematics(kinematics, frames):
     """The ``kinematics`` option of :func:`load`'s keywords (None: not given)."""
     if frames is None:
         return kinematics
     if isinstance(frames, str):
         frames = [frames]
+    if not (isinstance(frames, (list, tuple)) and all(isinstance(f, str) for f in frames)):
+        raise ArgumentTypeError(f"frames must be a frame name or a list of frame names, got "
+                                f"{frames!r}")
     merged = dict(kinematics) if isinstance(kinematics, dict) else \
         {} if kinematics is None else dict(vars(KinematicsOptions.of(kinematics)))
     merged["frames"] = tuple(frames)
@@ -202,7 +218,8 @@ def load_scene(path, out_dir=None, *, force: bool = False, progress=None,
     """
     # imported here: a plain model's load does not need the scene module
     from modelgen.sim.scene import Scene, read_card
-    options = BuildOptions.of(options, linearize=linearize)
+    options = BuildOptions.of(_options(options), linearize=linearize)
+    max_operations_of(max_operations)   # before the cache: a hit never builds
     card, spec = read_card(path, out_dir, force=force)
     return Scene(card, out_dir, force=force, progress=progress, options=options,
                  files=(card.source, card.model_source), max_operations=max_operations,

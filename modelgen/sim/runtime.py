@@ -104,16 +104,23 @@ class CompiledModel(FrameKinematics):
     def _ptr(self, a):
         return self.ffi.from_buffer("double[]", a)
 
-    def _vector(self, value, size, what):
-        """``value`` as a contiguous float vector of ``size``; never broadcast, never
-        silently drop an imaginary part."""
+    def _real(self, value, what):
+        """``value`` as a float array of its own shape; never silently drop an
+        imaginary part, never read None as NaN (numpy's cast of an object array)."""
         try:
             raw = np.asarray(value)
             if np.iscomplexobj(raw):
                 raise SimulationError(f"{self.name}: {what} must be real, got a complex value")
-            a = raw.astype(float)
-        except (TypeError, ValueError) as exc:
+            if raw.dtype == object:     # None, ints beyond a double, mixed: float() each
+                return np.array([float(v) for v in raw.ravel()]).reshape(raw.shape)
+            return raw.astype(float)
+        except (TypeError, ValueError, OverflowError) as exc:
             raise SimulationError(f"{self.name}: {what} must be numbers: {exc}") from None
+
+    def _vector(self, value, size, what):
+        """``value`` as a contiguous float vector of ``size``; never broadcast, never
+        silently drop an imaginary part."""
+        a = self._real(value, what)
         if a.shape != (size,):
             raise SimulationError(f"{self.name}: {what} must have shape ({size},), got {a.shape}")
         return np.ascontiguousarray(a)
@@ -123,7 +130,7 @@ class CompiledModel(FrameKinematics):
             if np.iscomplexobj(t) or np.ndim(t) != 0:
                 raise TypeError(t)
             t = float(t)
-        except (TypeError, ValueError):
+        except (TypeError, ValueError, OverflowError):
             raise SimulationError(f"{self.name}: t must be a real number, got {t!r}") from None
         if not np.isfinite(t):
             raise ArgumentValueError(f"{self.name}: t must be finite, got {t!r}")
@@ -207,7 +214,10 @@ class CompiledModel(FrameKinematics):
     def project(self, x) -> np.ndarray:
         """A copy of the state (or configuration) ``x`` with each quaternion normalised
         (what the integrators do after every step)."""
-        x = np.array(x, dtype=float)
+        x = self._real(x, "x")
+        if x.shape not in ((self.nx,), (self.nq,)):
+            raise ArgumentValueError(f"{self.name}: x must be a state, shape ({self.nx},), or a "
+                                     f"configuration, shape ({self.nq},); got shape {x.shape}")
         for quat in self.quaternions:
             x[list(quat)] /= np.linalg.norm(x[list(quat)])
         return x
@@ -434,19 +444,40 @@ class CompiledModel(FrameKinematics):
         return out
 
     def _input_samples(self, u):
-        """(times, values (n, nu) C-ordered, hold) for the C integrator."""
+        """(times, values (n, nu) C-ordered, hold) for the C integrator: every input
+        form but a callable, checked here for every method."""
         nu = len(self.inputs)
         if u is None:
             return np.zeros(0), np.zeros(0), False
         if isinstance(u, tuple) and len(u) == 3 and not isinstance(u[2], (int, float)):
-            times = np.ascontiguousarray(u[0], dtype=float)
-            values = np.ascontiguousarray(u[1], dtype=float).reshape(len(times), nu)
-            if u[2] not in ("linear", "hold"):
+            if not (isinstance(u[2], str) and u[2] in ("linear", "hold")):
                 raise SimulationError(f"{self.name}: interpolation must be 'linear' or "
                                       f"'hold', got {u[2]!r}")
-            if len(times) > 1 and not np.all(np.diff(times) > 0):
-                raise SimulationError(f"{self.name}: input sample times must increase")
-            return times, values, u[2] == "hold"
+            times = self._real(u[0], "u's sample times")
+            if times.ndim != 1 or times.size == 0:
+                raise ArgumentValueError(
+                    f"{self.name}: u's sample times must be a non-empty 1-D array, got shape "
+                    f"{times.shape}; fix: u=(times, values, {u[2]!r}) with one row of values "
+                    "per time (a constant input is a plain value)")
+            if not np.all(np.isfinite(times)) or np.any(np.diff(times) <= 0):
+                raise ArgumentValueError(f"{self.name}: u's sample times must be finite and "
+                                         "increase")
+            values = self._real(u[1], "u's sample values")
+            if nu == 1 and values.shape == times.shape:
+                values = values[:, None]
+            if values.shape != (len(times), nu):
+                raise ArgumentValueError(
+                    f"{self.name}: u's sample values must have shape ({len(times)}, {nu}) (one "
+                    f"row per sample time, one column per input: {', '.join(self.inputs)}), "
+                    f"got {values.shape}")
+            # NaN is refused as a constant NaN is; an infinite sample is a blow-up the
+            # run reports with the trajectory before it (a non-finite state)
+            if np.any(np.isnan(values)):
+                bad = [name for j, name in enumerate(self.inputs)
+                       if np.any(np.isnan(values[:, j]))]
+                raise ArgumentValueError(f"{self.name}: u's sample values must not be NaN; "
+                                         f"got NaN in {bad}")
+            return np.ascontiguousarray(times), np.ascontiguousarray(values), u[2] == "hold"
         return np.zeros(1), self.input_vector(u).reshape(1, nu).copy(), False
 
     # -- integration (modelgen/sim/integrate.py) -------------------------------------
@@ -542,10 +573,14 @@ class CompiledModel(FrameKinematics):
         if limit is None:            # implicit methods: A-stable
             return None
         x = self.state_vector(x0, "x0")
+        if not callable(u):
+            self._input_samples(u)      # a bad u is the caller's error, as in simulate
         try:
             J = self.jac(t0, x, _input_at(self, u, t0, x), p)
             lam = float(np.max(np.abs(np.linalg.eigvals(J))))
-        except (SimulationError, np.linalg.LinAlgError):
+        except Exception:
+            # a heuristic: whatever fails in it (a feedback u raising at t0, an infinite
+            # input sample, a singular A...) must not discard the run it annotates
             return None
         if float(step) * lam <= limit:
             return None
@@ -557,7 +592,10 @@ class CompiledModel(FrameKinematics):
     def energies(self, res, p=None) -> np.ndarray:
         """Kinetic and potential energy at every time of a result, shape (n_times, 2)."""
         nq, nx = self.nq, self.nx
-        X = np.ascontiguousarray(np.asarray(res.y, dtype=float).T)
+        if not hasattr(res, "y"):
+            raise ArgumentTypeError(f"{self.name}: energies takes the Result of simulate (its "
+                                    f"y, shape ({nx}, n_times)), got {type(res).__name__}")
+        X = np.ascontiguousarray(self._real(res.y, "res.y").T)
         if X.ndim != 2 or X.shape[1] != nx:
             raise ArgumentValueError(f"{self.name}: res.y must have {nx} rows, got shape "
                                      f"{np.shape(res.y)}")
@@ -652,11 +690,8 @@ def _input_at(cm, u, t, x):
         return None
     if callable(u):
         return u(t, x)
-    if isinstance(u, tuple) and len(u) == 3 and isinstance(u[2], str):
-        times, values, how = u
-        values = np.asarray(values, dtype=float).reshape(len(times), -1)
-        if how == "hold":
-            k = int(np.clip(np.searchsorted(times, t, side="right") - 1, 0, len(times) - 1))
-            return values[k]
-        return np.array([np.interp(t, times, values[:, j]) for j in range(values.shape[1])])
-    return u
+    times, values, hold = cm._input_samples(u)     # the samples the run was given
+    if hold:
+        k = int(np.clip(np.searchsorted(times, t, side="right") - 1, 0, len(times) - 1))
+        return values[k]
+    return np.array([np.interp(t, times, values[:, j]) for j in range(values.shape[1])])
