@@ -319,6 +319,7 @@ class Scene:
     def inputs_at(self, t: float) -> dict:
         """The scene's inputs at time ``t`` by name (a sampled input interpolated as the
         integrators do, its end values held outside the samples; missing inputs 0)."""
+        t = self.model._time(t)         # a real, finite number, as rhs takes it
         out = dict.fromkeys(self.model.inputs, 0.0)
         for sig in self.card.inputs:
             if sig.constant is not None:
@@ -408,18 +409,19 @@ def _keep_samples(res: Result, rows: slice) -> None:
 def _power_outputs(spec) -> dict:
     """effect -> the ``power`` output recording it, for every switched-on effect whose
     energy the total energy leaves out (non-conservative ones, gravity in a base
-    other than E); a ``power`` output the scene already asks for is reused."""
-    from modelgen.model.spec import CANONICAL_BASE, CONSERVATIVE_KINDS   # a spec is read
+    other than E or varying in time); a ``power`` output the scene already asks for
+    is reused."""
+    from modelgen.model.spec import CONSERVATIVE_KINDS, time_free   # a spec is read
     kinds = {e.name: e for e in spec.model.effects}
     kinds.update({a.name: a for a in spec.model.actions})
     taken = {out.name for out in spec.outputs}
     powers = {}
     for name in spec.effects:
         effect = kinds.get(name)
-        if effect is None:            # the top-level gravity (always in base E)
-            continue
-        if effect.kind in CONSERVATIVE_KINDS and getattr(effect, "base",
-                                                         CANONICAL_BASE) == CANONICAL_BASE:
+        if effect is None:            # the top-level gravity, in E: counted unless it varies
+            if time_free(spec.model.gravity or ()):
+                continue
+        elif effect.kind in CONSERVATIVE_KINDS and getattr(effect, "in_energy", True):
             continue
         asked = [out for out in spec.outputs if out.kind == "power"
                  and out.arg("effect") == name]
