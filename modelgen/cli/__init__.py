@@ -30,8 +30,8 @@ import signal
 import sys
 import threading
 
-from modelgen.errors import (ArgumentTypeError, ArgumentValueError, BuildError, ModelgenError,
-                             SimulationError, TemplateError)
+from modelgen.errors import (ArgumentTypeError, ArgumentValueError, BuildError, ModelError,
+                             ModelgenError, SimulationError, TemplateError)
 from modelgen.cli.commands import EXIT
 from modelgen.cli.parsers import build_parser
 
@@ -76,6 +76,18 @@ def _terminate_as_interrupt():
         yield received
     finally:
         signal.signal(signal.SIGTERM, previous)
+
+
+def _error_text(exc) -> str:
+    """One line for an error that ends a command.  A model error from no file (a check
+    of an argument deep in the library) leaves out the ``<model>`` placeholder, which
+    would name no file the user gave."""
+    if not isinstance(exc, ModelgenError):
+        return _os_error_text(exc)
+    text = str(exc)
+    if isinstance(exc, ModelError) and exc.file is None:
+        text = text.removeprefix("<model>: ")
+    return text
 
 
 def _os_error_text(exc: OSError) -> str:
@@ -131,7 +143,7 @@ def main(argv=None) -> int:
             print("modelgen: interrupted", file=sys.stderr)
             status = EXIT["interrupted"]
         except (ModelgenError, OSError) as exc:
-            text = str(exc) if isinstance(exc, ModelgenError) else _os_error_text(exc)
+            text = _error_text(exc)
             _debug_traceback(args)
             print(f"modelgen: error: {text}", file=sys.stderr)
             status = exit_status(exc)

@@ -132,6 +132,7 @@ def generate_command(args) -> int:
                             f"`modelgen simulate {args.model}` (which builds its reduced model), "
                             f"or generate the model file it names")
     _check_floating_base(args)
+    _check_max_operations(args)
     # --floating-base and the inertia options act as the file is read; the rest says
     # what to build
     options = BuildOptions(jacobian=args.jacobian, formulation=args.formulation)
@@ -185,7 +186,13 @@ def _constraint_lines(spec, c: dict) -> list:
             f"independent speeds {names(spec.speeds, c['independent_speeds'])}"]
 
 
+def _import_path(args) -> Path:
+    """The model file an import writes: -o, else the source's path with .yaml."""
+    return Path(args.output) if args.output else Path(args.urdf).with_suffix(".yaml")
+
+
 def import_command(args) -> int:
+    _check_output_file(_import_path(args), "model.yaml")
     if Path(args.urdf).suffix.lower() == ".xml":
         return _import_mjcf(args)
     from modelgen.model.urdf import import_urdf, urdf_to_yaml
@@ -211,7 +218,7 @@ def _write_import(args, imported, text: str, *, inputs: bool) -> int:
     report it; ``inputs``: the import made one input per joint (URDF)."""
     from modelgen.sim.result import replacing
     spec = imported.model.spec()
-    out = Path(args.output) if args.output else Path(args.urdf).with_suffix(".yaml")
+    out = _import_path(args)
     out.parent.mkdir(parents=True, exist_ok=True)
     with replacing(out) as part:        # no cut model file under the final name
         part.write_text(text)
@@ -276,6 +283,28 @@ def _check_times(args) -> None:
     if args.max_output_mb is not None and not (0 < args.max_output_mb < float("inf")):
         raise ModelgenError(f"--max-output-mb must be a positive number, got "
                             f"{args.max_output_mb!r}")
+
+
+def _check_max_operations(args) -> None:
+    """--max-operations is checked here, before the model is read: the build that checks
+    it again knows neither the flag's name nor the file."""
+    if args.max_operations is not None and args.max_operations < 1:
+        raise ModelgenError(f"--max-operations must be a positive number of operations, got "
+                            f"{args.max_operations}; fix: give e.g. --max-operations 320000, "
+                            f"or leave it out for the default")
+
+
+def _check_trace(args, spec) -> None:
+    """The --trace points of an --animate run are points of ``spec`` (the model drawn):
+    checked before the run, as the animation is drawn only after it."""
+    if not (args.animate and args.trace):
+        return
+    from modelgen.model.spec import CANONICAL_POINT
+    names = (CANONICAL_POINT, *(pt.name for pt in spec.points))
+    for name in args.trace:
+        if name not in names:
+            raise ModelgenError(f"--trace {name}: unknown point of model {spec.name} "
+                                f"({args.model}); fix: trace one of {', '.join(names)}")
 
 
 def _check_floating_base(args) -> None:
@@ -382,6 +411,12 @@ def _simulate_scene(args) -> int:
     t0 = time.perf_counter()
     # a scene run before: its card from the cache, nothing symbolic imported
     card, spec = read_card(args.model, args.build_dir)
+    if args.animate and args.trace and spec is None:
+        # a cached card names no points: the scene is read now, as the animation would
+        from modelgen.model.scene import load_scene
+        spec = load_scene(args.model)
+    if spec is not None:
+        _check_trace(args, spec.model)
     # every override is checked before anything is built
     init = _state_overrides(list(card.coordinates) + list(card.speeds), args.init)
     p = _parameter_overrides(list(card.parameters), args.set) or None
@@ -412,14 +447,27 @@ def _simulate_scene(args) -> int:
                    scene.conservative, animation=(lambda: scene.spec.model, scene.model, p))
 
 
-def _check_output_dir(path) -> None:
-    """Refuse an output directory that cannot be one before anything is built or run."""
+def _check_output_dir(path, shown=None) -> None:
+    """Refuse an output directory that cannot be one before anything is built or run
+    (``shown``: the -o path it is the folder of, if not itself)."""
+    fix = "give a directory (it is created if missing)" if shown is None else \
+        "give a file in a directory (missing directories are created)"
     for parent in (Path(path), *Path(path).parents):
         if parent.exists():
             if not parent.is_dir():
-                raise ModelgenError(f"-o {path}: {parent} is a file, not a directory; fix: "
-                                    f"give a directory (it is created if missing)")
+                raise ModelgenError(f"-o {shown or path}: {parent} is a file, not a directory; "
+                                    f"fix: {fix}")
             break
+
+
+def _check_output_file(path, example: str) -> None:
+    """Refuse an output file that cannot be one (a directory, or under a file) before
+    anything is built or run: the OS would only say so once the work is done."""
+    path = Path(path)
+    if path.is_dir():
+        raise ModelgenError(f"-o {path}: {path} is a directory, not a file; fix: give a file "
+                            f"name, e.g. -o {path / example}")
+    _check_output_dir(path.parent, shown=path)
 
 
 def simulate_command(args) -> int:
@@ -429,12 +477,14 @@ def simulate_command(args) -> int:
     _check_times(args)
     _check_output_dir(args.output)
     _check_floating_base(args)
+    _check_max_operations(args)
     if args.animate and args.animate_format == "mp4" and shutil.which("ffmpeg") is None:
         raise ModelgenError("--animate-format mp4 needs ffmpeg on PATH; fix: install ffmpeg, "
                             "or use --animate-format gif")
     if is_scene_file(args.model):
         return _simulate_scene(args)
     model = as_spec(args.model, floating_base=args.floating_base, **_reading(args))
+    _check_trace(args, model)
     method = _method(args.method or "rk4")
     t_end, dt = args.t_end or 10.0, args.dt or 1e-3
     sample = args.sample or dt
@@ -466,8 +516,10 @@ def linearize_command(args) -> int:
     from modelgen.sim.load import load
     from modelgen.sim.scene import Scene
     out = Path(args.output) if args.output else None
-    if out is not None and out.suffix.lower() not in (".npz", ".mat"):
-        raise ModelgenError(f"-o {out}: the file must end in .npz or .mat")
+    if out is not None:
+        if out.suffix.lower() not in (".npz", ".mat"):
+            raise ModelgenError(f"-o {out}: the file must end in .npz or .mat")
+        _check_output_file(out, "linear.npz")
     if args.t is not None and not math.isfinite(args.t):
         raise ModelgenError(f"--t must be a finite time [s], got {args.t!r}")
     if is_scene_file(args.model):
@@ -519,9 +571,13 @@ def bench_command(args) -> int:
 
     def progress(message):
         print(f"... {message}", file=sys.stderr, flush=True)
+    if Path(args.scene).is_dir():
+        raise ModelgenError(f"{args.scene} is a directory, not a scene file; fix: give a "
+                            f"scene file, e.g. models/scenes/dp_free.yaml")
     if not Path(args.scene).is_file():
         raise ModelgenError(f"{args.scene}: no such file; fix: give a scene file, e.g. "
                             f"models/scenes/dp_free.yaml")
+    _check_output_dir(args.output)
     if not is_scene_file(args.scene):
         raise ModelgenError(f"{args.scene} is a model file, not a scene; fix: `modelgen bench` "
                             f"takes a scene (it names the initial state, time span and "
@@ -550,6 +606,7 @@ def bench_command(args) -> int:
 
 def hard_cases_command(args) -> int:
     import modelgen.bench.hard_cases as hc
+    _check_output_dir(args.output)
 
     def progress(name):
         print(f"... {name}", file=sys.stderr, flush=True)
@@ -572,8 +629,14 @@ def hard_cases_command(args) -> int:
 def fmu_command(args) -> int:
     from modelgen.codegen.fmu import build_fmu
     if not Path(args.model).is_file():
-        raise ModelgenError(f"{args.model}: no such file; fix: give a model or scene file, "
-                            f"e.g. models/cart_pole.yaml")
+        what = " is a directory, not a file" if Path(args.model).is_dir() else ": no such file"
+        raise ModelgenError(f"{args.model}{what}; fix: give a model or scene file, e.g. "
+                            f"models/cart_pole.yaml")
+    # -o is the .fmu file, or the directory it is written into
+    if Path(args.output).suffix.lower() == ".fmu":
+        _check_output_file(args.output, "model.fmu")
+    else:
+        _check_output_dir(args.output)
     fmu = build_fmu(args.model, args.output, method=args.method, rtol=args.rtol,
                     atol=args.atol, step=args.step, out_dir=args.build_dir)
     count = {kind: len(fmu.names(kind)) for kind in ("parameter", "input", "output")}
@@ -585,6 +648,42 @@ def fmu_command(args) -> int:
     print(f"co-sim     {fmu.settings.describe()} (fixed at export)")
     print(f"seconds    {fmu.seconds:.2f}")
     return 0
+
+
+def _check_sweep(args, sw) -> None:
+    """The flags of a sweep, checked before the model is read or built: the library
+    finds a bad chunk, tolerance or method only once the model is loaded."""
+    _check_output_file(args.output, "sweep.nc")
+    if args.chunk is not None and args.chunk < 1:
+        raise ModelgenError(f"--chunk must be a positive number of runs per call, got "
+                            f"{args.chunk}; fix: give e.g. --chunk 64, or leave it out (about "
+                            f"{sw.CHUNKS_PER_WORKER} chunks per worker)")
+    if args.rtol is not None and not (math.isfinite(args.rtol) and args.rtol > 0):
+        raise ModelgenError(f"--rtol must be a positive number, got {args.rtol!r}; fix: give "
+                            f"a relative tolerance, e.g. --rtol 1e-8")
+    if args.method is not None:
+        _method(args.method)
+    if args.scheduler is not None:
+        sw.check_client(args.scheduler, name="--scheduler")
+
+
+def _check_sweep_model(args, axes, inits, model, scene_method) -> None:
+    """The swept names and the step, checked against the model read (before it is built):
+    a fixed-step --method needs --dt, unless the scene's own method (``scene_method``)
+    has a step too."""
+    parameters = [name for name, _ in model.parameters]
+    states = list(model.coordinates) + list(model.speeds)
+    for flag, names, known, what in (("--param", axes, parameters, "parameter"),
+                                     ("--init", inits, states, "state")):
+        for name in names:
+            if name not in known:
+                raise ModelgenError(f"{flag}: unknown {what} {name!r}; {what}s are "
+                                    f"{', '.join(known) or 'none'}")
+    if args.method is None or args.dt is not None or _method(args.method).adaptive:
+        return
+    if scene_method is None or _method(scene_method).adaptive:
+        raise ModelgenError(f"--method {_method(args.method).name} has a fixed step; fix: "
+                            f"give --dt")
 
 
 def sweep_command(args) -> int:
@@ -618,10 +717,12 @@ def sweep_command(args) -> int:
                             f"{', '.join(sw.REDUCTIONS)}, got {args.plot!r}")
     sw.require("xarray", *(["distributed"] if args.scheduler else []))
     _check_times(args)
+    _check_sweep(args, sw)
     t_eval = None
     scene = is_scene_file(args.scene)
     spec = load_scene(args.scene) if scene else as_spec(args.scene)
     model = spec.model if scene else spec
+    _check_sweep_model(args, axes, inits, model, spec.method if scene else None)
     t0 = spec.t_start if scene else 0.0
     t1 = args.t_end or (spec.t_end if scene else 10.0)
     dt = args.sample or (spec.sample_dt if scene else 0.01)

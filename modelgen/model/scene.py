@@ -16,6 +16,7 @@ frequencies.
 """
 from __future__ import annotations
 
+import math
 import os
 from dataclasses import replace
 
@@ -179,7 +180,7 @@ class _SceneReader:
         reduced = self.reduced_model(name, description, selected)
         initial = self.initial_state(full)
         t_start, t_end, sample = self.time_span()
-        method, step, rtol, atol = self.integrator(sample)
+        method, step, rtol, atol = self.integrator(sample, t_end - t_start)
         inputs = self.inputs(reduced, selected)
         outputs = self.outputs(reduced, selected, kinds)
         kinematics = self.kinematics(reduced)
@@ -350,8 +351,9 @@ class _SceneReader:
                              "e.g. sample: 0.01")
         return start, end, sample
 
-    def integrator(self, sample: float) -> tuple:
-        """(method, step, rtol, atol); fixed-step methods sample at whole steps."""
+    def integrator(self, sample: float, span: float) -> tuple:
+        """(method, step, rtol, atol); fixed-step methods sample at whole steps, and take
+        steps no longer than the ``span`` (t_end - t_start)."""
         settings = self.mapping("integrator", "{method: rk4, step: 0.001}")
         self.check_keys(settings, INTEGRATOR_KEYS, "integrator", "integrator")
         given = settings.get("method", DEFAULT_METHOD)
@@ -376,6 +378,7 @@ class _SceneReader:
                                  f"give a relative/absolute tolerance, e.g. {key}: {default!r}")
             tolerances.append(value)
         if method in FIXED_STEP_METHODS:
+            self.check_step_length(step, sample, span)
             every = round(sample / step)
             if every < 1 or abs(every * step - sample) > _REL_TOL * sample:
                 nearest = float(f"{max(every, 1) * step:.12g}")
@@ -384,6 +387,20 @@ class _SceneReader:
                                  f"samples are taken at steps: use e.g. sample: {nearest!r}, "
                                  "or change integrator.step")
         return (method, step, *tolerances)
+
+    def check_step_length(self, step: float, sample: float, span: float) -> None:
+        """A fixed step longer than the whole time span: the fix is a shorter step, not a
+        sample interval as long as that step (which no run of the span reaches)."""
+        if step <= span:
+            return
+        # a step that divides the sample interval and is at most a hundredth of the span
+        # (past a 1e12 ratio, or below 1, the hundredth itself or the sample interval)
+        ratio = sample / (span / 100)
+        shorter = sample / math.ceil(ratio) if 1 < ratio < 1e12 else min(sample, span / 100)
+        raise self.error(f"the step {step!r} is longer than the time span {span!r} s",
+                         "integrator.step", f"give a step that divides time.sample, e.g. "
+                         f"step: {float(f'{shorter:.12g}')!r} (a hundredth of the span or "
+                         f"less)")
 
     # -- inputs ------------------------------------------------------------------------
     def inputs(self, reduced: ModelSpec, selected: tuple) -> tuple:

@@ -32,6 +32,7 @@ import hashlib
 import os
 import threading
 import time
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -40,8 +41,10 @@ import numpy as np
 from modelgen.codegen.build import build_module, cache_lookup
 from modelgen.codegen.emit import integrator_sources
 from modelgen.codegen.pipeline import default_output, part_statements
-from modelgen.errors import ArgumentValueError, ModelgenError, SimulationError
+from modelgen.errors import (ArgumentTypeError, ArgumentValueError, ModelgenError,
+                             SimulationError)
 from modelgen.model import as_spec, is_scene_file
+from modelgen.sim.arguments import whole_number
 from modelgen.sim.integrate import STATUS, method_of
 from modelgen.sim.load import load, load_scene
 from modelgen.sim.runtime import CompiledModel
@@ -50,7 +53,7 @@ from modelgen.version import __version__
 
 __all__ = ["grid", "sweep", "Study", "ModelPayload", "payload_of", "worker_model",
            "builds_in_this_process", "run_chunk", "summary", "scalar", "plot_scalar",
-           "require"]
+           "require", "check_client"]
 
 #: what ``pip install`` line provides the optional dependencies
 EXTRA = "pip install 'modelgen[sweep]'"
@@ -86,14 +89,31 @@ def grid(**axes) -> dict:
     """
     arrays = {}
     for name, values in axes.items():
-        a = np.atleast_1d(np.asarray(values, dtype=float))
+        a = _real_array(values, f"grid axis {name!r}")
         if a.ndim != 1 or a.size == 0:
-            raise SimulationError(f"grid axis {name!r} must be a non-empty 1-D array")
+            raise ArgumentValueError(f"grid axis {name!r} must be a non-empty 1-D array, got "
+                                     f"shape {a.shape}; fix: give the axis's values, e.g. "
+                                     f"{name}=np.linspace(0.5, 2.0, 16)")
         arrays[name] = a
     if not arrays:
         return {}
     mesh = np.meshgrid(*arrays.values(), indexing="ij")
     return {name: m.ravel().copy() for name, m in zip(arrays, mesh)}
+
+
+def _real_array(values, what: str, example: str = "[0.5, 1.0, 2.0]") -> np.ndarray:
+    """``values`` as an array of floats (at least 1-D): numbers or arrays of them, never a
+    string or a complex number, which numpy would refuse (or cut to its real part)
+    with a message naming neither the argument nor the fix."""
+    try:
+        a = np.asarray(values)
+        if a.dtype.kind not in "biufO":     # O: numbers of other types, converted below
+            raise TypeError
+        return np.atleast_1d(a.astype(float))
+    except (TypeError, ValueError, OverflowError):
+        raise ArgumentTypeError(f"{what} must be a real number or an array of them, got "
+                                f"{values!r:.80}; fix: give numbers, e.g. {example}") \
+            from None
 
 
 # -- the model, on the driver and on the workers --------------------------------------
@@ -248,15 +268,32 @@ def run_chunk(model, study: Study, lo: int, hi: int) -> dict:
 
 # -- the sweep ---------------------------------------------------------------------------
 
-def _columns(values: dict | None, names, what: str, n_runs: int | None) -> tuple:
-    """(dict name -> float array, n_runs) from a mapping of names to scalars or arrays."""
+def _swept(values, argument: str, what: str, example: str) -> dict:
+    """``values`` (``parameters`` or ``initial``): a mapping of names to one value or a
+    1-D array of them, as float arrays; checked before the model is loaded."""
+    if values is None:
+        return {}
+    if not isinstance(values, Mapping):
+        raise ArgumentTypeError(f"{argument} must map {what} names to values, got "
+                                f"{values!r:.80}; fix: give a dict, e.g. {argument}={example}")
     out = {}
-    for name, value in (values or {}).items():
+    for name, value in values.items():
+        a = _real_array(value, f"{what} {name!r}")
+        if a.ndim != 1 or a.size == 0:
+            raise ArgumentValueError(f"{what} {name!r} must be one value or a non-empty 1-D "
+                                     f"array of one value per run, got shape {a.shape}; fix: "
+                                     f"e.g. {argument}={example}")
+        out[name] = a
+    return out
+
+
+def _columns(values: dict, names, what: str, n_runs: int | None) -> tuple:
+    """(dict name -> float array, n_runs) from :func:`_swept`'s arrays, their names
+    checked against the model's."""
+    out = {}
+    for name, a in values.items():
         if name not in names:
             raise ArgumentValueError(f"unknown {what} {name!r}; {what}s are {', '.join(names)}")
-        a = np.atleast_1d(np.asarray(value, dtype=float))
-        if a.ndim != 1:
-            raise SimulationError(f"{what} {name!r}: give a 1-D array, got shape {a.shape}")
         out[name] = a
     for name, a in out.items():
         if a.size != 1:
@@ -301,17 +338,44 @@ def _study(cm, defaults, parameters, initial, x0, t_eval, t_span, method, rtol, 
                   t_span=tuple(float(v) for v in t_span), t_eval=t_eval, method=method,
                   rtol=defaults.get("rtol", 1e-8) if rtol is None else rtol,
                   atol=defaults.get("atol", 1e-10) if atol is None else atol,
-                  step=step, max_steps=int(max_steps), u=defaults.get("u") if u is None else u,
+                  step=step, max_steps=max_steps, u=defaults.get("u") if u is None else u,
                   outputs=bool(outputs))
     swept = {name: ("parameter", a) for name, a in params.items()}
     swept.update({f"initial_{name}": ("initial", a) for name, a in inits.items()})
     return study, swept
 
 
+def check_client(client, name: str = "client") -> None:
+    """Refuse, before anything is built, a ``client`` that is none of None, ``"local"``,
+    a scheduler's address (``tcp://HOST:PORT``) or a ``dask.distributed.Client``;
+    ``name`` names it in the message (``--scheduler`` on the command line).  An
+    address is only parsed here: whether a scheduler answers there is found on
+    connecting."""
+    if client is None or (isinstance(client, str) and client == "local"):
+        return
+    if not isinstance(client, str) and all(hasattr(client, a) for a in (
+            "scheduler", "nthreads", "scatter", "submit")):
+        return      # a Client, or one that works as one (by what a sweep calls on it)
+    forms = ("'local' (a cluster on this machine) or a scheduler's address tcp://HOST:PORT, "
+             "e.g. tcp://127.0.0.1:8786")
+    if name == "client":
+        forms += ", or a dask.distributed.Client"
+    if not isinstance(client, str):
+        raise ArgumentTypeError(f"{name} must be a string or a Client, got {client!r:.80}; "
+                                f"fix: give {forms}")
+    distributed = require("distributed")
+    try:
+        distributed.comm.get_address_host_port(client)     # the scheme, host and port
+    except (ValueError, TypeError) as exc:
+        raise ArgumentValueError(f"{name} {client!r} is not a Dask scheduler address ({exc}); "
+                                 f"fix: give {forms}") from None
+
+
 def _client(client):
     """``(client, owned)``: a Client from ``"local"``, an address or a Client."""
     if client is None:
         return None, False
+    check_client(client)
     distributed = require("distributed")
     if isinstance(client, str):
         if client == "local":
@@ -330,10 +394,20 @@ def _client(client):
 
 
 def _chunks(n_runs: int, chunk: int | None, parts: int) -> list:
-    size = int(chunk) if chunk else max(1, math.ceil(n_runs / max(parts, 1)))
-    if size < 1:
-        raise SimulationError(f"chunk must be >= 1 runs, got {chunk!r}")
+    size = chunk if chunk is not None else max(1, math.ceil(n_runs / max(parts, 1)))
     return [(lo, min(lo + size, n_runs)) for lo in range(0, n_runs, size)]
+
+
+def _count(value, what: str, fix: str) -> int:
+    """``value`` as a whole number >= 1 (``chunk``, ``max_steps``), checked before the
+    model is loaded."""
+    try:
+        count = whole_number(value, what)
+    except (ArgumentTypeError, ArgumentValueError) as exc:
+        raise type(exc)(f"{exc}; fix: {fix}") from None
+    if count < 1:
+        raise ArgumentValueError(f"{what} must be >= 1, got {value!r}; fix: {fix}")
+    return count
 
 
 def sweep(source, parameters=None, initial=None, *, t_eval=None, t_span=None, method=None,
@@ -368,6 +442,24 @@ def sweep(source, parameters=None, initial=None, *, t_eval=None, t_span=None, me
     """
     xr = require("xarray")
     start = time.perf_counter()
+    # the arguments that need no model are checked before it is loaded (or built)
+    parameters = _swept(parameters, "parameters", "parameter", "{'g': [9.7, 9.8, 9.9]}")
+    initial = _swept(initial, "initial", "state", "{'q1': np.linspace(0.1, 3.0, 32)}")
+    if t_eval is not None:
+        t_eval = _real_array(t_eval, "t_eval", "np.linspace(0.0, 10.0, 101)")
+    if x0 is not None:
+        x0 = _real_array(x0, "x0", "[0.1, 0.0, 0.0, 0.0]")
+    if method is not None:
+        method_of(method)
+    if chunk is not None:
+        chunk = _count(chunk, "chunk", "give the runs per simulate_batch call, or None for "
+                                       "the default")
+    max_steps = _count(100_000 if max_steps is None else max_steps, "max_steps",
+                       "give the most steps of each run, e.g. 100000")
+    if progress is not None and not callable(progress):
+        raise ArgumentTypeError(f"progress must be None or a callable, got {progress!r:.80}; "
+                                f"fix: give a function progress(done, total)")
+    check_client(client)
     cm, defaults = load_model(source, build_dir)
     study, swept = _study(cm, defaults, parameters, initial, x0, t_eval, t_span, method, rtol,
                           atol, step, max_steps, u, outputs)
