@@ -107,6 +107,11 @@ def test_an_unknown_trace_point_is_refused_before_the_run(source, tmp_path, caps
     assert "--trace ZZ: unknown point of model" in err and str(source) in err
     assert "fix: trace one of O, P" in err
     assert not out.exists()                         # no CSV written before the refusal
+    # without --animate, --trace would do nothing: refused, not ignored
+    err = _refused(["simulate", source, "--trace", "P", "-o", out, "--build-dir", never,
+                    "--t-end", "0.1", "-q"], never, capsys)
+    assert "--trace draws a point's path in the animation; fix: add --animate" in err
+    assert not out.exists()
 
 
 @pytest.mark.parametrize("command", ["generate", "simulate"])

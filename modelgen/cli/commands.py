@@ -478,6 +478,9 @@ def simulate_command(args) -> int:
     _check_output_dir(args.output)
     _check_floating_base(args)
     _check_max_operations(args)
+    if args.trace and not args.animate:
+        raise ModelgenError("--trace draws a point's path in the animation; fix: add "
+                            "--animate, or leave out --trace")
     if args.animate and args.animate_format == "mp4" and shutil.which("ffmpeg") is None:
         raise ModelgenError("--animate-format mp4 needs ffmpeg on PATH; fix: install ffmpeg, "
                             "or use --animate-format gif")
