@@ -28,7 +28,6 @@ import numpy as np
 import pytest
 
 import modelgen
-import modelgen.model.spec
 from conftest import SUMMARY
 from mechanics_reference import (MechanicsReference, actions_spec,
                                  double_pendulum_closed_form, effects_spec, free_body_spec,
@@ -62,11 +61,10 @@ HAND_SPECS = {
     # forces at points other than G, given in rotated bases, depending on
     # speeds, time and inputs; a particle and a body with a full tensor
     "hand_actions": lambda: _hand(actions_spec),
-}
-if hasattr(modelgen.model.spec, "EFFECT_TYPES"):
     # every effect kind: gravity fields, spring, damper, torsion spring, joint
     # damping, friction, drag at a body-fixed point, an action as an effect
-    HAND_SPECS["hand_effects"] = lambda: _hand(effects_spec)
+    "hand_effects": lambda: _hand(effects_spec),
+}
 
 CASES = ([path.stem for path in MODEL_FILES]
          + [f"spatial_chain_{n}" for n in CHAIN_SIZES]

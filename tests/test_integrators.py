@@ -26,6 +26,15 @@ G = 9.81
 PERIOD_90 = 2.367841947576237          # L = 1, g = 9.81, released from horizontal
 ADAPTIVE = ("dopri5", "dop853", "rodas")
 ALL_METHODS = ("rk4", "dopri5", "dop853", "rodas", "midpoint", "gauss4")
+#: the published order of each step and of the continuous extension its t_eval and
+#: events use, written out here rather than read from the table under test: RK4 4;
+#: Dormand-Prince 5(4) 5 with Shampine's dense output 4 and DOP853 8 with its dense
+#: output 7 (Hairer, Norsett & Wanner, Solving ODEs I, II.5-II.6); RODAS4 4 with its
+#: dense output 3 (Hairer & Wanner, Solving ODEs II, IV.7); the implicit midpoint rule
+#: 2 and the 2-stage Gauss-Legendre method 4; rk4, midpoint and gauss4 sample through
+#: the cubic Hermite interpolant of x and xdot at the step ends (3)
+ORDER = {"rk4": 4, "dopri5": 5, "dop853": 8, "rodas": 4, "midpoint": 2, "gauss4": 4}
+DENSE_ORDER = {"rk4": 3, "dopri5": 4, "dop853": 7, "rodas": 3, "midpoint": 3, "gauss4": 3}
 
 
 @pytest.fixture(scope="module")
@@ -117,36 +126,46 @@ def _observed_order(sp, method, theta):
     return np.polyfit(np.log(hs), np.log(errors), 1)[0]
 
 
+def test_the_method_table_states_the_published_orders():
+    assert set(integrate.METHODS) == set(ALL_METHODS)
+    for name, m in integrate.METHODS.items():
+        assert (m.order, m.dense_order) == (ORDER[name], DENSE_ORDER[name]), name
+
+
 @pytest.mark.parametrize("method", ALL_METHODS)
 def test_fixed_step_convergence_order_matches_the_nominal_order(sp, method):
     """Adaptive methods run with fixed steps (step=) for this; error at t = 0, 0.25 .. 2."""
     order = _observed_order(sp, method, 0.0)
-    assert abs(order - integrate.METHODS[method].order) <= 0.3, order
+    assert abs(order - ORDER[method]) <= 0.3, order
 
 
-@pytest.mark.parametrize("method", ["rk4", "dopri5", "rodas", "midpoint", "gauss4"])
+@pytest.mark.parametrize("method", ALL_METHODS)
 def test_fixed_step_order_holds_for_a_time_dependent_right_hand_side(driven, method):
     """Stages at t + c_i h see the inputs of their own time, and rodas its
-    d xdot / d t term.  Reference: scipy's DOP853 at 1e-13.  (dop853 is left out:
-    on this problem it is still superconvergent, about 9, at the smallest steps
-    that stay above round-off.)"""
+    d xdot / d t term.  Reference: scipy's DOP853 at 1e-13 (its own error, about
+    8e-14 RMS, is the floor).  dop853 is still superconvergent on this problem
+    (measured slopes 8.8 over h = 0.4, 0.2, 0.1, errors 1.6e-5, 3.5e-8, 7.6e-11; at
+    h = 0.05, 1.5e-13, the reference's error shows), so it runs those three steps
+    and its slope is bounded below only: a wrong stage time c_i gives order 1."""
     T, x0, t = 2.0, [1.0, 0.0], np.linspace(0, 2.0, 9)
     ref = scipy.integrate.solve_ivp(driven.rhs, (0, T), x0, method="DOP853", rtol=1e-13,
                                     atol=1e-13, t_eval=t)
-    hs = SWEEP[method] / 2.0 ** np.arange(4)
+    hs = 0.4 / 2.0 ** np.arange(3) if method == "dop853" else SWEEP[method] / 2.0 ** np.arange(4)
     errors = [np.sqrt(np.mean((driven.simulate(x0, (0, T), t_eval=t, method=method,
                                                step=h).y - ref.y) ** 2)) for h in hs]
     order = np.polyfit(np.log(hs), np.log(errors), 1)[0]
-    assert abs(order - integrate.METHODS[method].order) <= 0.3, order
+    if method == "dop853":
+        assert order >= 7.7 and errors[-1] < 1e-9, (order, errors)
+    else:
+        assert abs(order - ORDER[method]) <= 0.3, order
 
 
 @pytest.mark.parametrize("method", ALL_METHODS)
 def test_dense_output_converges_at_the_order_of_step_or_interpolant(sp, method):
     """Samples at 37% of every step: the error is O(h^min(p, q + 1)) for a method of
     order p with a continuous extension of order q (dopri5 4, dop853 7, the others 3)."""
-    m = integrate.METHODS[method]
     order = _observed_order(sp, method, 0.37)
-    assert abs(order - min(m.order, m.dense_order + 1)) <= 0.3, order
+    assert abs(order - min(ORDER[method], DENSE_ORDER[method] + 1)) <= 0.3, order
 
 
 @pytest.mark.parametrize("method", ADAPTIVE)

@@ -22,7 +22,7 @@ from modelgen.derive.rnea_partials import derive_rnea_partials
 from modelgen.model.chains import spatial_chain
 from modelgen.model.urdf import import_urdf
 
-from test_derivatives import TOL, URDF, _check_against_pinocchio, _relative
+from test_derivatives import QDD_DERIVATIVES_TOL, URDF, _check_against_pinocchio, _relative
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -176,7 +176,7 @@ def test_looped_derivatives_of_urdf_robots_match_pinocchio(robot, pin, tmp_path,
     q_of, jmap = _pinocchio_maps(model, imp)
     damping = np.array([j.damping for j in imp.joints if j.coordinate is not None])
     assert _check_against_pinocchio(pin, cm, model, P=jmap, q_pin=q_of,
-                                    damping=damping) <= TOL
+                                    damping=damping) <= QDD_DERIVATIVES_TOL
 
 
 def test_looped_derivatives_of_the_g1_humanoid_match_pinocchio(pin, tmp_path):
@@ -189,4 +189,4 @@ def test_looped_derivatives_of_the_g1_humanoid_match_pinocchio(pin, tmp_path):
     q_of, jmap = _pinocchio_maps(model, imp)
     damping = np.array([j.damping for j in imp.joints if j.coordinate is not None])
     assert _check_against_pinocchio(pin, cm, model, P=jmap, q_pin=q_of, damping=damping,
-                                    states=2) <= TOL
+                                    states=2) <= QDD_DERIVATIVES_TOL
