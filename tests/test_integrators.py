@@ -478,8 +478,10 @@ def test_singular_rosenbrock_matrix_halves_the_step_or_stops_a_fixed_step_run(sy
     assert adaptive.t[1] == pytest.approx(h / 2, rel=1e-15)     # the halved first step
 
 
-def _c_call(cm, method, fixed, t1=1.0, interrupt=None, events=None):
-    """One direct call of <name>_integrate through the structs of mg_integrate.h."""
+def _c_call(cm, method, fixed, t1=1.0, interrupt=None, events=None, setup=None):
+    """One direct call of <name>_integrate through the structs of mg_integrate.h
+    (``setup(ffi, opt, out, keep)`` changes them and may return the inputs struct;
+    ``keep`` holds what the C reads until it returns)."""
     ffi, ptr = cm.ffi, cm._ptr
     nx = 2 * cm.n
     keep = [np.array([1.0, 0.0]), cm.params(), np.full(nx, 1e-8), np.empty(64),
@@ -499,7 +501,10 @@ def _c_call(cm, method, fixed, t1=1.0, interrupt=None, events=None):
         out.events_capacity, out.t_events, out.x_events = 8, ptr(t_ev), ptr(x_ev)
         out.which_events = ffi.from_buffer("int[]", which)
     out.capacity, out.t, out.x, out.stop = 64, ptr(t_out), ptr(x_out), ptr(stop)
-    status = getattr(cm.lib, f"{cm.name}_integrate")(0.0, t1, ptr(x0), ptr(p), ffi.NULL, opt,
+    inputs = ffi.NULL
+    if setup is not None:
+        inputs = setup(ffi, opt, out, keep) or ffi.NULL
+    status = getattr(cm.lib, f"{cm.name}_integrate")(0.0, t1, ptr(x0), ptr(p), inputs, opt,
                                                        out, stats, ptr(work))
     return status, out.n, stats, t_out[:out.n].copy(), stop.copy()
 
@@ -508,6 +513,90 @@ def test_c_rejects_bad_arguments_with_its_own_status(sp):
     for method, fixed in ((99, 0.0), (0, 0.0)):       # unknown method; rk4 without a step
         status, *_ = _c_call(sp, method, fixed)
         assert status == -7 and integrate.STATUS[status].name == "BAD_ARGUMENT"
+
+
+def _tolerance(value):
+    def setup(ffi, opt, out, keep):
+        keep.append(np.full(2, value))
+        opt.rtol = ffi.from_buffer("double[]", keep[-1])
+    return setup
+
+
+def _t_eval(values):
+    def setup(ffi, opt, out, keep):
+        keep.append(np.array(values, dtype=float))
+        out.t_eval, out.capacity = ffi.from_buffer("double[]", keep[-1]), len(values)
+    return setup
+
+
+def _samples(times):
+    def setup(ffi, opt, out, keep):
+        keep.append(np.array(times, dtype=float))
+        inputs = ffi.new("mg_inputs *")
+        inputs.n = len(times)
+        inputs.times = inputs.values = ffi.from_buffer("double[]", keep[-1])
+        keep.append(inputs)
+        return inputs
+    return setup
+
+
+def _resume(slot, value):
+    def setup(ffi, opt, out, keep):
+        stop = np.zeros(STOP_X + 2)
+        stop[0] = stop[1] = 0.1
+        stop[slot] = value
+        keep.append(stop)
+        opt.resume = ffi.from_buffer("double[]", stop)
+    return setup
+
+
+@pytest.mark.parametrize("why, setup", [
+    ("rtol 0", _tolerance(0.0)), ("rtol < 0", _tolerance(-1e-8)), ("rtol NaN", _tolerance(np.nan)),
+    ("rtol inf", _tolerance(np.inf)),
+    ("t_eval decreasing", _t_eval([0.5, 0.2, 1.0])), ("t_eval past t1", _t_eval([0.5, 2.0])),
+    ("t_eval before t0", _t_eval([-1.0, 0.5])), ("t_eval NaN", _t_eval([0.2, np.nan, 0.9])),
+    ("input times not increasing", _samples([0.0, 0.5, 0.5])),
+    ("input times NaN", _samples([0.0, np.nan])),
+    ("resume steps NaN", _resume(7, np.nan)), ("resume steps 1e30", _resume(7, 1e30)),
+    ("resume t_origin inf", _resume(8, np.inf))])
+def test_c_refuses_arguments_it_would_compute_garbage_from(sp, why, setup):
+    """The embedded C has no Python in front of it: tolerances that are not finite and
+    > 0, t_eval out of order or outside the span (returned as extrapolations of one
+    step's polynomial, with status 0), unsorted input samples and a stop array no run
+    wrote are BAD_ARGUMENT, nothing integrated."""
+    status, rows, stats, t, stop = _c_call(sp, capi.METHODS["dop853"].code, 0.0, setup=setup)
+    assert status == capi.STATUS_BY_NAME["BAD_ARGUMENT"].code, why
+    assert stats.naccept == 0 and rows == 0, why
+    good = _c_call(sp, capi.METHODS["dop853"].code, 0.0, setup=_t_eval([0.0, 0.5, 1.0]))
+    assert good[0] == 0 and good[1] == 3
+
+
+def test_c_batch_refuses_null_arrays_and_a_bad_parameter_stride(sp):
+    """mg_integrate_batch used to check only system and options, then index NULL or
+    short arrays by run (a segfault, or a read before P with a negative stride)."""
+    ffi, lib, nx = sp.ffi, sp.lib, 2
+    n_runs, n_eval = 2, 3
+    arrays = dict(x0=np.zeros((n_runs, nx)), t_eval=np.linspace(0, 1, n_eval),
+                  x_out=np.empty((n_runs, n_eval, nx)), stop=np.zeros((n_runs, STOP_X + nx)),
+                  work=np.empty(capi.work_size(nx, 0, 0)))
+    P, tol = sp.params(), np.full(nx, 1e-8)
+    n_out, status = np.zeros(n_runs, dtype=np.int_), np.zeros(n_runs, dtype=np.intc)
+    stats = ffi.new("mg_stats[]", n_runs)
+    opt = ffi.new("mg_options *")
+    opt.method, opt.max_steps = capi.METHODS["dop853"].code, 1000
+    opt.rtol = opt.atol = sp._ptr(tol)
+    fn = getattr(lib, f"{sp.name}_integrate_batch")
+
+    def call(n=n_runs, stride=0, drop=None):
+        a = {k: (ffi.NULL if k == drop else sp._ptr(v)) for k, v in arrays.items()}
+        return fn(n, 0.0, 1.0, a["x0"], sp._ptr(P), stride, ffi.NULL, opt, n_eval, a["t_eval"],
+                  a["x_out"], ffi.NULL, ffi.from_buffer("long[]", n_out),
+                  ffi.from_buffer("int[]", status), stats, a["stop"], a["work"])
+    bad = capi.STATUS_BY_NAME["BAD_ARGUMENT"].code
+    for drop in arrays:
+        assert call(drop=drop) == bad, drop
+    assert call(stride=-1) == bad and call(stride=1) == bad and call(n=-1) == bad
+    assert call() == 0 and list(status) == [0, 0] and list(n_out) == [n_eval] * n_runs
 
 
 @pytest.mark.parametrize("t1, step", [(1.0, 1e-19), (1e10, 1e-9)])

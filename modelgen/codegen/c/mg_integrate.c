@@ -35,6 +35,7 @@
  * rodas, Gauss, events, step size control), which are not compiled alone.
  * Every helper stays static, and a C user compiles this one file.
  * ------------------------------------------------------------------------- */
+#include <float.h>
 #include <limits.h>
 #include <math.h>
 #include <stddef.h>
@@ -152,6 +153,39 @@ static void mg_begin(mg_run *r, const double *x0, double *work)
     r->out->n_events = 0;
 }
 
+/* Whether v[0..n) lies in [lo, hi] (so is finite) and never decreases (with
+ * `strict`, increases). */
+static int mg_sorted(const double *v, long n, double lo, double hi, int strict)
+{
+    long i;
+    for (i = 0; i < n; ++i)
+        if (!(v[i] >= lo && v[i] <= hi) ||
+            (i > 0 && (strict ? !(v[i] > v[i - 1]) : v[i] < v[i - 1])))
+            return 0;
+    return 1;
+}
+
+/* Whether every tolerance is finite and > 0 (a zero, negative or NaN one has no error
+ * norm: the first step would fail as if the state were not finite). */
+static int mg_tolerances_ok(const double *tol, int nx)
+{
+    int i;
+    for (i = 0; i < nx; ++i)
+        if (!(tol[i] > 0.0 && tol[i] <= DBL_MAX))
+            return 0;
+    return 1;
+}
+
+/* Whether a resumed run's stop array is one mg_finish could have written. */
+static int mg_resume_ok(const double *resume)
+{
+    int i;
+    for (i = 0; i < MG_STOP_X; ++i)
+        if (!(resume[i] >= -DBL_MAX && resume[i] <= DBL_MAX))
+            return 0;
+    return resume[7] >= 0.0 && resume[7] < (double)LONG_MAX;
+}
+
 /* Whether the arguments describe a run mg_integrate can do (else BAD_ARGUMENT). */
 static int mg_arguments_ok(const mg_run *r)
 {
@@ -160,9 +194,12 @@ static int mg_arguments_ok(const mg_run *r)
     const mg_inputs *in = r->o.in;
     const int n_events = r->n_events;
     if (r->method < MG_METHOD_RK4 || r->method > MG_METHOD_GAUSS4 || !(r->t1 >= r->t0) ||
-        r->nx < 1 || r->sys->nu < 0 || !r->sys->rhs)
+        !(r->t0 >= -DBL_MAX && r->t1 <= DBL_MAX) || r->nx < 1 || r->sys->nu < 0 || !r->sys->rhs ||
+        (r->sys->np > 0 && !r->o.p))
         return 0;
-    if ((!r->adaptive && !(opt->fixed_step > 0.0)) || (r->adaptive && (!r->o.rtol || !r->o.atol)))
+    if ((!r->adaptive && !(opt->fixed_step > 0.0)) ||
+        (r->adaptive && (!r->o.rtol || !r->o.atol || !mg_tolerances_ok(r->o.rtol, r->nx) ||
+                         !mg_tolerances_ok(r->o.atol, r->nx))))
         return 0;
     if (n_events < 0 || n_events > MG_MAX_EVENTS ||
         (n_events > 0 && (!r->o.events || !opt->direction || !opt->terminal || !out->t_events ||
@@ -171,7 +208,17 @@ static int mg_arguments_ok(const mg_run *r)
     if (out->capacity < (out->t_eval ? 0 : 1) || opt->max_steps < 0 || (!out->t_eval && !out->t) ||
         !out->x)
         return 0;
-    return !(in && !in->callback && in->n > 0 && (!in->times || !in->values));
+    if (opt->resume && !mg_resume_ok(opt->resume))
+        return 0;
+    /* samples outside the span (of the whole run, when resumed: from its first t0) or
+     * out of order would be extrapolated from one step's dense output and returned as
+     * if they were the solution */
+    if (out->t_eval &&
+        !mg_sorted(out->t_eval, out->capacity, opt->resume ? opt->resume[8] : r->t0, r->t1, 0))
+        return 0;
+    return !(in && !in->callback &&
+             (in->n < 0 || (in->n > 0 && (!in->times || !in->values ||
+                                          !mg_sorted(in->times, in->n, -DBL_MAX, DBL_MAX, 1)))));
 }
 
 /* The outputs y of row `row` (state already in out->x), when asked for. */
@@ -652,9 +699,12 @@ int mg_integrate_batch(const mg_system *system, long n_runs, double t0, double t
     mg_options one;
     mg_output out;
     long r, failed = 0;
-    if (!system || !options)
-        return (int)n_runs;
-    one = *options; /* a batch has no events and does not resume */
+    if (!system || !options || n_runs < 0 || p_stride < 0 ||
+        (p_stride > 0 && p_stride < system->np) ||
+        (n_runs > 0 && (!x0 || (system->np > 0 && !p) || !t_eval || !x_out || !n_out || !status ||
+                        !stats || !stop || !work)))
+        return MG_STATUS_BAD_ARGUMENT; /* nothing written: no run's arrays can be trusted */
+    one = *options;                    /* a batch has no events and does not resume */
     one.n_events = 0;
     one.events = NULL;
     one.events_ctx = NULL;
@@ -662,11 +712,6 @@ int mg_integrate_batch(const mg_system *system, long n_runs, double t0, double t
     one.terminal = NULL;
     one.resume = NULL;
     for (r = 0; r < n_runs; ++r) {
-        if (!t_eval) { /* a batch samples at given times only */
-            status[r] = MG_STATUS_BAD_ARGUMENT;
-            ++failed;
-            continue;
-        }
         out.capacity = n_eval;
         out.t_eval = t_eval;
         out.t = NULL;
