@@ -247,6 +247,34 @@ def test_project_returns_a_state_or_a_configuration_unchanged_without_quaternion
     assert np.array_equal(dp.project(X), X) and np.array_equal(dp.project(X[:2]), X[:2])
 
 
+@pytest.mark.parametrize("quaternion, unit", [
+    ([1e200, 0, 0, 0], [1, 0, 0, 0]), ([1e-170, 0, 0, 0], [1, 0, 0, 0]),
+    ([0, -3e-160, 4e-160, 0], [0, -0.6, 0.8, 0]), ([1, 2, 3, 4], np.arange(1, 5) / 30 ** 0.5)])
+def test_quaternions_far_from_unit_length_are_normalised_without_overflow(compiled, quaternion,
+                                                                          unit):
+    """The squares of 1e200 overflowed (the quaternion became zero), those of 1e-170
+    underflowed (NaN); project is the C's <name>_project, which scales first."""
+    cm = compiled("tennis_racket")
+    (k, *_), = cm.quaternions
+    x = np.zeros(cm.nx)
+    x[k:k + 4] = quaternion
+    assert np.allclose(cm.project(x)[k:k + 4], unit, rtol=0, atol=1e-15)
+
+
+def test_a_quaternion_that_cannot_be_normalised_stops_the_run_as_projection(compiled):
+    cm = compiled("tennis_racket")
+    (k, *_), = cm.quaternions
+    x = np.zeros(cm.nx)
+    x[k:k + 4] = [np.inf, 0, 0, 0]
+    assert np.all(np.isnan(cm.project(x)[k:k + 4]))
+    system = cm.ffi.new("mg_system *")
+    getattr(cm.lib, f"{cm.name}_system")(system)
+    assert system.project(system.model, cm._ptr(cm.params()), cm._ptr(x)) != 0
+    x[k:k + 4] = [2, 0, 0, 0]
+    assert system.project(system.model, cm._ptr(cm.params()), cm._ptr(x)) == 0
+    assert list(x[k:k + 4]) == [1, 0, 0, 0]
+
+
 @pytest.mark.parametrize("res", [np.zeros((4, 3)), None])
 def test_energies_takes_a_result(dp, res):
     with pytest.raises(ArgumentTypeError, match="energies takes the Result of simulate"):

@@ -218,8 +218,9 @@ class CompiledModel(FrameKinematics):
         if x.shape not in ((self.nx,), (self.nq,)):
             raise ArgumentValueError(f"{self.name}: x must be a state, shape ({self.nx},), or a "
                                      f"configuration, shape ({self.nq},); got shape {x.shape}")
-        for quat in self.quaternions:
-            x[list(quat)] /= np.linalg.norm(x[list(quat)])
+        if self.quaternions:       # the C's own, bit for bit (and safe from overflow)
+            x = np.ascontiguousarray(x)
+            getattr(self.lib, f"{self.name}_project")(self._ptr(x))
         return x
 
     # -- constraints (modelgen.sim.assemble) ------------------------------------
