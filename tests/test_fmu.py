@@ -530,6 +530,48 @@ def test_misuse_of_a_co_simulation_instance_is_an_error_with_a_reason(fmus, tmp_
         cs.freeInstance()
 
 
+def test_a_last_step_of_a_few_ulps_is_taken_not_failed(fmus, tmp_path):
+    """An importer that sums 0.1 s steps and then steps to stopTime ends with a step
+    of 1.95e-14 s at t = 10, below the integrators' step control: it used to fail
+    (STEP_UNDERFLOW, the instance in the error state); it is one Euler step now, and
+    the run ends where one without the sliver does, to rounding."""
+    fmu = fmus("cart_pole")
+    runs = []
+    for steps in ([0.1] * 10, [0.1] * 9 + [0.1 - 3e-15, 3e-15]):
+        cs, log, vr = _instance(fmu, FMU2Slave, tmp_path / str(len(runs)))
+        try:
+            cs.setupExperiment(startTime=0.0)
+            cs.enterInitializationMode()
+            cs.setReal([vr["theta"]], [0.3])
+            cs.exitInitializationMode()
+            t = 0.0
+            for h in steps:
+                cs.doStep(t, h)
+                t += h
+            runs.append(np.array(cs.getReal([vr["x"], vr["theta"], vr["x_dot"],
+                                             vr["theta_dot"]])))
+        finally:
+            cs.freeInstance()
+    assert np.allclose(runs[1], runs[0], rtol=1e-12, atol=1e-12)
+    cs, log, vr = _instance(fmu, FMU2Slave, tmp_path / "sum")
+    try:
+        cs.setupExperiment(startTime=0.0)
+        cs.enterInitializationMode()
+        cs.exitInitializationMode()
+        t = 0.0
+        while t < 10.0:
+            h = min(0.1, 10.0 - t)
+            cs.doStep(t, h)                    # the last h is 1.95e-14
+            t += h
+        assert cs.getReal([vr["x"]])[0] == cs.getReal([vr["x"]])[0]
+        # a tolerance no integrator reaches is refused, not failed at every step
+        cs.reset()
+        assert "is below 2.22045e-15, which the integrators" in _fails(
+            log, lambda: cs.setupExperiment(tolerance=1e-30, startTime=0.0))
+    finally:
+        cs.freeInstance()
+
+
 def test_a_wrong_guid_is_refused_with_a_message(fmus, tmp_path):
     from fmpy import extract
     fmu = fmus("cart_pole")
