@@ -145,6 +145,26 @@ def test_four_bar_energy_and_constraints_hold_over_100_s(four_bar):
     assert drift <= 1e-8, drift
 
 
+def test_the_c_projection_onto_the_constraints_is_exported(four_bar):
+    """<name>_constrain, what the integrators call after every step, is public so a C
+    user's own stepper can call it too: a state 1e-3 off the loop comes back onto it
+    (f(q) and G qd to rounding); one it cannot bring back returns 1, x unchanged."""
+    cm = four_bar
+    constrain = getattr(cm.lib, f"{cm.name}_constrain")
+    q = cm.assemble(np.full(cm.nq, 0.5))
+    x = np.concatenate([q, cm.consistent_speeds(q, np.full(cm.n, 0.3))])
+    x[:cm.nq] += 1e-3
+    x[cm.nq:] += 1e-2
+    assert constrain(cm._ptr(cm.params()), cm._ptr(x)) == 0
+    q, qd = x[:cm.nq], x[cm.nq:]
+    assert np.max(np.abs(cm.constraint_residuals(q))) < 1e-12
+    assert np.max(np.abs(cm.constraint_jacobian(q) @ qd)) < 1e-12
+    far = np.concatenate([np.full(cm.nq, 0.5), np.full(cm.n, 0.3)])
+    before = far.copy()
+    assert constrain(cm._ptr(cm.params()), cm._ptr(far)) == 1
+    assert np.array_equal(far, before)
+
+
 def test_simulate_refuses_a_state_off_the_constraints(four_bar):
     with pytest.raises(modelgen.errors.SimulationError, match="assemble it first"):
         four_bar.simulate([0.3, 1.0, 2.0, 0.0, 0.0, 0.0], (0.0, 1.0))

@@ -256,7 +256,7 @@ def _exported(model_dir: Path) -> tuple:
     info = json.loads((model_dir / "manifest.json").read_text()).get("constraints")
     if not info:
         return EXPORTED
-    return EXPORTED + ("constraint_jacobian",) + \
+    return EXPORTED + ("constraint_jacobian", "constrain") + \
         (("constraint_residuals",) if info["holonomic"] else ())
 
 

@@ -25,7 +25,7 @@ import re
 from typing import NamedTuple
 
 #: Version of the C interface (model functions and mg_integrate), checked by the loader.
-ABI_VERSION = 8
+ABI_VERSION = 9
 #: Prefix of every constant, type and function of the model-independent C.
 PREFIX = "MG"
 
@@ -283,6 +283,7 @@ SIGNATURES = (
         "const double *p", "double *dQ_dq", "double *dQ_dv", "double *M")),
     Signature("system", "void", ("mg_system *system",)),
     Signature("x_inplace", "void", ("double *x",)),
+    Signature("p_x_inplace", "int", ("const double *p", "double *x")),
     Signature("integrate", "int", (
         "double t0", "double t1", "const double *x0", "const double *p",
         "const mg_inputs *inputs", "const mg_options *options", "mg_output *output",

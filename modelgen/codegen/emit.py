@@ -423,7 +423,7 @@ def template_context(*, name: str, description: str, model_hash: str, n: int,
     } | ({"api": constraint_api(name, n, nq, len(parameters), constraints)
           + public_api(name, n, len(parameters), len(inputs), len(bodies),
                        len(output_columns), has_jacobian, has_linearize, nq,
-                       rhs_solve="with dependent speeds (see below)")}
+                       rhs_solve="with dependent speeds (see below)", constrained=True)}
          if constraints else {})
 
 
@@ -451,13 +451,19 @@ def constraint_api(name: str, n: int, nq: int, n_p: int, c: dict) -> list:
                        "params": "const double *q, const double *p, double *out",
                        "doc": [f"Position constraint residuals f(q)[{c['mh']}] (zero on the",
                                f"constraints; m).  q[{nq}], p[{n_p}]."]})
+    out.append({"ret": "int", "name": f"{name}_constrain", "params": "const double *p, double *x",
+                "doc": ["Brings x[NX] back onto the constraints in place, as the integrators do",
+                        "after every step (call it after yours): quaternions normalised, q by",
+                        "Gauss-Newton, then the dependent speeds.  Returns 0, or 1 (x unchanged)",
+                        "when it does not converge."]})
     return out
 
 
 def public_api(name: str, n: int, n_p: int, n_u: int, n_b: int, n_y: int = 0,
                has_jacobian: bool = False, has_linearize: bool = False,
                nq: int | None = None, rhs_solve: str = "",
-               has_derivatives: bool = False, jacobian_method: str | None = None) -> list:
+               has_derivatives: bool = False, jacobian_method: str | None = None,
+               constrained: bool = False) -> list:
     """Prototypes and documentation of every exported function.
 
     The header is rendered from this one list, and the manifest records each
@@ -542,7 +548,8 @@ def public_api(name: str, n: int, n_p: int, n_u: int, n_b: int, n_y: int = 0,
         {"ret": "void", "name": f"{name}_project", "params": "double *x",
          "doc": ["Normalises the quaternions of the ball and free joints in x[NX] in place"
                  if nq != n else "Nothing to do: this model has no ball or free joints",
-                 "(the integrators call it after every step; call it after yours)."]},
+                 "(the integrators call it after every step; call it after yours)"
+                 + (f"; onto the constraints: {name}_constrain." if constrained else ".")]},
         {"ret": "void", "name": f"{name}_energy",
          "params": "const double *q, const double *qd, const double *p, double *out",
          "doc": ["out[0] kinetic energy, out[1] potential energy of gravity (zero at O)",
