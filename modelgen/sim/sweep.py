@@ -89,12 +89,8 @@ def grid(**axes) -> dict:
     """
     arrays = {}
     for name, values in axes.items():
-        a = _real_array(values, f"grid axis {name!r}")
-        if a.ndim != 1 or a.size == 0:
-            raise ArgumentValueError(f"grid axis {name!r} must be a non-empty 1-D array, got "
-                                     f"shape {a.shape}; fix: give the axis's values, e.g. "
-                                     f"{name}=np.linspace(0.5, 2.0, 16)")
-        arrays[name] = a
+        arrays[name] = _row(values, f"grid axis {name!r}", "a non-empty 1-D array",
+                            f"give the axis's values, e.g. {name}=np.linspace(0.5, 2.0, 16)")
     if not arrays:
         return {}
     mesh = np.meshgrid(*arrays.values(), indexing="ij")
@@ -114,6 +110,15 @@ def _real_array(values, what: str, example: str = "[0.5, 1.0, 2.0]") -> np.ndarr
         raise ArgumentTypeError(f"{what} must be a real number or an array of them, got "
                                 f"{values!r:.80}; fix: give numbers, e.g. {example}") \
             from None
+
+
+def _row(values, what: str, expected: str, fix: str) -> np.ndarray:
+    """``values`` as a non-empty 1-D float array (:func:`_real_array`), else an
+    ArgumentValueError saying it must be ``expected``."""
+    a = _real_array(values, what)
+    if a.ndim != 1 or a.size == 0:
+        raise ArgumentValueError(f"{what} must be {expected}, got shape {a.shape}; fix: {fix}")
+    return a
 
 
 # -- the model, on the driver and on the workers --------------------------------------
@@ -278,12 +283,9 @@ def _swept(values, argument: str, what: str, example: str) -> dict:
                                 f"{values!r:.80}; fix: give a dict, e.g. {argument}={example}")
     out = {}
     for name, value in values.items():
-        a = _real_array(value, f"{what} {name!r}")
-        if a.ndim != 1 or a.size == 0:
-            raise ArgumentValueError(f"{what} {name!r} must be one value or a non-empty 1-D "
-                                     f"array of one value per run, got shape {a.shape}; fix: "
-                                     f"e.g. {argument}={example}")
-        out[name] = a
+        out[name] = _row(value, f"{what} {name!r}",
+                         "one value or a non-empty 1-D array of one value per run",
+                         f"e.g. {argument}={example}")
     return out
 
 
