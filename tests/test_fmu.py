@@ -11,6 +11,7 @@ classes returns fmi2Error with a logged message and never crashes.
 from __future__ import annotations
 
 import ctypes
+import math
 import subprocess
 import zipfile
 
@@ -486,6 +487,12 @@ def test_misuse_of_a_model_exchange_instance_is_an_error_with_a_reason(fmus, tmp
         # a failed computation leaves the error state: diagnostics only, then reset
         assert "may not be called in the error state" in _fails(log, me.enterEventMode)
         assert me.getReal([vr["M"]]) == [-1.0]
+        # the whole state for diagnosis, derivatives included: NaN where the failure
+        # leaves them undefined, without failing (or logging) a second time
+        count = len(log.messages)
+        values = me.getReal([vr["theta"], vr["der(x)"], vr["der(x_dot)"]])
+        assert values[0] == 0.2 and math.isnan(values[1]) and math.isnan(values[2])
+        assert len(log.messages) == count
         # the NULL instance: fmi2Error, nothing to log through
         count = len(log.messages)
         with pytest.raises(FMICallException):
