@@ -277,6 +277,18 @@ def test_time_in_a_position_is_refused_where_it_is_read(key, entry):
     assert "time 't' is not allowed" in str(e) and "drive it with an action" in e.fix
 
 
+def test_time_in_a_hand_built_spec_is_refused_by_the_derivation():
+    """A ModelSpec built in Python skips the reader's rule: the derivation refuses t
+    in a base angle with the same fix."""
+    from modelgen.derive.kinematics import derive_kinematics
+    (q,) = S("q")
+    spec = ModelSpec("m", coordinates=("q",),
+                     bases=(BaseSpec("B", "E", 3, q + sympy.sin(TIME)),))
+    with pytest.raises(ModelError, match="prescribed motion") as err:
+        derive_kinematics(spec)
+    assert err.value.key == "bases.B.angle"
+
+
 def test_names_A_and_single_letters_are_legal_user_names():
     spec = parse_model("name: m\ncoordinates: [x, y]\nparameters: {A: 1, C: 2, e: 3}\n")
     assert spec.parameter_names == ("A", "C", "e")

@@ -574,10 +574,10 @@ class CompiledModel(FrameKinematics):
         if limit is None:            # implicit methods: A-stable
             return None
         x = self.state_vector(x0, "x0")
-        if not callable(u):
-            self._input_samples(u)      # a bad u is the caller's error, as in simulate
+        # a bad u is the caller's error, as in simulate; what fails below is the heuristic's
+        samples = None if u is None or callable(u) else self._input_samples(u)
         try:
-            J = self.jac(t0, x, _input_at(self, u, t0, x), p)
+            J = self.jac(t0, x, _input_at(u, samples, t0, x), p)
             lam = float(np.max(np.abs(np.linalg.eigvals(J))))
         except Exception:
             # a heuristic: whatever fails in it (a feedback u raising at t0, an infinite
@@ -685,13 +685,14 @@ def check_mass_matrix(cm: CompiledModel, samples: int = 3, seed: int = 0) -> Non
 STABILITY_LIMIT = {"rk4": 2.785, "dopri5": 3.31, "dop853": 6.0}
 
 
-def _input_at(cm, u, t, x):
-    """The input vector at (t, x) for any input form ``simulate`` accepts."""
-    if u is None:
-        return None
+def _input_at(u, samples, t, x):
+    """The input vector at (t, x) for any input form ``simulate`` accepts: a callable
+    ``u``, else its checked ``samples`` (:meth:`CompiledModel._input_samples`)."""
     if callable(u):
         return u(t, x)
-    times, values, hold = cm._input_samples(u)     # the samples the run was given
+    if samples is None:
+        return None
+    times, values, hold = samples
     if hold:
         k = int(np.clip(np.searchsorted(times, t, side="right") - 1, 0, len(times) - 1))
         return values[k]

@@ -374,10 +374,10 @@ def check_client(client, name: str = "client") -> None:
 
 
 def _client(client):
-    """``(client, owned)``: a Client from ``"local"``, an address or a Client."""
+    """``(client, owned)``: a Client from ``"local"``, an address or a Client (checked
+    by :func:`check_client` before the model was loaded)."""
     if client is None:
         return None, False
-    check_client(client)
     distributed = require("distributed")
     if isinstance(client, str):
         if client == "local":
