@@ -383,6 +383,12 @@ def _report(result, out: Path, name: str, args, title: str, conservative,
             relative = f" (relative {balance / energy.scale:.3e})" if energy.scale > 0 else ""
             print(f"work done: {work}; energy balance E - E(0) - sum of work: max "
                   f"{balance:.3e} J{relative}")
+            from modelgen.sim.mechanical_work import UNRESOLVED
+            if result.info.get("work_unresolved", 0.0) > UNRESOLVED:
+                print(f"modelgen: note: a power changes faster than the samples resolve, "
+                      f"so the work's quadrature may be off by up to "
+                      f"{result.info['work_quadrature_check']:.3e} J an interval; a finer "
+                      f"--sample separates it from the integration error", file=sys.stderr)
     if result.info.get("stability_warning"):
         print(f"modelgen: warning: {result.info['stability_warning']}", file=sys.stderr)
     if not result.success:

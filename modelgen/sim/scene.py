@@ -374,7 +374,8 @@ class Scene:
             balance = energy_balance(reached, res.energy.sum(axis=1), powers)
             res.work = balance.work
             res.info.update(energy_balance=balance.error,
-                            work_quadrature_check=balance.quadrature_check)
+                            work_quadrature_check=balance.quadrature_check,
+                            work_unresolved=balance.unresolved)
         for out in self.powers.values():        # recorded for the balance only
             if out not in s.outputs:
                 res.outputs.pop(out.name, None)
