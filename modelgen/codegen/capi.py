@@ -85,7 +85,8 @@ STATUSES = (
     Status(-5, "IMPLICIT_FAILED", "The implicit stage equations could not be solved in the step "
                                   "from t={t!r} (h={h:.3g}): the Newton iteration diverged or its "
                                   "matrix is singular; use a smaller step."),
-    Status(-6, "EVENT_ERROR", "The event function raised an exception at t={t!r}."),
+    Status(-6, "EVENT_ERROR", "An event function failed at t={t_fail!r}; the trajectory up to "
+                              "t={t!r} is kept."),
     Status(-7, "BAD_ARGUMENT", "Invalid argument to the C integrator."),
     Status(-8, "INTERRUPTED", "Interrupted at t={t!r}; the trajectory up to there is kept."),
     Status(-9, "INPUT_ERROR", "The input function u(t, x) failed at t={t!r}."),

@@ -143,7 +143,10 @@ def simulate(cm, x0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10
     sequence of them, with optional attributes ``terminal`` (bool, or the
     occurrence count at which to stop) and ``direction`` (a real number whose
     sign selects rising or falling zeros, 0 both), as in ``solve_ivp``; their zeros
-    are located on the dense output.  ``u`` is None, constant (vector, dict, or a
+    are located on the dense output.  A g that is zero at t0 itself does not
+    fire there (solve_ivp reports it at t0): an event is a sign change inside a
+    step, so a run released on its event surface (a ball at rest on the floor)
+    fires when it next crosses it.  ``u`` is None, constant (vector, dict, or a
     number for a one-input model), samples ``(times, values, "linear" | "hold")``,
     or a feedback callable ``u(t, x)`` (called from the C; any method) returning
     one of the constant forms.  ``p`` is None, a dict of
@@ -367,7 +370,9 @@ def _finish(cm, m, run: _Run, errors, inputs, sign, p_vec, x_start, max_steps, t
         message = constraint_message(cm, pivot, t_fail, stop[STOP_X:])
     elif status == DEAD_POINT and cm.manifest.get("constraints"):
         message = crossing_message(cm, t_reached, t_fail, stop[STOP_X:])
-    if failure is not None:
+    if isinstance(failure, _NonFiniteEvent):
+        message = f"{message.rstrip('.')}: {failure}."
+    elif failure is not None:
         message = f"{message.rstrip('.')}: {type(failure).__name__}: {failure}."
     if status < 0:
         message += _conditioning_note(cm, p_vec, x_start, stop[STOP_X:])
@@ -627,12 +632,24 @@ def simulate_batch(cm, X0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol
         if status[r] < 0:
             messages[-1] += _conditioning_note(cm, P_rows[r] if p_stride else P_rows, X0[r],
                                                stop[r, STOP_X:])
+        if status[r] == MAX_STEPS:
+            messages[-1] += _max_steps_note(max_steps, (sign * t0, sign * t1),
+                                            sign * float(stop[r, 0]))
+    short = np.flatnonzero(status == MAX_STEPS)
+    if short.size:
+        warnings.warn(f"{cm.name}: {short.size} of {n_runs} runs reached max_steps; run "
+                      f"{short[0]}: {messages[short[0]]}", RuntimeWarning, stacklevel=3)
     res = make_result(
         t=sign * times, y=np.ascontiguousarray(x_out.transpose(0, 2, 1)), state_names=cm.state_names,
         n_coordinates=cm.nq,
         status=status.astype(int), message=messages, method=m.name,
+        t_fail=np.where(status < 0, sign * stop[:, 2], np.nan),
         **{name: np.array([getattr(stats[r], name) for r in range(n_runs)], dtype=LONG)
            for name in STAT_NAMES if name != "pivot"})
+    # where each run stopped: a failed run's rows are NaN after the failure, and with
+    # the default t_eval=[t1] they would hold nothing of it
+    res.info["t_reached"] = sign * stop[:, 0]
+    res.info["x_reached"] = stop[:, STOP_X:].copy()
     if ny:
         res.outputs = {name: y_out[:, :, [cm.output_columns.index(c) for c in cols]]
                        for name, cols in cm.outputs.items()}

@@ -306,7 +306,9 @@ class DenseOutput:
     Degree 7 reproduces the continuous extensions of every method exactly
     (dop853's is of degree 7, dopri5's 4, rodas's and the Hermite of the
     fixed-step methods 3), so ``sol`` is as accurate as ``t_eval`` sampling.
-    ``sol(t)`` returns shape (n_states,) for a scalar t, else (n_states, len(t)).
+    ``sol(t)`` returns shape (n_states,) for a scalar t, else (n_states, len(t)),
+    NaN at times outside the steps the run took (scipy's ``OdeSolution``
+    extrapolates the end polynomials there, which past a failure is garbage).
     The quaternions of ball and free joints (``quaternions``: their state
     indices) are normalised, as the integrators normalise their samples.
     """
@@ -328,13 +330,15 @@ class DenseOutput:
         s = (ts - self.t[k]) / h
         diff = s[:, None] - self.NODES[None, :]                  # (n_t, 8)
         exact = diff == 0.0
-        with np.errstate(divide="ignore", invalid="ignore"):
+        with np.errstate(divide="ignore", invalid="ignore"):   # the NaN ones: see below
             c = self.WEIGHTS[None, :] / diff
-        c = np.where(exact.any(axis=1, keepdims=True), exact.astype(float), c)
-        c /= c.sum(axis=1, keepdims=True)
+            c = np.where(exact.any(axis=1, keepdims=True), exact.astype(float), c)
+            c /= c.sum(axis=1, keepdims=True)
         out = np.einsum("tj,tjn->nt", c, self.values[k])
         for quat in self.quaternions:
             out[list(quat)] /= np.linalg.norm(out[list(quat)], axis=0)
+        slack = 4 * np.finfo(float).eps * max(abs(self.t_min), abs(self.t_max))
+        out[:, (ts < self.t_min - slack) | (ts > self.t_max + slack)] = np.nan
         return out[:, 0] if np.ndim(t) == 0 else out
 
 

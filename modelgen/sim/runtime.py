@@ -9,6 +9,7 @@ callable with cached pointers and preallocated buffers.
 from __future__ import annotations
 
 import numbers
+import warnings
 from pathlib import Path
 from typing import NamedTuple
 
@@ -534,8 +535,11 @@ class CompiledModel(FrameKinematics):
                 res.message = f"{res.message} WARNING: {warning}"
                 res.info["stability_warning"] = warning
         if dense_output:
-            steps = res if t_eval is None else run(None)
-            res.sol = self._dense(steps, run)
+            # the same run again (to sample its steps): what it would warn, res has said
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", RuntimeWarning)
+                steps = res if t_eval is None else run(None)
+                res.sol = self._dense(steps, run)
         return res
 
     def _dense(self, steps, run) -> DenseOutput | None:

@@ -67,7 +67,7 @@ typedef struct {
     /* the step from t to t_new: size h, error norm err, the controller's memory */
     double t, t_new, h, hmax, err, facold, hacc, erracc, t_origin;
     long rows, found, attempts, n_fixed, done_steps;
-    int m, reject, last, dense_ready, fresh_jacobian, singular;
+    int m, reject, last, dense_ready, fresh_jacobian, singular, overflowed;
     /* the sign of the system's chart at the last accepted state (0: not known) */
     int orientation;
     /* the events: found in the step (sorted by time), counted, and where a terminal one cut */
@@ -141,7 +141,7 @@ static void mg_begin(mg_run *r, const double *x0, double *work)
     r->erracc = 1e-2;
     r->rows = r->found = r->attempts = r->n_fixed = r->done_steps = 0;
     r->m = 4;
-    r->reject = r->last = r->dense_ready = r->fresh_jacobian = r->singular = 0;
+    r->reject = r->last = r->dense_ready = r->fresh_jacobian = r->singular = r->overflowed = 0;
     r->orientation = 0;
     r->terminated = 0;
     memset(r->o.stats, 0, sizeof *r->o.stats);
@@ -324,22 +324,31 @@ static int mg_next_attempt(mg_run *r)
 {
     const mg_options *opt = r->opt;
     const mg_output *out = r->out;
+    int stop = 0;
     if (opt->interrupt && *opt->interrupt)
-        return MG_STATUS_INTERRUPTED;
-    if (r->attempts >= opt->max_steps)
-        return MG_STATUS_MAX_STEPS;
-    if ((!out->t_eval && r->rows >= out->capacity) ||
-        (r->n_events > 0 && r->found + r->n_events > out->events_capacity))
+        stop = MG_STATUS_INTERRUPTED;
+    else if (r->attempts >= opt->max_steps)
+        stop = MG_STATUS_MAX_STEPS;
+    else if ((!out->t_eval && r->rows >= out->capacity) ||
+             (r->n_events > 0 && r->found + r->n_events > out->events_capacity))
         return MG_STATUS_BUFFER_FULL;
-    if (!(0.1 * r->h > fabs(r->t) * MG_UROUND)) /* t + h would not differ from t */
-        return MG_STATUS_STEP_UNDERFLOW;
+    r->last = r->adaptive ? r->t + 1.01 * r->h >= r->t1 : r->done_steps + 1 >= r->n_fixed;
+    /* t + h would not differ from t (a step that ends at t1 always does: the last one
+     * of a span of a few ulps); after overflowed trial steps, the overflow's time is kept */
+    if (!stop && !r->last && !(0.1 * r->h > fabs(r->t) * MG_UROUND)) {
+        if (r->overflowed)
+            return MG_STATUS_NON_FINITE;
+        stop = MG_STATUS_STEP_UNDERFLOW;
+    }
+    if (stop) {
+        r->o.t_fail = r->t;
+        return stop;
+    }
     if (r->adaptive) {
-        r->last = r->t + 1.01 * r->h >= r->t1;
         if (r->last)
             r->h = r->t1 - r->t;
         r->t_new = r->last ? r->t1 : r->t + r->h;
     } else {
-        r->last = r->done_steps + 1 >= r->n_fixed;
         r->t_new = r->last ? r->t1 : r->t_origin + (double)(r->done_steps + 1) * r->h;
     }
     ++r->attempts;
@@ -375,7 +384,16 @@ static int mg_step(mg_run *r)
 }
 
 /* One attempted step: *accepted = 1, or 0 when it is to be tried again with the new
- * h (a singular Rosenbrock matrix, or an error above the tolerances); or a failure. */
+ * h (a singular Rosenbrock matrix, a stage that overflowed, or an error above the
+ * tolerances); or a failure.
+ * An adaptive step whose stages or result left the finite numbers is rejected like
+ * one with too large an error, its step cut by 5 (solve_ivp's smallest factor): a
+ * trial step can overshoot into a region the solution never reaches (a stiffening
+ * spring's exponential force after a long stretch of growing steps).  After
+ * MG_OVERFLOW_CUTS such cuts in a row, or when the step no longer moves t, the run
+ * stops as NON_FINITE at the last accepted state.  Not for a failure of rodas's
+ * Jacobian at that state itself, which a smaller step would meet again. */
+#define MG_OVERFLOW_CUTS 30
 static int mg_attempt(mg_run *r, int *accepted)
 {
     int status = mg_step(r);
@@ -387,16 +405,24 @@ static int mg_attempt(mg_run *r, int *accepted)
         r->reject = 1;
         return 0;
     }
+    if (!status && (!mg_finite(r->xn, r->nx) || !(r->err - r->err == 0.0))) {
+        r->o.t_fail = r->t_new;
+        status = MG_STATUS_NON_FINITE;
+    }
+    if (status == MG_STATUS_NON_FINITE && r->adaptive && r->overflowed < MG_OVERFLOW_CUTS &&
+        !(r->method == MG_METHOD_RODAS && !r->fresh_jacobian)) {
+        ++r->overflowed;
+        r->o.stats->nreject += 1;
+        r->h *= 0.2;
+        r->reject = 1;
+        return 0;
+    }
     if (status) {
         if (status == MG_STATUS_IMPLICIT_FAILED)
             r->o.t_fail = r->t;
         return status;
     }
     r->singular = 0;
-    if (!mg_finite(r->xn, r->nx) || !(r->err - r->err == 0.0)) {
-        r->o.t_fail = r->t_new;
-        return MG_STATUS_NON_FINITE;
-    }
     if (r->adaptive && r->err > 1.0) {
         r->o.stats->nreject += 1;
         r->reject = 1;
@@ -614,7 +640,7 @@ static int mg_advance(mg_run *r)
     for (i = 0; i < r->n_events; ++i)
         r->g_old[i] = r->g_new[i];
     ++r->done_steps;
-    r->fresh_jacobian = 0;
+    r->fresh_jacobian = r->overflowed = 0;
     if (r->adaptive) {
         double hnew = mg_next_step(r->method, 1, r->h, r->err, r->done_steps, &r->facold, &r->hacc,
                                    &r->erracc);

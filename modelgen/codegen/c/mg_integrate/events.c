@@ -7,7 +7,10 @@
 static int mg_ode_events(mg_ode *o, double t, const double *x, double *g)
 {
     o->stats->ngev += 1;
-    return o->events(o->ctx, t, x, g) ? MG_STATUS_EVENT_ERROR : 0;
+    if (!o->events(o->ctx, t, x, g))
+        return 0;
+    o->t_fail = t;
+    return MG_STATUS_EVENT_ERROR;
 }
 
 /* Event function `which` on the dense output at time tt. */

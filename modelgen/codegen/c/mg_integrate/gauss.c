@@ -57,8 +57,9 @@ static int mg_step_gauss(mg_ode *o, int s, double t, const double *x, const doub
         for (i = 0; i < s; ++i) {
             for (r = 0; r < nx; ++r)
                 xs[r] = x[r] + Z[i * nx + r];
+            /* an iterate that overflowed is a diverging iteration, halved like one */
             if ((status = mg_ode_f(o, t + c[i] * h, xs, F + i * nx)))
-                return status;
+                return status == MG_STATUS_NON_FINITE ? MG_STATUS_IMPLICIT_FAILED : status;
         }
         for (i = 0; i < s; ++i)
             for (r = 0; r < nx; ++r) {
