@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import re
 import threading
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -332,6 +333,15 @@ def test_energy_change_is_measured_against_the_run_not_a_zero_initial_energy():
     still = Result(np.arange(2.0), np.zeros((2, 2)), energy=np.zeros((2, 2)))
     assert still.energy_change().relative is None
     assert still.energy_change().describe() == "energy change 0.000e+00 J (the energies stayed zero)"
+
+
+def test_an_overflowed_energy_is_described_without_a_numpy_warning():
+    energy = np.array([[1e308, 1e308], [np.inf, 1.0], [np.inf, -np.inf]])
+    res = Result(np.arange(3.0), np.zeros((2, 3)), energy=energy)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        change = res.energy_change()
+    assert change.describe() == "energy change nan J (the energies overflowed)"
 
 
 def test_cli_prints_a_bounded_energy_change_for_a_block_released_from_rest(tmp_path, capsys):

@@ -121,6 +121,8 @@ class EnergyChange(NamedTuple):
     def describe(self, conservative: bool = False) -> str:
         """One line: the relative change (or error, for a conservative run) and its scale."""
         label = "energy error" if conservative else "energy change"
+        if not np.isfinite(self.change):
+            return f"{label} {self.change} J (the energies overflowed)"
         if self.relative is None:
             return f"{label} {self.change:.3e} J (the energies stayed zero)"
         return (f"relative {label} {self.relative:.3e} (against the largest |T| + |V| of "
@@ -202,9 +204,10 @@ class Result:
         if self.energy is None or not len(self.energy):
             raise ValueError("this result has no recorded energies")
         energy = np.asarray(self.energy, dtype=float)
-        total = energy.sum(axis=1)
-        change = float(total[-1] - total[0])
-        sizes = np.abs(energy).sum(axis=1)
+        with np.errstate(over="ignore", invalid="ignore"):   # an overflowed run: inf or nan
+            total = energy.sum(axis=1)
+            change = float(total[-1] - total[0])
+            sizes = np.abs(energy).sum(axis=1)
         scale = float(np.max(sizes[np.isfinite(sizes)], initial=0.0))
         return EnergyChange(change, scale, change / scale if scale > 0 else None)
 
