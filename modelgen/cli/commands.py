@@ -16,6 +16,7 @@ import time
 import warnings
 from pathlib import Path
 
+from modelgen.cli.kinematics_options import kinematics_line, kinematics_of
 from modelgen.codegen.capi import STATUS_BY_NAME
 from modelgen.codegen.options import BuildOptions
 from modelgen.errors import (ModelgenError,
@@ -135,7 +136,8 @@ def generate_command(args) -> int:
     _check_max_operations(args)
     # --floating-base and the inertia options act as the file is read; the rest says
     # what to build
-    options = BuildOptions(jacobian=args.jacobian, formulation=args.formulation)
+    options = BuildOptions(jacobian=args.jacobian, formulation=args.formulation,
+                           kinematics=kinematics_of(args))
     spec = as_spec(args.model, floating_base=args.floating_base, **_reading(args))
     t_load = time.perf_counter() - t0
     with _generation_progress(args, spec.name) as stages:
@@ -151,6 +153,8 @@ def generate_command(args) -> int:
     print(f"rhs        formulation {g.manifest['formulation']}")
     if g.manifest.get("jacobian_method"):
         print(f"jacobian   {_JACOBIAN_WORDS[g.manifest['jacobian_method']]}")
+    if g.manifest.get("kinematics"):
+        print(f"kinematics {kinematics_line(g.manifest['kinematics'])}")
     if g.manifest.get("constraints"):
         for line in _constraint_lines(spec, g.manifest["constraints"]):
             print(line)

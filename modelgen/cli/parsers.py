@@ -9,6 +9,7 @@ from modelgen.version import __version__
 from modelgen.cli.commands import (EXIT, MAX_OUTPUT_MB, bench_command, fmu_command,
                                    generate_command, hard_cases_command, import_command,
                                    linearize_command, simulate_command, sweep_command)
+from modelgen.cli.kinematics_options import add_kinematics_options
 
 
 def _bound(text: str) -> float:
@@ -130,6 +131,7 @@ def _generate_parser(sub) -> None:
                    help="build budget: refuse a model whose C would cost more than N "
                         "operations after CSE (sin, cos count 40), before compiling "
                         "(default: $MODELGEN_MAX_OPERATIONS, else 320000)")
+    add_kinematics_options(g)
     g.set_defaults(func=generate_command)
 
 

@@ -420,11 +420,12 @@ def template_context(*, name: str, description: str, model_hash: str, n: int,
                              if derivatives_pattern is not None else None),
         "capi": capi.context(),
         "constraints": constraints,
-    } | ({"api": constraint_api(name, n, nq, len(parameters), constraints)
-          + public_api(name, n, len(parameters), len(inputs), len(bodies),
-                       len(output_columns), has_jacobian, has_linearize, nq,
-                       rhs_solve="with dependent speeds (see below)", constrained=True)}
-         if constraints else {})
+    } | ({"api": _before_integration(
+        constraint_api(name, n, nq, len(parameters), constraints)
+        + public_api(name, n, len(parameters), len(inputs), len(bodies),
+                     len(output_columns), has_jacobian, has_linearize, nq,
+                     rhs_solve="with dependent speeds (see below)", constrained=True),
+        kinematics, name)} if constraints else {})
 
 
 def constraint_context(m: int, mh: int, dependent, independent, n: int,

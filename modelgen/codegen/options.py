@@ -19,7 +19,7 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass, field, fields, replace
 
-from modelgen.errors import ModelError
+from modelgen.errors import ArgumentTypeError, ModelError
 
 #: how ``<name>_rhs`` computes q_ddot: ``crba`` builds A and b = tau - h and
 #: solves A q_ddot = b (LDL^T in C); ``aba`` runs the articulated-body
@@ -36,7 +36,13 @@ REFERENCES = ("local", "world", "local_world_aligned")
 class KinematicsOptions:
     """Which kinematic quantities to generate (``BuildOptions.kinematics``).
 
+    Checked as it is made: ``frames`` a list or tuple of names (one name, a
+    string, is one frame), the flags ``True`` or ``False`` (not ``"false"``, not
+    1), ``reference`` one of :data:`REFERENCES`; :meth:`of` refuses unknown keys.
+
     >>> KinematicsOptions.of({"frames": ["tool0"], "com": True}).frames
+    ('tool0',)
+    >>> KinematicsOptions(frames="tool0").frames
     ('tool0',)
     """
     #: frame names (the model's ``frames:``): ``<name>_frame_poses``,
@@ -56,29 +62,54 @@ class KinematicsOptions:
     centroidal: bool = False
 
     def __post_init__(self):
-        object.__setattr__(self, "frames", tuple(self.frames))
+        object.__setattr__(self, "frames", _frame_names(self.frames))
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if isinstance(f.default, bool) and not isinstance(value, bool):
+                raise ArgumentTypeError(
+                    f"kinematics option {f.name!r} must be True or False, got {value!r}; "
+                    f"fix: {f.name}=True or {f.name}=False")
+        if self.reference not in REFERENCES:
+            raise ModelError(f"unknown frame reference {self.reference!r}",
+                             key="kinematics.reference", fix="use one of " + ", ".join(REFERENCES))
 
     @classmethod
     def of(cls, value) -> KinematicsOptions | None:
-        """A KinematicsOptions from itself, a mapping of its fields, or a list of frame
-        names; None for None or nothing asked."""
-        if value is None or isinstance(value, cls):
-            made = value
-        elif isinstance(value, dict):
+        """:meth:`parse`, or None when nothing is asked (no frame, no com, no
+        centroidal map)."""
+        made = cls.parse(value)
+        return made if made.frames or made.com or made.centroidal else None
+
+    @classmethod
+    def parse(cls, value) -> KinematicsOptions:
+        """A KinematicsOptions from itself, a mapping of its fields, a list of frame
+        names or one name; the defaults for None."""
+        if value is None:
+            return cls()
+        if isinstance(value, cls):
+            return value
+        if isinstance(value, dict):
             known = [f.name for f in fields(cls)]
             unknown = [k for k in value if k not in known]
             if unknown:
-                raise TypeError(f"unknown kinematics option {unknown[0]!r}; the options are "
-                                + ", ".join(known))
-            made = cls(**value)
-        elif isinstance(value, (list, tuple)):
-            made = cls(frames=tuple(value))
-        else:
-            raise TypeError(f"kinematics must be a KinematicsOptions, a dict or a list of "
-                            f"frame names, not {type(value).__name__}")
-        if made is not None and not (made.frames or made.com or made.centroidal):
-            return None
-        return made
+                raise ArgumentTypeError(f"unknown kinematics option {unknown[0]!r}; fix: use "
+                                        "the options " + ", ".join(known))
+            return cls(**value)
+        if isinstance(value, (list, tuple, str)):
+            return cls(frames=value)
+        raise ArgumentTypeError(f"kinematics must be a KinematicsOptions, a dict or a list "
+                                f"of frame names, not {type(value).__name__}; fix: "
+                                "kinematics={'frames': ['tool0'], 'com': True}")
+
+
+def _frame_names(frames) -> tuple:
+    """``frames`` as a tuple of names: one name (a string) is one frame."""
+    if isinstance(frames, str):
+        return (frames,)
+    if not (isinstance(frames, (list, tuple)) and all(isinstance(f, str) for f in frames)):
+        raise ArgumentTypeError(f"kinematics option 'frames' must be a frame name or a list "
+                                f"of frame names, got {frames!r}; fix: frames=['tool0', ...]")
+    return tuple(frames)
 
 
 @dataclass(frozen=True)

@@ -15,6 +15,10 @@ with the frame's pose, so every Pinocchio convention is available:
 Rows of 6-vectors and 6 x nv Jacobians: linear first, then angular, as
 Pinocchio's.  :class:`FrameKinematics` is a base class of
 :class:`~modelgen.sim.runtime.CompiledModel`.
+
+The quaternions of ball and free joints in ``q`` are taken as ``simulate``
+takes them in ``x0``: a zero one is refused, the others normalised (the
+rotation of ``s * u`` is that of the unit quaternion ``u``).
 """
 from __future__ import annotations
 
@@ -22,6 +26,7 @@ import numpy as np
 
 from modelgen.codegen.options import REFERENCES
 from modelgen.errors import SimulationError
+from modelgen.sim import integrate
 
 
 #: the routines that take the speeds v after q
@@ -70,6 +75,11 @@ class FrameKinematics:
                    "centroidal_momentum_matrix": "kinematics={..., 'centroidal': True}"
                    }.get(routine, "kinematics={'frames': [...]}"))
         q = self._vector(q, self.nq, "q")
+        if self.quaternions:
+            # the C reads a quaternion as a rotation only when it is a unit one: as
+            # simulate does, refuse a zero one and normalise the others
+            integrate._check_quaternions(self, q[None, :], "q")
+            q = self.project(q)
         out = np.empty(shape)
         args = [self._ptr(q)]
         if routine in SPEED_ROUTINES:       # v=None is no speeds, not zero speeds

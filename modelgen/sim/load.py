@@ -11,6 +11,7 @@ inside the functions below, only when the index has no verified build.
 from __future__ import annotations
 
 import importlib
+from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -113,8 +114,9 @@ def load(source, out_dir=None, *, force: bool = False, options: BuildOptions | N
     ``kinematics`` (a :class:`~modelgen.codegen.options.KinematicsOptions` or a dict
     of its fields) generates frame poses, velocities, Jacobians and bias
     accelerations, the centre of mass and the centroidal map
-    (:mod:`modelgen.sim.kinematics`); ``frames=[...]`` is short for
-    ``kinematics={"frames": [...]}``.
+    (:mod:`modelgen.sim.kinematics`); ``frames=[...]`` adds frames to
+    ``kinematics={"frames": [...]}`` (the two lists joined, each frame once, those of
+    ``kinematics`` first), and alone is short for it.
     With ``derivatives=True`` the analytical derivatives ``<name>_derivatives`` and
     ``<name>_inverse_dynamics_derivatives`` are generated too, for
     :meth:`CompiledModel.derivatives` and :meth:`CompiledModel.inverse_dynamics_derivatives`.
@@ -151,18 +153,18 @@ def _options(options):
 
 
 def _kinematics(kinematics, frames):
-    """The ``kinematics`` option of :func:`load`'s keywords (None: not given)."""
+    """The ``kinematics`` option of :func:`load`'s keywords (None: not given): the
+    frames of ``frames=`` join those of ``kinematics``, after them, each once."""
     if frames is None:
         return kinematics
     if isinstance(frames, str):
         frames = [frames]
     if not (isinstance(frames, (list, tuple)) and all(isinstance(f, str) for f in frames)):
         raise ArgumentTypeError(f"frames must be a frame name or a list of frame names, got "
-                                f"{frames!r}")
-    merged = dict(kinematics) if isinstance(kinematics, dict) else \
-        {} if kinematics is None else dict(vars(KinematicsOptions.of(kinematics)))
-    merged["frames"] = tuple(frames)
-    return KinematicsOptions.of(merged)
+                                f"{frames!r}; fix: frames=['tool0', ...]")
+    given = KinematicsOptions.parse(kinematics)
+    joined = tuple(dict.fromkeys(given.frames + tuple(frames)))   # each once, in order
+    return KinematicsOptions.of(replace(given, frames=joined))
 
 
 def _fast_key(source, options: BuildOptions, out_dir) -> str | None:
