@@ -297,6 +297,18 @@ def test_load_refuses_frames_that_are_not_names(build_root):
         modelgen.load(MODELS / "double_pendulum.yaml", build_root / "dp_args_opt", frames=3)
 
 
+@pytest.mark.parametrize("flag, value", [("jacobian", "no"), ("derivatives", 1),
+                                         ("linearize", "yes")])
+def test_load_refuses_yes_no_options_that_are_not_booleans(build_root, flag, value):
+    # "no" is truthy: it used to build the Jacobian
+    import modelgen
+    with pytest.raises(ArgumentTypeError, match=f"{flag} must be True or False"):
+        modelgen.load(MODELS / "double_pendulum.yaml", build_root / "dp_args_opt",
+                      **{flag: value})
+    from modelgen.codegen.options import BuildOptions
+    assert BuildOptions(jacobian=np.bool_(True)).jacobian is True
+
+
 def test_a_bad_build_budget_is_refused_on_a_cache_hit_too(dp, build_root):
     """``dp`` is built: the load below is an index hit, which never reached the build's
     own check of max_operations."""

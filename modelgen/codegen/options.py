@@ -102,6 +102,17 @@ class KinematicsOptions:
                                 "kinematics={'frames': ['tool0'], 'com': True}")
 
 
+def _flag(name: str, value) -> bool:
+    """A yes/no option: True or False (or numpy's), never a truthy string such as
+    ``"no"``."""
+    if isinstance(value, bool):
+        return value
+    if getattr(value, "dtype", None) is not None and value.dtype.kind == "b" and not value.shape:
+        return bool(value)
+    raise ArgumentTypeError(f"{name} must be True or False, got {value!r}; fix: {name}=True "
+                            f"or {name}=False")
+
+
 def _frame_names(frames) -> tuple:
     """``frames`` as a tuple of names: one name (a string) is one frame."""
     if isinstance(frames, str):
@@ -165,7 +176,7 @@ class BuildOptions:
         object.__setattr__(self, "kinematics", KinematicsOptions.of(self.kinematics))
         for f in fields(self):
             if isinstance(f.default, bool):
-                object.__setattr__(self, f.name, bool(getattr(self, f.name)))
+                object.__setattr__(self, f.name, _flag(f.name, getattr(self, f.name)))
         if self.linearize:
             object.__setattr__(self, "jacobian", True)
 
