@@ -58,8 +58,8 @@ def test_a_scene_is_shipped_for_every_model():
     models = {load_scene(path).full_model.name for path in SCENE_FILES}
     assert models == {path.stem for path in [*MODELS.glob("*.yaml"),
                                              *MODELS.glob("robots/*.yaml")]}
-    assert {"dp_free", "dp_damped", "cart_pole_push", "spring_chain", "spring_chain_stiff",
-            "block_friction", "arm7_damped"} <= {path.stem for path in SCENE_FILES}
+    assert {"dp_free", "dp_damped", "cart_pole_push", "spring_chain_release",
+            "spring_chain_stiff", "block_friction", "arm7_damped"} <= {path.stem for path in SCENE_FILES}
 
 
 @pytest.mark.parametrize("path", SCENE_FILES, ids=lambda p: p.stem)

@@ -264,7 +264,7 @@ def test_stiffness_verdict_comes_from_the_jacobian_not_the_effect_kind(scene):
     stiff = scene("spring_chain_stiff")
     assert stiff.stiffness() > 1e7
     assert "handled by rodas" in stiff.summary()
-    soft = scene("spring_chain")
+    soft = scene("spring_chain_release")
     assert "not stiff for rk4" in soft.summary()
     block = scene("block_friction")
     lam, card = block.stiffness(), block.card
@@ -291,6 +291,7 @@ def test_rk4_beyond_its_stability_limit_is_warned_not_silent(scene, tmp_path):
     import sys
     proc = subprocess.run([sys.executable, "-m", "modelgen", "simulate",
                            str(SCENES / "block_friction.yaml"), "--dt", str(2 * 2.785 / lam),
+                           "--sample", str(2 * 2.785 / lam),
                            "--init", f"{block.model.state_names[-1]}=0",
                            "--t-end", "0.5", "--no-plot", "-o", str(tmp_path / "o"),
                            "--build-dir", str(tmp_path / "b")], capture_output=True, text=True)

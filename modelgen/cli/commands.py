@@ -410,10 +410,14 @@ def _method(name):
         raise ModelgenError(f"--method: {exc}") from None
 
 
-def _simulate_scene(args) -> int:
-    from dataclasses import replace
+#: the command line's names of a scene's run settings, for the messages of its overrides
+_SCENE_FLAGS = {"time.end": "--t-end", "time.sample": "--sample", "integrator.step": "--dt",
+                "integrator.method": "--method"}
 
-    from modelgen.sim.scene import Scene, read_card
+
+def _simulate_scene(args) -> int:
+    from modelgen.model.scene_timing import Spelling
+    from modelgen.sim.scene import Scene, read_card, remove_stale_products, with_settings
 
     def progress(message):
         if not args.quiet:
@@ -433,15 +437,12 @@ def _simulate_scene(args) -> int:
     changes = {k: v for k, v in (("t_end", args.t_end), ("step", args.dt),
                                  ("sample_dt", args.sample)) if v is not None}
     if args.method is not None:
-        method = _method(args.method)
-        changes["method"] = method.name
-        if not method.adaptive and args.dt is None and card.step is None:
-            raise ModelgenError(f"--method {method.name} has a fixed step; fix: give --dt")
-    if changes.get("t_end", card.t_end) <= card.t_start:
-        raise ModelgenError(f"--t-end must be after the scene's start {card.t_start:g} s")
-    card = replace(card, **changes)
-    _check_output_size(args, _samples(card.t_start, card.t_end, card.sample_dt),
+        changes["method"] = _method(args.method).name
+    _check_output_size(args, _samples(card.t_start, changes.get("t_end", card.t_end),
+                                      changes.get("sample_dt", card.sample_dt)),
                        _columns_of(card, card.outputs))
+    # by the scene file's rules: a fixed step divides the sample interval, and more
+    card = with_settings(card, Spelling(_SCENE_FLAGS, "{name} {value}"), **changes)
     with _generation_progress(args, card.name) as stages:
         # the run settings changed above do not change the build: the files still say it
         scene = Scene(card, args.build_dir, progress=progress, stages=stages,
@@ -452,7 +453,12 @@ def _simulate_scene(args) -> int:
     progress(f"{card.name}: integrating (after {time.perf_counter() - t0:.2f} s of "
              f"set-up)")
     with _simulation_progress(args, card.name, card.t_start, card.t_end) as advance:
-        result = _quietly(scene.run, p=p, x0=x0, max_steps=args.max_steps, progress=advance)
+        result = _quietly(scene.run, p=p, x0=x0, max_steps=args.max_steps, progress=advance,
+                          max_output_mb=args.max_output_mb or MAX_OUTPUT_MB)
+    # a plot or animation of an earlier run would otherwise sit beside this run's tables
+    written = ((".png",) if not args.no_plot else ()) + (
+        (f".{args.animate_format}", ".html") if args.animate else ())
+    remove_stale_products(args.output, card.name, written)
     return _report(result, Path(args.output), card.name, args, f"scene {card.name}",
                    scene.conservative, animation=(lambda: scene.spec.model, scene.model, p))
 

@@ -27,7 +27,8 @@ _LAZY = {"Model": "api", "load_model": "api", "parse_model": "api", "API_FILE": 
          "spec_to_yaml": "writer"}
 
 __all__ = ["Model", "ModelSpec", "SceneSpec", "load_model", "parse_model", "spec_to_yaml",
-           "check_name", "load_scene", "parse_scene", "as_spec", "is_scene_file", "API_FILE",
+           "check_name", "load_scene", "parse_scene", "as_spec", "is_scene_file", "is_scene_text",
+           "API_FILE",
            "EFFECT_TYPES", "EFFECT_KINDS", "EFFECT_FIELD_ROLES", "STIFF_KINDS",
            "CONSERVATIVE_KINDS", "load_urdf", "load_mjcf"]
 
@@ -81,10 +82,47 @@ def as_spec(source, *, floating_base: bool = False, inertia: str = "physical",
                     "give a YAML path, a modelgen.model.Model or a ModelSpec")
 
 
+#: a block mapping's top-level key ``scene``, plain or quoted, at the start of a line
+_SCENE_KEY = re.compile(r"""^(?:scene|"scene"|'scene')[ \t]*:(?=[ \t\r\n]|\Z)""", re.MULTILINE)
+
+
 def is_scene_file(path) -> bool:
-    """True if a YAML file is a scene (it has a top-level ``scene:`` key)."""
+    """True if a YAML file is a scene (it has a top-level ``scene:`` key); see
+    :func:`is_scene_text`."""
     try:
-        text = Path(path).read_text()
+        text = Path(path).read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError):
         return False
-    return re.search(r"^scene\s*:", text, re.MULTILINE) is not None
+    return is_scene_text(text)
+
+
+def is_scene_text(text: str) -> bool:
+    """True if YAML text has a top-level ``scene`` key: a plain or quoted key at the
+    start of a line (after a UTF-8 byte order mark, if any), or a key of a document
+    that is one flow mapping (``{scene: s, model: m.yaml, ...}``) or starts with an
+    explicit key, read with the safe YAML reader (which a scene run from its
+    cached card never imports otherwise)."""
+    text = text.removeprefix("\ufeff")
+    if _SCENE_KEY.search(text):
+        return True
+    if "scene" not in text or _first_token(text) not in ("{", "?"):
+        return False
+    from modelgen.errors import ModelError
+    from modelgen.model.reader import compose
+    try:
+        data, _ = compose(text, "<text>")
+    except ModelError:
+        return False
+    return isinstance(data, dict) and "scene" in data
+
+
+def _first_token(text: str) -> str:
+    """The first character of a YAML document's content, past blank and comment lines,
+    directives and a ``---`` marker ('' for none)."""
+    for line in text.splitlines():
+        content = line.strip()
+        if content.startswith("---"):
+            content = content[3:].strip()
+        if content and not content.startswith(("#", "%")):
+            return content[0]
+    return ""

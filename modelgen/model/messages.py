@@ -20,25 +20,41 @@ __all__ = ["API_FILE", "describe", "listing", "article", "join_and", "closest", 
 API_FILE = "<api>"
 
 
+#: the longest value :func:`describe` shows whole [characters]; a longer one is cut
+SHOWN_LENGTH = 80
+
+
 def describe(value) -> str:
-    """A value's type (and value, when short) for messages.
+    """A value's type and value for messages; a long value cut to its start and its
+    length (a file read by mistake would otherwise fill the message).
 
     >>> describe(3), describe([1, 2]), describe(None)
     ('the number 3', 'a list of 2 items', 'null')
+    >>> describe("x" * 100)
+    "the string 'xxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxx...' (100 characters)"
     """
     if value is None:
         return "null"
     if isinstance(value, bool):
         return f"the boolean {str(value).lower()}"
     if isinstance(value, numbers.Number):
-        return f"the number {value!r}"
+        return f"the number {_shown(repr(value))}"
     if isinstance(value, str):
+        if len(value) > SHOWN_LENGTH:
+            return f"the string {value[:SHOWN_LENGTH - 20] + '...'!r} ({len(value)} characters)"
         return f"the string {value!r}"
     if isinstance(value, Mapping):
         return "a mapping"
     if isinstance(value, (list, tuple)):
         return f"a list of {len(value)} item" + ("" if len(value) == 1 else "s")
     return f"a {type(value).__name__}"
+
+
+def _shown(text: str) -> str:
+    """``text`` whole when short, else its start and its length."""
+    if len(text) <= SHOWN_LENGTH:
+        return text
+    return f"{text[:SHOWN_LENGTH - 20]}... ({len(text)} characters)"
 
 
 def listing(names, limit: int = 10) -> str:

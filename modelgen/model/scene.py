@@ -16,15 +16,16 @@ frequencies.
 """
 from __future__ import annotations
 
-import math
 import os
 from dataclasses import replace
 
 from modelgen.errors import ModelError
+from modelgen.model import is_scene_text
 from modelgen.model.builder import ModelBuilder, replay
 from modelgen.model.messages import article, closest, describe, listing
-from modelgen.model.names import check_name
+from modelgen.model.names import NAME_RE, check_name
 from modelgen.model.reader import compose, read_text
+from modelgen.model.scene_timing import timing_problem
 from modelgen.model.sections import (builder_from_text, check_top_level, load_effects,
                                      load_parameters)
 from modelgen.model.spec import (CANONICAL_BASE, CANONICAL_POINT, EFFECT_KINDS, OUTPUT_KINDS,
@@ -54,6 +55,9 @@ TOP_LEVEL_KEYS = ("scene", "description", "model", "add_parameters", "add_effect
                   "kinematics")
 #: Keys of a scene's ``kinematics:`` (the fields of the build's KinematicsOptions).
 KINEMATICS_KEYS = ("frames", "reference", "bias_acceleration", "com", "centroidal")
+#: Values of ``kinematics.reference``; equal to modelgen.codegen.options.REFERENCES
+#: (a test keeps them so: this stage does not import the code generator).
+KINEMATICS_REFERENCES = ("local", "world", "local_world_aligned")
 TIME_KEYS = ("start", "end", "sample")
 INTEGRATOR_KEYS = ("method", "step", "rtol", "atol")
 SIGNAL_KEYS = ("times", "values", "interpolation")
@@ -72,7 +76,6 @@ _ARG_ROLE = {"point": "point", "from": "point", "base": "base", "relative_to": "
              "constraint": "constraint"}
 #: Name of the top-level gravity as an effect.
 GRAVITY = "gravity"
-_REL_TOL = 1e-9
 
 
 def load_scene(path) -> SceneSpec:
@@ -174,13 +177,19 @@ class _SceneReader:
         load_effects(full_ctx, data.get("add_effects"), "add_effects")
         full = full_ctx.build()
         self.full, self.full_ctx = full, full_ctx
+        if name == full.name:
+            stem = os.path.splitext(os.path.basename(self.file))[0]
+            other = stem if stem != name and NAME_RE.match(stem) else f"{name}_scene"
+            raise self.error(f"the scene has its model's name '{name}', so its generated "
+                             "files would replace the model's own", "scene",
+                             f"name the scene after what it runs, e.g. scene: {other}")
 
         kinds = _effect_kinds(full)
         selected = self.selected_effects(kinds)
         reduced = self.reduced_model(name, description, selected)
         initial = self.initial_state(full)
         t_start, t_end, sample = self.time_span()
-        method, step, rtol, atol = self.integrator(sample, t_end - t_start)
+        method, step, rtol, atol = self.integrator(t_start, t_end, sample)
         inputs = self.inputs(reduced, selected)
         outputs = self.outputs(reduced, selected, kinds)
         kinematics = self.kinematics(reduced)
@@ -202,6 +211,11 @@ class _SceneReader:
                              "model", "write the model file's path relative to the scene "
                              "file, e.g. model: ../double_pendulum.yaml")
         path = os.path.normpath(os.path.join(self.base_dir, value))
+        if os.path.exists(path) and not os.path.isfile(path):
+            raise self.error(f"'{path}' is not a model file but a "
+                             f"{'folder' if os.path.isdir(path) else 'special file'}",
+                             "model", "give the path of a model file relative to the scene "
+                             "file, e.g. model: ../double_pendulum.yaml")
         if not os.path.isfile(path):
             folder = os.path.dirname(path)
             known = sorted(f for f in os.listdir(folder) if f.endswith((".yaml", ".yml"))) \
@@ -213,9 +227,22 @@ class _SceneReader:
                 fix = f"give the model's path relative to the scene file's folder " \
                       f"{self.base_dir or '.'}"
             raise self.error(f"model file '{path}' does not exist", "model", fix)
-        file, text = read_text(path)
-        ctx = builder_from_text(text, file)
-        ctx.build()                        # the model alone must be valid
+        try:
+            file, text = read_text(path)
+            if is_scene_text(text):
+                raise self.error(f"'{path}' is a scene file, not a model", "model",
+                                 "name the model file the scene runs (a file that starts "
+                                 "with 'name: <model name>')")
+            ctx = builder_from_text(text, file)
+            ctx.build()                        # the model alone must be valid
+        except ModelError as exc:
+            if exc.file == self.file:
+                raise
+            where = ":".join(str(part) for part in (exc.file, exc.line) if part is not None)
+            where += f": {exc.key}" if exc.key else ""
+            raise self.error(f"the model file is not valid: {where}: {exc.problem}", "model",
+                             "name another model file, or correct that one"
+                             + (f": {exc.fix}" if exc.fix else "")) from None
         return ctx
 
     def selected_effects(self, kinds: dict) -> tuple:
@@ -351,9 +378,10 @@ class _SceneReader:
                              "e.g. sample: 0.01")
         return start, end, sample
 
-    def integrator(self, sample: float, span: float) -> tuple:
-        """(method, step, rtol, atol); fixed-step methods sample at whole steps, and take
-        steps no longer than the ``span`` (t_end - t_start)."""
+    def integrator(self, t_start: float, t_end: float, sample: float) -> tuple:
+        """(method, step, rtol, atol), checked with the time span by the rules of
+        :func:`~modelgen.model.scene_timing.timing_problem` (a fixed step samples at
+        whole steps, is no longer than the span and takes a bounded number of steps)."""
         settings = self.mapping("integrator", "{method: rk4, step: 0.001}")
         self.check_keys(settings, INTEGRATOR_KEYS, "integrator", "integrator")
         given = settings.get("method", DEFAULT_METHOD)
@@ -377,30 +405,12 @@ class _SceneReader:
                 raise self.error(f"{key} must be positive but is {value!r}", f"integrator.{key}",
                                  f"give a relative/absolute tolerance, e.g. {key}: {default!r}")
             tolerances.append(value)
-        if method in FIXED_STEP_METHODS:
-            self.check_step_length(step, sample, span)
-            every = round(sample / step)
-            if every < 1 or abs(every * step - sample) > _REL_TOL * sample:
-                nearest = float(f"{max(every, 1) * step:.12g}")
-                raise self.error(f"the sample interval {sample!r} is not a whole multiple of "
-                                 f"the step {step!r}", "time.sample",
-                                 f"samples are taken at steps: use e.g. sample: {nearest!r}, "
-                                 "or change integrator.step")
+        problem = timing_problem(t_start, t_end, sample, method in FIXED_STEP_METHODS, step)
+        if problem is not None:
+            # a default step (no integrator key) is blamed on the time span it must fit
+            key = problem.key if self.ctx.line_of(problem.key) is not None else "time"
+            raise self.error(problem.problem, key, problem.fix)
         return (method, step, *tolerances)
-
-    def check_step_length(self, step: float, sample: float, span: float) -> None:
-        """A fixed step longer than the whole time span: the fix is a shorter step, not a
-        sample interval as long as that step (which no run of the span reaches)."""
-        if step <= span:
-            return
-        # a step that divides the sample interval and is at most a hundredth of the span
-        # (past a 1e12 ratio, or below 1, the hundredth itself or the sample interval)
-        ratio = sample / (span / 100)
-        shorter = sample / math.ceil(ratio) if 1 < ratio < 1e12 else min(sample, span / 100)
-        raise self.error(f"the step {step!r} is longer than the time span {span!r} s",
-                         "integrator.step", f"give a step that divides time.sample, e.g. "
-                         f"step: {float(f'{shorter:.12g}')!r} (a hundredth of the span or "
-                         f"less)")
 
     # -- inputs ------------------------------------------------------------------------
     def inputs(self, reduced: ModelSpec, selected: tuple) -> tuple:
@@ -478,6 +488,7 @@ class _SceneReader:
             if not isinstance(entry, dict):
                 raise self.error(f"expected a mapping but got {describe(entry)}", key,
                                  f"write it like '{example}'")
+            self.check_output_name(name, key, entry, reduced)
             found = [k for k in entry if k in OUTPUT_KINDS]
             kinds_text = "output kinds: " + ", ".join(OUTPUT_KINDS)
             if not found:
@@ -518,10 +529,25 @@ class _SceneReader:
             result.append(OutputSpec(name, kind, values))
         return tuple(result)
 
+    def check_output_name(self, name: str, key: str, entry: dict, reduced: ModelSpec) -> None:
+        """An output name is none of the result's other names: the time, a state, an
+        energy column (the table's columns and ``res[name]`` would be ambiguous)."""
+        state = reduced.coordinates + reduced.speeds
+        taken = ("the time" if name == "t" else
+                 "a state of the model" if name in state else
+                 "a column of the recorded energies" if name in ENERGIES else None)
+        if taken is None:
+            return
+        kind = next((k for k in entry if k in OUTPUT_KINDS), "out")
+        other = f"{name}_{kind}" if kind != name else f"{name}_out"
+        raise self.error(f"output name '{name}' is also {taken}: the results' columns "
+                         f"and res['{name}'] would be ambiguous", key,
+                         f"rename the output, e.g. '{other}' (t, the states "
+                         f"{listing(state)} and {', '.join(ENERGIES)} are taken)")
+
     def kinematics(self, reduced: ModelSpec) -> tuple:
         """``kinematics: {frames: [tool0], reference: local, com: true, ...}`` as
-        ((key, value), ...) in :data:`KINEMATICS_KEYS` order; the reference is
-        checked where it is generated."""
+        ((key, value), ...) in :data:`KINEMATICS_KEYS` order."""
         if self.data.get("kinematics") is None:
             return ()
         example = "{frames: [tool0], reference: local_world_aligned, com: true}"
@@ -548,6 +574,11 @@ class _SceneReader:
                 if not isinstance(value, str):
                     raise self.error(f"expected a name but got {describe(value)}", key,
                                      "write local, world or local_world_aligned")
+                if value not in KINEMATICS_REFERENCES:
+                    close = closest(value, KINEMATICS_REFERENCES)
+                    raise self.error(f"unknown reference '{value}'", key,
+                                     (f"did you mean '{close}'? " if close else "")
+                                     + "write local, world or local_world_aligned")
             elif not isinstance(value, bool):
                 raise self.error(f"expected true or false but got {describe(value)}", key,
                                  f"write '{field}: true'")

@@ -22,10 +22,11 @@ import numpy as np
 from modelgen.codegen import index
 from modelgen.codegen.build import Generated, cache_dir
 from modelgen.codegen.options import BuildOptions
-from modelgen.errors import SimulationError
+from modelgen.errors import ArgumentValueError
 from modelgen.model.records import InputSignal, OutputSpec
+from modelgen.model.scene_timing import Spelling, timing_problem
 from modelgen.sim.integrate import method_of
-from modelgen.sim.result import Result
+from modelgen.sim.result import Result, output_bytes
 from modelgen.sim.runtime import STABILITY_LIMIT, CompiledModel, check_mass_matrix
 from modelgen.sim.mechanical_work import PER, energy_balance, quadrature_times
 
@@ -34,6 +35,16 @@ from modelgen.sim.mechanical_work import PER, energy_balance, quadrature_times
 STIFF_STEPS = 1e4
 #: Changes when a card's fields change meaning (old cards are then misses).
 CARD_FORMAT = "modelgen-scene-card-1"
+#: the largest results :meth:`Scene.run` makes without ``max_output_mb=`` [MB]: its
+#: samples x columns doubles; the command line's default --max-output-mb (which
+#: counts the CSV text too, and passes its own limit)
+MAX_OUTPUT_MB = 1000.0
+#: the Python names of the settings :func:`with_settings` changes, for its messages
+PYTHON_SPELLING = Spelling({"time.end": "t_end", "time.sample": "sample_dt",
+                            "integrator.step": "step", "integrator.method": "method"},
+                           "{name}={value}")
+#: what a run of a scene writes beside its tables, by name: the plot and animations
+PRODUCTS = (".png", ".gif", ".mp4", ".html")
 
 
 @dataclass(frozen=True)
@@ -291,30 +302,11 @@ class Scene:
     def _inputs(self):
         s = self.card
         signals = {sig.name: sig for sig in s.inputs}
-        names = self.model.inputs
         if not signals:
             return None
         if all(sig.constant is not None for sig in signals.values()):
             return {name: sig.constant for name, sig in signals.items()}
-        grid = sorted({t for sig in signals.values() for t in sig.times})
-        values = np.zeros((len(grid), len(names)))
-        holds = {sig.interpolation for sig in signals.values() if sig.constant is None}
-        if len(holds) > 1:
-            raise SimulationError(f"scene {s.name}: all sampled inputs must use the same "
-                                  f"interpolation, got {sorted(holds)}")
-        hold = holds.pop() == "hold"
-        for j, name in enumerate(names):
-            sig = signals.get(name)
-            if sig is None:
-                continue
-            if sig.constant is not None:
-                values[:, j] = sig.constant
-            elif hold:
-                idx = np.searchsorted(sig.times, grid, side="right") - 1
-                values[:, j] = np.asarray(sig.values)[np.clip(idx, 0, len(sig.times) - 1)]
-            else:
-                values[:, j] = np.interp(grid, sig.times, sig.values)
-        return (np.array(grid), values, "hold" if hold else "linear")
+        return _input_samples(signals, self.model.inputs)
 
     def inputs_at(self, t: float) -> dict:
         """The scene's inputs at time ``t`` by name (a sampled input interpolated as the
@@ -341,7 +333,8 @@ class Scene:
         s = self.card
         return _scene_times(s.t_start, s.t_end, s.sample_dt)
 
-    def run(self, p=None, x0=None, u=None, max_steps=None, progress=None) -> Result:
+    def run(self, p=None, x0=None, u=None, max_steps=None, progress=None, *,
+            max_output_mb: float | None = None) -> Result:
         """Integrate the scene with its method, sampled at its times; energies recorded.
 
         ``p`` overrides parameters, ``x0`` the initial state (an array, or a
@@ -350,13 +343,17 @@ class Scene:
         :meth:`CompiledModel.simulate` accepts, including a feedback callable
         ``u(t, x)``).  ``max_steps`` overrides the step budget of
         :meth:`CompiledModel.simulate`; ``progress(t)`` hears the time reached while
-        the C runs (see :func:`modelgen.sim.integrate.simulate`).  Returns a :class:`~modelgen.sim.result.Result`.
+        the C runs (see :func:`modelgen.sim.integrate.simulate`).  A run whose samples
+        would take more than ``max_output_mb`` (default :data:`MAX_OUTPUT_MB`) is
+        refused before it starts.  Returns a :class:`~modelgen.sim.result.Result`.
         """
         s, cm = self.card, self.model
         x0 = self.initial_state(x0)
         u = self._inputs() if u is None else u
         fixed = not method_of(s.method).adaptive
-        times = _scene_times(s.t_start, s.t_end, s.sample_dt)
+        columns = 1 + cm.nx + len(cm.output_columns) + 3      # t, x, outputs, energies
+        times = _scene_times(s.t_start, s.t_end, s.sample_dt, columns,
+                             MAX_OUTPUT_MB if max_output_mb is None else max_output_mb)
         # with work to integrate, the run also samples the quadrature nodes between
         grid = quadrature_times(times) if self.powers else times
         res = cm.simulate(x0, (s.t_start, s.t_end), t_eval=grid, method=s.method,
@@ -400,6 +397,51 @@ class Scene:
         return cm.state_vector(x0, "x0", base=s.initial)
 
 
+def with_settings(card: SceneCard, spell: Spelling = PYTHON_SPELLING, **changes) -> SceneCard:
+    """``card`` with some run settings changed (``t_end``, ``step``, ``sample_dt``,
+    ``method``), checked by the scene file's rules (an ArgumentValueError naming
+    the changes, in ``spell``'s words, and the scene file): the end after the
+    start, and :func:`~modelgen.model.scene_timing.timing_problem`'s span and step."""
+    keys = {"t_end": "time.end", "step": "integrator.step", "sample_dt": "time.sample",
+            "method": "integrator.method"}
+    unknown = [name for name in changes if name not in keys]
+    if unknown:
+        raise ArgumentValueError(f"unknown scene setting {unknown[0]!r}; fix: change one of "
+                                 + ", ".join(keys))
+    new = replace(card, **changes)
+    given = ", ".join(spell.write(keys[name], value) for name, value in changes.items())
+    where = f"scene {card.name}" + (f" ({card.source})" if card.source else "")
+    if "step" in changes and method_of(new.method).adaptive:
+        raise ArgumentValueError(
+            f"{where} with {given}: method {new.method} adapts its steps to rtol and atol, "
+            f"so a step would be ignored; fix: leave out {spell.name('integrator.step')}, "
+            f"or choose a fixed-step method, e.g. {spell.write('integrator.method', 'rk4')}")
+    if not new.t_end > new.t_start:
+        raise ArgumentValueError(f"{where} with {given}: the end time {new.t_end!r} is not "
+                                 f"after the scene's start {new.t_start!r}; fix: give "
+                                 f"{spell.name('time.end')} after {new.t_start!r}")
+    problem = timing_problem(new.t_start, new.t_end, new.sample_dt,
+                             not method_of(new.method).adaptive, new.step, spell)
+    if problem is not None:
+        raise ArgumentValueError(f"{where} with {given}: {problem.problem}; fix: "
+                                 f"{problem.fix}")
+    return new
+
+
+def remove_stale_products(folder, name: str, written) -> list:
+    """Remove ``<name>.png``, ``.gif``, ``.mp4`` and ``.html`` in ``folder`` that a run
+    left there and this one does not write (``written``: the suffixes it writes), so
+    no plot or animation of an earlier run sits beside this run's tables; returns
+    the paths removed."""
+    removed = []
+    for suffix in PRODUCTS:
+        path = Path(folder) / f"{name}{suffix}"
+        if suffix not in written and path.is_file():
+            path.unlink()
+            removed.append(path)
+    return removed
+
+
 def _keep_samples(res: Result, rows: slice) -> None:
     """Keep only ``rows`` of a result's times, states and outputs (in place)."""
     res.t = res.t[rows]
@@ -415,7 +457,9 @@ def _power_outputs(spec) -> dict:
     from modelgen.model.spec import CONSERVATIVE_KINDS, time_free   # a spec is read
     kinds = {e.name: e for e in spec.model.effects}
     kinds.update({a.name: a for a in spec.model.actions})
-    taken = {out.name for out in spec.outputs}
+    # the names of the result's other columns are taken too (the reader refuses them)
+    taken = {out.name for out in spec.outputs} | {"t", "kinetic", "potential", "total"}
+    taken.update(spec.model.coordinates + spec.model.speeds)
     powers = {}
     for name in spec.effects:
         effect = kinds.get(name)
@@ -434,7 +478,46 @@ def _power_outputs(spec) -> dict:
     return powers
 
 
-def _scene_times(t0, t1, dt):
+def _input_samples(signals: dict, names) -> tuple:
+    """``(times, values, "linear" | "hold")`` for the C integrators, which interpolate
+    every input alike: each signal keeps its own interpolation all the same.  With
+    mixed ones, the samples are linear and a held signal's step at each of its
+    times t_k gets a sample one double below t_k with the value before it; the C
+    looks for ts[lo] <= t < ts[lo + 1], so no double t sees a value between the
+    two and the step is exact."""
+    sampled = [sig for sig in signals.values() if sig.constant is None]
+    holds = {sig.interpolation for sig in sampled}
+    grid = {t for sig in sampled for t in sig.times}
+    if len(holds) > 1:
+        grid.update(np.nextafter(t, -np.inf) for sig in sampled
+                    if sig.interpolation == "hold" for t in sig.times[1:])
+    grid = np.array(sorted(grid))
+    values = np.zeros((len(grid), len(names)))
+    for j, name in enumerate(names):
+        sig = signals.get(name)
+        if sig is None:
+            continue
+        if sig.constant is not None:
+            values[:, j] = sig.constant
+        elif sig.interpolation == "hold":
+            idx = np.searchsorted(sig.times, grid, side="right") - 1
+            values[:, j] = np.asarray(sig.values)[np.clip(idx, 0, len(sig.times) - 1)]
+        else:
+            values[:, j] = np.interp(grid, sig.times, sig.values)
+    return grid, values, "hold" if holds == {"hold"} else "linear"
+
+
+def _scene_times(t0, t1, dt, columns: int = 1, max_mb: float = MAX_OUTPUT_MB):
+    """Every ``dt`` from ``t0`` to ``t1``, the end included; refused (an
+    ArgumentValueError) when their ``columns`` would take more than ``max_mb``."""
+    samples = (t1 - t0) / dt + 1
+    size = output_bytes(samples, columns)
+    if not size <= max_mb * 1e6:
+        raise ArgumentValueError(
+            f"the samples every {dt!r} s from {t0!r} to {t1!r} s would take {size / 1e6:.4g} "
+            f"MB ({samples:.4g} samples x {columns} columns), more than max_output_mb="
+            f"{max_mb:g}; fix: a longer sample interval or a shorter span (or a larger "
+            f"max_output_mb)")
     count = int(np.floor((t1 - t0) / dt * (1 + 1e-12))) + 1
     times = t0 + dt * np.arange(count)
     return times if times[-1] >= t1 - 1e-12 * abs(t1) else np.append(times, t1)
