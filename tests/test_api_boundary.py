@@ -344,6 +344,17 @@ def test_an_overflowed_energy_is_described_without_a_numpy_warning():
     assert change.describe() == "energy change nan J (the energies overflowed)"
 
 
+def test_a_run_that_blew_up_is_plotted(tmp_path):
+    # matplotlib's tick formatter overflowed on a range near 1e308 ("internal error")
+    y = np.array([[1.0, 1e308, np.inf], [0.0, 1.0, 2.0]])
+    energy = np.array([[0.0, 0.0], [1e308, 1.0], [np.inf, 1.0]])
+    res = Result(np.arange(3.0), y, state_names=("q", "q_dot"), energy=energy, status=-4)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        res.plot(tmp_path / "blown.png")
+    assert (tmp_path / "blown.png").stat().st_size > 0
+
+
 def test_cli_prints_a_bounded_energy_change_for_a_block_released_from_rest(tmp_path, capsys):
     """The block on the incline from rest (E(0) = 0: at the origin, at rest) creeps
     down under regularised friction: the change is about -1 of the run's scale

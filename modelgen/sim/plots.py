@@ -11,6 +11,17 @@ import numpy as np
 
 #: outputs with more columns than this (orientations, poses) are not drawn
 MAX_COLUMNS = 6
+#: values beyond this magnitude are not drawn: matplotlib's tick formatter overflows
+#: on ranges near the largest double (a run that blew up)
+MAX_DRAWN = 1e150
+
+
+def _line(ax, t, values, **style):
+    """``ax.plot`` of the values that can be drawn (finite, below :data:`MAX_DRAWN`)."""
+    values = np.asarray(values, dtype=float)
+    with np.errstate(invalid="ignore"):
+        drawn = np.where(np.abs(values) <= MAX_DRAWN, values, np.nan)
+    ax.plot(t, drawn, **style)
 
 
 def result_figure(res, *, title: str = "", conservative=None):
@@ -45,28 +56,29 @@ def result_figure(res, *, title: str = "", conservative=None):
     for ax, panel in zip(axes, panels):
         if panel == "coordinates":
             for i, name in enumerate(coords):
-                ax.plot(t, res.y[i], label=name)
+                _line(ax, t, res.y[i], label=name)
             ax.set_ylabel("coordinates\n[rad or m]")
         elif panel == "energy":
             total = res.energy.sum(axis=1)
-            ax.plot(t, res.energy[:, 0], label="kinetic")
-            ax.plot(t, res.energy[:, 1], label="potential")
-            ax.plot(t, total, label="total E", color="k")
+            _line(ax, t, res.energy[:, 0], label="kinetic")
+            _line(ax, t, res.energy[:, 1], label="potential")
+            _line(ax, t, total, label="total E", color="k")
             for name, w in res.work.items():
-                ax.plot(t, w, label=f"work of {name}", ls="--")
+                _line(ax, t, w, label=f"work of {name}", ls="--")
             if res.work:
                 supplied = total[0] + sum(res.work.values())
-                ax.plot(t, supplied, label="E(0) + sum of work", color="0.5", ls=":", lw=2)
+                _line(ax, t, supplied, label="E(0) + sum of work", color="0.5", ls=":", lw=2)
             ax.set_ylabel("energy, work [J]")
         elif panel == "energy_balance":
             balance = res.energy.sum(axis=1) - res.energy.sum(axis=1)[0] - sum(res.work.values())
-            ax.plot(t, balance, color="k", label="E - E(0) - sum of work")
+            _line(ax, t, balance, color="k", label="E - E(0) - sum of work")
             ax.set_ylabel("energy balance\nerror [J]")
         elif panel == "energy_error":
             total = res.energy.sum(axis=1)
             scale = res.energy_change().scale   # the largest |T| + |V|: E(0) may be 0
             change = np.abs(total[1:] - total[0]) / (scale if scale > 0 else 1.0)
-            ax.semilogy(t[1:], np.maximum(change, 1e-17))
+            _line(ax, t[1:], np.maximum(change, 1e-17))
+            ax.set_yscale("log")
             ax.set_ylabel("|E - E(0)| / E scale" if scale > 0 else "|E - E(0)| [J]")
         else:
             name = panel[1]
@@ -74,7 +86,7 @@ def result_figure(res, *, title: str = "", conservative=None):
             columns = res.output_columns.get(name) or [f"{name}[{j}]" for j in
                                                         range(values.shape[1])]
             for j, column in enumerate(columns):
-                ax.plot(t, values[:, j], label=column)
+                _line(ax, t, values[:, j], label=column)
             ax.set_ylabel(name)
         if ax.get_legend_handles_labels()[0]:
             entries = len(ax.get_legend_handles_labels()[0])
