@@ -484,7 +484,8 @@ def test_non_string_keys_are_refused():
 
 def test_empty_file_and_non_mapping_file():
     assert message("", header="") == (
-        "m.yaml:1: the model file is empty; fix: start with 'name: <model name>'")
+        "m.yaml:1: the model file is empty; fix: start with 'name: <model name>' (or, for a "
+        "scene, with 'scene: <name>' and 'model: <model file>')")
     assert message("", header="- a\n- b\n") == (
         "m.yaml:1: expected a mapping of model keys but got a list of 2 items; "
         "fix: start with 'name: <model name>' and use the keys name, description, "

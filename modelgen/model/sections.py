@@ -76,13 +76,15 @@ def load_parameters(ctx: ModelBuilder, value, key: str = "parameters") -> None:
         ctx.add_parameter(name, default, f"{key}.{name}")
 
 
-def check_top_level(data, ctx: ModelBuilder, what: str, keys, start: str) -> None:
+def check_top_level(data, ctx: ModelBuilder, what: str, keys, start: str,
+                    empty: str = "") -> None:
     """A parsed file is a non-empty mapping whose keys are all in ``keys``.
 
-    Shared by model and scene files; ``start`` says how such a file begins.
+    Shared by model and scene files; ``start`` says how such a file begins, and
+    ``empty`` what else an empty one may have been meant as.
     """
     if data is None:
-        raise ModelError(f"the {what} file is empty", file=ctx.file, line=1, fix=start)
+        raise ModelError(f"the {what} file is empty", file=ctx.file, line=1, fix=start + empty)
     if not isinstance(data, dict):
         raise ModelError(f"expected a mapping of {what} keys but got {describe(data)}",
                          file=ctx.file, line=1, fix=f"{start} and use the keys " + ", ".join(keys))
@@ -96,7 +98,8 @@ def check_top_level(data, ctx: ModelBuilder, what: str, keys, start: str) -> Non
 def builder_from_data(data, lines: dict, file: str) -> ModelBuilder:
     """The validated declarations of a parsed model file, not yet resolved."""
     ctx = ModelBuilder(file, lines)
-    check_top_level(data, ctx, "model", TOP_LEVEL_KEYS, "start with 'name: <model name>'")
+    check_top_level(data, ctx, "model", TOP_LEVEL_KEYS, "start with 'name: <model name>'",
+                    " (or, for a scene, with 'scene: <name>' and 'model: <model file>')")
     if "name" not in data:
         raise ModelError("missing required key 'name'", file=file, line=1,
                          fix="add 'name: <model name>' (a C identifier) at the top level")
