@@ -46,6 +46,10 @@ def _refused(argv, never, capsys) -> str:
     (["--method", "gauss4", "--param", "c=0:1:2"], "--method gauss4 has a fixed step; fix: give --dt"),
     (["--param", "bogus=1:2:3"], "--param: unknown parameter 'bogus'"),
     (["--init", "q9=1"], "--init: unknown state 'q9'"),
+    # the scene file's time rules, as simulate applies them
+    (["--method", "rk4", "--dt", "0.003", "--param", "c=0:1:2"],
+     "the sample interval 0.01 is not a whole multiple of the step 0.003"),
+    (["--method", "rk4", "--dt", "1e-12", "--param", "c=0:1:2"], "more than the 1e+09"),
 ])
 def test_bad_sweep_flags_are_usage_errors_before_the_build(flags, phrase, tmp_path, capsys):
     never = tmp_path / "never"

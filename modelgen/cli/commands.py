@@ -747,6 +747,13 @@ def sweep_command(args) -> int:
     dt = args.sample or (spec.sample_dt if scene else 0.01)
     if t1 <= t0:
         raise ModelgenError(f"--t-end must be after the scene's start {t0:g} s")
+    if scene:     # the scene file's time rules, as simulate applies them to overrides
+        from modelgen.model.scene_timing import Spelling, timing_problem
+        problem = timing_problem(t0, t1, dt, not _method(args.method or spec.method).adaptive,
+                                 spec.step if args.dt is None else args.dt,
+                                 Spelling(_SCENE_FLAGS, "{name} {value}"))
+        if problem is not None:
+            raise ModelgenError(f"scene {spec.name}: {problem.problem}; fix: {problem.fix}")
     runs = math.prod(1 if len(v) == 1 else int(v[2]) for v in (*axes.values(), *inits.values()))
     _check_output_size(args, max(_samples(t0, t1, dt), 2), _columns_of(
         model, spec.outputs if scene else ()) - 3, runs, csv=False)
