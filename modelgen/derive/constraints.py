@@ -23,6 +23,7 @@ for, at seeded random configurations.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -51,6 +52,14 @@ __all__ = [
 
 #: seeded random configurations at which redundancy and the dependent speeds are checked
 RANK_SAMPLES = 3
+#: draws tried for each of them until every constraint is real there (a square root,
+#: logarithm or inverse sine of a coordinate is real on part of its range only); the
+#: coordinates' range is pi times a power of two that changes every
+#: :data:`DRAWS_PER_RANGE` draws (:data:`RANGE_EXPONENTS`), so narrow and wide
+#: domains are both met
+REAL_DRAWS = 100
+DRAWS_PER_RANGE = 10
+RANGE_EXPONENTS = (0, -1, 1, -2, 2, -3, 3, -4, 4, -5)
 
 
 @dataclass(frozen=True)
@@ -224,18 +233,19 @@ def choose_dependent(graph: Graph, G, m_h: int, spec, seed: int = 0) -> tuple:
     :func:`modelgen.model.resolve.build_spec`)."""
     import numpy as np
     rng = np.random.default_rng(seed)
-    values = {symbol(p): v for p, v in zip(spec.parameter_names, spec.parameter_defaults)}
-    values.update(_configuration(spec, rng))
+    params = {symbol(p): v for p, v in zip(spec.parameter_names, spec.parameter_defaults)}
     m, n, ns = len(G), spec.n, len(spec.simple_coordinates)
-    Gv = _evaluate(graph, [e for row in G for e in row], values).reshape(m, n)[:, :ns]
+    rows = constraint_rows(spec)
+    Gv = _real_sample(graph, [list(row) for row in G], spec, rng, params, rows)
+    Gv = Gv.reshape(m, n)[:, :ns]
     return _pivots(Gv, m), _pivots(Gv[:m_h], m_h) if m_h else ()
 
 
-def _configuration(spec, rng) -> dict:
-    """Seeded random coordinates in [-pi, pi], each joint's quaternion then scaled
+def _configuration(spec, rng, span: float = math.pi) -> dict:
+    """Seeded random coordinates in [-span, span], each joint's quaternion then scaled
     to unit length (a rotation; the draws are those of a model without joints)."""
     import numpy as np
-    values = {symbol(c): rng.uniform(-np.pi, np.pi) for c in spec.coordinates}
+    values = {symbol(c): rng.uniform(-span, span) for c in spec.coordinates}
     for j in spec.joints:
         quat = [symbol(c) for c in j.quaternion]
         norm = float(np.sqrt(sum(values[c] ** 2 for c in quat)))
@@ -294,13 +304,74 @@ class _Wheel:
             self.no_slip.append((axis, row, builder.name(dot(e, a))))
 
 
+class _NotReal(Exception):
+    """A value of :func:`_evaluate` is complex, infinite or NaN."""
+
+
+def _real(value) -> float:
+    """``value`` (a number sympy evaluated) as a finite float, else :class:`_NotReal`."""
+    if getattr(value, "free_symbols", None):
+        raise TypeError(f"{value} is not a number")      # a symbol left: a defect here
+    try:
+        out = float(value)
+    except TypeError:               # complex: sqrt or log of a negative number, zoo
+        raise _NotReal from None
+    if not math.isfinite(out):
+        raise _NotReal
+    return out
+
+
 def _evaluate(graph: Graph, exprs, values: dict) -> np.ndarray:
-    """``exprs`` at ``values`` (symbol -> float), through the graph's statements."""
+    """``exprs`` at ``values`` (symbol -> float), through the graph's statements;
+    :class:`_NotReal` when a value on the way is complex or not finite."""
     import numpy as np
     values = dict(values)
     for sym, expr in graph.closure(exprs):
-        values[sym] = float(expr.xreplace(values))
-    return np.array([float(sympy.sympify(e).xreplace(values)) for e in exprs])
+        values[sym] = _real(expr.xreplace(values))
+    return np.array([_real(sympy.sympify(e).xreplace(values)) for e in exprs])
+
+
+def _real_sample(graph: Graph, row_exprs: list, spec, rng, params: dict, rows) -> np.ndarray:
+    """The values of ``row_exprs`` (one list of expressions per constraint row, the
+    rows named by ``rows``) at the first seeded random configuration where all are
+    real and finite (:data:`REAL_DRAWS` draws at most; the first is
+    :func:`_configuration`'s over [-pi, pi], so a model real everywhere draws as it
+    always did), flattened row by row.  A :class:`ModelError` naming the first row
+    that is never real when none is found."""
+    flat = [e for row in row_exprs for e in row]
+    for draw in range(REAL_DRAWS):
+        span = math.pi * 2.0 ** RANGE_EXPONENTS[draw // DRAWS_PER_RANGE % len(RANGE_EXPONENTS)]
+        values = dict(params)
+        values.update(_configuration(spec, rng, span))
+        try:
+            return _evaluate(graph, flat, values)
+        except _NotReal:
+            continue
+    bad = 0
+    for i, row in enumerate(row_exprs):
+        try:
+            _evaluate(graph, row, values)
+        except _NotReal:
+            bad = i
+            break
+    raise _not_real_error(spec, rows[bad][0])
+
+
+def _not_real_error(spec, name: str) -> ModelError:
+    """The error of constraint ``name``, complex or not finite at every draw."""
+    c = next(c for c in spec.constraints if c.name == name)
+    key = f"constraints.{name}" + (".expression" if c.kind in ("position", "speeds") else "")
+    lo, hi = (math.pi * 2.0 ** e for e in (min(RANGE_EXPONENTS), max(RANGE_EXPONENTS)))
+    return ModelError(
+        f"constraint {name} is complex or not finite at every one of the {REAL_DRAWS} "
+        f"random configurations tried (coordinates within +-{lo:.3g} to +-{hi:.3g}, parameters "
+        "at their defaults), so the constraint Jacobian cannot be checked: a square root, "
+        "logarithm, inverse sine or cosine whose argument is outside its domain there",
+        file=spec.source, line=spec.line_of(key) or spec.line_of(f"constraints.{name}"),
+        key=key,
+        fix="write the constraint so that it is real where the mechanism moves, or "
+            "without those functions (x**2 + y**2 - L**2 for a point on a circle, not "
+            "sqrt(L**2 - x**2) - y)")
 
 
 def check_constraints(terms: ConstraintTerms, spec, samples: int = RANK_SAMPLES,
@@ -310,15 +381,17 @@ def check_constraints(terms: ConstraintTerms, spec, samples: int = RANK_SAMPLES,
     singular there (the rhs could never solve for them)."""
     import numpy as np
     m, n = terms.m, spec.n
-    flat = [e for row in terms.G for e in row]
+    # each row's entries of G, and a position row's residual: all must be real
+    row_exprs = [list(row) + ([terms.residuals[i]] if i < len(terms.residuals) else [])
+                 for i, row in enumerate(terms.G)]
+    at = np.cumsum([0] + [len(row) for row in row_exprs])
     rng = np.random.default_rng(seed)
     params = {symbol(p): v for p, v in zip(spec.parameter_names, spec.parameter_defaults)}
     ranks, dep_ranks, coord_ranks = [], [], []
     m_h, dep_q = len(terms.residuals), list(terms.dependent_coordinates)
     for _ in range(samples):
-        values = dict(params)
-        values.update(_configuration(spec, rng))
-        Gv = _evaluate(terms.graph, flat, values).reshape(m, n)
+        flat = _real_sample(terms.graph, row_exprs, spec, rng, params, terms.rows)
+        Gv = np.array([flat[at[i]:at[i] + n] for i in range(m)]).reshape(m, n)
         scale_ = max(1.0, float(np.abs(Gv).max()))
         tol = 1e-9 * scale_
         ranks.append(np.linalg.matrix_rank(Gv, tol))
@@ -347,14 +420,18 @@ def check_constraints(terms: ConstraintTerms, spec, samples: int = RANK_SAMPLES,
                 + (" (with ball or free joints, plain coordinates' speeds: a constraint "
                    "that only a joint's speeds could satisfy cannot be imported)"
                    if spec.joints else ""))
-    if spec.joints and m_h and max(coord_ranks) < m_h:
+    # checked on every model: coordinates the position rows do not involve (z for
+    # x - y = 0) would leave the projection's and the linearization's solves singular
+    if m_h and max(coord_ranks) < m_h:
         raise ModelError(
             "the position constraints cannot be solved for the dependent coordinates "
             + ", ".join(spec.coordinates[k] for k in dep_q) + ": their columns of the "
-            f"constraint Jacobian are singular at {samples} random configurations, and "
-            "on a model with ball or free joints only plain coordinates (angles or "
-            "lengths) can be dependent", file=spec.source,
+            f"constraint Jacobian are singular at {samples} random configurations"
+            + (", and on a model with ball or free joints only plain coordinates (angles "
+               "or lengths) can be dependent" if spec.joints else ""), file=spec.source,
             line=spec.line_of("dependent") or where,
             key="dependent.coordinates" if spec.dependent_coordinates else "constraints",
-            fix="choose plain coordinates the position constraints involve, one per "
-                "equation, or write the joint's motion with simple bases and points")
+            fix=("choose plain coordinates the position constraints involve, one per "
+                 "equation, or write the joint's motion with simple bases and points")
+            if spec.joints else "choose coordinates the position constraints involve, "
+                                "one per position equation, whose columns are independent")

@@ -348,9 +348,20 @@ class Model:
 
     def set_dependent(self, *, coordinates=(), speeds=()) -> "Model":
         """Declare the dependent coordinates (one per position equation) and speeds
-        (one per constraint equation); the others stay independent."""
-        return self._apply(lambda c: c.set_dependent({"coordinates": list(coordinates),
-                                                       "speeds": list(speeds)}))
+        (one per constraint equation); the others stay independent.  Each is a list
+        of names, one name, or None (none).
+
+        >>> m = Model("m").add_coordinates("x", "y").add_parameter("L", 1.0)
+        >>> m = m.add_constraint("line", "position", expression="x - y")
+        >>> m.set_dependent(coordinates="y", speeds="y_dot").spec().dependent_speeds
+        ('y_dot',)
+        """
+        def names(value):
+            # one name is a list of one, not its characters; anything else that is not
+            # a list (a number) goes to the YAML's check, which names the key
+            return [] if value is None else [value] if isinstance(value, str) else value
+        return self._apply(lambda c: c.set_dependent({"coordinates": names(coordinates),
+                                                       "speeds": names(speeds)}))
 
     def set_units(self, units: Mapping[str, str]) -> "Model":
         """Set the units of declared coordinates, parameters and inputs (replacing any

@@ -41,7 +41,7 @@ from modelgen.sim.arguments import (LONG, MAX_CHUNK, MIN_ATOL, MIN_RTOL, Inputs,
                                      method_of, progress_callback, row_chunk, run_options,
                                      sample_times, span, terminal_count, thread_count)
 from modelgen.sim.conditioning import condition_number, failure_kind, growth_note
-from modelgen.sim.assemble import crossing_message
+from modelgen.sim.assemble import check_initial_states, crossing_message
 from modelgen.sim.assemble import singular_message as constraint_message
 from modelgen.sim.result import Result, make_result
 
@@ -100,6 +100,9 @@ def jacobian(cm, t, x, u=None, p=None) -> np.ndarray:
     fn = _lib_function(cm, "jacobian") or _lib_function(cm, "jacobian_fd")
     status = fn(t, cm._ptr(x), cm._ptr(cm.input_vector(u)), cm._ptr(cm.params(p)),
                 cm._ptr(out))
+    if status > cm.n and cm.manifest.get("constraints"):
+        # a constrained rhs's status n + k: the dependent columns of G, not A
+        raise SimulationError(constraint_message(cm, status, t, x, p))
     if status:
         raise MassMatrixError(status, cm.dof_names[status - 1], t, x,
                               failure_kind(cm.mass_matrix(x[:cm.nq], p), status - 1))
@@ -558,7 +561,8 @@ def simulate_batch(cm, X0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol
     (final states).  Returns ``t`` (n_t,), ``y`` (n_runs, nx, n_t) (NaN after a
     failure), and per run ``status``, ``success``, ``message``, ``nfev``...; with
     ``outputs`` a scene's outputs, recorded by the C at every time, in
-    ``res.outputs[name]`` of shape (n_runs, n_t, columns).
+    ``res.outputs[name]`` of shape (n_runs, n_t, columns).  A constrained model's
+    rows must be on its constraints with their runs' parameters, as ``x0`` of :func:`simulate`.
 
     >>> res = simulate_batch(cm, X0, (0, 5), P={"m2": np.linspace(0.5, 2, len(X0))})  # doctest: +SKIP
     """
@@ -579,6 +583,8 @@ def simulate_batch(cm, X0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol
     t0, t1 = sign * t0, sign * t1          # from here on s = sign * t, increasing
     inputs = Inputs(cm, u, sign)
     P_rows, p_stride = _parameter_rows(cm, P, n_runs)
+    if cm.manifest.get("constraints"):     # as simulate: projected, a row would move
+        check_initial_states(cm, X0, P_rows)
     threads = thread_count(threads, n_runs)
 
     check_step_count(fixed, t0, t1)

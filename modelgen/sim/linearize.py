@@ -240,8 +240,13 @@ def linearize(cm, x, u=None, t=0.0, p=None, outputs=None) -> Linearization:
             f"modelgen.load(..., linearize=True) or modelgen.load_scene(..., linearize=True)")
     status, A, B, C, D = got
     info = cm.manifest.get("constraints")
+    if info:
+        # off the constraints the dependent columns may be singular too: that the
+        # point is off them is what to say, not a dead point
+        check_initial_state(cm, np.concatenate([x[:cm.nq], np.zeros(cm.n)]), p_vec,
+                            what="the operating point", var="x")
     if info and status > cm.n:
-        raise SimulationError(singular_message(cm, status, t, x))
+        raise SimulationError(singular_message(cm, status, t, x, p_vec))
     if status:
         raise MassMatrixError(status, cm.dof_names[status - 1], t, x,
                               failure_kind(cm.mass_matrix(x[:cm.nq], p_vec), status - 1))
@@ -280,7 +285,8 @@ def _minimal(cm, info, A, B, C, x, p) -> tuple:
     constraint matrices).  ``x`` must be on the constraints (:func:`check_initial_state`).
     """
     n = cm.n
-    check_initial_state(cm, np.concatenate([x[:n], consistent_speeds(cm, x[:n], x[n:], p)]), p)
+    check_initial_state(cm, np.concatenate([x[:n], consistent_speeds(cm, x[:n], x[n:], p)]), p,
+                        what="the operating point", var="x")
     dep_q = list(info["dependent_coordinates"])
     ind_q = [k for k in range(n) if k not in dep_q]
     ind_u = list(info["independent_speeds"])
@@ -288,6 +294,15 @@ def _minimal(cm, info, A, B, C, x, p) -> tuple:
     Q[ind_q, range(len(ind_q))] = 1.0
     if dep_q:
         Gh = constraint_jacobian(cm, x[:n], p)[:info["holonomic"]]
+        if np.linalg.matrix_rank(Gh[:, dep_q]) < len(dep_q):
+            names = ", ".join(cm.coordinates[k] for k in dep_q)
+            raise SimulationError(
+                f"{cm.name}: no minimal linearization at q = {np.array2string(x[:n])}: the "
+                f"position constraints' columns of the dependent coordinates ({names}) are "
+                "singular there, so those cannot follow a change of the independent ones "
+                "(a singular configuration for them); fix: linearize at another "
+                "configuration, or choose other dependent coordinates ('dependent:' in "
+                "the model)")
         Q[dep_q] = np.linalg.solve(Gh[:, dep_q], -Gh[:, ind_q])
     P = np.zeros((2 * n, len(ind_q) + len(ind_u)))
     P[:n, :len(ind_q)] = Q

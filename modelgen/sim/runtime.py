@@ -345,7 +345,7 @@ class CompiledModel(FrameKinematics):
     def _mass_matrix_error(self, pivot: int, t, x, p=None) -> MassMatrixError:
         """The error of a failing pivot at x, worded by the kind of failure."""
         if pivot > self.n and self.manifest.get("constraints"):
-            return SimulationError(assemble.singular_message(self, pivot, t, x))
+            return SimulationError(assemble.singular_message(self, pivot, t, x, p))
         kind = failure_kind(self.mass_matrix(x[:self.nq], p), pivot - 1)
         return MassMatrixError(pivot, self.dof_names[pivot - 1], t, x, kind)
 

@@ -323,6 +323,8 @@ def _study(cm, defaults, parameters, initial, x0, t_eval, t_span, method, rtol, 
     P = np.tile(cm.params(None), (n_runs, 1))
     for name, a in params.items():
         P[:, list(cm.parameters).index(name)] = a
+    if cm.manifest.get("constraints"):
+        X0 = _assembled(cm, X0, P, {**inits, **params})
     if t_eval is None:
         if "t_eval" not in defaults:
             raise SimulationError(f"{cm.name}: give t_eval (the sample times); a scene "
@@ -345,6 +347,45 @@ def _study(cm, defaults, parameters, initial, x0, t_eval, t_span, method, rtol, 
     swept = {name: ("parameter", a) for name, a in params.items()}
     swept.update({f"initial_{name}": ("initial", a) for name, a in inits.items()})
     return study, swept
+
+
+def _assembled(cm, X0, P, swept: dict) -> np.ndarray:
+    """``X0`` of a constrained model with every run put on the constraints with its own
+    parameters: the dependent coordinates assembled (Newton from their given values)
+    with every other coordinate as given, so a swept one keeps its value, then the
+    dependent speeds from the independent ones (docs/constraints.md, "Sweeps").  A
+    swept dependent coordinate or speed is refused: assembly would overwrite it."""
+    info = cm.manifest["constraints"]
+    dep = [cm.coordinates[k] for k in info["dependent_coordinates"]] + \
+        [cm.speeds[k] for k in info["dependent_speeds"]]
+    clash = [name for name in swept if name in dep]
+    if clash:
+        free = [name for name in cm.state_names if name not in dep]
+        raise ArgumentValueError(
+            f"{cm.name}: the initial {clash[0]} is swept, but it is a dependent state: each "
+            f"run starts on the constraints with {', '.join(dep)} computed from the others; "
+            f"fix: sweep independent ones ({', '.join(free)}), or declare other dependent "
+            "coordinates and speeds ('dependent:' in the model)")
+    keep = [c for c in cm.coordinates if c not in dep]
+    nq, nx = cm.nq, cm.nx
+    # identical rows (a parameter swept that the constraints do not involve still
+    # repeats the state) are assembled once
+    unique, inverse = np.unique(np.hstack([X0, P]), axis=0, return_inverse=True)
+    inverse = inverse.reshape(-1)
+    out = np.empty((unique.shape[0], nx))
+    for i, row in enumerate(unique):
+        try:
+            q = cm.assemble(row[:nq], keep=keep, p=row[nx:])
+            out[i] = np.concatenate([q, cm.consistent_speeds(q, row[nq:nx], row[nx:])])
+        except SimulationError as exc:
+            r = int(np.flatnonzero(inverse == i)[0])
+            values = ", ".join(f"{name} = {a[r] if a.size > 1 else a[0]:.6g}"
+                               for name, a in swept.items())
+            raise SimulationError(
+                f"{cm.name}: run {r} ({values or 'the given x0'}) cannot start on the "
+                f"constraints: {exc}; fix: sweep values the mechanism can take (or give an "
+                "x0 nearer an assembled state)") from None
+    return np.ascontiguousarray(out[inverse])
 
 
 def check_client(client, name: str = "client") -> None:
@@ -423,7 +464,11 @@ def sweep(source, parameters=None, initial=None, *, t_eval=None, t_span=None, me
     product with :func:`grid`, or paired samples, e.g. from ``scipy.stats.qmc``).
     A scene gives the defaults of ``t_eval``, ``t_span``, ``method``, ``rtol``,
     ``atol``, ``step``, ``u`` and ``x0``; a model starts from ``x0`` (default
-    zeros) and needs ``t_eval``.  ``client`` is None (in-process), a
+    zeros) and needs ``t_eval``.  A constrained model's runs start on its
+    constraints with their own parameters: each run's dependent coordinates are
+    assembled with the others as given (a swept ``q1`` keeps its value) and its
+    dependent speeds computed from the independent ones; sweeping a dependent
+    state is refused.  ``client`` is None (in-process), a
     ``dask.distributed.Client``, an address (``"tcp://host:8786"``) or
     ``"local"`` (a ``LocalCluster`` with one worker per core, closed after);
     ``chunk`` is the runs per ``simulate_batch`` call (default: all in-process,
