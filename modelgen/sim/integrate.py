@@ -111,7 +111,7 @@ def jacobian(cm, t, x, u=None, p=None) -> np.ndarray:
 
 # -- argument checking ---------------------------------------------------------------
 
-def _check_quaternions(cm, X, what: str) -> None:
+def check_quaternions(cm, X, what: str) -> None:
     """Every joint quaternion of every row of X is nonzero (the integrators
     normalise it; a zero one has no direction)."""
     for quat in cm.quaternions:
@@ -195,7 +195,7 @@ def simulate(cm, x0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10
     x = cm.state_vector(x0, "x0").copy()
     if not np.all(np.isfinite(x)):
         raise ArgumentValueError(f"{cm.name}: x0 must be finite")
-    _check_quaternions(cm, x[None, :], "x0")
+    check_quaternions(cm, x[None, :], "x0")
     x_start = x.copy()
     inputs = Inputs(cm, u, sign)
     p_vec = cm.params(p).copy()
@@ -577,7 +577,7 @@ def simulate_batch(cm, X0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol
         raise SimulationError(f"{cm.name}: X0 must have shape (n_runs, {nx}), got {X0.shape}")
     if not np.all(np.isfinite(X0)):
         raise ArgumentValueError(f"{cm.name}: X0 must be finite")
-    _check_quaternions(cm, X0, "X0")
+    check_quaternions(cm, X0, "X0")
     n_runs = X0.shape[0]
     times = sample_times([t1] if t_eval is None else t_eval, t0, t1, sign)
     t0, t1 = sign * t0, sign * t1          # from here on s = sign * t, increasing

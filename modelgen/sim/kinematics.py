@@ -26,7 +26,7 @@ import numpy as np
 
 from modelgen.codegen.options import REFERENCES
 from modelgen.errors import SimulationError
-from modelgen.sim import integrate
+from modelgen.sim.integrate import check_quaternions
 
 
 #: the routines that take the speeds v after q
@@ -78,7 +78,7 @@ class FrameKinematics:
         if self.quaternions:
             # the C reads a quaternion as a rotation only when it is a unit one: as
             # simulate does, refuse a zero one and normalise the others
-            integrate._check_quaternions(self, q[None, :], "q")
+            check_quaternions(self, q[None, :], "q")
             q = self.project(q)
         out = np.empty(shape)
         args = [self._ptr(q)]
