@@ -74,3 +74,37 @@ def test_jacobian_c_is_the_same_whatever_the_hash_seed(tmp_path):
         subprocess.run([sys.executable, "-c", script, str(out)], check=True, env=env)
         texts.append((out / "cart_pole.c").read_text())
     assert "cart_pole_linearize" in texts[0] and texts[0] == texts[1]
+
+
+# The parachute of docs/model-format.md: drag -1/2 rho Cd S |v| v on a falling body.
+PARACHUTE = """name: parachute
+coordinates: [y]
+parameters: {m: 80.0, g: 9.81, rho: 1.2, cd: 1.5, S: 30.0}
+points: {P: {coordinates: [0, y, 0]}}
+bodies: {jumper: {mass: m, G: P, base: E}}
+gravity: [0, -g, 0]
+effects:
+  air: {type: drag, body: jumper, point: P, density: rho, drag_coefficient: cd, area: S}
+"""
+
+
+def test_drag_is_differentiable_at_rest(build_root):
+    """d|v|/dv is 0/0 at v = 0 written as sqrt; the Jacobian, the derivatives and a
+    rodas run released from rest were NaN (rodas stopped at t = 0)."""
+    path = build_root / "parachute.yaml"
+    path.write_text(PARACHUTE)
+    cm = modelgen.load(path, build_root / "parachute", jacobian=True, derivatives=True)
+    k = 0.5 * 1.2 * 1.5 * 30.0 / 80.0        # q_ddot = -g + k v^2 for v < 0
+    for v in (0.0, -3.0, 2.0):
+        x = np.array([1.0, v])
+        J = cm.jac(0.0, x)
+        assert np.isfinite(J).all()
+        assert J[1, 1] == pytest.approx(-2 * k * abs(v), rel=1e-14, abs=1e-300)
+        assert cm.derivatives(0.0, x).dqdd_dv[0, 0] == pytest.approx(J[1, 1], rel=1e-14,
+                                                                      abs=1e-300)
+    res = cm.simulate([1000.0, 0.0], (0.0, 5.0), method="rodas", rtol=1e-10, atol=1e-10)
+    # v(t) = -c tanh(g t / c), c = sqrt(g / k): y(t) = y0 - c^2 / g log cosh(g t / c)
+    c = np.sqrt(9.81 / k)
+    y = 1000.0 - c ** 2 / 9.81 * np.log(np.cosh(9.81 * 5.0 / c))
+    assert res.status == 0 and res.y[0, -1] == pytest.approx(y, rel=1e-8)
+    assert res.y[1, -1] == pytest.approx(-c * np.tanh(9.81 * 5.0 / c), rel=1e-8)

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import sympy
 
-__all__ = ["diff"]
+__all__ = ["diff", "norm_of_square"]
 
 
 class _RealAbs(sympy.Function):
@@ -53,3 +53,22 @@ def diff(expr, x):
     result = real.diff(x)
     return result.replace(lambda e: e.func in _FROM_REAL,
                           lambda e: _FROM_REAL[e.func](*e.args))
+
+
+def norm_of_square(w):
+    """sqrt(w) of a w >= 0 that is a sum of squares (w = v.v, this is |v|), written so
+    that its derivative is 0 where w = 0 instead of 0/0.
+
+    d sqrt(w) = dw / (2 sqrt(w)) is 0/0 at w = 0, where dw = 2 v.dv is 0 too; every
+    expression the derivatives of |v| enter (drag's |v| v) has the limit 0 there.
+    With s = sign(w), ``w s (w + 1 - s)^(-1/2)`` equals sqrt(w) for w > 0 and 0 at
+    w = 0, and since d sign = 0 (:func:`diff`) its derivative is dw / (2 sqrt(w))
+    for w > 0 and exactly 0 at w = 0, in C with no branch.
+
+    >>> w = sympy.Symbol("w")
+    >>> e = norm_of_square(w)
+    >>> e.subs(w, 4), e.subs(w, 0), diff(e, w).subs(w, 4), diff(e, w).subs(w, 0)
+    (2, 0, 1/4, 0)
+    """
+    s = sympy.sign(w)
+    return w * s * (w + 1 - s) ** sympy.Rational(-1, 2)

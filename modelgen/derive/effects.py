@@ -21,6 +21,7 @@ from typing import Optional
 
 import sympy
 
+from modelgen.derive.calculus import norm_of_square
 from modelgen.derive.graph import GraphBuilder
 from modelgen.derive.spatial import ZERO, add, cross, dot, matvec, scale, sub
 from modelgen.derive.kinematics import Kinematics
@@ -101,7 +102,8 @@ def _drag(builder: GraphBuilder, kin: Kinematics, eff: DragEffect) -> EffectTerm
     B, G = kin.bases[body.base], kin.points[body.G]
     rP = kin.points[eff.point].r
     vP = builder.vec(add(G.v, cross(B.omega, sub(rP, G.r))))
-    speed = builder.name(sympy.sqrt(dot(vP, vP)))
+    # |v|, whose derivative is 0 at rest (sqrt's is 0/0 there: NaN Jacobians from rest)
+    speed = builder.name(norm_of_square(dot(vP, vP)))
     coef = builder.name(-eff.density * eff.drag_coefficient * eff.area * speed / 2)
     F = builder.vec(scale(coef, vP))
     return EffectTerms(body_forces={i: builder.vec(cross(rP, F)) + F})
