@@ -530,6 +530,7 @@ def linearize_command(args) -> int:
     """Linearize a model or scene at --at (over the scene's initial state, or zero) and
     --u (over the scene's inputs at --t, or zero); print A, B, the modes; write -o."""
     import numpy as np
+    from modelgen.cli.operating_point import at_rest, check_equilibrium
     from modelgen.model import as_spec, is_scene_file
     from modelgen.model.scene import load_scene
     from modelgen.sim.load import load
@@ -561,25 +562,21 @@ def linearize_command(args) -> int:
             raise ModelgenError(f"--u {key}: unknown input; inputs are "
                                 f"{', '.join(model.inputs) or 'none'}")
     p = _parameter_overrides([name for name, _ in model.parameters], args.set) or None
+    if args.equilibrium:
+        check_equilibrium(model)
     if spec is not None:
         scene = Scene(spec, args.build_dir, options=BuildOptions(linearize=True))
         cm, u = scene.model, dict(scene.inputs_at(t), **u)
     else:
         cm = load(model, args.build_dir, options=BuildOptions(linearize=True))
     if args.equilibrium:
-        try:
-            q = cm.equilibrium(x0[:cm.n], u=u, p=p, t=t)
-        except SimulationError as exc:      # a start or parameters without a rest point
-            raise ModelgenError(f"--equilibrium: {exc}") from exc
-        print("equilibrium " + ", ".join(f"{c}={v:.12g}" for c, v in zip(cm.coordinates, q)))
-        x0 = np.concatenate([q, np.zeros(cm.n)])
+        x0 = at_rest(cm, x0, u, p, t)
     lin = cm.linearize(x0, u=u, t=t, p=p)
     print(lin)
     if out is not None:
-        from modelgen.sim.result import replacing
         out.parent.mkdir(parents=True, exist_ok=True)
-        with replacing(out) as part:
-            lin.to_npz(part) if out.suffix.lower() == ".npz" else lin.to_mat(part)
+        # written under a temporary name and renamed: exactly -o's name, even .NPZ
+        lin.to_npz(out) if out.suffix.lower() == ".npz" else lin.to_mat(out)
         print(f"wrote {out}")
     return 0
 

@@ -7,7 +7,8 @@ returns a :class:`Linearization`: ``A, B, C, D`` with the operating point and
 the names of states, inputs and outputs, its eigenvalues and modes (natural
 frequency, damping ratio), and writers for NPZ, MAT and python-control.
 ``cm.equilibrium(q_guess, u)`` finds a rest point to linearize about (Newton
-on q_ddot(q, 0, u) = 0 with the symbolic Jacobian and a line search).
+on q_ddot(q, 0, u) = 0 in the tangent space, with the symbolic Jacobian or the
+analytical derivatives and a trust region).
 """
 from __future__ import annotations
 
@@ -22,7 +23,8 @@ from modelgen.sim.arguments import positive, whole_number
 from modelgen.sim.assemble import (check_initial_state, consistent_speeds, constraint_jacobian,
                                    singular_message)
 from modelgen.sim.conditioning import failure_kind
-from modelgen.sim.integrate import jacobian_source
+from modelgen.sim.integrate import check_quaternions
+from modelgen.sim.result import replacing
 
 #: an eigenvalue below this times the largest |eigenvalue| (or 1) counts as zero, and a
 #: real part below it times |lambda| as none
@@ -123,22 +125,22 @@ class Linearization:
 
     def to_npz(self, path) -> Path:
         """Write A, B, C, D, the operating point (t, x, u, p) and the names (string
-        arrays ``states``, ``inputs``, ``outputs``, ``parameters``) to ``path``;
-        ``np.load(path)`` reads it back without pickle."""
-        path = Path(path)
+        arrays ``states``, ``inputs``, ``outputs``, ``parameters``) to ``path``, exactly
+        that name (``np.savez`` given a name would add ``.npz`` unless it ends in
+        lower-case ``.npz``); ``np.load(path)`` reads it back without pickle.  The file
+        appears only once complete: a failed write leaves neither it nor a temporary."""
         names = {k: np.array(v, dtype=str) for k, v in self._names().items()}
-        np.savez(path, model=np.array(self.model), **self._arrays(), **names)
-        return path
+        return _written(path, lambda fh: np.savez(fh, model=np.array(self.model),
+                                                  **self._arrays(), **names))
 
     def to_mat(self, path) -> Path:
         """Write the same as :meth:`to_npz` as a MATLAB file (scipy.io.savemat; the
-        names are cell arrays of strings)."""
+        names are cell arrays of strings), exactly at ``path`` (no ``.mat`` added)."""
         from scipy.io import savemat
-        path = Path(path)
         names = {k: np.array(list(v), dtype=object).reshape(-1, 1)
                  for k, v in self._names().items()}
-        savemat(str(path), {"model": self.model, **self._arrays(), **names})
-        return path
+        return _written(path, lambda fh: savemat(fh, {"model": self.model, **self._arrays(),
+                                                      **names}))
 
     def to_control(self):
         """A ``control.StateSpace`` with the names of states, inputs and outputs (python-control
@@ -177,23 +179,31 @@ class Linearization:
         return "\n".join(parts)
 
 
+def _written(path, write) -> Path:
+    """``write(fh)`` into a file opened at exactly ``path`` (under a temporary name
+    beside it, renamed when complete); returns ``path``."""
+    path = Path(path)
+    with replacing(path) as part, open(part, "wb") as fh:
+        write(fh)
+    return path
+
+
 def state_at(cm, x) -> np.ndarray:
-    """The state from x[2n], q[n] (speeds zero), or names -> values (missing ones zero)."""
-    n = cm.n
+    """The state from x[nx], q[nq] (speeds zero), or names -> values (the others
+    zero, quaternions (1, 0, 0, 0)); finite, each joint's quaternion nonzero and
+    normalised (as the integrators and :meth:`CompiledModel.project` do)."""
     if isinstance(x, dict):
-        out = np.zeros(2 * n)
+        out = cm.neutral_state()
         for name, value in x.items():
             if name not in cm.state_names:
                 raise SimulationError(f"{cm.name}: unknown state {name!r}; states are "
                                       f"{', '.join(cm.state_names)}")
             out[cm.state_names.index(name)] = cm._vector([value], 1, f"state {name}")[0]
-    elif np.ndim(x) == 1 and np.shape(x)[0] == n:
-        out = np.concatenate([cm._vector(x, n, "q"), np.zeros(n)])
+    elif np.ndim(x) == 1 and np.shape(x)[0] == cm.nq:
+        out = np.concatenate([cm._vector(x, cm.nq, "q"), np.zeros(cm.n)])
     else:
-        out = cm._vector(x, 2 * n, "x")
-    if not np.all(np.isfinite(out)):
-        raise SimulationError(f"{cm.name}: the state must be finite, got {out}")
-    return out
+        out = cm._vector(x, cm.nx, "x")
+    return cm.checked_state(out, "x")
 
 
 def _rows(cm, outputs) -> list:
@@ -230,15 +240,13 @@ def linearize(cm, x, u=None, t=0.0, p=None, outputs=None) -> Linearization:
     coordinates and speeds, about an ``x`` on the position constraints (its
     dependent speeds are recomputed from the independent ones; docs/constraints.md).
     """
+    if getattr(cm.lib, f"{cm.name}_linearize", None) is None:
+        # before x is read: a model with quaternions cannot be built with it at all
+        raise SimulationError(_no_linearize(cm))
     x = state_at(cm, x)
     t = cm._time(t)
     u_vec, p_vec = cm.input_vector(u), cm.params(p)
-    got = cm.linearize_call(t, x, u_vec, p_vec)
-    if got is None:
-        raise SimulationError(
-            f"{cm.name}: this build has no {cm.name}_linearize; fix: load it with "
-            f"modelgen.load(..., linearize=True) or modelgen.load_scene(..., linearize=True)")
-    status, A, B, C, D = got
+    status, A, B, C, D = cm.linearize_call(t, x, u_vec, p_vec)
     info = cm.manifest.get("constraints")
     if info:
         # off the constraints the dependent columns may be singular too: that the
@@ -268,6 +276,19 @@ def linearize(cm, x, u=None, t=0.0, p=None, outputs=None) -> Linearization:
                          states, cm.inputs,
                          tuple(cm.output_columns[i] for i in rows),
                          tuple(cm.parameters), cm.name)
+
+
+def _no_linearize(cm) -> str:
+    """Why ``cm`` cannot linearize, with a fix its build accepts."""
+    if cm.quaternions:
+        return (f"{cm.name}: a model with ball or free joints has no <name>_linearize (a "
+                f"build with linearize=True is refused: its state holds unit quaternions, "
+                f"whose four components cannot move independently); fix: load it with "
+                f"derivatives=True and use cm.derivatives(t, x, u) (d q_ddot / dq in the "
+                f"tangent space, d q_ddot / dv, d q_ddot / du), or write the rotations as "
+                f"simple angles")
+    return (f"{cm.name}: this build has no {cm.name}_linearize; fix: load it with "
+            f"modelgen.load(..., linearize=True) or modelgen.load_scene(..., linearize=True)")
 
 
 def _minimal(cm, info, A, B, C, x, p) -> tuple:
@@ -314,13 +335,21 @@ def _minimal(cm, info, A, B, C, x, p) -> tuple:
 def equilibrium(cm, q_guess, u=None, p=None, t=0.0, *, tol=1e-10, max_iter=50) -> np.ndarray:
     """A rest point q near ``q_guess``: q_ddot(t, q, 0, u) = 0 to ``tol`` (max norm).
 
-    Newton with the symbolic Jacobian's columns for q of the lower half of A
-    (least squares, so neutral directions such as a cart's position stay
-    where they are) and a backtracking line search on |q_ddot|^2 (``tol`` > 0,
-    ``max_iter`` >= 1 Newton steps).  Raises :class:`SimulationError` with the
-    residual when it does not converge.
+    A trust-region Newton method (Powell's dogleg, as MINPACK's ``hybrj``) on the
+    accelerations, in the tangent space: one unknown per speed, a ball or free
+    joint's rotation vector turning its quaternion by the exponential map (the
+    guess's quaternions are normalised).  The slope is ``<name>_jacobian``'s (a
+    build with ``linearize=True`` or ``jacobian=True``) or ``<name>_derivatives``'
+    (``derivatives=True``).  Steps are least squares, so neutral directions such
+    as a cart's position stay where they are, and no longer than the trust radius,
+    which starts at :data:`FIRST_RADIUS` and grows only while the linear model
+    predicts the residual well: the search follows the residual down to the rest
+    point near the guess instead of jumping turns away.  A guess that is a rest
+    point is returned as it is.  ``tol`` > 0; ``max_iter`` >= 1 Newton steps.
+    Raises :class:`SimulationError` with the residual when it does not converge.
+
+    >>> cm.equilibrium([-1.2, 0.4], {"T1": 3.0})                 # doctest: +SKIP
     """
-    n = cm.n
     # checked first: a bad option is the caller's error, not a failure to converge
     tol = positive(tol, f"{cm.name}: tol")
     max_iter = whole_number(max_iter, f"{cm.name}: max_iter")
@@ -333,57 +362,218 @@ def equilibrium(cm, q_guess, u=None, p=None, t=0.0, *, tol=1e-10, max_iter=50) -
                               f"model's rest points; fix: put the configuration on the "
                               f"constraints with cm.assemble(q_guess, keep=[...]) and "
                               f"linearize there")
-    if jacobian_source(cm) != "symbolic":
-        raise SimulationError(f"{cm.name}: equilibrium needs the symbolic Jacobian; fix: "
-                              f"load the model with linearize=True (or jacobian=True)")
-    q = cm._vector(q_guess, n, "q_guess").copy()
-    if not np.all(np.isfinite(q)):
-        raise ArgumentValueError(f"{cm.name}: q_guess must be finite, got {list(map(float, q))}")
+    guess = _guess(cm, q_guess)
     t = cm._time(t)
     u_vec, p_vec = cm.input_vector(u), cm.params(p)
-    zero = np.zeros(n)
-
-    def residual(q):
-        return cm.rhs(t, np.concatenate([q, zero]), u_vec, p_vec)[n:]
-
-    f = residual(q)
+    rest = _RestProblem(cm, t, u_vec, p_vec)
+    q, f = guess, rest.residual(guess)
     if not np.all(np.isfinite(f)):
         # LAPACK would be handed NaN (and print its own noise) on the first step
         raise ArgumentValueError(
-            f"{cm.name}: q_ddot is not finite at the start q = {list(map(float, q))} (a "
-            f"division by zero in the model there, e.g. a spring of zero length); fix: start "
-            f"from another q or other parameters")
+            f"{cm.name}: q_ddot is not finite at the start q = {_listed(q)} (a division by "
+            f"zero in the model there, e.g. a spring of zero length); fix: start from "
+            f"another q or other parameters")
+    radius = FIRST_RADIUS
     for _ in range(max_iter):
         if np.max(np.abs(f)) <= tol:
             return q
-        J = cm.jac(t, np.concatenate([q, zero]), u_vec, p_vec)[n:, :n]
+        J = rest.slope(q)
         if not np.all(np.isfinite(J)):
             raise SimulationError(
-                f"{cm.name}: no equilibrium found from q = {list(map(float, q_guess))}: the "
-                f"Jacobian of q_ddot is not finite at q = {list(map(float, q))}; fix: start "
-                f"nearer a rest point")
-        if not np.any(J):
-            raise SimulationError(
-                f"{cm.name}: no equilibrium found from q = {list(map(float, q_guess))}: q_ddot "
-                f"= {list(map(float, f))} does not depend on q at q = {list(map(float, q))} "
-                f"(a zero Jacobian: no rest point nearby for these parameters and inputs)")
-        step = np.linalg.lstsq(J, -f, rcond=None)[0]
-        norm, alpha = float(f @ f), 1.0
-        while alpha > 1e-10:
-            try:
-                trial = residual(q + alpha * step)
-            except MassMatrixError:
-                trial = None
-            if trial is not None and float(trial @ trial) <= (1 - 1e-4 * alpha) * norm:
-                break
-            alpha *= 0.5
-        else:
-            break
-        q, f = q + alpha * step, trial
+                f"{cm.name}: no equilibrium found from q = {_listed(guess)}: the Jacobian of "
+                f"q_ddot is not finite at q = {_listed(q)}; fix: start nearer a rest point")
+        moved = _trust_region_step(rest, q, f, J, radius)
+        if moved is None:
+            raise SimulationError(_stationary(cm, guess, q, f))
+        q, f, radius = moved
     if np.max(np.abs(f)) <= tol:
         return q
     raise SimulationError(
-        f"{cm.name}: no equilibrium found from q = {list(map(float, q_guess))}: Newton stopped "
-        f"at q = {list(map(float, q))} with residual |q_ddot| = {float(np.max(np.abs(f))):.3g} "
-        f"(tolerance {tol:g}); fix: start nearer a rest point, or check that one exists "
-        f"for these inputs")
+        f"{cm.name}: no equilibrium found from q = {_listed(guess)}: Newton stopped after "
+        f"{max_iter} steps at q = {_listed(q)} with residual |q_ddot| = "
+        f"{float(np.max(np.abs(f))):.3g} (tolerance {tol:g}); fix: start nearer a rest "
+        f"point, raise max_iter, or check that one exists for these inputs")
+
+
+#: the trust radius of :func:`equilibrium`'s first step, in the tangent space (radians,
+#: metres); it doubles after a step the linear model predicted well, up to
+#: :data:`MAX_RADIUS`, and shrinks after one it did not
+FIRST_RADIUS = 0.5
+#: the longest step :func:`equilibrium` takes: about a sixth of a turn, so a rest
+#: point a turn or more away is reached only by walking down the residual to it
+MAX_RADIUS = 1.0
+#: a step is taken when the residual's square fell by at least this part of what the
+#: linear model predicted (Nocedal and Wright, Numerical Optimization, algorithm 4.1)
+ACCEPT = 0.1
+
+
+def _listed(v) -> list:
+    return [float(a) for a in v]
+
+
+def _guess(cm, q_guess) -> np.ndarray:
+    """q_guess as a finite configuration of ``nq`` values, its quaternions normalised."""
+    q = cm._vector(q_guess, cm.nq, "q_guess").copy()
+    if not np.all(np.isfinite(q)):
+        raise ArgumentValueError(f"{cm.name}: q_guess must be finite, got {_listed(q)}")
+    if cm.quaternions:
+        check_quaternions(cm, q[None, :], "q_guess")
+        q = cm.project(q)
+    return q
+
+
+class _RestProblem:
+    """The residual q_ddot(q) at rest and its slope in the tangent space, (n, n): from
+    the symbolic Jacobian (its q columns times the kinematic map dq = N(q) dv), or
+    from the analytical derivatives, which are in the tangent space already."""
+
+    def __init__(self, cm, t, u, p):
+        self.cm, self.t, self.u, self.p = cm, t, u, p
+        self.zero = np.zeros(cm.n)
+        if getattr(cm.lib, f"{cm.name}_jacobian", None) is not None:
+            self.source = "jacobian"
+        elif getattr(cm.lib, f"{cm.name}_derivatives", None) is not None:
+            self.source = "derivatives"
+        else:
+            builds = "jacobian=True or derivatives=True" if cm.quaternions else \
+                "linearize=True (or jacobian=True or derivatives=True)"
+            raise SimulationError(f"{cm.name}: equilibrium needs the symbolic Jacobian or "
+                                  f"the analytical derivatives; fix: load the model with "
+                                  f"{builds}")
+
+    def residual(self, q) -> np.ndarray:
+        x = np.concatenate([q, self.zero])
+        return self.cm.rhs(self.t, x, self.u, self.p)[self.cm.nq:]
+
+    def slope(self, q) -> np.ndarray:
+        cm, x = self.cm, np.concatenate([q, self.zero])
+        if self.source == "derivatives":
+            return cm.derivatives(self.t, x, self.u, self.p).dqdd_dq
+        J = cm.jac(self.t, x, self.u, self.p)[cm.nq:, :cm.nq]
+        return J @ tangent_map(cm, q) if cm.quaternions else J
+
+
+def _trust_region_step(rest, q, f, J, radius):
+    """``(q, f, radius)`` after one accepted dogleg step from q, or None when no step
+    inside a vanishing radius lowers |f| (the residual is stationary there)."""
+    ff = float(f @ f)
+    g = J.T @ f                        # half the gradient of |f|^2
+    scale = float(np.linalg.norm(J, 2)) * np.sqrt(ff)
+    if not np.linalg.norm(g) > 1e-14 * scale:
+        return None
+    newton = np.linalg.lstsq(J, -f, rcond=None)[0]
+    floor = 1e-12 * (1.0 + float(np.linalg.norm(q)))
+    while radius > floor:
+        step = _dogleg(J, g, newton, radius)
+        length = float(np.linalg.norm(step))
+        predicted = ff - float(np.sum((f + J @ step) ** 2))
+        try:
+            trial = retract(rest.cm, q, step)
+            f_trial = rest.residual(trial)
+        except MassMatrixError:
+            f_trial = None
+        if f_trial is not None and np.all(np.isfinite(f_trial)) and predicted > 0:
+            ratio = (ff - float(f_trial @ f_trial)) / predicted
+            if ratio >= ACCEPT:
+                if ratio > 0.75 and length >= 0.99 * radius:
+                    radius = min(2.0 * radius, MAX_RADIUS)
+                elif ratio < 0.25:
+                    radius = 0.25 * length
+                return trial, f_trial, radius
+        radius = 0.25 * length
+    return None
+
+
+def _dogleg(J, g, newton, radius) -> np.ndarray:
+    """The dogleg step inside ``radius``: the Newton step if it fits, else along the
+    steepest descent of |f|^2 to its minimum (the Cauchy point) and on towards the
+    Newton step until the radius."""
+    if np.linalg.norm(newton) <= radius:
+        return newton
+    Jg = J @ g
+    cauchy = -(float(g @ g) / float(Jg @ Jg)) * g
+    if np.linalg.norm(cauchy) >= radius:
+        return -radius * g / np.linalg.norm(g)
+    d = newton - cauchy
+    a, b, c = float(d @ d), 2.0 * float(cauchy @ d), float(cauchy @ cauchy) - radius ** 2
+    return cauchy + ((-b + np.sqrt(b * b - 4.0 * a * c)) / (2.0 * a)) * d
+
+
+def _stationary(cm, guess, q, f) -> str:
+    at = "the guess" if np.array_equal(q, guess) else f"q = {_listed(q)}"
+    return (f"{cm.name}: no equilibrium found from q = {_listed(guess)}: at {at} the "
+            f"residual q_ddot = {_listed(f)} is not zero but stationary (no step in q "
+            f"lowers |q_ddot|: its Jacobian in q is singular there, e.g. zero where "
+            f"gravity's torque peaks), so Newton has no direction to go; fix: start from "
+            f"another guess, nearer a configuration where the forces balance, or check "
+            f"that one exists for these parameters and inputs")
+
+
+def _quaternion_rows(quat) -> np.ndarray:
+    """d quat / d w (4 x 3) of ``dquat/dt = quat * (0, w) / 2``, w in the joint's base."""
+    w, x, y, z = quat
+    return 0.5 * np.array([[-x, -y, -z], [w, -z, y], [z, w, -x], [-y, x, w]])
+
+
+def _rotation(quat) -> np.ndarray:
+    """The rotation matrix of a unit quaternion (w, x, y, z): child axes as columns."""
+    w, x, y, z = quat
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                     [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                     [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+
+
+def _joints(cm):
+    """Per ball or free joint: (its position's coordinate indices or None, its
+    quaternion's, its linear speeds' or None, its angular speeds'), in the state's
+    order (simple coordinates and speeds first, then each joint's: a free joint's
+    position and linear velocity before its quaternion and angular velocity)."""
+    c = s = cm.manifest.get("n_simple", cm.nq)
+    for quat in map(list, cm.quaternions):
+        position = linear = None
+        if quat[0] - c == 3:
+            position, linear, s = list(range(c, c + 3)), list(range(s, s + 3)), s + 3
+        yield position, quat, linear, list(range(s, s + 3))
+        c, s = quat[3] + 1, s + 3
+
+
+def tangent_map(cm, q) -> np.ndarray:
+    """N(q), (nq, n): dq = N(q) dv, the model's kinematic relation dq/dt = N(q) v (a
+    simple coordinate's rate its speed, a quaternion's ``quat * (0, w) / 2``, a free
+    joint's position's ``R(quat) v``)."""
+    simple = cm.manifest.get("n_simple", cm.nq)
+    N = np.zeros((cm.nq, cm.n))
+    N[range(simple), range(simple)] = 1.0
+    for position, quat, linear, angular in _joints(cm):
+        if position is not None:
+            N[np.ix_(position, linear)] = _rotation(q[quat])
+        N[np.ix_(quat, angular)] = _quaternion_rows(q[quat])
+    return N
+
+
+def retract(cm, q, dv) -> np.ndarray:
+    """q moved by dv in the tangent space: simple coordinates and a free joint's
+    position (by ``R(quat) dv``) linearly, each quaternion by the exponential map,
+    ``quat * exp(dw / 2)`` (unit, as the motion of angular velocity dw for a unit
+    time turns it)."""
+    simple = cm.manifest.get("n_simple", cm.nq)
+    out = np.array(q, dtype=float)
+    out[:simple] += dv[:simple]
+    for position, quat, linear, angular in _joints(cm):
+        if position is not None:
+            out[position] += _rotation(q[quat]) @ dv[linear]
+        w = np.asarray(dv[angular], dtype=float)
+        angle = float(np.linalg.norm(w))
+        half = np.concatenate([[np.cos(angle / 2)], np.sinc(angle / (2 * np.pi)) * w / 2])
+        out[quat] = _product(q[quat], half)
+    return out
+
+
+def _product(a, b) -> np.ndarray:
+    """The quaternion product a * b, (w, x, y, z)."""
+    w1, x1, y1, z1 = a
+    w2, x2, y2, z2 = b
+    return np.array([w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2,
+                     w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
+                     w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
+                     w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2])

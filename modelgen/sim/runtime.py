@@ -128,14 +128,30 @@ class CompiledModel(FrameKinematics):
 
     def _time(self, t) -> float:
         try:
-            if np.iscomplexobj(t) or np.ndim(t) != 0:
+            # a string is not a time, though float() would read "0" as one
+            if np.iscomplexobj(t) or np.ndim(t) != 0 or np.asarray(t).dtype.kind in "SU":
                 raise TypeError(t)
             t = float(t)
         except (TypeError, ValueError, OverflowError):
-            raise SimulationError(f"{self.name}: t must be a real number, got {t!r}") from None
+            raise ArgumentTypeError(f"{self.name}: t must be a real number, got {t!r}") from None
         if not np.isfinite(t):
             raise ArgumentValueError(f"{self.name}: t must be finite, got {t!r}")
         return t
+
+    def checked_state(self, x, what: str = "x") -> np.ndarray:
+        """The state (or configuration) ``x``, a float vector of ``nx`` (or ``nq``)
+        values, refused when not finite or when a joint's quaternion is zero, and
+        returned with each quaternion normalised (:meth:`project`): what the
+        derivatives and the linearization are taken at (a quaternion off unit norm is
+        no rotation; the integrators normalise it after every step)."""
+        if not np.all(np.isfinite(x)):
+            bad = [name for name, v in zip(self.state_names, x) if not np.isfinite(v)]
+            raise ArgumentValueError(f"{self.name}: {what} must be finite; got NaN or Inf in "
+                                     f"{bad}")
+        if not self.quaternions:
+            return x
+        integrate.check_quaternions(self, x[None, :], what)
+        return self.project(x)
 
     def params(self, p=None) -> np.ndarray:
         """Full parameter vector from None (defaults), a dict of overrides or an array.
@@ -287,6 +303,14 @@ class CompiledModel(FrameKinematics):
 
     def _derivatives_function(self, suffix: str):
         fn = getattr(self.lib, f"{self.name}_{suffix}", None)
+        if fn is None and self.manifest.get("constraints"):
+            # derivatives=True is refused for this model: name what works instead
+            raise BuildError(f"{self.name}: a constrained model has no analytical "
+                             f"derivatives (a build with derivatives=True is refused: they "
+                             f"would leave out the constraint forces); fix: load it with "
+                             f"jacobian=True and use cm.jac(t, x, u), or with "
+                             f"linearize=True and use cm.linearize(x, u) (the derivatives "
+                             f"of the constrained rhs)")
         if fn is None:
             raise BuildError(f"{self.name}: built without the analytical derivatives; load "
                              f"it with derivatives=True")
@@ -297,13 +321,15 @@ class CompiledModel(FrameKinematics):
         analytical (``<name>_derivatives``: -M^-1 times the derivatives of inverse
         dynamics, Carpentier and Mansard 2018); d/dq of a ball or free joint in the
         tangent space (along the speeds), as Pinocchio's ``computeABADerivatives``.
-        Load the model with ``derivatives=True``.
+        Load the model with ``derivatives=True``.  ``x`` must be finite; its
+        quaternions are normalised first (a zero one is refused), as the integrators
+        do: the derivatives are those at the rotation it stands for.
 
         >>> d = modelgen.load(path, derivatives=True).derivatives(0.0, x)  # doctest: +SKIP
         >>> d.dqdd_dq.shape                                                 # doctest: +SKIP
         """
         fn = self._derivatives_function("derivatives")
-        x = self._vector(x, self.nx, "x")
+        x = self.checked_state(self._vector(x, self.nx, "x"))
         n, nu = self.n, len(self.inputs)
         out = Derivatives(np.empty((n, n)), np.empty((n, n)), np.empty((n, nu)))
         status = fn(self._time(t), self._ptr(x), self._ptr(self.input_vector(u)),
@@ -317,11 +343,13 @@ class CompiledModel(FrameKinematics):
         """dQ/dq, dQ/dv and M = dQ/dqdd of :meth:`inverse_dynamics` at (t, x, qdd, u, p)
         (``<name>_inverse_dynamics_derivatives``; Pinocchio's ``computeRNEADerivatives``
         with the model's own forces taken off).  Load the model with ``derivatives=True``.
+        ``x`` is checked and its quaternions normalised as by :meth:`derivatives`.
 
         >>> d = cm.inverse_dynamics_derivatives(0.0, x, qdd)             # doctest: +SKIP
         """
         fn = self._derivatives_function("inverse_dynamics_derivatives")
-        x, qdd = self._vector(x, self.nx, "x"), self._vector(qdd, self.n, "qdd")
+        x = self.checked_state(self._vector(x, self.nx, "x"))
+        qdd = self._vector(qdd, self.n, "qdd")
         n = self.n
         out = InverseDynamicsDerivatives(np.empty((n, n)), np.empty((n, n)), np.empty((n, n)))
         fn(self._time(t), self._ptr(x), self._ptr(qdd), self._ptr(self.input_vector(u)),
@@ -630,9 +658,15 @@ class CompiledModel(FrameKinematics):
 
         The generated symbolic Jacobian when the model has one, else central
         differences of the compiled rhs (see :func:`modelgen.sim.integrate.jacobian_source`).
+        ``x`` must be finite and a joint's quaternion nonzero; it is not normalised,
+        since this is the derivative of :meth:`rhs` at ``x`` itself (which a stiff
+        solver needs where its iterates stray off unit norm).
 
         >>> scipy.integrate.solve_ivp(cm.rhs, (0, 1), x0, method="Radau", jac=cm.jac)  # doctest: +SKIP
         """
+        x = self._vector(x, self.nx, "x")
+        if not np.all(np.isfinite(x)) or self.quaternions:
+            self.checked_state(x)
         return integrate.jacobian(self, t, x, u, p)
 
     # -- linearization (modelgen/sim/linearize.py) -------------------------------------
@@ -649,7 +683,9 @@ class CompiledModel(FrameKinematics):
         return linearization.linearize(self, x, u, t, p, outputs)
 
     def equilibrium(self, q_guess, u=None, p=None, t=0.0, **options) -> np.ndarray:
-        """A rest point q (q_ddot(q, 0, u) = 0) near ``q_guess``; see
+        """A rest point q (q_ddot(q, 0, u) = 0) near ``q_guess`` (``nq`` values), by
+        trust-region Newton in the tangent space; the model is loaded with
+        ``linearize=True``, ``jacobian=True`` or ``derivatives=True``.  See
         :func:`modelgen.sim.linearize.equilibrium` (``tol``, ``max_iter``).
 
         >>> q = cm.equilibrium([2.9]); cm.linearize(q).eigenvalues()    # doctest: +SKIP
