@@ -24,6 +24,7 @@ from modelgen.derive.dynamics import derive_equations
 from modelgen.errors import ModelError
 from modelgen.derive.spatial import add
 from modelgen.derive.kinematics import derive_kinematics
+from modelgen.model.api import Model
 from modelgen.model.spec import ModelSpec, symbol
 
 
@@ -33,9 +34,16 @@ def acceleration_name(coordinate: str) -> str:
 
 
 class Mechanism:
-    """Closed-form kinematic and dynamic queries on a :class:`ModelSpec`."""
+    """Closed-form kinematic and dynamic queries on a :class:`ModelSpec` (or on a
+    :class:`~modelgen.model.api.Model`, whose spec it takes)."""
 
-    def __init__(self, spec: ModelSpec, simplify: bool = True):
+    def __init__(self, spec: ModelSpec | Model, simplify: bool = True):
+        if isinstance(spec, Model):
+            spec = spec.spec()
+        if not isinstance(spec, ModelSpec):
+            raise TypeError(f"Mechanism takes a ModelSpec or a Model, not "
+                            f"{type(spec).__name__}: e.g. Mechanism(load_model('arm.yaml')) "
+                            "or Mechanism(Model(...))")
         self.spec = spec
         self.kin = derive_kinematics(spec)
         self._simplify = simplify

@@ -18,7 +18,7 @@ from typing import Mapping, Optional
 
 from modelgen.errors import ModelError
 from modelgen.model.builder import ModelBuilder, replay
-from modelgen.model.messages import API_FILE
+from modelgen.model.messages import API_FILE, describe
 from modelgen.model.names import check_name
 from modelgen.model.reader import read_text
 from modelgen.model.sections import builder_from_text
@@ -66,10 +66,19 @@ def _listed(names: tuple) -> tuple:
     return names
 
 
+def _as_dict(value, method: str, example: str) -> dict:
+    """A mapping argument of ``method`` as a dict, or a ModelError naming the method."""
+    if not isinstance(value, Mapping):
+        raise ModelError(f"{method}() takes a mapping (a dict) but got {describe(value)}",
+                         file=API_FILE, key=method.split("_", 1)[1],
+                         fix=f"pass a dict, e.g. {method}({example})")
+    return dict(value)
+
+
 def _mapping(defaults, keywords: dict, what: str) -> dict:
     """``add_parameters({"m": 1.0})`` or ``add_parameters(m=1.0)`` (or both), as the
     YAML's mapping: one dict of name -> default."""
-    out = dict(defaults or {})
+    out = {} if defaults is None else _as_dict(defaults, f"add_{what}", "{'m': 1.0}")
     twice = sorted(set(out) & set(keywords))
     if twice:
         raise ModelError(f"{what} {', '.join(twice)} given both in the mapping and as "
@@ -331,8 +340,9 @@ class Model:
         >>> m.set_armature({"q": "Ir"}).spec().armature
         (('q', Ir),)
         """
-        return self._apply(lambda c: c.set_armature(None if armature is None
-                                                     else dict(armature)))
+        armature = None if armature is None else \
+            _as_dict(armature, "set_armature", "{'q1': 0.01}")
+        return self._apply(lambda c: c.set_armature(armature))
 
     def add_constraint(self, name: str, type: str, **fields) -> "Model":
         """Add a named constraint of kind ``type`` (``coincide``, ``position``,
@@ -363,14 +373,16 @@ class Model:
         return self._apply(lambda c: c.set_dependent({"coordinates": names(coordinates),
                                                        "speeds": names(speeds)}))
 
-    def set_units(self, units: Mapping[str, str]) -> "Model":
+    def set_units(self, units: Optional[Mapping[str, str]]) -> "Model":
         """Set the units of declared coordinates, parameters and inputs (replacing any
-        set before); for people and exports, never in the equations.
+        set before); for people and exports, never in the equations.  None removes
+        them (as ``units: null`` in the YAML).
 
         >>> Model("m").add_parameter("L", 1.0).set_units({"L": "m"}).spec().units
         (('L', 'm'),)
         """
-        return self._apply(lambda c: c.set_units(dict(units)))
+        units = None if units is None else _as_dict(units, "set_units", "{'L': 'm'}")
+        return self._apply(lambda c: c.set_units(units))
 
     def spec(self) -> ModelSpec:
         """Validate the whole model and return the frozen :class:`ModelSpec`.

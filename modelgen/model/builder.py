@@ -12,6 +12,7 @@ builder as it was.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import numbers
 import re
@@ -25,10 +26,10 @@ from modelgen.model import spec as specmod
 from modelgen.model.constraints import constraint_decl, constraint_fields, dependent_decl
 from modelgen.model.expr import ExpressionParseError, format_expression, parse_expression
 from modelgen.model.inertia import check_physical_inertia, read_inertia
-from modelgen.model.messages import (article, as_list, closest, describe, join_and,
-                                     quote_expression)
+from modelgen.model.messages import (API_FILE, article, as_list, closest, describe,
+                                     join_and, quote_expression)
 from modelgen.model.names import (MAX_NAME_LENGTH, NAME_FIX, NAME_RE, NAMESPACE_NOTE,
-                                  NAMESPACE_NOTE_EFFECTS, check_name)
+                                  NAMESPACE_NOTE_EFFECTS, check_model_name, check_name)
 from modelgen.model.resolve import build_spec
 from modelgen.model.schema import ENTRY_KEYS, EXPRESSION_RULES, NUMERIC_STRING, REQUIRED_KEYS
 from modelgen.model.spec import (CANONICAL_BASE, CANONICAL_POINT, EFFECT_KINDS, TIME,
@@ -39,6 +40,10 @@ __all__ = ["ModelBuilder", "replay", "BaseDecl", "PointDecl", "JointDecl", "Fram
 
 
 # -- declarations: validated entries, before references are resolved ----------
+
+#: The fix of a name that is a coordinate's or a joint speed's acceleration.
+ACCELERATION_FIX = ("rename it; accelerations are named q_ddot for a coordinate q and "
+                    "J_wx_dot for a ball or free joint's speed J_wx")
 
 #: What a unit may be written as (see ModelBuilder.set_units).
 UNIT_TEXT = re.compile(r"[A-Za-z0-9_.*/^() -]{1,40}")
@@ -215,7 +220,21 @@ class ModelBuilder:
         if name in self.speeds:
             raise self.error(f"'{name}' is the speed of coordinate '{self.speeds[name]}'",
                              key, "rename it; the speed of a coordinate q is named q_dot")
+        owner = self.acceleration_owner(name)
+        if owner is not None:
+            raise self.error(f"'{name}' is the acceleration of {self.kind_of(owner)} "
+                             f"'{owner}'", key, ACCELERATION_FIX)
         return name
+
+    def acceleration_owner(self, name: str) -> Optional[str]:
+        """The coordinate (q of ``q_ddot``) or ball/free joint speed (J_wx of
+        ``J_wx_dot``) whose acceleration symbol is ``name``, or None: the names of
+        :class:`~modelgen.derive.queries.Mechanism`'s results, so reserved."""
+        for suffix, kind in (("_ddot", "coordinate"), ("_dot", "joint speed")):
+            stem = name.removesuffix(suffix)
+            if stem != name and self.kind_of(stem) == kind:
+                return stem
+        return None
 
     def register(self, name: str, kind: str, key: str) -> None:
         self.kinds[name] = (kind, key)
@@ -287,13 +306,32 @@ class ModelBuilder:
         return value
 
     def number(self, value, key: str, what: str) -> float:
+        """A real number (or numeric string) as a double; one that overflows a double,
+        or is not 0 but rounds to 0, is refused as the expression grammar refuses it."""
         if isinstance(value, str) and NUMERIC_STRING.match(value):
-            value = float(value)
-        if (isinstance(value, bool) or not isinstance(value, numbers.Real)
-            or not math.isfinite(float(value))):
+            exact_zero = not re.search(r"[1-9]", value.lower().partition("e")[0])
+            approx = float(value)
+            overflow = math.isinf(approx)
+        elif isinstance(value, numbers.Real) and not isinstance(value, bool):
+            exact_zero = value == 0
+            try:
+                approx = float(value)
+            except OverflowError:       # an int or a fraction beyond the doubles
+                approx = math.inf if value > 0 else -math.inf
+            overflow = math.isinf(approx) and value != approx
+        else:
             raise self.error(f"{what} must be a finite real number but is "
                              f"{describe(value)}", key, "write a number such as 1.0")
-        return float(value)
+        if overflow:
+            raise self.error(f"{what} overflows a double (its magnitude is above 1.8e308)",
+                             key, "write a number of magnitude at most 1.7e308")
+        if not math.isfinite(approx):
+            raise self.error(f"{what} must be a finite real number but is "
+                             f"{describe(value)}", key, "write a number such as 1.0")
+        if approx == 0 and not exact_zero:
+            raise self.error(f"{what} is too small for a double (it would be 0)", key,
+                             "use a magnitude of at least 5e-324, or 0")
+        return approx
 
     def at_defaults(self, expr: sympy.Expr) -> Optional[float]:
         """Value of a parameters-only expression at the defaults (None if not real)."""
@@ -311,8 +349,7 @@ class ModelBuilder:
             raise self.error(f"model name {shown} is not a valid C identifier", key,
                              f"{NAME_FIX} and at most {MAX_NAME_LENGTH} characters "
                              "(it prefixes every generated C function)")
-        check_name(name, file=self.file, line=self.line_of(key), key=key, what="model name",
-                   modelgen_reserved=False)
+        check_model_name(name, file=self.file, line=self.line_of(key), key=key)
         self.name = name
 
     def set_description(self, text, key: str = "description") -> None:
@@ -365,6 +402,11 @@ class ModelBuilder:
             raise self.error(f"the speed of coordinate '{name}' would be '{speed}', which "
                              f"is already declared as {article(other_kind)} at {other_key}", key,
                              f"rename {other_kind} '{speed}' or coordinate '{name}'")
+        if f"{name}_ddot" in self.kinds:
+            other_kind, other_key = self.kinds[f"{name}_ddot"]
+            raise self.error(f"the acceleration of coordinate '{name}' would be '{name}_ddot', "
+                             f"which is already declared as {article(other_kind)} at "
+                             f"{other_key}", key, ACCELERATION_FIX)
         self.register(name, "coordinate", key)
         self.coordinates.append(name)
         self.speeds[speed] = name
@@ -396,21 +438,38 @@ class ModelBuilder:
         self.register(name, "base", key)
         self.bases.append(BaseDecl(name, parent, int(axis), angle, key))
 
+    def spelled(self, field: str, key: str) -> str:
+        """A field as its writer spells it: 'from' in a model file, from_= in the
+        Python API (whose ``file`` is ``<api>``; ``from`` is a Python keyword)."""
+        if self.file_of(key) == API_FILE:
+            return ("from_" if field == "from" else field) + "="
+        return f"'{field}'"
+
+    def missing(self, field: str, key: str) -> str:
+        """'missing required key 'from'', or in the Python API 'missing argument from_='."""
+        api = self.file_of(key) == API_FILE
+        return f"missing {'argument' if api else 'required key'} {self.spelled(field, key)}"
+
     def add_point(self, name, parent, base, frame, coordinates, key: str) -> None:
         self.check_new_name(name, "point", key)
+        spell = functools.partial(self.spelled, key=key)
         if frame is not None:
             if parent is not None or base is not None:
-                raise self.error("'frame' cannot be combined with 'from' or 'base'",
-                                 f"{key}.frame", "give either 'frame' or 'from' and 'base'")
+                raise self.error(f"{spell('frame')} cannot be combined with "
+                                 f"{spell('from')} or {spell('base')}", f"{key}.frame",
+                                 f"give either {spell('frame')} or {spell('from')} and "
+                                 f"{spell('base')}")
             frame = self.reference(frame, "frame", f"{key}.frame")
         elif parent is None and base is None:
             parent, base = CANONICAL_POINT, CANONICAL_BASE
         elif base is None:
-            raise self.error("missing required key 'base' (needed with 'from')", key,
-                             "add 'base', or use 'frame' instead of 'from'")
+            raise self.error(f"{self.missing('base', key)} (needed with {spell('from')})",
+                             key, f"add {spell('base')}, or use {spell('frame')} instead of "
+                             f"{spell('from')}")
         elif parent is None:
-            raise self.error("missing required key 'from' (needed with 'base')", key,
-                             "add 'from', or use 'frame' instead of 'base'")
+            raise self.error(f"{self.missing('from', key)} (needed with {spell('base')})",
+                             key, f"add {spell('from')}, or use {spell('frame')} instead of "
+                             f"{spell('base')}")
         if frame is None:
             parent = self.reference(parent, "point", f"{key}.from")
             base = self.reference(base, "base", f"{key}.base")
@@ -424,8 +483,10 @@ class ModelBuilder:
         """A ball or free joint: it declares its base (and a free joint its point),
         its coordinates ``<name>_<suffix>`` and speeds (``JOINT_KINDS``)."""
         self.check_new_name(name, "joint", key)
-        if kind not in specmod.JOINT_KINDS:
-            raise self.error(f"unknown joint type {describe(kind)}", f"{key}.type",
+        api = self.file_of(key) == API_FILE
+        if not isinstance(kind, str) or kind not in specmod.JOINT_KINDS:
+            raise self.error(f"unknown joint {'kind' if api else 'type'} {describe(kind)}",
+                             f"{key}.type",
                              "use 'ball' (a quaternion, 3 speeds) or 'free' (a position and "
                              "a quaternion, 6 speeds); a hinge is a base with an axis and "
                              "an angle")
@@ -435,14 +496,16 @@ class ModelBuilder:
             origin = CANONICAL_POINT if origin is None else \
                 self.reference(origin, "point", f"{key}.from")
             if point is None:
-                raise self.error("missing required key 'point'", key,
-                                 "a free joint makes a point: add 'point: <new point name>'")
+                raise self.error(self.missing("point", key), key, "a free joint makes a point: "
+                                 + ("add point='<new point name>'" if api else
+                                    "add 'point: <new point name>'"))
             point = self.reference(point, "point", f"{key}.point")
         else:
             for field, value in (("from", origin), ("point", point)):
                 if value is not None:
-                    raise self.error(f"a ball joint has no '{field}'", f"{key}.{field}",
-                                     "remove it, or make the joint 'type: free'")
+                    raise self.error(f"a ball joint has no {self.spelled(field, key)}",
+                                     f"{key}.{field}", "remove it, or make the joint "
+                                     + ("kind='free'" if api else "'type: free'"))
             origin = point = ""
         q_suffixes, v_suffixes = specmod.JOINT_KINDS[kind]
         coordinates = tuple(f"{name}_{s}" for s in q_suffixes)
@@ -452,6 +515,12 @@ class ModelBuilder:
             [(v, "joint speed") for v in speeds]
         for new, what in names:
             self.check_new_name(new, what, key)
+        for speed in speeds:
+            if f"{speed}_dot" in self.kinds:
+                raise self.error(f"the acceleration of joint speed '{speed}' would be "
+                                 f"'{speed}_dot', which is already declared as "
+                                 f"{article(self.kinds[speed + '_dot'][0])}", key,
+                                 ACCELERATION_FIX)
         if len({new for new, _ in names} | {name}) != len(names) + 1:
             raise self.error("the joint's base, point and name must differ", key,
                              "give the base and the point their own names")

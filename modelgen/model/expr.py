@@ -78,7 +78,8 @@ from typing import Mapping, Optional
 import sympy
 
 from modelgen.errors import ExpressionError
-from modelgen.model.expr_print import FUNCTION_NAMES, Unprintable, expression_text, integer_text
+from modelgen.model.expr_print import (FUNCTION_NAMES, MAX_TEXT_BITS, Unprintable,
+                                       expression_text, integer_text)
 
 __all__ = [
     "FUNCTIONS", "CONSTANTS", "MAX_LENGTH", "MAX_DEPTH", "MAX_NUMBER_CHARS",
@@ -586,7 +587,8 @@ def _check_numbers(result: sympy.Expr, text: Optional[str]) -> None:
         e = stack.pop()
         if e.is_Rational:
             for part in (e.p, e.q):
-                if len(integer_text(abs(part))) > MAX_NUMBER_CHARS:
+                if abs(part).bit_length() > MAX_TEXT_BITS or \
+                        len(integer_text(abs(part))) > MAX_NUMBER_CHARS:
                     raise ExpressionParseError(
                         f"a number in the expression has more than {MAX_NUMBER_CHARS} digits",
                         text, None, "use fewer significant digits")
@@ -704,6 +706,13 @@ def _stable(result: sympy.Expr, text: str, allowed: Mapping[str, sympy.Symbol]) 
         except ExpressionParseError:
             break
         if again == result:
+            if len(printed) > MAX_LENGTH:
+                # what is accepted must read back from the model file it is written to
+                raise ExpressionParseError(
+                    f"the expression is {len(printed)} characters long as sympy writes it",
+                    text, None, f"use at most {MAX_LENGTH} characters once sympy has "
+                    "evaluated it (a number times a sum is multiplied out: 7*(a + b) is "
+                    "7*a + 7*b)")
             return result
         result = again
     raise ExpressionParseError("the expression has no stable form under sympy's automatic "
@@ -755,5 +764,5 @@ def _fmt(e) -> tuple:
         return expression_text(e)
     except Unprintable as exc:
         if exc.reason:
-            raise ExpressionParseError(exc.reason, None) from None
+            raise ExpressionParseError(exc.reason, None, None, exc.hint or None) from None
         raise

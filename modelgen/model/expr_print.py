@@ -38,7 +38,7 @@ def expression_text(e) -> tuple:
     if e.is_Rational:
         denominator = integer_text(e.q)
         if denominator.startswith("1e"):  # a small decimal fraction: 3e-20
-            text = f"{abs(e.p)}e-{denominator[2:]}"
+            text = f"{digits_text(abs(e.p))}e-{denominator[2:]}"
             return ("-" + text, _PREC_NEG) if e.p < 0 else (text, _PREC_ATOM)
         text = f"{integer_text(abs(e.p))}/{denominator}"
         return ("-" + text, _PREC_NEG) if e.p < 0 else (text, _PREC_MUL)
@@ -65,13 +65,28 @@ def expression_text(e) -> tuple:
     raise Unprintable(e)
 
 
+#: Most bits of an integer printed (about 3900 digits): Python refuses to convert an
+#: int of more than 4300 digits to text, and the grammar takes at most 400 anyway.
+MAX_TEXT_BITS = 13_000
+
+
+def digits_text(n: int) -> str:
+    """``str(n)``, or :class:`Unprintable` for an integer of more than
+    :data:`MAX_TEXT_BITS` bits (which ``str`` would refuse with a ValueError)."""
+    if abs(n).bit_length() > MAX_TEXT_BITS:
+        raise Unprintable(None, f"a number in the expression has more than "
+                          f"{int(MAX_TEXT_BITS * math.log10(2))} digits",
+                          "use fewer significant digits")
+    return str(n)
+
+
 def integer_text(n: int) -> str:
     """A non-negative integer as a literal: digits, or ``<digits>e<k>`` when shorter.
 
     >>> integer_text(10**19), integer_text(1000), integer_text(12 * 10**40)
     ('1e19', '1000', '12e40')
     """
-    digits = str(n)
+    digits = digits_text(n)
     if len(digits) <= 15:
         return digits
     mantissa = digits.rstrip("0")
@@ -82,13 +97,15 @@ def integer_text(n: int) -> str:
 
 
 class Unprintable(Exception):
-    """A node outside the grammar; ``reason`` is set when the node is a number that
-    is not finite.  :mod:`modelgen.model.expr` turns it into its ExpressionParseError."""
+    """A node outside the grammar; ``reason`` (and ``hint``) are set when the node is
+    a number that is not finite or too long to print.  :mod:`modelgen.model.expr`
+    turns it into its ExpressionParseError."""
 
-    def __init__(self, node, reason: str = ""):
+    def __init__(self, node, reason: str = "", hint: str = ""):
         super().__init__(reason or str(node))
         self.node = node
         self.reason = reason
+        self.hint = hint
 
 
 def _negative_coefficient(term) -> bool:

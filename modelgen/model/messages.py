@@ -8,13 +8,14 @@ loader words its errors the same way.
 from __future__ import annotations
 
 import difflib
+import math
 import numbers
 from typing import Mapping, Optional
 
 import sympy
 
 __all__ = ["API_FILE", "describe", "listing", "article", "join_and", "closest", "as_list",
-           "quote_expression"]
+           "quote_expression", "comment_text"]
 
 #: ``file`` of the errors raised by the Python API.
 API_FILE = "<api>"
@@ -38,7 +39,10 @@ def describe(value) -> str:
     if isinstance(value, bool):
         return f"the boolean {str(value).lower()}"
     if isinstance(value, numbers.Number):
-        return f"the number {_shown(repr(value))}"
+        try:
+            return f"the number {_shown(repr(value))}"
+        except ValueError:      # Python has no text for an int of more than 4300 digits
+            return f"an integer of about {int(int(value).bit_length() * math.log10(2))} digits"
     if isinstance(value, str):
         if len(value) > SHOWN_LENGTH:
             return f"the string {value[:SHOWN_LENGTH - 20] + '...'!r} ({len(value)} characters)"
@@ -117,3 +121,18 @@ def quote_expression(value) -> str:
         text = text[:60] + "..." + text[-15:]
     return repr(text)
 
+
+
+def comment_text(text: str) -> str:
+    """``text`` made safe to write into one line of a comment or of a terminal report:
+    every line break (``\\r \\n \\x85 \\u2028 \\u2029``) and other non-printable
+    character as its Python escape.  Names and file names from an imported robot
+    go into the model file's ``#`` comments; a raw line break there would end the
+    comment and make the rest of the name live YAML.
+
+    >>> print(comment_text("f\\narmature: {j1: 5.0}\\u2028#"))
+    f\\narmature: {j1: 5.0}\\u2028#
+    """
+    if text.isprintable():
+        return text
+    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)

@@ -83,7 +83,8 @@ from modelgen.model.halfangle import POLY_NOISE, quat_conj, quat_const, quat_mul
 from modelgen.model.mjcf_state import (qacc_to_mujoco, qpos_from_mujoco, qpos_to_mujoco,
                                       quat_matrix, qvel_from_mujoco, qvel_to_mujoco,
                                       velocity_map)
-from modelgen.model.names import fresh_name, sanitize
+from modelgen.model.messages import comment_text
+from modelgen.model.names import fresh_name, model_name_for, sanitize
 from modelgen.model.spec import CANONICAL_BASE, CANONICAL_POINT, JOINT_KINDS, symbol
 
 __all__ = ["MjcfImport", "MjcfJoint", "import_mjcf", "import_mjcf_text", "import_mjmodel",
@@ -661,7 +662,7 @@ class _Builder:
         dof_index = tuple(by_speed[v] for v in spec.dof_names)
         free = tuple((spec.coordinates.index(jt.coordinates[3]), spec.dof_names.index(jt.speeds[0]))
                      for jt in self.quaternion_joints if jt.type == "free")
-        return MjcfImport(model, tuple(joints), self.source, tuple(self.notes),
+        return MjcfImport(model, tuple(joints), self.source, tuple(map(comment_text, self.notes)),
                           qpos_index, dof_index, free, tuple(self.equality_rows))
 
     def check_numbers(self) -> None:
@@ -711,8 +712,8 @@ def import_mjmodel(mjmodel, source: str = "<mjmodel>", *, name: Optional[str] = 
     if frictionloss not in FRICTIONLOSS:
         raise ValueError(f"frictionloss must be one of {FRICTIONLOSS}, not {frictionloss!r}")
     if name is None:
-        name = sanitize(_mujoco().mj_id2name(mjmodel, _mujoco().mjtObj.mjOBJ_MODEL, 0) or "") \
-            or sanitize(Path(source).stem)
+        name = model_name_for(_mujoco().mj_id2name(mjmodel, _mujoco().mjtObj.mjOBJ_MODEL, 0)
+                              or Path(source).stem)
     if not re.match(r"[A-Za-z]", name):
         name = "robot_" + name
     try:
@@ -791,4 +792,4 @@ def mjcf_to_yaml(imported: MjcfImport) -> str:
     lines = [f"# Imported by 'modelgen import' from {Path(imported.source).name} (MJCF).",
              "# Edit freely; re-importing overwrites this file."]
     lines += [f"# Note: {note}" for note in imported.notes]
-    return "\n".join(lines) + "\n" + imported.model.to_yaml()
+    return "\n".join(map(comment_text, lines)) + "\n" + imported.model.to_yaml()

@@ -22,7 +22,8 @@ from modelgen.model.spec import CANONICAL_BASE, CANONICAL_POINT
 
 __all__ = ["MAX_NAME_LENGTH", "C_KEYWORDS", "CPP_KEYWORDS", "PYTHON_KEYWORDS",
            "MODELGEN_RESERVED", "NAME_RE", "NAME_FIX", "NAMESPACE_NOTE",
-           "NAMESPACE_NOTE_EFFECTS", "check_name"]
+           "NAMESPACE_NOTE_EFFECTS", "check_name", "check_model_name",
+           "model_name_for"]
 
 #: Longest name accepted (C99 guarantees 63 significant initial characters).
 MAX_NAME_LENGTH = 63
@@ -116,6 +117,46 @@ def check_name(name, *, file: Optional[str] = API_FILE, line: Optional[int] = No
     return name
 
 
+def check_model_name(name, *, file: Optional[str] = API_FILE, line: Optional[int] = None,
+                     key: Optional[str] = "name") -> str:
+    """Check a model's name (a C prefix): :func:`check_name` without modelgen's
+    reserved symbols, and not ``mg`` in any case.
+
+    >>> check_model_name("MG")  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    modelgen.errors.ModelError: <api>: name: model name 'MG' is reserved: ...; fix: choose another model name, e.g. 'MG1'
+    """
+    check_name(name, file=file, line=line, key=key, what="model name",
+               modelgen_reserved=False)
+    if name.lower() == "mg":
+        raise ModelError(f"model name '{name}' is reserved: the generated C names its own "
+                         "functions and constants mg_... and MG_..., which the model's "
+                         "would clash with", file=file, line=line, key=key,
+                         fix=f"choose another model name, e.g. '{name}1'")
+    return name
+
+
+def model_name_for(wanted: str) -> str:
+    """A valid model name close to an imported robot's name: sanitized, ``robot_``
+    before one that does not start with a letter, ``_robot`` after a keyword, and
+    ``robot_`` before a reserved name or prefix.
+
+    >>> model_name_for("2-link arm"), model_name_for("int"), model_name_for("mg_arm")
+    ('robot_2_link_arm', 'int_robot', 'robot_mg_arm')
+    """
+    name = sanitize(wanted)
+    if not re.match(r"[A-Za-z]", name):
+        name = "robot_" + name
+    name = name[:MAX_NAME_LENGTH]
+    for candidate in (name, name[:57] + "_robot"):
+        try:
+            return check_model_name(candidate)
+        except ModelError:
+            pass
+    return "robot_" + name[:57]
+
+
 def sanitize(name: str) -> str:
     """A foreign name (URDF, MJCF) with every character outside ``[A-Za-z0-9_]``
     replaced by ``_``.
@@ -136,8 +177,8 @@ def fresh_name(wanted: str, taken: set) -> str:
     while True:
         try:
             check_name(name)
-            ok = (name not in taken and not name.endswith("_dot")
-                  and f"{name}_dot" not in taken)
+            ok = (name not in taken and not name.endswith(("_dot", "_ddot"))
+                  and f"{name}_dot" not in taken and f"{name}_ddot" not in taken)
         except ModelError:
             ok = False
         if ok:

@@ -11,7 +11,9 @@ is a :class:`~modelgen.errors.ModelError` naming the file and line.
 """
 from __future__ import annotations
 
+import math
 import os
+import re
 import unicodedata
 from typing import Optional
 
@@ -110,6 +112,14 @@ def _plain(node, path: str, lines: dict, loader: _Loader):
         raise _YamlProblem(f"the integer {node.value[:20]}... is beyond the range of a double "
                            f"(more than {len(str(MAX_INTEGER))} digits)", line,
                            "write a number below 1e308 (as a float: 1.5e300)", path or None)
+    if isinstance(value, float) and (math.isinf(value) or value == 0) \
+            and re.search(r"[1-9]", node.value.lower().partition("e")[0]):
+        # 1.0e400 or 1.0e-400, which float() makes inf or 0 (.inf is inf as written)
+        problem, fix = ("overflows a double (its magnitude is above 1.8e308)",
+                        "write a number of magnitude at most 1.7e308") if value else \
+            ("is too small for a double (it would be 0)",
+             "use a magnitude of at least 5e-324, or 0")
+        raise _YamlProblem(f"the number {node.value[:40]} {problem}", line, fix, path or None)
     return value
 
 

@@ -45,11 +45,12 @@ def build_spec(builder) -> ModelSpec:
     if builder.name is None:
         raise builder.error("missing required key 'name'", None,
                             "add 'name: <model name>' (a C identifier) at the top level")
-    for b in builder.bases:
+    declared_bases = _joints_first(builder.bases, {j.base for j in builder.joints})
+    for b in declared_bases:
         resolve(builder, b.parent, "base", f"{b.key}.parent", CANONICAL_BASE)
-    bases = _topological(builder.bases, lambda b: b.parent)
+    bases = _topological(declared_bases, lambda b: b.parent)
     if isinstance(bases, tuple):
-        first = _declared(builder.bases, bases[0])
+        first = _declared(declared_bases, bases[0])
         raise builder.error("the bases form a cycle: " + " -> ".join(bases) +
                             " (each base is rotated from the next)", f"{first.key}.parent",
                             "make one of these bases a child of 'E' or of a base outside "
@@ -64,7 +65,7 @@ def build_spec(builder) -> ModelSpec:
         resolve(builder, f.base, "base", f"{f.key}.base", CANONICAL_BASE)
         frames[f.name] = f
     points = []
-    for p in builder.points:
+    for p in _joints_first(builder.points, {j.point for j in builder.joints}):
         if p.frame is not None:
             resolve(builder, p.frame, "frame", f"{p.key}.frame")
             frame = frames[p.frame]
@@ -243,6 +244,13 @@ def resolve_effect(builder, e, frames: dict):
                 if builder.kind_of(item) != "joint speed":   # a ball/free joint's dof
                     resolve(builder, item, "coordinate", f"{where}[{i}]")
     return EFFECT_KINDS[e.kind](name=e.name, **values)
+
+def _joints_first(items: list, made: set) -> list:
+    """The bases (or points) the joints make, then the others, each in declaration
+    order: the order a model file declares them in (its joints are read first), so
+    that a model built in any order has the spec of its YAML."""
+    return [i for i in items if i.name in made] + [i for i in items if i.name not in made]
+
 
 def _declared(items, name):
     """The declaration named ``name``."""

@@ -83,7 +83,6 @@ applies.  What becomes what:
 from __future__ import annotations
 
 import math
-import re
 import warnings
 from pathlib import Path
 from typing import NamedTuple, Optional
@@ -93,7 +92,8 @@ import sympy
 
 from modelgen.errors import ModelError
 from modelgen.model.api import Model, check_name
-from modelgen.model.names import fresh_name, sanitize
+from modelgen.model.messages import comment_text
+from modelgen.model.names import fresh_name, model_name_for, sanitize
 from modelgen.model.spec import CANONICAL_BASE, CANONICAL_POINT, JOINT_KINDS, symbol
 from modelgen.model.urdf_read import Joint, Limit, Robot, parse_robot, rpy_matrix
 
@@ -225,15 +225,7 @@ class _Builder:
     def model_name(self) -> str:
         """The robot's name made a valid model name (a keyword such as 'True' or 'int'
         gets the suffix '_robot': the name is a C prefix and a Python identifier)."""
-        name = sanitize(self.robot.name)
-        if not re.match(r"[A-Za-z]", name):
-            name = "robot_" + name
-        name = name[:63]
-        try:
-            check_name(name, modelgen_reserved=False)
-        except ModelError:
-            name = name[:57] + "_robot"
-        return name
+        return model_name_for(self.robot.name)
 
     def unique(self, wanted: str) -> str:
         """A fresh valid name close to ``wanted`` (suffix _2, _3... on a clash)."""
@@ -592,10 +584,14 @@ class _Builder:
         self.model.set_gravity([0, 0, -symbol("g")])
         if self.changes:
             # never silent: the changed or non-physical bodies, per link
-            warnings.warn(f"{Path(self.robot.file).name}: read with {self.options.text()}: "
-                          + "; ".join(self.changes), stacklevel=4)
+            warnings.warn(comment_text(f"{Path(self.robot.file).name}: read with "
+                                       f"{self.options.text()}: " + "; ".join(self.changes)),
+                          stacklevel=4)
+        # the notes name links and joints: one line each in the file's comments and
+        # in the terminal, whatever characters the names hold
         return UrdfImport(self.model, tuple(self.infos), self.robot.file,
-                          self.notes + tuple(self.changes), self.options)
+                          tuple(map(comment_text, self.notes + tuple(self.changes))),
+                          self.options)
 
 
 def _shown(moments) -> str:
@@ -730,4 +726,4 @@ def urdf_to_yaml(imported: UrdfImport) -> str:
         lines.append("#   coordinate: lower upper velocity effort")
         lines += [f"#   {j.coordinate}: {_fmt(j.limit.lower)} {_fmt(j.limit.upper)} "
                   f"{_fmt(j.limit.velocity)} {_fmt(j.limit.effort)}" for j in limited]
-    return "\n".join(lines) + "\n" + imported.model.to_yaml()
+    return "\n".join(map(comment_text, lines)) + "\n" + imported.model.to_yaml()

@@ -24,13 +24,29 @@ _RESOLVER = yaml.resolver.Resolver()
 _PLAIN_SAFE = re.compile(r"-?[A-Za-z0-9_(][A-Za-z0-9_ .+\-*/()]*\Z")
 
 
+#: what :func:`_yaml_scalar` escapes after JSON has: DEL and everything beyond ASCII
+_ESCAPED = re.compile(r"[^\x00-\x7e]")
+
+
+def _escape(match) -> str:
+    """YAML's escape of one character: ``\\u00e9``, or ``\\U0001f600`` beyond the
+    Basic Multilingual Plane (where JSON's surrogate pair would read back as two
+    lone surrogates)."""
+    code = ord(match.group())
+    return f"\\u{code:04x}" if code <= 0xFFFF else f"\\U{code:08x}"
+
+
 def _yaml_scalar(text: str, numbers_ok: bool = False) -> str:
-    """``text`` as a YAML scalar that reads back as the same string (or number)."""
+    """``text`` as a YAML scalar that reads back as the same string (or number).
+
+    >>> print(_yaml_scalar("a: b\u00e9\U0001F600"))
+    "a: b\\u00e9\\U0001f600"
+    """
     if _PLAIN_SAFE.match(text) and not text.endswith(" "):
         tag = _RESOLVER.resolve(yaml.ScalarNode, text, (True, False)).rsplit(":", 1)[-1]
         if tag == "str" or (numbers_ok and tag == "int"):
             return text
-    return json.dumps(text)
+    return _ESCAPED.sub(_escape, json.dumps(text, ensure_ascii=False))
 
 
 def _yaml_expr(expr) -> str:
