@@ -388,3 +388,12 @@ def test_model_file_messages_keep_the_yaml_spelling_and_agree_on_numbers(text, e
     with pytest.raises(ModelError) as caught:
         parse_model("name: m\n" + text + "\n", "m.yaml")
     assert str(caught.value) == expected
+
+
+@pytest.mark.parametrize("method", ["add_coordinates", "add_inputs"])
+def test_several_names_from_a_mapping_are_refused(method):
+    # a dict's keys were taken as the names and its values dropped unread
+    with pytest.raises(ModelError, match=rf"expected names but got a mapping; fix: pass "
+                                         rf"names, e.g. {method}\('a', 'b'\)"):
+        getattr(Model("m"), method)({"a": 1.0})
+    assert getattr(Model("m"), method)(("a", "b")).spec() is not None

@@ -58,11 +58,16 @@ def load_model(path) -> ModelSpec:
 
 
 
-def _listed(names: tuple) -> tuple:
+def _listed(names: tuple, method: str) -> tuple:
     """``add_coordinates("q1", "q2")`` or ``add_coordinates(["q1", "q2"])``, as the YAML's
     list: the names either way."""
-    if len(names) == 1 and not isinstance(names[0], str) and hasattr(names[0], "__iter__"):
+    if len(names) == 1 and isinstance(names[0], (list, tuple)):
         return tuple(names[0])
+    if len(names) == 1 and isinstance(names[0], Mapping):
+        # a dict's keys would be taken as the names and its values dropped unread
+        raise ModelError(f"expected names but got {describe(names[0])}", file=API_FILE,
+                         key=method.split("_", 1)[1],
+                         fix=f"pass names, e.g. {method}('a', 'b') or {method}(['a', 'b'])")
     return names
 
 
@@ -169,7 +174,7 @@ class Model:
         >>> Model("m").add_coordinates(["q1", "q2"]).spec().coordinates
         ('q1', 'q2')
         """
-        names = _listed(names)
+        names = _listed(names, "add_coordinates")
 
         def change(c):
             for name in names:
@@ -217,7 +222,7 @@ class Model:
         >>> Model("m").add_inputs(["T1", "T2"]).spec().inputs
         ('T1', 'T2')
         """
-        names = _listed(names)
+        names = _listed(names, "add_inputs")
 
         def change(c):
             for name in names:
