@@ -396,4 +396,5 @@ def test_several_names_from_a_mapping_are_refused(method):
     with pytest.raises(ModelError, match=rf"expected names but got a mapping; fix: pass "
                                          rf"names, e.g. {method}\('a', 'b'\)"):
         getattr(Model("m"), method)({"a": 1.0})
-    assert getattr(Model("m"), method)(("a", "b")).spec() is not None
+    spec = getattr(Model("m"), method)(("a", "b")).spec()
+    assert (spec.coordinates if method == "add_coordinates" else spec.inputs) == ("a", "b")
