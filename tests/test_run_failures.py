@@ -135,7 +135,10 @@ def test_dense_output_warns_once_for_its_repeated_run(pendulum):
         warnings.simplefilter("always")
         res = pendulum.simulate([1.0, 0.0], (0.0, 100.0), max_steps=50, dense_output=True,
                                 t_eval=[1.0, 2.0])
-    assert res.status == -1 and len(caught) == 1 and res.sol is not None
+    assert res.status == -1 and len(caught) == 1
+    # the repeated run is the same run: its steps give back the samples
+    assert res.t.tolist() == [1.0, 2.0] and np.allclose(res.sol(res.t), res.y, rtol=0,
+                                                        atol=1e-12)
 
 
 def test_the_balance_flags_a_power_the_samples_do_not_resolve():

@@ -64,11 +64,9 @@ class KinematicsOptions:
     def __post_init__(self):
         object.__setattr__(self, "frames", _frame_names(self.frames))
         for f in fields(self):
-            value = getattr(self, f.name)
-            if isinstance(f.default, bool) and not isinstance(value, bool):
-                raise ArgumentTypeError(
-                    f"kinematics option {f.name!r} must be True or False, got {value!r}; "
-                    f"fix: {f.name}=True or {f.name}=False")
+            if isinstance(f.default, bool):
+                object.__setattr__(self, f.name, _flag(f.name, getattr(self, f.name),
+                                                       f"kinematics option {f.name!r}"))
         if self.reference not in REFERENCES:
             raise ModelError(f"unknown frame reference {self.reference!r}",
                              key="kinematics.reference", fix="use one of " + ", ".join(REFERENCES))
@@ -102,15 +100,15 @@ class KinematicsOptions:
                                 "kinematics={'frames': ['tool0'], 'com': True}")
 
 
-def _flag(name: str, value) -> bool:
-    """A yes/no option: True or False (or numpy's), never a truthy string such as
-    ``"no"``."""
+def _flag(name: str, value, label: str = "") -> bool:
+    """A yes/no option ``name`` (``label`` in the message, default the name): True or
+    False (or numpy's), never a truthy string such as ``"no"``."""
     if isinstance(value, bool):
         return value
     if getattr(value, "dtype", None) is not None and value.dtype.kind == "b" and not value.shape:
         return bool(value)
-    raise ArgumentTypeError(f"{name} must be True or False, got {value!r}; fix: {name}=True "
-                            f"or {name}=False")
+    raise ArgumentTypeError(f"{label or name} must be True or False, got {value!r}; fix: "
+                            f"{name}=True or {name}=False")
 
 
 def _frame_names(frames) -> tuple:

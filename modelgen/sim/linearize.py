@@ -23,7 +23,6 @@ from modelgen.sim.arguments import positive, whole_number
 from modelgen.sim.assemble import (check_initial_state, consistent_speeds, constraint_jacobian,
                                    singular_message)
 from modelgen.sim.conditioning import failure_kind
-from modelgen.sim.integrate import check_quaternions
 from modelgen.sim.result import replacing
 
 #: an eigenvalue below this times the largest |eigenvalue| (or 1) counts as zero, and a
@@ -413,13 +412,7 @@ def _listed(v) -> list:
 
 def _guess(cm, q_guess) -> np.ndarray:
     """q_guess as a finite configuration of ``nq`` values, its quaternions normalised."""
-    q = cm._vector(q_guess, cm.nq, "q_guess").copy()
-    if not np.all(np.isfinite(q)):
-        raise ArgumentValueError(f"{cm.name}: q_guess must be finite, got {_listed(q)}")
-    if cm.quaternions:
-        check_quaternions(cm, q[None, :], "q_guess")
-        q = cm.project(q)
-    return q
+    return cm.checked_state(cm._vector(q_guess, cm.nq, "q_guess").copy(), "q_guess")
 
 
 class _RestProblem:

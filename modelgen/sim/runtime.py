@@ -138,12 +138,13 @@ class CompiledModel(FrameKinematics):
             raise ArgumentValueError(f"{self.name}: t must be finite, got {t!r}")
         return t
 
-    def checked_state(self, x, what: str = "x") -> np.ndarray:
+    def checked_state(self, x, what: str = "x", normalise: bool = True) -> np.ndarray:
         """The state (or configuration) ``x``, a float vector of ``nx`` (or ``nq``)
         values, refused when not finite or when a joint's quaternion is zero, and
-        returned with each quaternion normalised (:meth:`project`): what the
-        derivatives and the linearization are taken at (a quaternion off unit norm is
-        no rotation; the integrators normalise it after every step)."""
+        returned with each quaternion normalised (:meth:`project`) unless not
+        ``normalise``: what the derivatives and the linearization are taken at (a
+        quaternion off unit norm is no rotation; the integrators normalise it after
+        every step)."""
         if not np.all(np.isfinite(x)):
             bad = [name for name, v in zip(self.state_names, x) if not np.isfinite(v)]
             raise ArgumentValueError(f"{self.name}: {what} must be finite; got NaN or Inf in "
@@ -151,7 +152,7 @@ class CompiledModel(FrameKinematics):
         if not self.quaternions:
             return x
         integrate.check_quaternions(self, x[None, :], what)
-        return self.project(x)
+        return self.project(x) if normalise else x
 
     def params(self, p=None) -> np.ndarray:
         """Full parameter vector from None (defaults), a dict of overrides or an array.
@@ -664,9 +665,7 @@ class CompiledModel(FrameKinematics):
 
         >>> scipy.integrate.solve_ivp(cm.rhs, (0, 1), x0, method="Radau", jac=cm.jac)  # doctest: +SKIP
         """
-        x = self._vector(x, self.nx, "x")
-        if not np.all(np.isfinite(x)) or self.quaternions:
-            self.checked_state(x)
+        x = self.checked_state(self._vector(x, self.nx, "x"), normalise=False)
         return integrate.jacobian(self, t, x, u, p)
 
     # -- linearization (modelgen/sim/linearize.py) -------------------------------------

@@ -454,11 +454,12 @@ def _power_outputs(spec) -> dict:
     energy the total energy leaves out (non-conservative ones, gravity in a base
     other than E or varying in time); a ``power`` output the scene already asks for
     is reused."""
-    from modelgen.model.spec import CONSERVATIVE_KINDS, time_free   # a spec is read
+    from modelgen.model.scene import ENERGIES                      # a spec is read
+    from modelgen.model.spec import CONSERVATIVE_KINDS, time_free
     kinds = {e.name: e for e in spec.model.effects}
     kinds.update({a.name: a for a in spec.model.actions})
     # the names of the result's other columns are taken too (the reader refuses them)
-    taken = {out.name for out in spec.outputs} | {"t", "kinetic", "potential", "total"}
+    taken = {out.name for out in spec.outputs} | {"t", *ENERGIES}
     taken.update(spec.model.coordinates + spec.model.speeds)
     powers = {}
     for name in spec.effects:
