@@ -60,6 +60,8 @@ MAX_STEPS = 1_000_000
 #: The logger categories of the FMU (modelDescription's LogCategories).
 LOG_CATEGORIES = (
     ("logStatusError", "errors: a misused call or a failed computation (always reported)"),
+    ("logStatusDiscard", "a Co-Simulation step that stopped short, or a status the FMU "
+                         "cannot give (always reported)"),
     ("logDebug", "what the FMU does: instantiation, initialization, each Co-Simulation step"),
 )
 #: Default Co-Simulation integrator of a model (a scene brings its own).
@@ -378,7 +380,8 @@ def wrapper_source(name: str, hash16: str, guid: str, variables, settings,
         "rtol": _number(settings.rtol), "atol": _number(settings.atol),
         "fixed_step": _number(settings.step or 0.0), "max_steps": str(settings.max_steps),
         "ny": n_outputs,
-        "constraints": ({"m": int(constraints["m"]), "mh": int(constraints["holonomic"])}
+        "constraints": ({"m": int(constraints["m"]), "mh": int(constraints["holonomic"]),
+                         "dep": [int(k) for k in constraints["dependent_speeds"]]}
                         if constraints else None),
     }
     return render("fmu/fmi2.c.j2", context)
