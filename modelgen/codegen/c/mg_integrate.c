@@ -34,7 +34,21 @@
  * families of mg_integrate/ (numerics, the system, explicit Runge-Kutta,
  * rodas, Gauss, events, step size control), which are not compiled alone.
  * Every helper stays static, and a C user compiles this one file.
+ *
+ * Each output directory holds a copy of this file, and a program that embeds
+ * several models compiles every one of them: with gcc or clang on ELF and
+ * Mach-O the four public functions are weak definitions, so the linker keeps
+ * one copy instead of failing on duplicates.  Their link names carry the ABI
+ * version (mg_integrate.h), so only copies of one interface are merged, and
+ * copies of two interfaces stay apart, each serving its own models.  PE/COFF
+ * (Windows) has no such merge: compile one copy there.
  * ------------------------------------------------------------------------- */
+#if (defined(__GNUC__) || defined(__clang__)) && (defined(__ELF__) || defined(__APPLE__))
+#define MG_WEAK __attribute__((weak))
+#else
+#define MG_WEAK
+#endif
+
 #include <float.h>
 #include <limits.h>
 #include <math.h>
@@ -75,7 +89,7 @@ typedef struct {
     double t_cut;
 } mg_run;
 
-long mg_work_size(int nx, int nu, int n_events)
+MG_WEAK long mg_work_size(int nx, int nu, int n_events)
 {
     return MG_WORK_SIZE((long)nx, (long)nu, (long)n_events);
 }
@@ -692,9 +706,9 @@ static void mg_finish(const mg_run *r)
     r->out->n_events = r->found;
 }
 
-int mg_integrate(const mg_system *system, double t0, double t1, const double *x0, const double *p,
-                 const mg_inputs *inputs, const mg_options *options, mg_output *output,
-                 mg_stats *stats, double *work)
+MG_WEAK int mg_integrate(const mg_system *system, double t0, double t1, const double *x0,
+                         const double *p, const mg_inputs *inputs, const mg_options *options,
+                         mg_output *output, mg_stats *stats, double *work)
 {
     mg_run r;
     int status;
@@ -716,11 +730,11 @@ int mg_integrate(const mg_system *system, double t0, double t1, const double *x0
     return status;
 }
 
-int mg_integrate_batch(const mg_system *system, long n_runs, double t0, double t1, const double *x0,
-                       const double *p, long p_stride, const mg_inputs *inputs,
-                       const mg_options *options, long n_eval, const double *t_eval, double *x_out,
-                       double *y_out, long *n_out, int *status, mg_stats *stats, double *stop,
-                       double *work)
+MG_WEAK int mg_integrate_batch(const mg_system *system, long n_runs, double t0, double t1,
+                               const double *x0, const double *p, long p_stride,
+                               const mg_inputs *inputs, const mg_options *options, long n_eval,
+                               const double *t_eval, double *x_out, double *y_out, long *n_out,
+                               int *status, mg_stats *stats, double *stop, double *work)
 {
     mg_options one;
     mg_output out;
@@ -751,8 +765,8 @@ int mg_integrate_batch(const mg_system *system, long n_runs, double t0, double t
         out.which_events = NULL;
         out.n_events = 0;
         out.stop = stop + r * (MG_STOP_X + system->nx);
-        status[r] = mg_integrate(system, t0, t1, x0 + r * system->nx, p + r * p_stride, inputs,
-                                 &one, &out, stats + r, work);
+        status[r] = mg_integrate(system, t0, t1, x0 + r * system->nx, p ? p + r * p_stride : NULL,
+                                 inputs, &one, &out, stats + r, work);
         n_out[r] = out.n;
         if (status[r] < 0)
             ++failed;
@@ -760,6 +774,7 @@ int mg_integrate_batch(const mg_system *system, long n_runs, double t0, double t
     return (int)failed;
 }
 
+#undef MG_WEAK
 #undef MG_UROUND
 #undef MG_FD_STEP
 #undef MG_RO_GAMMA

@@ -128,8 +128,8 @@ static int mg_fd_jacobian(const mg_system *sys, const mg_inputs *in, double t, c
     return 0;
 }
 
-int mg_jacobian_fd(const mg_system *system, double t, const double *x, const double *u,
-                   const double *p, double *J, double *work)
+MG_WEAK int mg_jacobian_fd(const mg_system *system, double t, const double *x, const double *u,
+                           const double *p, double *J, double *work)
 {
     long nfev = 0;
     return mg_fd_jacobian(system, NULL, t, x, (double *)u, p, J, &nfev, work);
