@@ -9,6 +9,8 @@
 """
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 from scipy.integrate import simpson
@@ -323,3 +325,20 @@ def test_a_field_that_varies_in_time_has_its_work_recorded(tmp_path):
     assert np.all(res.energy[:, 1] == 0.0)              # no potential is counted
     assert np.ptp(total) > 1.0
     assert np.abs(res.info["energy_balance"]).max() < 1e-7
+
+
+def test_stiffness_is_taken_at_the_state_the_run_starts_from(build_root, tmp_path):
+    """simulate normalises x0's quaternion, so the scene's |lambda|max must be taken
+    there too: on the heavy body on a ball joint, x0's quaternion scaled by 10 moved
+    it from 5.7 to 56.1 1/s."""
+    model = Path(__file__).parent / "data" / "joints" / "heavy_body_ball.yaml"
+    path = tmp_path / "ball_swing.yaml"
+    path.write_text(f"scene: ball_swing\nmodel: {model}\neffects: [gravity]\n"
+                    "initial: {J_qw: 0.8, J_qx: 0.4, J_qy: 0.2, J_qz: 0.4,\n"
+                    "          J_wx: 0.5, J_wy: -0.3, J_wz: 0.2}\n"
+                    "time: {end: 1.0, sample: 0.1}\nintegrator: {method: rk4, step: 0.01}\n")
+    swing = modelgen.load_scene(path, build_root / "scene_ball_swing")
+    x0 = swing.initial_state()
+    scaled = x0.copy()
+    scaled[list(swing.model.quaternions[0])] *= 10.0
+    assert swing.stiffness(scaled) == pytest.approx(swing.stiffness(x0), rel=1e-12)

@@ -17,6 +17,8 @@ import numpy as np
 from modelgen.codegen.capi import ALIASES, LIMITS, MAX_EVENTS, METHODS, Method
 from modelgen.errors import ArgumentTypeError, ArgumentValueError, SimulationError
 
+#: the dtype of every array the C reads or writes
+FLOAT = np.dtype(np.float64)
 #: numpy's C long (the counters of the C API)
 LONG = np.dtype("l")
 #: fixed step counts from here on do not fit the C integrator's counter (a C long)
@@ -36,6 +38,37 @@ MIN_ATOL = 1e-100
 MAX_COUNT = int(np.iinfo(np.intc).max)
 #: the most rows one C call of a run records when every step is recorded
 MAX_CHUNK = 1 << 16
+
+
+#: dtype kinds numpy's astype(float) converts that hold no numbers: text ("0.1" would
+#: be read as 0.1), timedeltas and dates (their counts of some unit), records
+NOT_NUMBERS = {"S": "text", "U": "text", "m": "timedeltas", "M": "dates", "V": "records"}
+
+
+def real_array(value, model: str, what: str) -> np.ndarray:
+    """``value`` as a new float64 array of its own shape (never a view of the caller's
+    array: the C and the caller may both write later); never silently drop an
+    imaginary part, read None as NaN (numpy's cast of an object array), or read text
+    and times as numbers."""
+    try:
+        raw = np.asarray(value)
+        if np.iscomplexobj(raw):
+            raise SimulationError(f"{model}: {what} must be real, got a complex value")
+        if raw.dtype.kind in NOT_NUMBERS:
+            raise ArgumentTypeError(f"{model}: {what} must be numbers, got "
+                                    f"{NOT_NUMBERS[raw.dtype.kind]} (dtype {raw.dtype})")
+        if raw.dtype == object:     # None, ints beyond a double, mixed: float() each
+            items = raw.ravel()
+            for v in items:
+                if isinstance(v, (str, bytes)) or (isinstance(v, np.generic)
+                                                   and v.dtype.kind in NOT_NUMBERS):
+                    raise ArgumentTypeError(f"{model}: {what} must be numbers, got {v!r}")
+            return np.array([float(v) for v in items]).reshape(raw.shape)
+        return raw.astype(float)
+    except (TypeError, ValueError, OverflowError) as exc:
+        if isinstance(exc, SimulationError):
+            raise
+        raise SimulationError(f"{model}: {what} must be numbers: {exc}") from None
 
 
 def method_of(name: str) -> Method:

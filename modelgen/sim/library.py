@@ -154,7 +154,9 @@ class ModelLibrary:
         """``runtime``: where the runtime module is (see :func:`runtime_module`)."""
         self.path = Path(path)
         self._dll = open_library(manifest, self.path)
-        module = runtime_module(runtime)
+        #: (module name, path) of the runtime module: a pickled model names it
+        self.runtime = runtime if runtime is not None else _runtime_location()
+        module = runtime_module(self.runtime)
         self.ffi, self._runtime = module.ffi, module.lib
         functions = manifest.get("functions")
         if not isinstance(functions, dict):

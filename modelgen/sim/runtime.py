@@ -8,13 +8,16 @@ callable with cached pointers and preallocated buffers.
 """
 from __future__ import annotations
 
+import math
 import numbers
+import threading
 import warnings
 from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
 
+from modelgen.codegen.build import file_problem
 from modelgen.errors import (ArgumentTypeError, ArgumentValueError, BuildError,
                              MassMatrixError, SimulationError)
 from modelgen.sim import assemble, integrate
@@ -22,6 +25,7 @@ from modelgen.sim.kinematics import FrameKinematics
 from modelgen.sim.library import ModelLibrary
 from modelgen.sim import linearize as linearization
 from modelgen.sim import massmatrix
+from modelgen.sim.arguments import FLOAT, real_array
 from modelgen.sim.conditioning import failure_kind
 from modelgen.sim.result import DenseOutput, Result
 
@@ -88,13 +92,16 @@ class CompiledModel(FrameKinematics):
         self.output_columns = tuple(c for cols in self.outputs.values() for c in cols)
         self._outputs = fn("outputs") if self.output_columns else None
         self._p_default = np.array(list(self.parameters.values()), dtype=float)
+        self._p_default.flags.writeable = False     # shared by every call; params() copies
         self._param_index = {name: i for i, name in enumerate(self.parameters)}
 
     def __reduce__(self):
-        """Pickle as (manifest, library path): the unpickled model loads the same
-        compiled library, so it crosses process boundaries (multiprocessing,
-        concurrent.futures, joblib) on machines that share the build."""
-        return (CompiledModel, (self.manifest, str(self.path)))
+        """Pickle as (manifest, library path, runtime module): the unpickled model loads
+        the same compiled library, so it crosses process boundaries (multiprocessing,
+        concurrent.futures, joblib, Dask) on machines that share the build; naming the
+        runtime module spares a spawned worker the code generator's imports (sympy)."""
+        runtime = (self.lib.runtime[0], str(self.lib.runtime[1]))
+        return (unpickled, (self.manifest, str(self.path), runtime))
 
     def __repr__(self):
         sizes = f"n={self.n}" if self.nq == self.n else f"nq={self.nq}, nv={self.n}"
@@ -106,17 +113,8 @@ class CompiledModel(FrameKinematics):
         return self.ffi.from_buffer("double[]", a)
 
     def _real(self, value, what):
-        """``value`` as a float array of its own shape; never silently drop an
-        imaginary part, never read None as NaN (numpy's cast of an object array)."""
-        try:
-            raw = np.asarray(value)
-            if np.iscomplexobj(raw):
-                raise SimulationError(f"{self.name}: {what} must be real, got a complex value")
-            if raw.dtype == object:     # None, ints beyond a double, mixed: float() each
-                return np.array([float(v) for v in raw.ravel()]).reshape(raw.shape)
-            return raw.astype(float)
-        except (TypeError, ValueError, OverflowError) as exc:
-            raise SimulationError(f"{self.name}: {what} must be numbers: {exc}") from None
+        """``value`` as a new float array of its own shape (:func:`~modelgen.sim.arguments.real_array`)."""
+        return real_array(value, self.name, what)
 
     def _vector(self, value, size, what):
         """``value`` as a contiguous float vector of ``size``; never broadcast, never
@@ -160,7 +158,7 @@ class CompiledModel(FrameKinematics):
         >>> cm.params({"g": 0.0})                                   # doctest: +SKIP
         """
         if p is None:
-            return self._p_default
+            return self._p_default.copy()
         if isinstance(p, dict):
             out = self._p_default.copy()
             for key, value in p.items():
@@ -372,9 +370,13 @@ class CompiledModel(FrameKinematics):
         return out
 
     def _mass_matrix_error(self, pivot: int, t, x, p=None) -> MassMatrixError:
-        """The error of a failing pivot at x, worded by the kind of failure."""
+        """The error of a failing pivot at x, worded by the kind of failure (a NaN in q
+        is no property of A: it is named, as jac names it)."""
         if pivot > self.n and self.manifest.get("constraints"):
             return SimulationError(assemble.singular_message(self, pivot, t, x, p))
+        if not np.all(np.isfinite(x)):
+            bad = [name for name, v in zip(self.state_names, x) if not np.isfinite(v)]
+            return ArgumentValueError(f"{self.name}: x must be finite; got NaN or Inf in {bad}")
         kind = failure_kind(self.mass_matrix(x[:self.nq], p), pivot - 1)
         return MassMatrixError(pivot, self.dof_names[pivot - 1], t, x, kind)
 
@@ -390,6 +392,10 @@ class CompiledModel(FrameKinematics):
         :class:`~modelgen.errors.ArgumentValueError` instead of rounding into it.
         The fastest path copies nothing: write the state into ``f.x``, call
         ``f.inplace(t)``, and read ``f.out`` (overwritten by the next call).
+        ``f(t, x)`` may be shared between threads (its calls take turns on its
+        buffers); for threads that run in parallel, give each its own ``f``.
+        ``f.x``, ``f.inplace`` and ``f.out`` are one thread's, not to be mixed with
+        calls of ``f`` from others.
 
         >>> f = cm.rhs_function(p={"g": 1.62})                      # doctest: +SKIP
         >>> scipy.integrate.solve_ivp(f, (0, 1), x0)                # doctest: +SKIP
@@ -404,6 +410,10 @@ class CompiledModel(FrameKinematics):
         p_ptr, u_ptr = ffi.from_buffer("double[]", p_arr), ffi.from_buffer("double[]", u_arr)
         x_ptr, out_ptr = ffi.from_buffer("double[]", x_buf), ffi.from_buffer("double[]", out_buf)
         call, pointer = self.lib.unbound(f"{self.name}_rhs")
+        # the C call releases the GIL: without the lock, another thread's x could
+        # replace this one's in x_buf mid-call, or its result this one's in out_buf
+        lock = threading.Lock()
+        isfinite = math.isfinite
 
         def rhs(*args):          # only off the fast path (errors)
             return call(pointer, *args)
@@ -412,28 +422,35 @@ class CompiledModel(FrameKinematics):
             raise self._mass_matrix_error(status, t, x_buf.copy(), p_arr)
 
         def f(t, x, out=None):
-            try:
-                if np.shape(x) != (nx,) or np.iscomplexobj(x):
-                    raise ValueError(x)
-                x_buf[:] = x
-                status = call(pointer, t, x_ptr, u_ptr, p_ptr, out_ptr)
-            except (TypeError, ValueError):      # the clear error, off the fast path
-                x_buf[:] = self._vector(x, nx, "x")
-                status = rhs(self._time(t), x_ptr, u_ptr, p_ptr, out_ptr)
-            if status:
-                fail(status, t)
-            if out is None:
-                return out_buf.copy()
-            if (type(out) is not np.ndarray or out.dtype != np.float64 or out.shape != (nx,)
-                    or not out.flags.writeable):
-                self._check_out(out, nx)
-            out[:] = out_buf
-            return out
+            with lock:
+                try:
+                    # a float64 vector as solve_ivp passes it; anything else (text,
+                    # complex, a NaN time...) the checks below refuse or convert
+                    if (type(x) is not np.ndarray or x.dtype is not FLOAT
+                            or x.shape != (nx,) or not isfinite(t)):
+                        raise ValueError(x)
+                    x_buf[:] = x
+                    status = call(pointer, t, x_ptr, u_ptr, p_ptr, out_ptr)
+                except (TypeError, ValueError, OverflowError):   # off the fast path
+                    x_buf[:] = self._vector(x, nx, "x")
+                    status = rhs(self._time(t), x_ptr, u_ptr, p_ptr, out_ptr)
+                if status:
+                    fail(status, t)
+                if out is None:
+                    return out_buf.copy()
+                if (type(out) is not np.ndarray or out.dtype != np.float64
+                        or out.shape != (nx,) or not out.flags.writeable):
+                    self._check_out(out, nx)
+                out[:] = out_buf
+                return out
 
         def inplace(t):
+            # no lock: the caller's f.x and f.out around the call are one thread's anyway
             try:
+                if not isfinite(t):
+                    raise ValueError(t)
                 status = call(pointer, t, x_ptr, u_ptr, p_ptr, out_ptr)
-            except TypeError:
+            except (TypeError, ValueError, OverflowError):
                 status = rhs(self._time(t), x_ptr, u_ptr, p_ptr, out_ptr)
             if status:
                 fail(status, t)
@@ -606,7 +623,8 @@ class CompiledModel(FrameKinematics):
         limit = STABILITY_LIMIT.get(name)
         if limit is None:            # implicit methods: A-stable
             return None
-        x = self.state_vector(x0, "x0")
+        # the state the run starts from: its quaternions normalised, as simulate's are
+        x = self.checked_state(self.state_vector(x0, "x0"), "x0")
         # a bad u is the caller's error, as in simulate; what fails below is the heuristic's
         samples = None if u is None or callable(u) else self._input_samples(u)
         try:
@@ -709,6 +727,16 @@ class CompiledModel(FrameKinematics):
         out = np.empty((len(self.bodies), 4, 4))
         self._body_poses(self._ptr(q), self._ptr(self.params(p)), self._ptr(out))
         return out
+
+
+def unpickled(manifest: dict, path: str, runtime: tuple | None = None) -> CompiledModel:
+    """The model a pickle names (:meth:`CompiledModel.__reduce__`), with the runtime module
+    it names when that is intact here (size and SHA-256 as recorded, as the fast index
+    checks it), else this machine's own."""
+    if runtime is not None and file_problem(Path(runtime[1])) is not None:
+        runtime = None
+    return CompiledModel(manifest, path, None if runtime is None else (runtime[0],
+                                                                       Path(runtime[1])))
 
 
 def check_mass_matrix(cm: CompiledModel, samples: int = 3, seed: int = 0) -> None:

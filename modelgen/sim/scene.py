@@ -265,7 +265,8 @@ class Scene:
         limit); a run whose span holds many such steps is stiff.
         """
         s, cm = self.card, self.model
-        x = self.initial_state(x0)
+        # at the state the run starts from: simulate normalises the quaternions
+        x = cm.checked_state(self.initial_state(x0), "x0")
         rest = np.concatenate([x[:cm.nq], np.zeros(cm.n)])
         u = self._constant_inputs()
         return max(float(np.max(np.abs(np.linalg.eigvals(cm.jac(s.t_start, state, u, p)))))
