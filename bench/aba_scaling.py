@@ -28,7 +28,9 @@ Method
       command); MuJoCo's ``mj_forward`` on the identical chain with its
       harness (the arm rebuilt in MJCF from its joint tree by
       ``modelgen.bench.peers.tree_mjcf``), alternated ``--rounds`` times, minimum
-      kept.
+      kept; *mj rel*: MuJoCo's ``qacc`` after ``mj_forward`` against the ABA's q_ddot
+      at the timed state, max |qacc - qdd| / max |qdd|, in the same run.  Without
+      mujoco (or its headers) the MuJoCo columns are empty and a note says why.
     * plans: the ABA rhs derived in-process with each ``velocity_products``
       (inward, outward, auto), operations per coordinate before and after
       CSE, and auto's per-joint plan.
@@ -209,7 +211,8 @@ def main(argv=None) -> int:
                     help=argparse.SUPPRESS)
     ap.add_argument("--n", type=int, nargs="+", default=list(DEFAULT_NS))
     ap.add_argument("--no-arm", action="store_true", help="skip models/arm7.yaml")
-    ap.add_argument("--rounds", type=int, default=3)
+    ap.add_argument("--rounds", type=int, default=3,
+                    help="alternating timing rounds, minimum kept (default 3)")
     ap.add_argument("--agreement-only", action="store_true",
                     help="no timing: generation figures and agreement only")
     ap.add_argument("--reference", action="store_true",
@@ -223,16 +226,19 @@ def main(argv=None) -> int:
     from modelgen.bench import harnesses, peers
     from modelgen.bench.tables import markdown
     kinds = ([] if args.no_arm else ["arm7"]) + [str(n) for n in args.n]
-    mj_harness = None
-    if not args.agreement_only and peers.have_mujoco():
-        mj_harness, why = harnesses.build_mujoco_harness(
-            Path(tempfile.mkdtemp(prefix="aba_mj_")))
-        if mj_harness is None:
-            print("MuJoCo:", why)
     print(f"load average {os.getloadavg()[0]:.2f} (2 cores shared: > 0.5 means noisy times)\n")
     gen_rows, run_rows, plan_rows = [], [], []
     with tempfile.TemporaryDirectory(prefix="aba_scaling_") as tmp:
         tmp = Path(tmp)
+        mj_harness = None
+        if args.agreement_only:
+            pass
+        elif not peers.have_mujoco():
+            print("MuJoCo not measured: mujoco is not installed (its columns stay empty)")
+        else:
+            mj_harness, why = harnesses.build_mujoco_harness(tmp / "mujoco")
+            if mj_harness is None:
+                print(f"MuJoCo not measured: {why}")
         for kind in kinds:
             figures, cms = {}, {}
             for f in FORMULATIONS:
@@ -252,7 +258,7 @@ def main(argv=None) -> int:
             fwd, bwd = agreement(cms["crba"], cms["aba"], n)
             ref = reference_errors(model_spec(kind), cms) if args.reference else {}
             times = {f: None for f in FORMULATIONS}
-            mj = None
+            mj = mj_rel = None
             if not args.agreement_only:
                 rng = np.random.default_rng(1)
                 x0 = rng.uniform(-0.5, 0.5, 2 * n)
@@ -274,9 +280,12 @@ def main(argv=None) -> int:
                     if xml is not None:
                         t = harnesses.run_mj_harness(mj_harness, xml, x0)[0]
                         mj = t if mj is None else min(mj, t)
+                if xml is not None:       # the peer timed is the peer checked
+                    mj_rel = peers.mujoco_agreement(cms["aba"], [x0], xml)[0]
             run_rows.append([kind, fmt(times["crba"]), fmt(times["aba"]),
                              fmt(times["crba"] / times["aba"] if times["aba"] else None),
                              fmt(mj), fmt(mj / times["aba"] if mj and times["aba"] else None),
+                             fmt(mj_rel, ".1e"),
                              f"{fwd:.1e}", f"{bwd:.1e}",
                              fmt(ref.get("crba"), ".1e"), fmt(ref.get("aba"), ".1e")])
             plan_rows.append(plan_row(kind))
@@ -287,8 +296,11 @@ def main(argv=None) -> int:
                     "after/n"], gen_rows, left=2))
     print()
     print(markdown(["model", "crba rhs µs", "aba rhs µs", "crba/aba", "mj_forward µs",
-                    "mj/aba", "aba-crba rel", "aba backward err", "crba err (mp)",
+                    "mj/aba", "mj rel", "aba-crba rel", "aba backward err", "crba err (mp)",
                     "aba err (mp)"], run_rows))
+    print("\ncrba/aba, mj/aba: time over the ABA rhs's time (above 1: the ABA is faster); "
+          "mj rel: MuJoCo's qacc against the ABA's q_ddot at the timed state; "
+          "–: not measured")
     print()
     print("ABA rhs operations per coordinate, before / after CSE, by where the "
           "velocity-product accelerations go (o: outwards, in auto's plan)\n")

@@ -10,19 +10,20 @@ valgrind for the instruction counts)::
 
 Method
     Robots: the URDFs of tests/data/urdf (ur5: frame ``tool0``; panda, the
-    7-joint arm: frame ``panda_link8``; G1 with a floating base: the whole-body
-    centroidal map).  modelgen builds each with ``kinematics=`` asking for that
+    7-joint arm: frame ``panda_link8``, nv 8 with its finger joint, whose column
+    is zero; G1 with a floating base: the whole-body centroidal map).  modelgen builds each with ``kinematics=`` asking for that
     one quantity (the Jacobian in LOCAL_WORLD_ALIGNED, rows linear first); the
-    harness ``bench/kinematics_mg.c`` calls ``<name>_frame_jacobians`` or
-    ``<name>_centroidal_momentum_matrix``, compiled by the command modelgen's
-    build used.  Pinocchio's harness ``bench/kinematics_pin.cpp`` (-O3
+    harness ``modelgen/bench/harness/kinematics_mg.c`` calls
+    ``<name>_frame_jacobians`` or ``<name>_centroidal_momentum_matrix``, compiled by the command modelgen's
+    build used.  Pinocchio's harness ``harness/kinematics_pin.cpp`` (-O3
     -march=native) rebuilds the robot from Pinocchio's own URDF model (written
     out as text) and calls ``computeFrameJacobian(model, data, q, frame,
     LOCAL_WORLD_ALIGNED, J)`` (forward kinematics of the joints on the frame's
     branch included) or ``computeCentroidalMap(model, data, q)``.  Both loops
     perturb one entry of q from the previous result (a dependency chain).
     Time: minimum over 5 repeats of >= 0.05 s, per call.  Instructions:
-    callgrind, 200 calls minus 0 (``codegen_scaling.instructions_per_call``);
+    callgrind, 200 calls minus 0 (``harnesses.instructions_per_call``; none without
+    valgrind);
     Pinocchio counted in its build without AVX-512.  *agree*: the largest
     difference of the two matrices at q0 (Pinocchio's Python bindings), over
     the largest entry.  Target (issue 27): >= 3x fewer instructions than
@@ -32,7 +33,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import shlex
 import shutil
 import sys
 import tempfile
@@ -107,16 +107,9 @@ def build_mg_harness(cm, routine: str, q0, work: Path) -> Path:
 
 
 def build_pin_harness(work: Path, count: bool) -> Path:
-    include, lib = cs.pinocchio_paths()
+    """kinematics_pin.cpp, compiled as the other Pinocchio harnesses are (cached)."""
     exe = work / ("kinematics_pin_count" if count else "kinematics_pin")
-    arch = ["-march=native", "-mno-avx512f"] if count else ["-march=native"]
-    cs.run_checked([*shlex.split(os.environ.get("CXX", "c++")), "-O3", *arch, "-DNDEBUG",
-                     "-std=c++17", "-DBOOST_MPL_LIMIT_LIST_SIZE=30",
-                     "-DBOOST_MPL_LIMIT_VECTOR_SIZE=30",
-                     "-DBOOST_MPL_CFG_NO_PREPROCESSED_HEADERS",
-                     "-DBOOST_FUSION_INVOKE_MAX_ARITY=12", "-w", f"-I{include}",
-                     f"-I{include / 'eigen3'}", str(HARNESS / "kinematics_pin.cpp"),
-                     "-o", str(exe), f"-L{lib}", "-lpinocchio_default", f"-Wl,-rpath,{lib}"])
+    cs.cached_build(cs.pinocchio_command(HARNESS / "kinematics_pin.cpp", exe, count), exe)
     return exe
 
 

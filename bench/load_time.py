@@ -29,7 +29,10 @@ for the children, as for an installed package):
     PyDy's Cython backend, ``generate_ode_function(..., generator="cython")``),
     each in a fresh process into a fresh directory, the two alternated in the
     same run; the ratio PyDy / modelgen.  Skipped, with the reason, when pydy or
-    cython is missing.
+    cython is missing.  After the timing, the two generated rhs are compared
+    at one state (every q and u 0.1, the chain's default parameters): the
+    largest difference over the largest |x'|, so the ratio is between
+    generators that produced the same equations.
 
 The figures of the issue (before the work) and the targets are printed beside
 the measurement.  A shared machine is noisy: compare the minimum, and rerun
@@ -113,6 +116,22 @@ def pydy_missing() -> str:
     return ", ".join(missing)
 
 
+def pydy_agreement(pydy_out: str, chain: Path, build: Path) -> float:
+    """PyDy's rhs (its output ``pydy_out``) against modelgen's build of ``chain`` in
+    ``build``, at the state and parameters of :mod:`modelgen.bench.pydy_models`."""
+    import numpy as np
+
+    import modelgen
+    from modelgen.bench.pydy_models import CHECK_STATE, XDOT_MARK, chain_constants
+    line = next(x for x in pydy_out.splitlines() if x.startswith(XDOT_MARK))
+    theirs = np.array(json.loads(line[len(XDOT_MARK):]))
+    cm = modelgen.load(chain, build)        # the build the CLI made: found, not rebuilt
+    if not np.allclose(cm.params(), chain_constants(CHAIN_LINKS), rtol=0, atol=0):
+        raise SystemExit("the chain's default parameters are not PyDy's constants")
+    mine = cm.rhs(0.0, np.full(cm.nx, CHECK_STATE))
+    return float(np.max(np.abs(mine - theirs)) / np.max(np.abs(mine)))
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--rounds", type=int, default=5, help="rounds of each (default 5)")
@@ -147,7 +166,7 @@ def main(argv=None) -> int:
         pydy = [sys.executable, "-m", "modelgen.bench.pydy_models", str(CHAIN_LINKS),
                 str(root / "pydy")]
         missing = pydy_missing()
-        gen_times, pydy_times = [], []
+        gen_times, pydy_times, pydy_out = [], [], ""
         # alternated, so that a machine that slows down or speeds up during the
         # run moves both sides of the ratio alike
         for _ in range(chain_rounds):
@@ -155,7 +174,8 @@ def main(argv=None) -> int:
             if not missing:
                 shutil.rmtree(root / "pydy", ignore_errors=True)
                 (root / "pydy").mkdir()
-                pydy_times.append(run(pydy, env)[:2])
+                wall, cpu, pydy_out = run(pydy, env)
+                pydy_times.append((wall, cpu))
 
         load_avg = ", ".join(f"{v:.2f}" for v in os.getloadavg())
         print(f"# Start-up and generation time ({rounds} rounds, chain {chain_rounds}; "
@@ -188,6 +208,9 @@ def main(argv=None) -> int:
             print(f"\nPyDy / modelgen = {ratio:.1f}x wall, {ratio_cpu:.1f}x CPU (min over min), "
                   f"{medians:.1f}x wall (median over median); "
                   f"{verdict('chain ratio', ratio, higher_is_better=True)} (wall)")
+            print(f"PyDy's rhs against modelgen's (the two builds timed above): "
+                  f"{pydy_agreement(pydy_out, chain, root / 'chain'):.1e} "
+                  f"(largest difference over the largest |x'|)")
         else:
             print(f"\nPyDy not measured: {missing} not installed "
                   f"(pip install pydy cython)")

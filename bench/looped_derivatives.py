@@ -49,8 +49,10 @@ print(json.dumps({{"wall": time.perf_counter() - start,
 def generate(n: int, looped: bool, out: Path) -> dict:
     """Wall and CPU seconds of one fresh build, in a child process."""
     code = CHILD.format(repo=str(REPO), looped=looped, n=n, out=str(out))
-    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                          check=True)
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    if done.returncode:
+        raise SystemExit(f"building the {n}-link chain (looped={looped}) failed:\n"
+                         f"{done.stderr[-3000:]}")
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 

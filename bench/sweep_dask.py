@@ -12,6 +12,10 @@
 (c) runs per second against the chunk size on 2 workers, and the scheduler's
     overhead per chunk (near-empty runs, one per chunk).
 
+Every sweep on the cluster is compared with the in-process one (the largest
+difference of q2 over all runs and samples; 0 when the workers computed what
+the process did), so the speed-up is of the same work.
+
 Prints the tables, the machine's load average, and writes docs/sweep_dask.md
 and docs/sweep_dask.png.  Usage::
 
@@ -23,6 +27,7 @@ with the figures (on 2 cores, a load above 2 takes cores from the workers).
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import os
 import sys
 import time
@@ -83,10 +88,19 @@ def in_process(cm, scene, g, repeats) -> list:
     ref, ds = runs["bare cm.simulate_batch"][2], runs["modelgen.sweep (model)"][2]
     assert np.array_equal(ds["q2"].values, ref.y[:, 1, :], equal_nan=True)
     wall, cpu = runs["bare cm.simulate_batch"][:2]
-    return [(name, n, w, w / wall, c, c / cpu) for name, (w, c, _) in runs.items()]
+    return [(name, n, w, w / wall, c, c / cpu) for name, (w, c, _) in runs.items()], ds
 
 
-def cluster_rows(cm, g, workers_list, chunks, overhead_chunks) -> tuple:
+def difference(ds, reference) -> float:
+    """The largest difference of q2 between two sweeps of the same runs (0.0: the
+    cluster computed what the process did)."""
+    a, b = ds["q2"].values, reference["q2"].values
+    if a.shape != b.shape:
+        return float("inf")
+    return float(np.nanmax(np.abs(a - b))) if np.isfinite(a).any() else float("inf")
+
+
+def cluster_rows(cm, g, workers_list, chunks, overhead_chunks, reference) -> tuple:
     from distributed import Client, LocalCluster
     rows, chunk_rows, overhead = [], [], None
     n = g["m2"].size
@@ -102,7 +116,8 @@ def cluster_rows(cm, g, workers_list, chunks, overhead_chunks) -> tuple:
                                 client=client, **SETTINGS)
             cpu = [t - cpu0[w] for w, t in client.run(time.process_time).items()]
             rows.append((workers, ds.attrs["chunk"], ds.attrs["seconds"],
-                         n / ds.attrs["seconds"], ds.attrs["compute_seconds"], max(cpu)))
+                         n / ds.attrs["seconds"], ds.attrs["compute_seconds"], max(cpu),
+                         difference(ds, reference)))
             print(f"  {workers} worker(s): {ds.attrs['seconds']:.2f} s (load {load_average()})",
                   flush=True)
             if workers == max(workers_list):
@@ -110,7 +125,7 @@ def cluster_rows(cm, g, workers_list, chunks, overhead_chunks) -> tuple:
                     ds = modelgen.sweep(cm, {"m2": g["m2"]}, {"q1": g["q1"]}, t_eval=T_EVAL,
                                         x0=x0, client=client, chunk=chunk, **SETTINGS)
                     chunk_rows.append((chunk, ds.attrs["chunks"], ds.attrs["seconds"],
-                                       n / ds.attrs["seconds"]))
+                                       n / ds.attrs["seconds"], difference(ds, reference)))
                     print(f"  chunk {chunk}: {ds.attrs['seconds']:.2f} s", flush=True)
                 # near-empty runs, one per chunk: what remains is the scheduler's cost
                 k = overhead_chunks
@@ -159,6 +174,11 @@ def main(argv=None) -> int:
     parser.add_argument("--repeats", type=int, default=2)
     parser.add_argument("--out", default=str(HERE / "docs"))
     args = parser.parse_args(argv)
+    missing = [m for m in ("distributed", "xarray") if importlib.util.find_spec(m) is None]
+    if missing:
+        print(f"{' and '.join(missing)} not installed: the sweeps on Dask cannot run "
+              "(pip install '.[sweep]')", file=sys.stderr)
+        return 1
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     build = Path(os.environ.get("MODELGEN_CACHE_DIR", "/tmp")) / "bench_sweep"
@@ -168,19 +188,19 @@ def main(argv=None) -> int:
     n = g["m2"].size
     load_before = load_average()
     print(f"{n} runs, {os.cpu_count()} cores, load average {load_before}", flush=True)
-    serial = in_process(cm, scene, g, args.repeats)
+    serial, reference = in_process(cm, scene, g, args.repeats)
     t1 = table(["what", "runs", "wall s", "ratio to bare", "CPU s", "ratio to bare"], serial,
                ["{}", "{}", "{:.2f}", "{:.3f}", "{:.2f}", "{:.3f}"])
     print(t1, flush=True)
     chunk_sizes = [n // 2, n // 8, n // 32, n // 128, max(n // 512, 1)]
-    cluster, chunk_rows, overhead = cluster_rows(cm, g, [1, 2], chunk_sizes, 200)
+    cluster, chunk_rows, overhead = cluster_rows(cm, g, [1, 2], chunk_sizes, 200, reference)
     t2 = table(["workers", "runs per chunk", "wall s", "runs/s", "chunks' wall s (sum)",
-                "busiest worker's CPU s"],
-               cluster, ["{}", "{}", "{:.2f}", "{:.0f}", "{:.2f}", "{:.2f}"])
+                "busiest worker's CPU s", "q2 difference to in-process"],
+               cluster, ["{}", "{}", "{:.2f}", "{:.0f}", "{:.2f}", "{:.2f}", "{:.1e}"])
     speedup = cluster[0][2] / cluster[-1][2]
     cpu_speedup = cluster[0][5] / cluster[-1][5]
-    t3 = table(["runs per chunk", "chunks", "seconds", "runs/s"], chunk_rows,
-               ["{}", "{}", "{:.2f}", "{:.0f}"])
+    t3 = table(["runs per chunk", "chunks", "seconds", "runs/s", "q2 difference to in-process"],
+               chunk_rows, ["{}", "{}", "{:.2f}", "{:.0f}", "{:.1e}"])
     k, secs, compute, per_chunk = overhead
     load_after = load_average()
     lines = [

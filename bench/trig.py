@@ -10,7 +10,7 @@ Method
       ``$MODELGEN_CFLAGS`` unset (mg_sin/mg_cos) and set to ``-DMG_LIBM_TRIG``
       (libm's sin and cos): the same C text, compiled by the build's own
       command, so only the trig functions differ.
-    * instructions per rhs call: callgrind, ``<name>_rhs`` inclusive of the
+    * instructions per rhs call: callgrind, ``<name>_rhs_prepared`` inclusive of the
       trig functions (``modelgen.bench.harnesses.rhs_instructions``, 200
       calls minus none from a seeded random state); noise-free.
     * rhs time: ``modelgen/bench/harness/model_bench.c`` (min over 5 repeats of
@@ -31,6 +31,7 @@ from __future__ import annotations
 import argparse
 import os
 import re
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -187,6 +188,10 @@ def main(argv=None) -> int:
     parser.add_argument("--search", type=int, metavar="M", default=0,
                         help="only search M million arguments for the largest error")
     args = parser.parse_args(argv)
+    if not args.search and shutil.which("valgrind") is None:
+        print("valgrind not found: the instruction counts this script is for cannot be "
+              "made (apt-get install valgrind)", file=sys.stderr)
+        return 1
     with tempfile.TemporaryDirectory(prefix="mg-trig-") as tmp:
         work = Path(tmp)
         if args.search:
@@ -197,8 +202,8 @@ def main(argv=None) -> int:
                 measure("spatial_chain_20", spatial_chain(20).spec(), work, args.rounds,
                         BuildOptions(formulation="aba"))]
         loop = per_call(work)
-    print("| model | instructions/rhs libm | mg | ratio | rhs us libm | mg | ratio "
-          "| max rel diff of rhs |")
+    print("| model | instructions/rhs libm | mg | mg / libm | rhs µs libm | mg | mg / libm "
+          "| max rel diff of rhs, mg against libm |")
     print("|---|---:|---:|---:|---:|---:|---:|---:|")
     for r in rows:
         print(f"| {r['model']} | {r['libm_instructions']:,.0f} | {r['mg_instructions']:,.0f} "

@@ -4,6 +4,7 @@ Run from the repository root (minutes: about a hundred builds)::
 
     .venv/bin/python bench/urdf_robots.py                   # writes docs/robots.md
     .venv/bin/python bench/urdf_robots.py --only solo       # the files matching 'solo'
+                                                            # (printed; -o FILE to write)
     .venv/bin/python bench/urdf_robots.py --largest         # the 3 largest, timed alone
 
 ``--largest`` generates the largest robots (centauro 39 dof, g1 with hands 43,
@@ -12,7 +13,8 @@ into fresh directories, one at a time, and prints the wall and CPU seconds
 (the process and its compilers) and the peak resident memory of the largest
 process (Python or the compiler), against issue 23's target of 15 s each (on
 an idle machine the wall time is at most the CPU time, so a CPU time within
-the target meets it when other jobs stretch this run's wall time).
+the target meets it when other jobs stretch this run's wall time).  Exit status 1
+when a robot misses it.
 
 For each file (fixed base; floating base too for legged robots, humanoids and
 flying robots) it imports the URDF with the reading options it needs, generates
@@ -92,7 +94,9 @@ def largest(directory: Path, rounds: int) -> int:
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--only", default="", help="only the files whose path contains this")
-    parser.add_argument("-o", "--output", default=str(ROOT / "docs" / "robots.md"))
+    parser.add_argument("-o", "--output",
+                        help="where the table goes (default docs/robots.md; with --only "
+                             "none: a partial table must not replace the whole one)")
     parser.add_argument("--largest", action="store_true",
                         help="only time the generation of the largest robots (see above)")
     parser.add_argument("--rounds", type=int, default=2, help="rounds of --largest")
@@ -142,8 +146,11 @@ def main(argv=None) -> int:
              f"Worst agreement: {worst[0]:.1e} ({worst[1]}).", "",
              "| robot | base | dof | seconds | rhs ops | agreement | options |",
              "|---|---|---:|---:|---:|---:|---|"] + rows
-    Path(args.output).write_text("\n".join(lines) + "\n")
-    print(f"worst {worst[0]:.1e} ({worst[1]}); wrote {args.output}")
+    output = args.output or (None if args.only else str(ROOT / "docs" / "robots.md"))
+    if output:
+        Path(output).write_text("\n".join(lines) + "\n")
+    print(f"worst {worst[0]:.1e} ({worst[1]}); "
+          + (f"wrote {output}" if output else "not written (--only without -o)"))
     return 0
 
 

@@ -150,8 +150,9 @@ def build_parser():
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--quick", action="store_true",
                         help="whole-decade tolerances, half-decade steps, 2 repeats")
-    parser.add_argument("--out", default="out/work_precision",
-                        help="output directory (default out/work_precision)")
+    parser.add_argument("--out", default=str(REPO / "out" / "work_precision"),
+                        help="output directory (default out/work_precision in the "
+                             "repository, whatever the current directory)")
     parser.add_argument("--problems", nargs="+", choices=list(wp.STANDARD),
                         default=list(wp.STANDARD), metavar="NAME",
                         help=f"problems to run (default all: {' '.join(wp.STANDARD)})")

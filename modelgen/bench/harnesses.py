@@ -15,6 +15,7 @@ the sources are plain C/C++ that ship with the package.
 """
 from __future__ import annotations
 
+import hashlib
 import importlib.util
 import os
 import platform
@@ -28,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from modelgen.codegen.build import compile_flags, compiler
+from modelgen.codegen.build import cache_dir, compile_flags, compiler
 
 #: the harnesses' sources (package data)
 HARNESS_DIR = Path(__file__).resolve().with_name("harness")
@@ -330,30 +331,80 @@ def pinocchio_paths():
     return None
 
 
+def pinocchio_command(source: Path, exe: Path, count: bool = False) -> list:
+    """The command that compiles a Pinocchio harness ``source`` into ``exe`` (-O3
+    -march=native, with ``count`` also -mno-avx512f), or None without the wheels."""
+    paths = pinocchio_paths()
+    if paths is None:
+        return None
+    include, lib = paths
+    # the definitions are those of Pinocchio's exported CMake target; without
+    # AVX-512 on the CPU the counted build is the timed one (and its cached copy)
+    arch = ["-march=native", "-mno-avx512f"] if count and _has_avx512() else ["-march=native"]
+    return [*shlex.split(os.environ.get("CXX", "c++")), "-O3", *arch, "-DNDEBUG",
+            "-std=c++17", "-DBOOST_MPL_LIMIT_LIST_SIZE=30", "-DBOOST_MPL_LIMIT_VECTOR_SIZE=30",
+            "-DBOOST_MPL_CFG_NO_PREPROCESSED_HEADERS", "-DBOOST_FUSION_INVOKE_MAX_ARITY=12",
+            f"-DMIN_SECONDS={MIN_SECONDS}", f"-DREPEATS={REPEATS}", "-w",
+            f"-I{include}", f"-I{include / 'eigen3'}", str(source),
+            "-o", str(exe), f"-L{lib}", "-lpinocchio_default", f"-Wl,-rpath,{lib}"]
+
+
+def _has_avx512() -> bool:
+    """Whether the CPU has AVX-512 (which valgrind cannot decode); True when unknown."""
+    try:
+        return " avx512f" in Path("/proc/cpuinfo").read_text()
+    except OSError:
+        return True
+
+
+def cached_build(cmd: list, exe: Path) -> None:
+    """Run the compile command ``cmd`` that writes ``exe``, or copy the executable an
+    identical earlier build left in the cache (``<cache_dir>/bench-harnesses/``).
+    A Pinocchio harness takes gcc minutes and gigabytes, and every benchmark
+    script builds it twice; the key is the command (the output path left out),
+    the sources it names, the compiler's version and the CPU (-march=native)."""
+    out = cmd.index("-o") + 1
+    digest = hashlib.sha256()
+    for i, arg in enumerate(cmd):
+        digest.update(b"\0" + (b"<exe>" if i == out else arg.encode()))
+        if Path(arg).suffix in (".c", ".cpp", ".h") and Path(arg).is_file():
+            digest.update(Path(arg).read_bytes())
+    machine = environment()
+    digest.update(f"{machine['cpu']}\0{machine['compiler']}\0{platform.machine()}".encode())
+    try:
+        import pinocchio
+        digest.update(pinocchio.__version__.encode())
+    except ImportError:
+        pass
+    cached = cache_dir() / "bench-harnesses" / digest.hexdigest()[:24] / "harness"
+    exe.parent.mkdir(parents=True, exist_ok=True)
+    if cached.is_file():
+        shutil.copy2(cached, exe)
+        return
+    run_checked(cmd)
+    try:
+        cached.parent.mkdir(parents=True, exist_ok=True)
+        partial = cached.with_name(f".harness.{os.getpid()}")
+        shutil.copy2(exe, partial)
+        os.replace(partial, cached)       # whole or absent, for a concurrent reader
+    except OSError:
+        pass                              # a read-only cache: build every time
+
+
 def build_pinocchio_harness(work: Path, count: bool = False):
-    """Compile ``harness/pinocchio_bench.cpp`` (-O3 -march=native); it reads the model
-    from a file (:func:`modelgen.bench.peers.pinocchio_tree_file`).  Returns
-    (path, None) or (None, reason).
+    """Compile ``harness/pinocchio_bench.cpp`` (-O3 -march=native; :func:`cached_build`);
+    it reads the model from a file (:func:`modelgen.bench.peers.pinocchio_tree_file`).
+    Returns (path, None) or (None, reason).
 
     ``count``: the build that callgrind runs, ``pin_count``, with ``-mno-avx512f``
     added, because valgrind does not decode AVX-512 (on a CPU without AVX-512 it is
     the timed build's code)."""
-    paths = pinocchio_paths()
-    if paths is None:
-        return None, "pin or cmeel-eigen not installed (pip install '.[bench]')"
-    include, lib = paths
-    work.mkdir(parents=True, exist_ok=True)
     exe = work / ("pin_count" if count else "pin_bench")
-    # the definitions are those of Pinocchio's exported CMake target
-    arch = ["-march=native", "-mno-avx512f"] if count else ["-march=native"]
-    cmd = [*shlex.split(os.environ.get("CXX", "c++")), "-O3", *arch, "-DNDEBUG",
-           "-std=c++17", "-DBOOST_MPL_LIMIT_LIST_SIZE=30", "-DBOOST_MPL_LIMIT_VECTOR_SIZE=30",
-           "-DBOOST_MPL_CFG_NO_PREPROCESSED_HEADERS", "-DBOOST_FUSION_INVOKE_MAX_ARITY=12",
-           f"-DMIN_SECONDS={MIN_SECONDS}", f"-DREPEATS={REPEATS}",
-           f"-I{include}", f"-I{include / 'eigen3'}", str(HARNESS_DIR / "pinocchio_bench.cpp"),
-           "-o", str(exe), f"-L{lib}", "-lpinocchio_default", f"-Wl,-rpath,{lib}"]
+    cmd = pinocchio_command(HARNESS_DIR / "pinocchio_bench.cpp", exe, count)
+    if cmd is None:
+        return None, "pin or cmeel-eigen not installed (pip install '.[bench]')"
     try:
-        run_checked(cmd)
+        cached_build(cmd, exe)
     except RuntimeError as exc:
         return None, f"Pinocchio harness did not build: {exc}"
     return exe, None

@@ -3,8 +3,11 @@ its equations by Kane's method and compiled by PyDy's Cython backend.
 
 The model is :func:`modelgen.model.chains.spatial_chain` exactly (same bases,
 points, masses, inertias, gravity), so the two generators do the same job.
-Run as a script, it generates one chain and prints the seconds of each step
-(the benchmark ``bench/load_time.py`` runs it in a fresh process)::
+Run as a script, it generates one chain and prints the seconds of each step, then
+on a line of its own :data:`XDOT_MARK` and the JSON of the generated rhs at
+:data:`CHECK_STATE` with :func:`chain_constants` (the benchmark
+``bench/load_time.py`` runs it in a fresh process and compares that with
+modelgen's rhs of the same chain)::
 
     python -m modelgen.bench.pydy_models 6 OUT_DIR
 
@@ -12,8 +15,17 @@ It needs ``pydy`` and ``cython`` (not dependencies of modelgen).
 """
 from __future__ import annotations
 
+import json
 import sys
 import time
+
+XDOT_MARK = "@@pydy-xdot@@ "
+CHECK_STATE = 0.1       # every q and u of the state the rhs is evaluated at
+
+
+def chain_constants(n: int) -> list:
+    """m1..mn, l1..ln, r, g: the defaults of ``spatial_chain(n)``'s parameters."""
+    return [1.0] * n + [0.5] * n + [0.02, 9.81]
 
 
 def chain_kane(n: int):
@@ -51,7 +63,8 @@ def chain_kane(n: int):
 
 def generate_chain(n: int, out_dir: str) -> dict:
     """Form the chain's equations and compile them with PyDy's Cython backend into
-    ``out_dir``; the seconds of each step and a check that the result runs."""
+    ``out_dir``; the seconds of each step and the rhs at :data:`CHECK_STATE`
+    (``xdot``: q', u')."""
     t0 = time.perf_counter()
     from pydy.codegen.ode_function_generators import generate_ode_function
     t1 = time.perf_counter()
@@ -62,14 +75,17 @@ def generate_chain(n: int, out_dir: str) -> dict:
                                 tmp_dir=out_dir)
     t3 = time.perf_counter()
     import numpy as np
-    xdot = rhs(np.full(2 * n, 0.1), 0.0, np.array([1.0] * n + [0.5] * n + [0.02, 9.81]))
+    xdot = rhs(np.full(2 * n, CHECK_STATE), 0.0, np.array(chain_constants(n)))
     if not np.all(np.isfinite(xdot)):
         raise RuntimeError("PyDy's rhs is not finite")
-    return {"import": t1 - t0, "kane": t2 - t1, "codegen+compile": t3 - t2}
+    return {"import": t1 - t0, "kane": t2 - t1, "codegen+compile": t3 - t2,
+            "xdot": [float(v) for v in xdot]}
 
 
 if __name__ == "__main__":
     start = time.perf_counter()
     figures = generate_chain(int(sys.argv[1]), sys.argv[2])
+    xdot = figures.pop("xdot")
     print(" ".join(f"{k}={v:.3f}" for k, v in figures.items()),
           f"total={time.perf_counter() - start:.3f}")
+    print(XDOT_MARK + json.dumps(xdot))
