@@ -412,7 +412,8 @@ def _check_options(spec: ModelSpec, options: BuildOptions) -> None:
         raise ModelError("linearization of a model with ball or free joints is not supported: "
                          "its state holds unit quaternions, whose four components cannot "
                          "move independently", file=spec.source, key="linearize",
-                         fix="linearize a model whose rotations are simple ones (angles)")
+                         fix="build with derivatives=True and use cm.derivatives (in the "
+                             "tangent space), or write the rotations as simple angles")
     if options.derivatives and spec.constraints:
         raise ModelError("the analytical derivatives of a constrained model are not "
                          "supported: they are those of the joint tree's dynamics, while "
@@ -428,8 +429,7 @@ def _check_options(spec: ModelSpec, options: BuildOptions) -> None:
                          "and a quaternion's four components cannot move independently",
                          file=spec.source, key="jacobian",
                          fix="build without jacobian=True (the implicit integrators then "
-                             "difference the rhs), or write the rotations as simple bases "
-                             "(angles)")
+                             "difference the rhs), or write the rotations as simple angles")
 
 
 def _check_kinematics(spec: ModelSpec, k) -> None:
