@@ -160,9 +160,10 @@ def generate_command(args) -> int:
             print(line)
     if b.cached:
         print("build      unchanged model: reused the cached build")
-    print("\nroutine              statements   ops before CSE   ops after CSE")
+    w = max([20, *map(len, g.ops)])
+    print(f"\n{'routine':<{w}} statements   ops before CSE   ops after CSE")
     for name, o in g.ops.items():
-        print(f"{name:<20} {o['statements']:>10} {o['before_cse']:>16} {o['after_cse']:>15}")
+        print(f"{name:<{w}} {o['statements']:>10} {o['before_cse']:>16} {o['after_cse']:>15}")
     if not b.cached:
         s = g.seconds
         print("\nstage      seconds")
