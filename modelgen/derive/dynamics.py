@@ -52,7 +52,7 @@ class Equations:
     tau: tuple              # n, the sum of tau_parts
     tau_parts: tuple        # ((label, n-tuple), ...): gravity and each action
     kinetic: sympy.Expr
-    potential: sympy.Expr   # of gravity, zero at O
+    potential: sympy.Expr   # gravity's (zero at O) plus the conservative effects'
     poses: tuple            # per body: 16 entries of the 4x4 pose, row-major
     #: dq/dt = N(q) qd (len(q) entries): the speeds themselves, except for the
     #: coordinates of ball and free joints (:func:`kinematic_relation`)

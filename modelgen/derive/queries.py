@@ -94,19 +94,33 @@ class Mechanism:
 
     # -- the seed's queries -------------------------------------------------------
     def change_of_basis(self, base_from: str, base_to: str) -> sympy.Matrix:
-        """Matrix M with ``v_to = M v_from`` (components of one vector in two bases)."""
+        """Matrix M with ``v_to = M v_from`` (components of one vector in two bases).
+
+        Column j of M is ``base_from``'s j-th unit vector in components of
+        ``base_to``: the seed's ``Change_Basis_Matrix(Base_1, Base_2)``, and the
+        scene output ``{orientation: base_from, relative_to: base_to}``.
+        """
         R1 = sympy.Matrix(self._base(base_from).R)
         R2 = sympy.Matrix(self._base(base_to).R)
         return self._matrix((R2.T * R1).tolist())
 
     def angular_velocity(self, base_fixed: str, base_moving: str, components: str = "E"):
-        """Angular velocity of ``base_moving`` relative to ``base_fixed``, in ``components``."""
+        """Angular velocity of ``base_moving`` relative to ``base_fixed``, in ``components``.
+
+        The fixed base comes first, as in the seed's ``Angular_Velocity(Base_1,
+        Base_2, Base_Components)``; the scene output names the moving one first:
+        ``{angular_velocity: base_moving, relative_to: base_fixed}``.  Swapping
+        the two bases negates the vector.
+        """
         w = [a - b for a, b in zip(self._base(base_moving).omega, self._base(base_fixed).omega,
                                    strict=True)]
         return self._column(self._in_base(w, components))
 
     def position(self, start: str, end: str, components: str = "E") -> sympy.Matrix:
-        """Vector from point ``start`` to point ``end``, in ``components``."""
+        """Vector from point ``start`` to point ``end`` (``r_end - r_start``), in ``components``.
+
+        The scene output names the end first: ``{position: end, from: start}``.
+        """
         d = [b - a for a, b in zip(self._point(start).r, self._point(end).r, strict=True)]
         return self._column(self._in_base(d, components))
 
@@ -115,7 +129,11 @@ class Mechanism:
         return self._column(self._in_base(self._point(point).v, components))
 
     def acceleration(self, point: str, components: str = "E") -> sympy.Matrix:
-        """Acceleration of ``point`` relative to E (with ``q_ddot`` symbols)."""
+        """Acceleration of ``point`` relative to E, in ``components``.
+
+        Linear in the accelerations :attr:`qdd`: ``<q>_ddot`` of a coordinate,
+        ``<speed>_dot`` of a ball or free joint's speed.
+        """
         pk = self._point(point)
         a = pk.a_bias
         for k in range(self.spec.n):
@@ -136,15 +154,22 @@ class Mechanism:
         return out
 
     def pose(self, body: str) -> sympy.Matrix:
-        """4x4 transformation matrix [[R, r_G], [0, 0, 0, 1]] of a body."""
+        """4x4 transformation matrix [[R, r_G], [0, 0, 0, 1]] of a body.
+
+        R's columns are the body base's unit vectors in E (``v_E = R v_body``,
+        ``change_of_basis(body base, "E")``); r_G is the centre of mass from O in E.
+        """
         i, _ = self._body(body)
         return self._matrix([self._eqs.poses[i][4 * r:4 * r + 4] for r in range(4)])
 
     def kinetic_energy(self):
+        """Kinetic energy of the bodies relative to E."""
         return self._final(self._eqs.kinetic)
 
     def potential_energy(self):
-        """Potential energy of gravity, zero at O."""
+        """Potential energy: gravity's (zero at O) plus the conservative effects'
+        (springs between points and on coordinates, gravity fields constant in E),
+        as ``CompiledModel.energy`` returns it."""
         return self._final(self._eqs.potential)
 
     def mass_matrix(self) -> sympy.Matrix:
