@@ -153,3 +153,27 @@ def test_the_balance_flags_a_power_the_samples_do_not_resolve():
         # unresolved, the error is of the check's order
         ratio = np.abs(balance.error).max() / balance.quadrature_check
         assert ratio > 0.01 if flagged else ratio < 1e-3, (w, ratio)
+
+
+def test_a_fixed_step_batch_gets_the_steps_its_span_needs(pendulum):
+    """simulate gives a fixed-step run the steps its span needs; simulate_batch kept
+    100,000, so rk4 at 1e-5 s over 1.2 s ended every run with MAX_STEPS."""
+    X0 = np.array([[0.5, 0.0], [1.0, 0.0]])
+    res = pendulum.simulate_batch(X0, (0.0, 1.2), method="rk4", step=1e-5)
+    assert np.all(res.status == 0), res.message
+    one = pendulum.simulate(X0[1], (0.0, 1.2), t_eval=[1.2], method="rk4", step=1e-5)
+    assert np.array_equal(res.y[1], one.y)
+    back = pendulum.simulate_batch(X0, (1.2, 0.0), method="rk4", step=1e-5)
+    assert np.all(back.status == 0), back.message
+    with pytest.warns(RuntimeWarning, match="max_steps"):
+        short = pendulum.simulate_batch(X0, (0.0, 1.2), method="rk4", step=1e-5,
+                                        max_steps=10)
+    assert np.all(short.status == -1)
+
+
+def test_a_batch_names_the_row_and_state_that_is_not_finite(pendulum):
+    X0 = np.array([[0.5, 0.0], [1.0, np.nan]])
+    name = pendulum.state_names[1]
+    with pytest.raises(modelgen.errors.ArgumentValueError,
+                       match=rf"got nan in row 1 \({name}\)"):
+        pendulum.simulate_batch(X0, (0.0, 1.0))

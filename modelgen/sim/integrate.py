@@ -132,6 +132,14 @@ def c_constants(cm) -> dict:
     return {name: getattr(cm.lib, name) for name in define_values()}
 
 
+def step_budget(max_steps, budget: int, fixed: float, t0: float, t1: float) -> int:
+    """The step budget of a run: ``budget`` (max_steps, or its default when None), but
+    a fixed-step run without a given max_steps gets the steps its span needs."""
+    if max_steps is None and fixed > 0:
+        budget = max(budget, int(np.ceil(abs(t1 - t0) / fixed)) + 2)
+    return budget
+
+
 def simulate(cm, x0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10, u=None,
              p=None, events=None, *, step=None, first_step=None, max_step=None,
              max_steps=None, chunk=2048, interrupt=None, outputs=True,
@@ -189,9 +197,7 @@ def simulate(cm, x0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10
     t0, t1 = sign * t0, sign * t1          # from here on s = sign * t, increasing
     check_step_count(fixed, t0, t1)
     chunk, progress = row_chunk(chunk), progress_callback(progress)
-    if max_steps is None and fixed > 0:      # a fixed-step run's step count is known
-        budget = max(budget, int(np.ceil((t1 - t0) / fixed)) + 2)
-    max_steps = budget
+    max_steps = step_budget(max_steps, budget, fixed, t0, t1)
     x = cm.state_vector(x0, "x0").copy()
     if not np.all(np.isfinite(x)):
         raise ArgumentValueError(f"{cm.name}: x0 must be finite")
@@ -548,9 +554,25 @@ def _parameter_rows(cm, P, n_runs):
     return rows, n_p
 
 
+def _batch_states(cm, X0) -> np.ndarray:
+    """The rows of ``X0`` as a C-ordered float array (n_runs, nx), checked."""
+    if isinstance(X0, (list, tuple)) and any(isinstance(row, dict) for row in X0):
+        X0 = [cm.state_vector(row, f"X0[{r}]") for r, row in enumerate(X0)]
+    X0 = np.ascontiguousarray(cm._real(X0, "X0"))
+    if X0.ndim != 2 or X0.shape[1] != cm.nx:
+        raise SimulationError(f"{cm.name}: X0 must have shape (n_runs, {cm.nx}), got "
+                              f"{X0.shape}")
+    if not np.all(np.isfinite(X0)):
+        r, j = np.argwhere(~np.isfinite(X0))[0]
+        raise ArgumentValueError(f"{cm.name}: X0 must be finite; got {X0[r, j]} in row {r} "
+                                 f"({cm.state_names[j]})")
+    check_quaternions(cm, X0, "X0")
+    return X0
+
+
 def simulate_batch(cm, X0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol=1e-10,
                    u=None, P=None, *, step=None, first_step=None, max_step=None,
-                   max_steps=100_000, threads=1, outputs=True) -> Result:
+                   max_steps=None, threads=1, outputs=True) -> Result:
     """Integrate many initial states (rows of ``X0``), each with its own parameters.
 
     One C call loops over the runs (``threads`` > 1, a whole number, splits them
@@ -567,17 +589,12 @@ def simulate_batch(cm, X0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol
     >>> res = simulate_batch(cm, X0, (0, 5), P={"m2": np.linspace(0.5, 2, len(X0))})  # doctest: +SKIP
     """
     nx = cm.nx
-    m, rtol, atol, fixed, first, hmax, max_steps = run_options(
-        cm, method, rtol, atol, step, first_step, max_step, max_steps, stacklevel=3)
+    m, rtol, atol, fixed, first, hmax, budget = run_options(
+        cm, method, rtol, atol, step, first_step, max_step,
+        DEFAULT_MAX_STEPS if max_steps is None else max_steps, stacklevel=3)
     t0, t1, sign = span(t_span)
-    if isinstance(X0, (list, tuple)) and any(isinstance(row, dict) for row in X0):
-        X0 = [cm.state_vector(row, f"X0[{r}]") for r, row in enumerate(X0)]
-    X0 = np.ascontiguousarray(cm._real(X0, "X0"))
-    if X0.ndim != 2 or X0.shape[1] != nx:
-        raise SimulationError(f"{cm.name}: X0 must have shape (n_runs, {nx}), got {X0.shape}")
-    if not np.all(np.isfinite(X0)):
-        raise ArgumentValueError(f"{cm.name}: X0 must be finite")
-    check_quaternions(cm, X0, "X0")
+    max_steps = step_budget(max_steps, budget, fixed, t0, t1)
+    X0 = _batch_states(cm, X0)
     n_runs = X0.shape[0]
     times = sample_times([t1] if t_eval is None else t_eval, t0, t1, sign)
     t0, t1 = sign * t0, sign * t1          # from here on s = sign * t, increasing
