@@ -112,7 +112,7 @@ def _generate_parser(sub) -> None:
     g.add_argument("-o", "--output", "--build-dir", dest="output", default=None,
                    help="output directory of the C, header and library: the build directory "
                         "(-o and --build-dir are the same here; default: the per-user cache, "
-                        "see modelgen.codegen.pipeline.default_output)")
+                        "see modelgen.codegen.build.default_output)")
     g.add_argument("--force", action="store_true", help="rebuild even if cached")
     g.add_argument("-q", "--quiet", action="store_true",
                    help="no progress bar (one is drawn on a terminal when the build takes "

@@ -465,6 +465,12 @@ def cache_lookup(directory: Path, build_hash: str) -> tuple:
     return BuildResult(directory, manifest["module_name"], module_path, manifest, True, 0.0), ""
 
 
+def default_output(name: str) -> Path:
+    """Where a model is built when no output directory is given: the per-user cache
+    (``models/<name>`` under :func:`cache_dir`), never the current directory."""
+    return cache_dir() / "models" / name
+
+
 def host_tag() -> str:
     """8 hex digits naming this machine, in a temporary directory's name beside its
     process id (a cache may be shared between machines, whose pids differ); the name

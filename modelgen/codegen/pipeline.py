@@ -16,9 +16,9 @@ from pathlib import Path
 from modelgen.version import __version__
 from modelgen.codegen import budget
 from modelgen.codegen import parts
-from modelgen.codegen.build import (Generated, build_module, cache_dir, cache_lookup,
-                                    compiler, host_flags, integrator_hash, part_command,
-                                    runtime_module, unoptimized)
+from modelgen.codegen.build import (Generated, build_module, cache_lookup,
+                                    compiler, default_output, host_flags, integrator_hash,
+                                    part_command, runtime_module, unoptimized)
 from modelgen.codegen.capi import signature_of
 from modelgen.codegen.compilers import core_count, probe_compiler
 from modelgen.codegen.cse import Routine, hoist_parameters, make_routines
@@ -48,13 +48,6 @@ from modelgen.derive.linearize import (derive_linearization_terms,
 from modelgen.derive.kinematics import derive_kinematics
 from modelgen.derive.outputs import derive_outputs
 from modelgen.model.spec import ModelSpec
-
-
-def default_output(name: str) -> Path:
-    """Where a model is built when no output directory is given: the per-user cache
-    (``models/<name>`` under :func:`modelgen.codegen.build.cache_dir`), never the
-    current directory."""
-    return cache_dir() / "models" / name
 
 
 #: smallest n for which ``auto`` chooses aba.  Measured with bench/aba_scaling.py

@@ -96,7 +96,7 @@ def load(source, out_dir=None, *, force: bool = False, options: BuildOptions | N
     MuJoCo: :mod:`modelgen.model.mjcf`) file, a :class:`modelgen.model.Model` or a
     ModelSpec.
     Output goes to ``out_dir`` (default: the per-user cache,
-    :func:`modelgen.codegen.pipeline.default_output`).  ``options`` (a
+    :func:`modelgen.codegen.build.default_output`).  ``options`` (a
     :class:`~modelgen.codegen.options.BuildOptions`) says what to build; the
     keywords below are shorthand for its fields and override them.  With
     ``jacobian=True`` the symbolic Jacobian ``<name>_jacobian`` is generated too

@@ -1,29 +1,13 @@
 """Sweeps: parameter studies and Monte Carlo runs, in-process or on a Dask cluster.
 
-:func:`sweep` runs one model over many parameter sets and initial states and
-returns an ``xarray.Dataset`` with dimensions ``(run, time)``: a variable per
-state and per scene output, the swept values as coordinates along ``run``,
-and per run ``status``, ``message`` and the integrator's counters.  A run that
-fails keeps its trajectory up to the failure (NaN after it) and its status;
-it never fails the sweep.
-
-In-process, the runs go through :meth:`CompiledModel.simulate_batch` (one C
-call per chunk).  With a ``dask.distributed`` client (or ``client="local"``,
-a ``LocalCluster`` with one single-threaded worker per core) each chunk is one
-``simulate_batch`` call on a worker.  The model travels as a
-:class:`ModelPayload` (manifest, module path and the generated sources),
-scattered once to every worker; a worker loads it at most once per process
-(:func:`worker_model`: from the shared build when the module path exists and
-verifies, else rebuilt from the sources into the worker's own build cache)
-and keeps it for every later chunk.
-
-Dask and xarray are the ``sweep`` extra (``pip install 'modelgen[sweep]'``).
-
->>> import numpy as np, modelgen
->>> g = modelgen.grid(m2=np.linspace(0.5, 2.0, 64), q1=np.linspace(0.1, 3.0, 32))
->>> ds = modelgen.sweep("models/scenes/dp_damped.yaml", parameters={"m2": g["m2"]},
-...                     initial={"q1": g["q1"]})                       # doctest: +SKIP
->>> ds["q2"].isel(time=-1), ds.status, ds.to_netcdf("study.nc")      # doctest: +SKIP
+:func:`sweep` runs one model over many parameter sets and initial states: an
+``xarray.Dataset``.  A run that fails keeps its trajectory up to the failure
+(NaN after it), its status and message; it never fails the sweep.  Each chunk
+of runs is one :meth:`CompiledModel.simulate_batch` call, in-process or on a
+Dask worker, which loads the scattered :class:`ModelPayload` once per process
+(:func:`worker_model`: the shared build, else rebuilt from the shipped sources).
+Only a rebuild imports the code generator (sympy: 0.6 s and 40 MB per worker
+process), so this module imports none of it.  Needs the ``sweep`` extra.
 """
 from __future__ import annotations
 
@@ -32,22 +16,22 @@ import hashlib
 import os
 import threading
 import time
+import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from modelgen.codegen.build import build_module, cache_lookup
-from modelgen.codegen.emit import integrator_sources
-from modelgen.codegen.pipeline import default_output, part_statements
+from modelgen.codegen.build import build_module, cache_lookup, default_output
 from modelgen.errors import (ArgumentTypeError, ArgumentValueError, ModelgenError,
                              SimulationError)
 from modelgen.model import as_spec, is_scene_file
 from modelgen.sim.arguments import whole_number
-from modelgen.sim.integrate import STATUS, method_of
+from modelgen.sim.integrate import (DEFAULT_MAX_STEPS, STATUS, STATUS_BY_NAME, method_of,
+                                    step_budget)
 from modelgen.sim.load import load, load_scene
-from modelgen.sim.runtime import CompiledModel
+from modelgen.sim.runtime import CompiledModel, unpickled
 from modelgen.sim.scene import Scene
 from modelgen.version import __version__
 
@@ -59,7 +43,7 @@ __all__ = ["grid", "sweep", "Study", "ModelPayload", "payload_of", "worker_model
 EXTRA = "pip install 'modelgen[sweep]'"
 #: chunks per worker thread when no chunk size is given (load balance against overhead)
 CHUNKS_PER_WORKER = 4
-#: chunks of an in-process sweep with a progress callback (one C call otherwise)
+#: chunks of an in-process sweep: Ctrl-C and progress act between two C calls
 PROGRESS_CHUNKS = 50
 #: per-run counters of the integrator kept in the dataset
 COUNTERS = ("nfev", "naccept", "nreject")
@@ -126,10 +110,7 @@ def _row(values, what: str, expected: str, fix: str) -> np.ndarray:
 def load_model(source, build_dir=None):
     """``(CompiledModel, defaults)`` of a sweep's source: a scene file or
     :class:`Scene` (defaults: its times, method, tolerances, step, inputs and initial
-    state), a model file or spec, or a :class:`CompiledModel` (no defaults).
-
-    The one place a sweep loads a model.
-    """
+    state), a model file or spec, or a :class:`CompiledModel` (no defaults)."""
     if isinstance(source, CompiledModel):
         return source, {}
     if isinstance(source, (str, os.PathLike)) and is_scene_file(source):
@@ -146,11 +127,12 @@ def load_model(source, build_dir=None):
 
 @dataclass(frozen=True)
 class ModelPayload:
-    """What a worker needs to load a compiled model: its manifest and module path,
-    and the generated sources to rebuild it where that path does not exist."""
+    """What a worker needs to load a compiled model: manifest, module path, the generated
+    sources to rebuild it where that path does not exist, runtime module (name, path)."""
     manifest: dict
     module_path: str
     sources: dict | None = field(repr=False)   # None: they could not be verified
+    runtime: tuple | None = None
 
     @property
     def build_hash(self) -> str:
@@ -174,7 +156,8 @@ def payload_of(cm: CompiledModel) -> ModelPayload:
         # another variant of the model was built into that directory since: its
         # sources are not this build's, so none travel (workers need the shared path)
         sources = None
-    return ModelPayload(cm.manifest, str(cm.path), sources)
+    return ModelPayload(cm.manifest, str(cm.path), sources,
+                        (cm.lib.runtime[0], str(cm.lib.runtime[1])))
 
 
 _LOADED: dict = {}
@@ -188,13 +171,10 @@ def builds_in_this_process() -> int:
 
 
 def worker_model(payload: ModelPayload, build_dir=None) -> CompiledModel:
-    """The compiled model of ``payload`` in this process, loaded once and kept.
-
-    From the payload's module path when it exists and its build verifies (a
-    shared file system or the driver's own machine), else from this process's
-    build cache (``build_dir`` or the per-user default), compiling the shipped
-    sources there if no verified build is found: at most once per process.
-    """
+    """The compiled model of ``payload`` in this process, loaded once and kept: from
+    the payload's module path when its build verifies there (a shared file system),
+    else from this process's build cache (``build_dir`` or the per-user default),
+    compiling the shipped sources there if need be: at most once per process."""
     key = payload.build_hash
     with _LOCK:
         cm = _LOADED.get(key)
@@ -212,6 +192,8 @@ def worker_model(payload: ModelPayload, build_dir=None) -> CompiledModel:
                     f"its directory since); fix: build the model into a directory of its own "
                     f"(build_dir=...) or share the build directory with the workers")
             if hit is None:
+                from modelgen.codegen.emit import integrator_sources
+                from modelgen.codegen.pipeline import part_statements
                 statements = part_statements({name: o["statements"]
                                               for name, o in manifest["ops"].items()})
                 keep = {k: v for k, v in manifest.items()
@@ -221,7 +203,9 @@ def worker_model(payload: ModelPayload, build_dir=None) -> CompiledModel:
                 hit = build_module(directory, manifest["name"], payload.sources, keep,
                                    statements, integrator_sources())
                 _BUILDS["count"] += 1
-        cm = CompiledModel(hit.manifest, hit.module_path)
+        # the runtime module the driver named, when intact here: finding it otherwise
+        # renders its sources, which imports the code generator
+        cm = unpickled(hit.manifest, str(hit.module_path), payload.runtime)
         _LOADED[key] = cm
         return cm
 
@@ -253,19 +237,41 @@ def run_chunk(model, study: Study, lo: int, hi: int) -> dict:
     """Runs ``lo:hi`` of ``study`` in one :meth:`~CompiledModel.simulate_batch` call on
     ``model`` (a :class:`CompiledModel`, or a :class:`ModelPayload` loaded with
     :func:`worker_model`); plain arrays: ``y`` (runs, nx, times), ``outputs``
-    (runs, times, ny) or None, ``status``, ``message``, counters, ``seconds``."""
+    (runs, times, ny) or None, ``status``, ``message``, counters, ``t_reached``,
+    ``seconds``.  A run with a non-finite initial value or parameter fails alone, not
+    run: status BAD_ARGUMENT, its message naming the values."""
     start = time.perf_counter()
     cm = model if isinstance(model, CompiledModel) else worker_model(model)
-    res = cm.simulate_batch(study.X0[lo:hi], study.t_span, t_eval=study.t_eval,
-                            method=study.method, rtol=study.rtol, atol=study.atol, u=study.u,
-                            P=study.P[lo:hi], step=study.step, max_steps=study.max_steps,
-                            outputs=study.outputs)
-    out = {"y": res.y, "status": np.asarray(res.status, dtype=np.int32),
-           "message": list(res.message), "outputs": None}
-    for name in COUNTERS:
-        out[name] = np.asarray(getattr(res, name), dtype=np.int64)
-    if study.outputs and cm.output_columns:     # recorded by the C at every sample
-        out["outputs"] = np.concatenate([res.outputs[name] for name in cm.outputs], axis=2)
+    X0, P = study.X0[lo:hi], study.P[lo:hi]
+    ok = np.isfinite(X0).all(axis=1) & np.isfinite(P).all(axis=1)
+    n, nt, ny = hi - lo, len(study.t_eval), len(cm.output_columns) if study.outputs else 0
+    out = {"outputs": None, "message": [""] * n}
+    if not ok.all():        # simulate_batch would refuse the whole chunk
+        bad = STATUS_BY_NAME["BAD_ARGUMENT"].code
+        out.update(y=np.full((n, cm.nx, nt), np.nan), status=np.full(n, bad, np.int32),
+                   outputs=np.full((n, nt, ny), np.nan) if ny else None,
+                   t_reached=np.full(n, study.t_span[0]),
+                   **{name: np.zeros(n, dtype=np.int64) for name in COUNTERS})
+        names, rows = [*cm.state_names, *cm.parameters], np.hstack([X0, P])
+        for r in np.flatnonzero(~ok):
+            out["message"][r] = "Not run: not finite: " + ", ".join(
+                f"{names[j]} = {rows[r, j]}" for j in np.flatnonzero(~np.isfinite(rows[r])))
+    if ok.any():
+        res = cm.simulate_batch(X0[ok], study.t_span, t_eval=study.t_eval, method=study.method,
+                                rtol=study.rtol, atol=study.atol, u=study.u, P=P[ok],
+                                step=study.step, max_steps=study.max_steps,
+                                outputs=study.outputs)
+        got = {"y": res.y, "status": np.asarray(res.status, np.int32),
+               "t_reached": res.info["t_reached"],
+               **{name: np.asarray(getattr(res, name), np.int64) for name in COUNTERS}}
+        if ny:      # recorded by the C at every sample
+            got["outputs"] = np.concatenate([res.outputs[k] for k in cm.outputs], axis=2)
+        if ok.all():            # no copy when every run ran
+            out.update(got)
+        for key, a in got.items() if not ok.all() else ():
+            out[key][ok] = a
+        for r, message in zip(np.flatnonzero(ok), res.message):
+            out["message"][r] = message
     out["seconds"] = time.perf_counter() - start
     out["pid"] = os.getpid()
     return out
@@ -289,13 +295,15 @@ def _swept(values, argument: str, what: str, example: str) -> dict:
     return out
 
 
-def _columns(values: dict, names, what: str, n_runs: int | None) -> tuple:
-    """(dict name -> float array, n_runs) from :func:`_swept`'s arrays, their names
-    checked against the model's."""
+def _columns(values: dict, names, what: str, n_runs: int | None, other: tuple) -> tuple:
+    """(dict name -> float array, n_runs) from :func:`_swept`'s arrays, their names checked
+    against the model's; ``other``: (names, what, argument) where the other kind belongs."""
     out = {}
     for name, a in values.items():
         if name not in names:
-            raise ArgumentValueError(f"unknown {what} {name!r}; {what}s are {', '.join(names)}")
+            hint = f"{name!r} is a {other[1]}: give it in {other[2]}=; " if name in other[0] else ""
+            raise ArgumentValueError(f"unknown {what} {name!r}; {hint}{what}s are "
+                                     f"{', '.join(names) or 'none'}")
         out[name] = a
     for name, a in out.items():
         if a.size != 1:
@@ -310,8 +318,10 @@ def _columns(values: dict, names, what: str, n_runs: int | None) -> tuple:
 def _study(cm, defaults, parameters, initial, x0, t_eval, t_span, method, rtol, atol, step,
            max_steps, u, outputs) -> tuple:
     """(Study, swept coordinates) from a sweep's arguments and the source's defaults."""
-    params, n_runs = _columns(parameters, tuple(cm.parameters), "parameter", None)
-    inits, n_runs = _columns(initial, cm.state_names, "state", n_runs)
+    params, n_runs = _columns(parameters, tuple(cm.parameters), "parameter", None,
+                              (cm.state_names, "state", "initial"))
+    inits, n_runs = _columns(initial, cm.state_names, "state", n_runs,
+                             (tuple(cm.parameters), "parameter", "parameters"))
     n_runs = 1 if n_runs is None else n_runs
     base = cm.neutral_state() if x0 is None and "x0" not in defaults else \
         np.array(defaults["x0"] if x0 is None else x0, dtype=float)
@@ -338,14 +348,26 @@ def _study(cm, defaults, parameters, initial, x0, t_eval, t_span, method, rtol, 
         step = defaults.get("step")
         if step is None:
             raise SimulationError(f"method {method!r} has a fixed step: give step=")
+    # as simulate: a fixed step gets the steps its span needs (recorded in the attrs)
+    max_steps = step_budget(max_steps, DEFAULT_MAX_STEPS if max_steps is None else max_steps,
+                            float(step or 0.0), float(t_span[0]), float(t_span[1]))
     study = Study(X0=np.ascontiguousarray(X0), P=np.ascontiguousarray(P),
                   t_span=tuple(float(v) for v in t_span), t_eval=t_eval, method=method,
                   rtol=defaults.get("rtol", 1e-8) if rtol is None else rtol,
                   atol=defaults.get("atol", 1e-10) if atol is None else atol,
                   step=step, max_steps=max_steps, u=defaults.get("u") if u is None else u,
                   outputs=bool(outputs))
-    swept = {name: ("parameter", a) for name, a in params.items()}
-    swept.update({f"initial_{name}": ("initial", a) for name, a in inits.items()})
+    # a parameter named as one of the dataset's own names (time, run, status, a state, an
+    # initial_<state>) is parameter_<name>: overwriting those would lose data silently
+    fixed = {"run", "time", "status", "message", "t_reached", *COUNTERS, *cm.state_names}
+    own = fixed | {*cm.outputs, *(f"{o}_column" for o in cm.outputs),
+                   *(f"initial_{s}" for s in inits)}
+    if study.outputs and fixed & set(cm.outputs):
+        raise SimulationError(f"{cm.name}: the outputs {sorted(fixed & set(cm.outputs))} are named "
+                              f"as the dataset's own variables; fix: rename them, or outputs=False")
+    swept = {(f"parameter_{name}" if name in own else name): ("parameter", name, a)
+             for name, a in params.items()}
+    swept.update({f"initial_{name}": ("initial value of", name, a) for name, a in inits.items()})
     return study, swept
 
 
@@ -374,6 +396,9 @@ def _assembled(cm, X0, P, swept: dict) -> np.ndarray:
     inverse = inverse.reshape(-1)
     out = np.empty((unique.shape[0], nx))
     for i, row in enumerate(unique):
+        if not np.all(np.isfinite(row)):    # not run: run_chunk reports it
+            out[i] = row[:nx]
+            continue
         try:
             q = cm.assemble(row[:nq], keep=keep, p=row[nx:])
             out[i] = np.concatenate([q, cm.consistent_speeds(q, row[nq:nx], row[nx:])])
@@ -390,10 +415,8 @@ def _assembled(cm, X0, P, swept: dict) -> np.ndarray:
 
 def check_client(client, name: str = "client") -> None:
     """Refuse, before anything is built, a ``client`` that is none of None, ``"local"``,
-    a scheduler's address (``tcp://HOST:PORT``) or a ``dask.distributed.Client``;
-    ``name`` names it in the message (``--scheduler`` on the command line).  An
-    address is only parsed here: whether a scheduler answers there is found on
-    connecting."""
+    a scheduler's address (``tcp://HOST:PORT``, only parsed) or a ``Client``;
+    ``name`` names it in the message (``--scheduler`` on the command line)."""
     if client is None or (isinstance(client, str) and client == "local"):
         return
     if not isinstance(client, str) and all(hasattr(client, a) for a in (
@@ -442,8 +465,7 @@ def _chunks(n_runs: int, chunk: int | None, parts: int) -> list:
 
 
 def _count(value, what: str, fix: str) -> int:
-    """``value`` as a whole number >= 1 (``chunk``, ``max_steps``), checked before the
-    model is loaded."""
+    """``value`` as a whole number >= 1 (``chunk``, ``max_steps``), before the model loads."""
     try:
         count = whole_number(value, what)
     except (ArgumentTypeError, ArgumentValueError) as exc:
@@ -454,35 +476,34 @@ def _count(value, what: str, fix: str) -> int:
 
 
 def sweep(source, parameters=None, initial=None, *, t_eval=None, t_span=None, method=None,
-          rtol=None, atol=None, step=None, max_steps=100_000, u=None, x0=None, client=None,
+          rtol=None, atol=None, step=None, max_steps=None, u=None, x0=None, client=None,
           chunk=None, outputs=True, progress=None, build_dir=None):
     """Run ``source`` over swept parameters and initial values; an ``xarray.Dataset``.
 
-    ``source`` is a scene file (or :class:`Scene`), a model file (or spec) or a
-    :class:`CompiledModel`.  ``parameters`` and ``initial`` map parameter and
-    state names (``q1``, ``q1_dot``) to one value or one value per run (a
-    product with :func:`grid`, or paired samples, e.g. from ``scipy.stats.qmc``).
-    A scene gives the defaults of ``t_eval``, ``t_span``, ``method``, ``rtol``,
-    ``atol``, ``step``, ``u`` and ``x0``; a model starts from ``x0`` (default
-    zeros) and needs ``t_eval``.  A constrained model's runs start on its
-    constraints with their own parameters: each run's dependent coordinates are
-    assembled with the others as given (a swept ``q1`` keeps its value) and its
-    dependent speeds computed from the independent ones; sweeping a dependent
-    state is refused.  ``client`` is None (in-process), a
-    ``dask.distributed.Client``, an address (``"tcp://host:8786"``) or
-    ``"local"`` (a ``LocalCluster`` with one worker per core, closed after);
-    ``chunk`` is the runs per ``simulate_batch`` call (default: all in-process,
-    else about :data:`CHUNKS_PER_WORKER` chunks per worker thread).
-    ``progress(done, total)`` is called as runs finish.  ``outputs=False``
-    skips the scene outputs (evaluated per sample after the C run).
+    ``source``: a scene file (or :class:`Scene`; it gives the defaults of
+    ``t_eval``, ``t_span``, ``method``, ``rtol``, ``atol``, ``step``, ``u``, ``x0``),
+    a model file (or spec) or a :class:`CompiledModel` (``x0`` default zeros;
+    give ``t_eval``).  ``parameters`` and ``initial`` map parameter and state
+    names (``q1_dot``) to one value or one per run (:func:`grid`, or paired
+    samples).  A constrained model's runs start on its constraints with their own
+    parameters (dependent states computed; sweeping one is refused).  ``client``:
+    None (in-process), a ``dask.distributed.Client``, an address or ``"local"``
+    (a ``LocalCluster``, one worker per core).  ``chunk``: runs per
+    ``simulate_batch`` call (default: :data:`PROGRESS_CHUNKS` chunks in-process,
+    so Ctrl-C stops it between two, or :data:`CHUNKS_PER_WORKER` per worker
+    thread).  ``max_steps`` defaults as in ``simulate`` (100,000, or what a fixed
+    ``step`` needs).  ``progress(done, total)`` is called as runs finish.  A
+    sweep whose results exceed this machine's memory is refused before any run.
 
-    The dataset: dims ``run`` and ``time``; a variable per state and per scene
-    output (outputs with several columns get a ``<name>_column`` dim); the
-    swept values as coordinates along ``run`` (parameters by name, initial
-    values as ``initial_<state>``); ``status``, ``message``, ``nfev``,
-    ``naccept``, ``nreject`` per run; settings and timings in ``attrs``
-    (``seconds``: the runs, a local cluster's start included; ``load_seconds``:
-    loading or building the model; ``compute_seconds``: the chunks' own time).
+    The dataset: dims ``run`` and ``time`` (s); a variable per state and scene
+    output (several columns: a ``<name>_column`` dim); the swept values as
+    coordinates along ``run`` (a parameter by its name, ``parameter_<name>`` if
+    that is one of the dataset's; initial values as ``initial_<state>``); per
+    run ``status`` (< 0 failed; BAD_ARGUMENT: not run, a swept value not
+    finite), ``message``, ``t_reached`` (s), ``nfev``, ``naccept``, ``nreject``;
+    a ``description`` on each; settings and timings in ``attrs`` (``seconds``,
+    ``load_seconds``, ``compute_seconds``, ``workers``, ``chunks``, ``chunk``,
+    ``scheduler``: all that differs between repeats).
 
     >>> ds = sweep("models/double_pendulum.yaml", initial={"q1": np.linspace(0, 1, 100)},
     ...            t_eval=np.linspace(0, 10, 101))                          # doctest: +SKIP
@@ -499,10 +520,9 @@ def sweep(source, parameters=None, initial=None, *, t_eval=None, t_span=None, me
     if method is not None:
         method_of(method)
     if chunk is not None:
-        chunk = _count(chunk, "chunk", "give the runs per simulate_batch call, or None for "
-                                       "the default")
-    max_steps = _count(100_000 if max_steps is None else max_steps, "max_steps",
-                       "give the most steps of each run, e.g. 100000")
+        chunk = _count(chunk, "chunk", "give the runs per simulate_batch call, or None")
+    if max_steps is not None:
+        max_steps = _count(max_steps, "max_steps", "give the most steps of a run, e.g. 100000")
     if progress is not None and not callable(progress):
         raise ArgumentTypeError(f"progress must be None or a callable, got {progress!r:.80}; "
                                 f"fix: give a function progress(done, total)")
@@ -510,19 +530,22 @@ def sweep(source, parameters=None, initial=None, *, t_eval=None, t_span=None, me
     cm, defaults = load_model(source, build_dir)
     study, swept = _study(cm, defaults, parameters, initial, x0, t_eval, t_span, method, rtol,
                           atol, step, max_steps, u, outputs)
+    _check_memory(cm, study)
     loaded = time.perf_counter()
     dask_client, owned = _client(client)
     scheduler = "in-process" if dask_client is None else \
         str(getattr(dask_client.scheduler, "address", None) or "dask")
     try:
         if dask_client is None:
-            parts = PROGRESS_CHUNKS if (progress and not chunk) else 1
-            bounds = _chunks(study.n_runs, chunk, parts)
+            # several C calls, not one: Ctrl-C lands between them, not after the study
+            bounds = _chunks(study.n_runs, chunk, PROGRESS_CHUNKS)
             results, workers = [], 1
-            for lo, hi in bounds:
-                results.append(run_chunk(cm, study, lo, hi))
-                if progress:
-                    progress(hi, study.n_runs)
+            with warnings.catch_warnings():     # one warning for the sweep, below
+                warnings.filterwarnings("ignore", ".*runs reached max_steps", RuntimeWarning)
+                for lo, hi in bounds:
+                    results.append(run_chunk(cm, study, lo, hi))
+                    if progress:
+                        progress(hi, study.n_runs)
         else:
             results, workers, bounds = _distributed(dask_client, cm, study, chunk, progress)
     finally:
@@ -531,11 +554,35 @@ def sweep(source, parameters=None, initial=None, *, t_eval=None, t_span=None, me
             dask_client.close()
             if cluster is not None:
                 cluster.close()
-    seconds = time.perf_counter() - loaded
-    return _dataset(xr, cm, study, swept, results, defaults, dict(
-        seconds=seconds, load_seconds=loaded - start, workers=workers, chunks=len(bounds),
+    ds = _dataset(xr, cm, study, swept, results, defaults, dict(
+        seconds=time.perf_counter() - loaded, load_seconds=loaded - start, workers=workers, chunks=len(bounds),
         chunk=max(hi - lo for lo, hi in bounds) if bounds else 0,
         compute_seconds=float(sum(r["seconds"] for r in results)), scheduler=scheduler))
+    short = int(np.count_nonzero(ds["status"].values == STATUS_BY_NAME["MAX_STEPS"].code))
+    if short:
+        warnings.warn(f"{cm.name}: {short} of {study.n_runs} runs reached max_steps "
+                      f"({study.max_steps}); see their messages", RuntimeWarning, stacklevel=2)
+    return ds
+
+
+def physical_memory() -> float:
+    """This machine's memory in bytes (inf where the system does not say)."""
+    try:
+        return float(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
+    except (AttributeError, ValueError, OSError):
+        return math.inf
+
+
+def _check_memory(cm, study) -> None:
+    # before any run: chunk by chunk, a sweep too large would run for hours, then fail
+    # (or be killed) assembling its results, held twice (the chunks' and the dataset's)
+    columns = cm.nx + (len(cm.output_columns) if study.outputs else 0)
+    need, have = 16.0 * study.n_runs * len(study.t_eval) * columns, physical_memory()
+    if need > have:
+        raise ArgumentValueError(
+            f"{cm.name}: the sweep's results ({study.n_runs} runs x {len(study.t_eval)} samples x "
+            f"{columns} columns, held twice) need {need / 1e9:.3g} GB, more than this machine's "
+            f"{have / 1e9:.3g} GB; fix: fewer samples in t_eval, fewer runs, or outputs=False")
 
 
 def _distributed(client, cm, study, chunk, progress) -> tuple:
@@ -550,19 +597,23 @@ def _distributed(client, cm, study, chunk, progress) -> tuple:
     index = {f.key: k for k, f in enumerate(futures)}
     results = [None] * len(futures)
     done = 0
-    for future in distributed.as_completed(futures):
-        k = index[future.key]
-        results[k] = future.result()
-        done += bounds[k][1] - bounds[k][0]
-        if progress:
-            progress(done, study.n_runs)
+    try:
+        for future in distributed.as_completed(futures):
+            k = index[future.key]
+            results[k] = future.result()
+            done += bounds[k][1] - bounds[k][0]
+            if progress:
+                progress(done, study.n_runs)
+    except BaseException:   # Ctrl-C: a kept traceback keeps the futures (and the cluster busy)
+        client.cancel([*futures, payload, shared])
+        raise
     return results, len(client.nthreads()), bounds
 
 
 def _dataset(xr, cm, study, swept, results, defaults, timing):
     """The sweep's ``xarray.Dataset`` from its chunks' results, in run order."""
     coords = {"run": np.arange(study.n_runs), "time": study.t_eval}
-    for name, (_, values) in swept.items():
+    for name, (_, _, values) in swept.items():
         coords[name] = ("run", np.broadcast_to(values, (study.n_runs,)).copy())
     # one contiguous block per state, filled chunk by chunk (one copy): xarray is slow on
     # strided views (6.8 s instead of 0.02 s for four 10,000 x 101 views, xarray 2026.9)
@@ -583,14 +634,9 @@ def _dataset(xr, cm, study, swept, results, defaults, timing):
                 dim = f"{name}_column"
                 coords[dim] = list(cols)
                 data[name] = (("run", "time", dim), ys[:, :, idx])
-    per_run = {"status": np.concatenate([r["status"] for r in results]),
-               "message": np.array([m for r in results for m in r["message"]], dtype=str)}
-    for name in COUNTERS:
-        per_run[name] = np.concatenate([r[name] for r in results])
-    clash = (set(data) | set(coords)) & set(per_run)
-    if clash or set(data) & set(coords):
-        raise SimulationError(f"{cm.name}: the names {sorted(clash or set(data) & set(coords))} "
-                              f"are used twice in the sweep's dataset; fix: rename the output")
+    per_run = {name: np.concatenate([r[name] for r in results])
+               for name in ("status", *COUNTERS, "t_reached")}
+    per_run["message"] = np.array([m for r in results for m in r["message"]], dtype=str)
     data.update({name: ("run", values) for name, values in per_run.items()})
     attrs = {"model": cm.name, "scene": defaults.get("scene", ""), "method": study.method,
              "rtol": float(np.max(study.rtol)), "atol": float(np.max(study.atol)),
@@ -600,8 +646,17 @@ def _dataset(xr, cm, study, swept, results, defaults, timing):
              "runs": study.n_runs, "failed": int(np.count_nonzero(per_run["status"] < 0)),
              **timing}
     ds = xr.Dataset(data, coords=coords, attrs=attrs)
-    for name in cm.state_names:
-        ds[name].attrs["kind"] = "state"
+    about = {"time": "sample time", "t_reached": "time the run reached: t_span's end, or where "
+             "it failed", "status": "0 success, 1 stopped by an event, < 0 failed (modelgen.sim."
+             "integrate.STATUS; message says why)", "message": "the integrator's message",
+             "nfev": "right-hand side evaluations", "naccept": "accepted steps",
+             "nreject": "rejected steps", **{name: f"swept {kind} {of}" for name, (kind, of, _)
+                                             in swept.items()},
+             **{name: f"scene output {name}" for name in cm.outputs if name in ds}}
+    for name, text in {**about, **{x: f"state {x}" for x in cm.state_names}}.items():
+        ds[name].attrs.update(description=text, **({"kind": "state"} if name in cm.state_names
+                                                   else {}))
+    ds["time"].attrs["units"] = ds["t_reached"].attrs["units"] = "s"
     return ds
 
 
