@@ -714,6 +714,49 @@ def test_ctrl_c_stops_a_long_c_run_and_keeps_what_it_computed(tmp_path, dp):
     assert float(t_last) == 0.0          # no t_eval sample reached yet: the start is kept
 
 
+CTRL_C_BATCH = """\
+import signal, sys, time, warnings, numpy as np, modelgen
+signal.signal(signal.SIGINT, signal.default_int_handler)
+cm = modelgen.load(sys.argv[1], sys.argv[2])
+print("ready", flush=True)
+with warnings.catch_warnings(record=True) as caught:
+    warnings.simplefilter("always")
+    res = cm.simulate_batch(np.tile([1.0, 0.5, 0.0, 0.0], (4, 1)), (0.0, 1e9), method="rk4",
+                            step=1e-4, max_steps=10**15, threads=int(sys.argv[3]))
+print(*res.status, flush=True)
+print(*[str(w.message) for w in caught], flush=True)
+"""
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+def test_ctrl_c_stops_a_long_batch_and_returns_its_runs(tmp_path, dp, threads):
+    """A batch was one C call that Ctrl-C could not stop before every run ended
+    (here: days); now every run left stops within a step, INTERRUPTED, and the
+    result comes back with a warning."""
+    import signal
+    import subprocess
+    import sys
+    import time
+    script = tmp_path / "run.py"
+    script.write_text(CTRL_C_BATCH)
+    proc = subprocess.Popen([sys.executable, str(script), str(MODELS / "double_pendulum.yaml"),
+                             str(dp.path.parent), str(threads)], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    assert proc.stdout.readline().strip() == "ready"
+    time.sleep(1.0)
+    proc.send_signal(signal.SIGINT)
+    try:
+        out, err = proc.communicate(timeout=60)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        out, err = proc.communicate()
+        pytest.fail(f"SIGINT did not stop the batch within 60 s: {out} {err}")
+    statuses, warned = out.split("\n", 1)
+    code = capi.STATUS_BY_NAME["INTERRUPTED"].code
+    assert statuses.split() == [str(code)] * 4, (out, err)
+    assert "interrupted (Ctrl-C): 4 of 4 runs stopped early" in warned, (out, err)
+
+
 @pytest.mark.parametrize("name, method", [
     ("RK45", "dopri5"), ("DOP853", "dop853"), ("Radau", "rodas"), ("BDF", "rodas"),
     ("LSODA", "rodas"), ("rk45", "dopri5")])

@@ -554,6 +554,32 @@ def _parameter_rows(cm, P, n_runs):
     return rows, n_p
 
 
+def _batch_messages(cm, status, stats, stop, sign, rows, p_vec, X0, max_steps,
+                    t_span) -> list:
+    """Each run's message, as :func:`simulate`'s (``rows``: per-run parameters, or None
+    when all share ``p_vec``)."""
+    messages = []
+    for r in range(len(status)):
+        p = rows[r] if rows is not None else p_vec
+        pivot = int(stats[r].pivot)
+        messages.append(status_message(
+            int(status[r]), t=sign * float(stop[r, 0]), h=sign * float(stop[r, 1]),
+            t_fail=sign * float(stop[r, 2]),
+            x=_vector_text(stop[r, STOP_X:]), pivot=pivot,
+            coordinate=cm.dof_names[pivot - 1] if 0 < pivot <= cm.n else "?",
+            max_steps=max_steps,
+            kind=_mass_matrix_kind(cm, int(status[r]), pivot, p, X0[r],
+                                   stats[r].naccept == 0)))
+        if status[r] == DEAD_POINT and cm.manifest.get("constraints"):
+            messages[-1] = crossing_message(cm, sign * float(stop[r, 0]),
+                                            sign * float(stop[r, 2]), stop[r, STOP_X:])
+        if status[r] < 0:
+            messages[-1] += _conditioning_note(cm, p, X0[r], stop[r, STOP_X:])
+        if status[r] == MAX_STEPS:
+            messages[-1] += _max_steps_note(max_steps, t_span, sign * float(stop[r, 0]))
+    return messages
+
+
 def _batch_states(cm, X0) -> np.ndarray:
     """The rows of ``X0`` as a C-ordered float array (n_runs, nx), checked."""
     if isinstance(X0, (list, tuple)) and any(isinstance(row, dict) for row in X0):
@@ -616,6 +642,8 @@ def simulate_batch(cm, X0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol
     fn = cm.lib.integrate_function(cm.name, batch=True, backward=sign < 0)
     ffi, ptr = cm.ffi, cm._ptr
     opt = c_options(cm, m, rtol, atol, fixed, first, hmax, max_steps)
+    flag = np.zeros(1, dtype=np.intc)       # Ctrl-C: every run left stops, INTERRUPTED
+    opt.interrupt = ffi.from_buffer("int[]", flag)
 
     def run(lo, hi):
         if hi <= lo:
@@ -627,37 +655,24 @@ def simulate_batch(cm, X0, t_span, t_eval=None, method="dop853", rtol=1e-8, atol
            ffi.from_buffer("long[]", n_out[lo:hi]),
            ffi.from_buffer("int[]", status[lo:hi]), stats + lo, ptr(stop[lo:hi]), ptr(work))
 
-    bounds = np.linspace(0, n_runs, threads + 1).astype(int)
-    if threads == 1:
-        run(0, n_runs)
-    else:
+    def runs():
+        bounds = np.linspace(0, n_runs, threads + 1).astype(int)
+        if threads == 1:
+            return run(0, n_runs)
         import concurrent.futures      # only batches use it; a cached load does not
         with concurrent.futures.ThreadPoolExecutor(threads) as pool:
             list(pool.map(run, bounds[:-1], bounds[1:]))
+
+    _interruptible(runs, (), flag)
     for r in range(n_runs):    # rows after a failure stay NaN
         x_out[r, n_out[r]:] = np.nan
         y_out[r, n_out[r]:] = np.nan
-    messages = []
-    for r in range(n_runs):
-        pivot = int(stats[r].pivot)
-        messages.append(status_message(
-            int(status[r]), t=sign * float(stop[r, 0]), h=sign * float(stop[r, 1]),
-            t_fail=sign * float(stop[r, 2]),
-            x=_vector_text(stop[r, STOP_X:]), pivot=pivot,
-            coordinate=cm.dof_names[pivot - 1] if 0 < pivot <= cm.n else "?",
-            max_steps=max_steps,
-            kind=_mass_matrix_kind(cm, int(status[r]), pivot,
-                                   P_rows[r] if p_stride else P_rows, X0[r],
-                                   stats[r].naccept == 0)))
-        if status[r] == DEAD_POINT and cm.manifest.get("constraints"):
-            messages[-1] = crossing_message(cm, sign * float(stop[r, 0]),
-                                            sign * float(stop[r, 2]), stop[r, STOP_X:])
-        if status[r] < 0:
-            messages[-1] += _conditioning_note(cm, P_rows[r] if p_stride else P_rows, X0[r],
-                                               stop[r, STOP_X:])
-        if status[r] == MAX_STEPS:
-            messages[-1] += _max_steps_note(max_steps, (sign * t0, sign * t1),
-                                            sign * float(stop[r, 0]))
+    messages = _batch_messages(cm, status, stats, stop, sign, P_rows if p_stride else None,
+                               P_rows, X0, max_steps, (sign * t0, sign * t1))
+    if flag[0]:
+        warnings.warn(f"{cm.name}: interrupted (Ctrl-C): {np.count_nonzero(status == INTERRUPTED)}"
+                      f" of {n_runs} runs stopped early, with the samples they reached",
+                      RuntimeWarning, stacklevel=3)
     short = np.flatnonzero(status == MAX_STEPS)
     if short.size:
         warnings.warn(f"{cm.name}: {short.size} of {n_runs} runs reached max_steps; run "

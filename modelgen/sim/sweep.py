@@ -28,8 +28,8 @@ from modelgen.errors import (ArgumentTypeError, ArgumentValueError, ModelgenErro
                              SimulationError)
 from modelgen.model import as_spec, is_scene_file
 from modelgen.sim.arguments import whole_number
-from modelgen.sim.integrate import (DEFAULT_MAX_STEPS, STATUS, STATUS_BY_NAME, method_of,
-                                    step_budget)
+from modelgen.sim.integrate import (DEFAULT_MAX_STEPS, INTERRUPTED, STATUS, STATUS_BY_NAME,
+                                    method_of, step_budget)
 from modelgen.sim.load import load, load_scene
 from modelgen.sim.runtime import CompiledModel, unpickled
 from modelgen.sim.scene import Scene
@@ -43,7 +43,7 @@ __all__ = ["grid", "sweep", "Study", "ModelPayload", "payload_of", "worker_model
 EXTRA = "pip install 'modelgen[sweep]'"
 #: chunks per worker thread when no chunk size is given (load balance against overhead)
 CHUNKS_PER_WORKER = 4
-#: chunks of an in-process sweep: Ctrl-C and progress act between two C calls
+#: chunks of an in-process sweep: progress is reported between two C calls
 PROGRESS_CHUNKS = 50
 #: per-run counters of the integrator kept in the dataset
 COUNTERS = ("nfev", "naccept", "nreject")
@@ -489,9 +489,9 @@ def sweep(source, parameters=None, initial=None, *, t_eval=None, t_span=None, me
     parameters (dependent states computed; sweeping one is refused).  ``client``:
     None (in-process), a ``dask.distributed.Client``, an address or ``"local"``
     (a ``LocalCluster``, one worker per core).  ``chunk``: runs per
-    ``simulate_batch`` call (default: :data:`PROGRESS_CHUNKS` chunks in-process,
-    so Ctrl-C stops it between two, or :data:`CHUNKS_PER_WORKER` per worker
-    thread).  ``max_steps`` defaults as in ``simulate`` (100,000, or what a fixed
+    ``simulate_batch`` call (default: :data:`PROGRESS_CHUNKS` chunks in-process, or
+    :data:`CHUNKS_PER_WORKER` per worker thread; Ctrl-C stops a call within a
+    step).  ``max_steps`` defaults as in ``simulate`` (100,000, or what a fixed
     ``step`` needs).  ``progress(done, total)`` is called as runs finish.  A
     sweep whose results exceed this machine's memory is refused before any run.
 
@@ -537,13 +537,14 @@ def sweep(source, parameters=None, initial=None, *, t_eval=None, t_span=None, me
         str(getattr(dask_client.scheduler, "address", None) or "dask")
     try:
         if dask_client is None:
-            # several C calls, not one: Ctrl-C lands between them, not after the study
             bounds = _chunks(study.n_runs, chunk, PROGRESS_CHUNKS)
             results, workers = [], 1
             with warnings.catch_warnings():     # one warning for the sweep, below
                 warnings.filterwarnings("ignore", ".*runs reached max_steps", RuntimeWarning)
                 for lo, hi in bounds:
                     results.append(run_chunk(cm, study, lo, hi))
+                    if np.any(results[-1]["status"] == INTERRUPTED):   # Ctrl-C in the C
+                        raise KeyboardInterrupt
                     if progress:
                         progress(hi, study.n_runs)
         else:
