@@ -123,7 +123,9 @@ def test_the_stage_times_add_up_to_the_whole_call(tmp_path):
     g = generate(model, tmp_path / "out", force=True)
     wall = time.perf_counter() - start
     assert list(g.seconds) == ["check", "derive", "cse", "emit", "compile"]
-    assert sum(g.seconds.values()) == pytest.approx(wall, rel=0.02, abs=0.01)
+    # a stage left out would miss a tenth of a second or more; a loaded machine's
+    # scheduling between the stages moves the sum by a few hundredths
+    assert sum(g.seconds.values()) == pytest.approx(wall, rel=0.05, abs=0.05)
 
 
 @pytest.mark.parametrize("command", [["generate"], ["simulate", "--t-end", "0.01"]])
