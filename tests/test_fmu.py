@@ -304,20 +304,27 @@ def test_model_exchange_projects_a_constrained_model_onto_its_constraints(fmus, 
     assert f_off[-200:].max() > 5 * f_off[:200].max()         # about linear in t
 
 
+def rocker_fmu(build_root, out) -> tuple:
+    """The FMU of the rocker-driven four-bar (crank and coupler dependent), written
+    into ``out``, and a start (names -> values) that reaches its dead point at
+    t = 0.31 s, where mg_integrate stops with MG_STATUS_DEAD_POINT."""
+    from modelgen.bench import hard_case_models as hm
+    path = out / "hc_four_bar_rocker.yaml"
+    path.write_text(hm.FOUR_BAR_ROCKER)
+    fmu = build_fmu(path, out / "rocker.fmu", out_dir=build_root / "hc_four_bar_rocker")
+    cm = modelgen.load(path, build_root / "hc_four_bar_rocker")
+    q0 = cm.assemble([0.0, 1.2, 2.0], keep=["q3"])
+    return fmu, dict(zip(cm.state_names,
+                         np.concatenate([q0, cm.consistent_speeds(q0, [0.0, 0.0, 3.0])])))
+
+
 def test_a_dead_point_is_an_error_in_model_exchange_and_a_discard_in_cs(build_root, tmp_path):
     """The rocker-driven four-bar (crank and coupler dependent) reaches a dead point
     at t = 0.31 s: under Model Exchange fmi2CompletedIntegratorStep sees det G_d
     change sign and fails with the dead point named; under Co-Simulation
     fmi2DoStep returns fmi2Discard with mg_integrate's status, and FMPy ends the
     run at the last time reached; never a silent crossing or NaN."""
-    from modelgen.bench import hard_case_models as hm
-    path = tmp_path / "hc_four_bar_rocker.yaml"
-    path.write_text(hm.FOUR_BAR_ROCKER)
-    fmu = build_fmu(path, tmp_path / "rocker.fmu", out_dir=build_root / "hc_four_bar_rocker")
-    cm = modelgen.load(path, build_root / "hc_four_bar_rocker")
-    q0 = cm.assemble([0.0, 1.2, 2.0], keep=["q3"])
-    start = dict(zip(cm.state_names,
-                     np.concatenate([q0, cm.consistent_speeds(q0, [0.0, 0.0, 3.0])])))
+    fmu, start = rocker_fmu(build_root, tmp_path)
     messages = []
     with pytest.raises(FMICallException):
         simulate_fmu(str(fmu.path), fmi_type="ModelExchange", solver="CVode",

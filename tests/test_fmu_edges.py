@@ -23,9 +23,8 @@ from fmpy.fmi1 import FMICallException  # noqa: E402
 from fmpy.fmi2 import (FMU2Slave, fmi2DoStepStatus, fmi2LastSuccessfulTime,  # noqa: E402
                        fmi2PendingStatus, fmi2Terminated)
 
-import modelgen  # noqa: E402
 from modelgen.codegen.fmu import build_fmu  # noqa: E402
-from test_fmu import _Log  # noqa: E402
+from test_fmu import _Log, rocker_fmu  # noqa: E402
 
 OK, DISCARD, ERROR = 0, 2, 3
 
@@ -39,18 +38,9 @@ def cart_pole(build_root, tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def rocker(build_root, tmp_path_factory):
-    """The rocker-driven four-bar (tests/test_fmu.py) and a start that reaches its
-    dead point at t = 0.31 s: mg_integrate stops there with MG_STATUS_DEAD_POINT."""
-    from modelgen.bench import hard_case_models as hm
-    out = tmp_path_factory.mktemp("fmu_rocker")
-    path = out / "hc_four_bar_rocker.yaml"
-    path.write_text(hm.FOUR_BAR_ROCKER)
-    fmu = build_fmu(path, out / "rocker.fmu", out_dir=build_root / "hc_four_bar_rocker")
-    cm = modelgen.load(path, build_root / "hc_four_bar_rocker")
-    q0 = cm.assemble([0.0, 1.2, 2.0], keep=["q3"])
-    start = dict(zip(cm.state_names,
-                     np.concatenate([q0, cm.consistent_speeds(q0, [0.0, 0.0, 3.0])])))
-    return fmu, start
+    """The rocker-driven four-bar and a start that reaches its dead point at t = 0.31 s:
+    mg_integrate stops there with MG_STATUS_DEAD_POINT."""
+    return rocker_fmu(build_root, tmp_path_factory.mktemp("fmu_rocker"))
 
 
 def _slave(fmu, tmp_path, name="probe"):

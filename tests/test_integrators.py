@@ -684,18 +684,17 @@ print(res.message, flush=True)
 """
 
 
-def test_ctrl_c_stops_a_long_c_run_and_keeps_what_it_computed(tmp_path, dp):
-    """SIGINT during a C loop that would run for days: it stops within 0.2 s with
-    status INTERRUPTED, and the result (not a KeyboardInterrupt) comes back."""
+def _interrupted(tmp_path, script_text, *args) -> tuple:
+    """(stdout after "ready", stderr, seconds from SIGINT to exit) of ``script_text``
+    run with ``args``, sent SIGINT 1 s after it says it is ready."""
     import signal
     import subprocess
     import sys
     import time
     script = tmp_path / "run.py"
-    script.write_text(CTRL_C)
-    proc = subprocess.Popen([sys.executable, str(script), str(MODELS / "double_pendulum.yaml"),
-                             str(dp.path.parent)], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)
+    script.write_text(script_text)
+    proc = subprocess.Popen([sys.executable, str(script), *map(str, args)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     assert proc.stdout.readline().strip() == "ready"
     time.sleep(1.0)
     sent = time.perf_counter()
@@ -706,7 +705,15 @@ def test_ctrl_c_stops_a_long_c_run_and_keeps_what_it_computed(tmp_path, dp):
         proc.kill()
         out, err = proc.communicate()
         pytest.fail(f"SIGINT did not stop the run within 60 s: {out} {err}")
-    waited = time.perf_counter() - sent       # about 0.1 s; bounded loosely (shared machine)
+    return out, err, time.perf_counter() - sent
+
+
+def test_ctrl_c_stops_a_long_c_run_and_keeps_what_it_computed(tmp_path, dp):
+    """SIGINT during a C loop that would run for days: it stops within 0.2 s with
+    status INTERRUPTED, and the result (not a KeyboardInterrupt) comes back."""
+    out, err, waited = _interrupted(tmp_path, CTRL_C, MODELS / "double_pendulum.yaml",
+                                    dp.path.parent)
+    # waited: about 0.1 s; bounded loosely (shared machine)
     first, out = out.split("\n", 1)
     status, t_last, _ = first.split()
     assert int(status) == capi.STATUS_BY_NAME["INTERRUPTED"].code, err
@@ -733,24 +740,8 @@ def test_ctrl_c_stops_a_long_batch_and_returns_its_runs(tmp_path, dp, threads):
     """A batch was one C call that Ctrl-C could not stop before every run ended
     (here: days); now every run left stops within a step, INTERRUPTED, and the
     result comes back with a warning."""
-    import signal
-    import subprocess
-    import sys
-    import time
-    script = tmp_path / "run.py"
-    script.write_text(CTRL_C_BATCH)
-    proc = subprocess.Popen([sys.executable, str(script), str(MODELS / "double_pendulum.yaml"),
-                             str(dp.path.parent), str(threads)], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)
-    assert proc.stdout.readline().strip() == "ready"
-    time.sleep(1.0)
-    proc.send_signal(signal.SIGINT)
-    try:
-        out, err = proc.communicate(timeout=60)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        out, err = proc.communicate()
-        pytest.fail(f"SIGINT did not stop the batch within 60 s: {out} {err}")
+    out, err, _ = _interrupted(tmp_path, CTRL_C_BATCH, MODELS / "double_pendulum.yaml",
+                               dp.path.parent, threads)
     statuses, warned = out.split("\n", 1)
     code = capi.STATUS_BY_NAME["INTERRUPTED"].code
     assert statuses.split() == [str(code)] * 4, (out, err)
