@@ -421,9 +421,10 @@ class _Log:
     def _free(self, pointer):
         self.libc.free(pointer)
 
-    def last(self):
+    def last(self, level=3):
         status, category, message = self.messages[-1]
-        assert (status, category) == (3, "logStatusError")
+        assert (status, category) == ((3, "logStatusError") if level == 3
+                                      else (level, "logStatusDiscard"))
         return message
 
 
@@ -445,14 +446,14 @@ def _derivatives(me, n=4):
     return list(dx)
 
 
-def _fails(log, call, *args):
-    """Call, expect fmi2Error (FMPy raises), return the logged message."""
+def _fails(log, call, *args, status=3):
+    """Call, expect fmi2Error (or ``status``; FMPy raises), return the logged message."""
     before = len(log.messages)
     with pytest.raises(FMICallException) as info:
         call(*args)
-    assert info.value.status == 3
+    assert info.value.status == status
     assert len(log.messages) == before + 1
-    return log.last()
+    return log.last(status)
 
 
 def test_misuse_of_a_model_exchange_instance_is_an_error_with_a_reason(fmus, tmp_path):
@@ -489,11 +490,21 @@ def test_misuse_of_a_model_exchange_instance_is_an_error_with_a_reason(fmus, tmp
         me.enterEventMode()
         me.setReal([vr["g"]], [1.62])                          # in event mode: fine
         assert me.getReal([vr["g"]]) == [1.62]
-        # a negative pole mass leaves the mass matrix not positive definite
+        # a negative pole mass leaves the mass matrix not positive definite: in event
+        # mode fmi2Discard (the importer may change what it set), nothing changed
         me.setReal([vr["M"], vr["m"]], [-1.0, 0.5])
-        message = _fails(log, _derivatives, me)
+        message = _fails(log, _derivatives, me, status=2)
         assert "mass matrix is not positive definite" in message and "coordinate" in message
-        # a failed computation leaves the error state: diagnostics only, then reset
+        me.setReal([vr["M"]], [1.0])
+        assert np.all(np.isfinite(_derivatives(me)))
+        # at initialization nothing can be retried: fmi2Error and the error state,
+        # diagnostics only, then reset
+        me.reset()
+        me.setupExperiment(startTime=0.0)
+        me.setReal([vr["theta"], vr["M"], vr["m"]], [0.2, -1.0, 0.5])
+        me.enterInitializationMode()
+        assert "mass matrix is not positive definite" in _fails(log, me.exitInitializationMode)
+        assert log.messages[-1][:2] == (3, "logStatusError")
         assert "may not be called in the error state" in _fails(log, me.enterEventMode)
         assert me.getReal([vr["M"]]) == [-1.0]
         # the whole state for diagnosis, derivatives included: NaN where the failure

@@ -1,4 +1,4 @@
-"""FMI 2.0 Co-Simulation at the edges of the standard, driven call by call.
+"""FMI 2.0 at the edges of the standard, driven call by call.
 
 What a master may rely on besides the ordinary run of tests/test_fmu.py: a
 step the integrator cannot finish is fmi2Discard with the last successful time
@@ -6,7 +6,8 @@ and the slave's wish to terminate (and FMPy ends such a run there), the status
 functions answer each fmi2StatusKind as the standard says, a defined stop time
 is not stepped past, each step ends at the master's time, and the calls on the
 edges of the state machine (NULL arrays of length 0, fmi2Reset, two instances
-at once, fmi2FreeInstance(NULL)) behave.
+at once, fmi2FreeInstance(NULL)) behave.  Under Model Exchange, derivatives
+that cannot be evaluated at the importer's states are fmi2Discard.
 """
 from __future__ import annotations
 
@@ -331,3 +332,58 @@ def test_setup_experiment_ignores_what_it_is_told_is_undefined(cart_pole, tmp_pa
         finally:
             slave.freeInstance()
     assert runs[0] == runs[1]
+
+
+def test_model_exchange_discards_derivatives_at_a_state_it_cannot_evaluate(build_root,
+                                                                          tmp_path):
+    """Under Model Exchange the importer's solver chooses the states: at one where
+    the mass matrix is singular (the heavy top's Euler angles at theta = 0) the
+    derivatives are fmi2Discard, the standard's hint to retry with a shorter step,
+    with NaN for the values and the reason logged; the instance stays in
+    continuous-time mode and evaluates the next state it is given.  At
+    initialization nothing lets the importer retry: the same state is fmi2Error."""
+    from fmpy.fmi2 import FMU2Model
+    fmu = build_fmu(MODELS / "heavy_top.yaml", tmp_path / "heavy_top.fmu",
+                    out_dir=build_root / "heavy_top")
+    md = read_model_description(str(fmu.path))
+    directory = extract(str(fmu.path), unzipdir=str(tmp_path / "me"))
+    vr = {v.name: v.valueReference for v in md.modelVariables}
+    log = _Log()
+    model = FMU2Model(guid=md.guid, unzipDirectory=directory,
+                      modelIdentifier=fmu.model_identifier, instanceName="me")
+    model.instantiate(callbacks=log.callbacks)
+    get_derivatives = _raw(model, "fmi2GetDerivatives", ctypes.c_int,
+                           ctypes.POINTER(ctypes.c_double), ctypes.c_size_t)
+    get_real = _raw(model, "fmi2GetReal", ctypes.c_int, ctypes.POINTER(ctypes.c_uint),
+                    ctypes.c_size_t, ctypes.POINTER(ctypes.c_double))
+    try:
+        model.setupExperiment(startTime=0.0)
+        model.enterInitializationMode()
+        model.setReal([vr["theta"]], [0.5])
+        model.exitInitializationMode()
+        model.enterContinuousTimeMode()
+        good = [0.0, 0.5, 0.0, 0.1, 0.0, 20.0]
+        singular = [0.0, 0.0, 0.0, 0.1, 0.0, 20.0]
+        out = (ctypes.c_double * 6)()
+        for x, expected in ((good, OK), (singular, DISCARD), (good, OK)):
+            model.setContinuousStates((ctypes.c_double * 6)(*x), 6)
+            assert get_derivatives(model.component, out, 6) == expected
+            assert np.all(np.isfinite(out)) == (expected == OK)
+            refs = [vr["theta"], vr["der(phi_dot)"], vr["der(psi_dot)"]]
+            values = (ctypes.c_double * 3)()
+            assert get_real(model.component, (ctypes.c_uint * 3)(*refs), 3, values) \
+                == expected
+            assert values[0] == x[1] and np.all(np.isfinite(values[1:])) == (expected == OK)
+            if expected == DISCARD:
+                level, category, message = log.messages[-1]
+                assert (level, category) == (DISCARD, "logStatusDiscard")
+                assert "mass matrix is not positive definite" in message
+                assert "(coordinate phi)" in message
+        model.reset()
+        model.setupExperiment(startTime=0.0)
+        model.enterInitializationMode()
+        with pytest.raises(FMICallException):
+            model.exitInitializationMode()
+        assert log.messages[-1][:2] == (ERROR, "logStatusError")
+    finally:
+        model.freeInstance()
