@@ -1,9 +1,12 @@
-"""Units of a model's names: read, checked, written back, and carried into an FMU's
-modelDescription; never part of the equations (the generated C does not change)."""
+"""Units of a model's names: read, checked, written back, carried into the compiled
+model (``cm.units``), a sweep's dataset and an FMU's modelDescription; never part
+of the equations (the generated C does not change)."""
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
+import modelgen
 from modelgen.codegen.pipeline import model_hash
 from modelgen.errors import ModelError
 from modelgen.model import parse_model
@@ -23,7 +26,39 @@ def test_units_are_read_written_back_and_leave_the_equations_alone():
     assert dict(spec.units) == {"q": "rad", "L": "m", "g": "m/s^2", "T": "N*m"}
     again = parse_model(spec_to_yaml(spec))
     assert again.units == spec.units
-    assert model_hash(spec) == model_hash(model(""))
+    assert model_hash(spec) == model_hash(model("{L: m, q: rad, T: N*m, g: m/s^2}"))
+
+
+def test_units_reach_the_compiled_model_and_change_no_line_of_c(tmp_path):
+    """``cm.units`` (a speed: its coordinate's per second) from the manifest.  The C
+    is the same with and without units, but the build is another: a cached build
+    must not answer a model whose units changed with the old ones."""
+    with_units = modelgen.load(model("{q: rad, L: m, T: N*m}"), tmp_path / "a")
+    assert with_units.units == {"q": "rad", "q_dot": "rad/s", "L": "m", "T": "N*m"}
+    changed = modelgen.load(model("{q: deg, L: cm}"), tmp_path / "a")
+    assert changed.units == {"q": "deg", "q_dot": "deg/s", "L": "cm"}
+    bare = modelgen.load(model(""), tmp_path / "b")
+    assert bare.units == {}
+    code = [[line for line in (tmp_path / d / "m.c").read_text().splitlines()
+             if not line.startswith(" * Model hash: ")] for d in "ab"]
+    assert code[0] == code[1] and len(code[0]) > 100
+    x = [0.3, -0.2]
+    assert np.array_equal(changed.rhs(0.0, x), bare.rhs(0.0, x))
+
+
+def test_a_sweep_gives_each_state_and_swept_value_its_unit(tmp_path):
+    pytest.importorskip("xarray")
+    from conftest import MODELS
+    ds = modelgen.sweep(MODELS / "cart_pole.yaml", parameters={"m": [0.1, 0.2]},
+                        initial={"theta": 0.1}, t_eval=np.linspace(0.0, 0.1, 3),
+                        build_dir=tmp_path)
+    units = {name: ds[name].attrs.get("units") for name in
+             ("x", "theta", "x_dot", "theta_dot", "m", "initial_theta", "time", "status")}
+    assert units == {"x": "m", "theta": "rad", "x_dot": "m/s", "theta_dot": "rad/s",
+                     "m": "kg", "initial_theta": "rad", "time": "s", "status": None}
+    from modelgen.sim.sweep import plot_scalar
+    fig = plot_scalar(ds, "final", "x")
+    assert fig.axes[0].get_xlabel() == "m [kg]" and fig.axes[0].get_ylabel() == "final x [m]"
 
 
 @pytest.mark.parametrize("units, message", [

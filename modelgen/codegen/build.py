@@ -428,6 +428,9 @@ def manifest_problem(manifest) -> str | None:
     if not all(isinstance(o, dict) and isinstance(o.get("name"), str)
                and isinstance(o.get("columns"), list) for o in manifest["outputs"]):
         return "the manifest's 'outputs' is not a list of {name, columns}"
+    units = manifest.get("units", {})
+    if not (isinstance(units, dict) and all(isinstance(v, str) for v in units.values())):
+        return "the manifest's 'units' is not a mapping of names to units"
     if Path(manifest["module_file"]).name != manifest["module_file"]:
         return "the manifest's 'module_file' is not a file name"
     return None

@@ -202,10 +202,8 @@ def _variables(src: _Source, output_columns) -> tuple:
     spec = src.spec
     speeds = list(spec.speeds)
     states = list(spec.coordinates) + speeds
-    units = dict(spec.units)
-    per_s = lambda unit, k: unit and (unit + ("/s" if k == 1 else f"/s{k}"))   # noqa: E731
-    state_units = [units.get(c, "") for c in spec.coordinates]
-    state_units += [per_s(u, 1) for u in state_units]
+    units = spec.name_units
+    state_units = [units.get(name, "") for name in states]
     out = []
     for i, name in enumerate(states):
         what = (f"generalized coordinate {i + 1}" if i < spec.n
@@ -215,7 +213,8 @@ def _variables(src: _Source, output_columns) -> tuple:
     for i, name in enumerate(states):
         what = (f"= {speeds[i]}" if i < spec.n
                 else f"acceleration of {spec.coordinates[i - spec.n]}")
-        unit = state_units[i + spec.n] if i < spec.n else per_s(state_units[i - spec.n], 2)
+        unit = (state_units[i + spec.n] if i < spec.n
+                else state_units[i - spec.n] and f"{state_units[i - spec.n]}/s2")
         out.append(FmuVariable(f"der({name})", len(out), "local", "continuous", "calculated",
                                None, what, derivative_of=i, unit=unit))
     for name, value in spec.parameters:

@@ -59,19 +59,21 @@ ABA_CROSSOVER = 1
 
 
 def model_hash(spec: ModelSpec, options: BuildOptions | None = None) -> str:
-    """Hash of what determines the model's generated C: the model, modelgen, the
-    model templates (not the integrators', which every model shares) and the
-    build options (:meth:`BuildOptions.key_text`; default: the defaults; ``auto``
-    resolved as :func:`generate` resolves it).
+    """Hash of what determines a build: the model, modelgen, the model templates
+    (not the integrators', which every model shares) and the build options
+    (:meth:`BuildOptions.key_text`; default: the defaults; ``auto`` resolved as
+    :func:`generate` resolves it).
 
     The file the model came from and its line numbers are not part of it, so
-    the same model gives the same C wherever it lies.
+    the same model gives the same build wherever it lies.  Its ``units:`` are:
+    they change no line of C, but the manifest carries them, and a cached
+    build must not answer with another model's units.
     """
     options = options if options is not None else BuildOptions()
     if options.formulation == "auto":
         options = replace(options, formulation=choose_formulation(spec)[0])
     h = hashlib.sha256()
-    for part in (repr(replace(spec, source=None, lines=(), units=()))
+    for part in (repr(replace(spec, source=None, lines=(), units=tuple(sorted(spec.units))))
                  + (f" armature={spec.armature!r}" if spec.armature else "")
                  + ("" if spec.physical_inertia else " physical_inertia=False"),
                  options.key_text(read=False), __version__, str(ABI_VERSION),
@@ -736,6 +738,7 @@ def _manifest(spec: ModelSpec, options: BuildOptions, derived: Derived, emitted:
         "quaternions": _quaternions(spec),
         "parameters": [[name, float(value)] for name, value in spec.parameters],
         "inputs": list(spec.inputs),
+        "units": spec.name_units,
         "jacobian": options.jacobian,
         "linearize": options.linearize,
         "derivatives": options.derivatives,

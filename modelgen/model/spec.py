@@ -505,6 +505,24 @@ class ModelSpec:
         return (tuple(speed_name(c) for c in self.simple_coordinates)
                 + tuple(s for j in self.joints for s in j.speeds))
 
+    @property
+    def name_units(self) -> dict:
+        """Unit of each coordinate, speed, parameter and input that the model's
+        ``units:`` gives one (others are left out): a simple coordinate's speed
+        has its coordinate's unit per second (``rad/s``; a joint's speeds have
+        none, as its quaternion has none).
+
+        >>> ModelSpec(name="m", coordinates=("x",), units=(("x", "m"),)).name_units
+        {'x': 'm', 'x_dot': 'm/s'}
+        """
+        given = dict(self.units)
+        out = {name: unit for name, unit in self.units if name in self.coordinates}
+        out.update((speed_name(c), f"{given[c]}/s") for c in self.simple_coordinates
+                   if c in given)
+        out.update((name, given[name]) for name in (*self.parameter_names, *self.inputs)
+                   if name in given)
+        return out
+
     def expressions(self):
         """Every expression of the model: angles, coordinates, masses, inertias,
         gravity, action components and effect fields."""

@@ -76,6 +76,9 @@ class CompiledModel(FrameKinematics):
         self.quaternions = tuple(tuple(qi) for qi in manifest.get("quaternions", ()))
         #: names of the state x = [q, qd]: the coordinates, then the speeds
         self.state_names = self.coordinates + self.speeds
+        #: the model's ``units:`` (a state's, parameter's or input's name -> unit; a
+        #: simple coordinate's speed per second): for people and exports, never used
+        self.units = dict(manifest.get("units") or {})
         #: one name per degree of freedom (the rows of A): a simple coordinate's
         #: own name, a joint's speed name
         self.dof_names = massmatrix.dof_names(manifest)
