@@ -102,6 +102,9 @@ class FmuVariable:
     description: str
     derivative_of: int | None = None    # value reference of the state it is der() of
     unit: str = ""                      # from the model's units: (a speed: its coordinate's/s)
+    #: value reference of the state this derivative equals (a simple coordinate's
+    #: speed), else None (calculated from the whole state)
+    equals: int | None = None
 
 
 @dataclass(frozen=True)
@@ -147,8 +150,16 @@ def _resolve(source) -> _Source:
                        # the rule of modelgen.sim.scene.Scene, so both share one build
                        bool(s.stiff_effects) and s.model.n <= 12)
     spec = as_spec(source)
-    return _Source(spec, (), (0.0,) * (2 * spec.n), (0.0,) * len(spec.inputs), None,
+    return _Source(spec, (), _rest(spec), (0.0,) * len(spec.inputs), None,
                    (DEFAULT_METHOD, DEFAULT_RTOL, DEFAULT_ATOL, None), False)
+
+
+def _rest(spec: ModelSpec) -> tuple:
+    """A model's start values: every coordinate and speed zero, but each ball or free
+    joint's quaternion the identity (w = 1; zero is no rotation)."""
+    x = dict.fromkeys((*spec.coordinates, *spec.speeds), 0.0)
+    x.update((j.quaternion[0], 1.0) for j in spec.joints)
+    return tuple(x.values())
 
 
 def _signal_start(signal, t0: float) -> float:
@@ -200,23 +211,29 @@ def _variables(src: _Source, output_columns) -> tuple:
     """Every ScalarVariable, in value-reference order (states, derivatives, parameters,
     inputs, outputs), with unique names checked."""
     spec = src.spec
-    speeds = list(spec.speeds)
-    states = list(spec.coordinates) + speeds
+    coordinates, speeds = list(spec.coordinates), list(spec.speeds)
+    states, nq, simple = coordinates + speeds, len(coordinates), len(spec.simple_coordinates)
     units = spec.name_units
     state_units = [units.get(name, "") for name in states]
+    joint_of = {n: j.name for j in spec.joints for n in (*j.coordinates, *j.speeds)}
     out = []
     for i, name in enumerate(states):
-        what = (f"generalized coordinate {i + 1}" if i < spec.n
-                else f"speed, the time derivative of {states[i - spec.n]}")
+        what = (f"generalized coordinate {i + 1}" if i < simple else
+                f"coordinate {name} of joint {joint_of[name]}" if i < nq else
+                f"speed, the time derivative of {coordinates[i - nq]}" if i < nq + simple else
+                f"speed {name} of joint {joint_of[name]}")
         out.append(FmuVariable(name, len(out), "local", "continuous", "exact",
                                float(src.initial[i]), what, unit=state_units[i]))
     for i, name in enumerate(states):
-        what = (f"= {speeds[i]}" if i < spec.n
-                else f"acceleration of {spec.coordinates[i - spec.n]}")
-        unit = (state_units[i + spec.n] if i < spec.n
-                else state_units[i - spec.n] and f"{state_units[i - spec.n]}/s2")
+        what = (f"= {speeds[i]}" if i < simple else
+                f"rate of {name}, from the speeds of joint {joint_of[name]}" if i < nq else
+                f"acceleration of {coordinates[i - nq]}" if i < nq + simple else
+                f"rate of {name}")
+        unit = (state_units[nq + i] if i < simple else "" if i < nq else
+                state_units[i - nq] and f"{state_units[i - nq]}/s2" if i < nq + simple else "")
         out.append(FmuVariable(f"der({name})", len(out), "local", "continuous", "calculated",
-                               None, what, derivative_of=i, unit=unit))
+                               None, what, derivative_of=i, unit=unit,
+                               equals=nq + i if i < simple else None))
     for name, value in spec.parameters:
         out.append(FmuVariable(name, len(out), "parameter", "tunable", "exact", float(value),
                                "parameter", unit=units.get(name, "")))
@@ -270,7 +287,8 @@ def model_description(name: str, description: str, guid: str, variables, setting
                       sources, experiment=None, completed_step_needed=False) -> str:
     """The text of ``modelDescription.xml`` (FMI 2.0, naming convention flat).
     ``completed_step_needed``: Model Exchange must call fmi2CompletedIntegratorStep
-    (a constrained model checks there whether its state drifted off the constraints)."""
+    (a constrained model, or one with quaternions, checks there whether its state
+    drifted off the constraints or off unit length)."""
     root = ET.Element("fmiModelDescription", {
         "fmiVersion": "2.0", "modelName": name, "guid": guid,
         "description": description,
@@ -335,12 +353,11 @@ def model_description(name: str, description: str, guid: str, variables, setting
         element = ET.SubElement(structure, "Outputs")
         for v in outputs:      # on the state and the inputs (no dependencies: all of them)
             ET.SubElement(element, "Unknown", {"index": str(index[v.value_reference])})
-    n = len(derivatives) // 2
     element = ET.SubElement(structure, "Derivatives")
-    for k, v in enumerate(derivatives):
+    for v in derivatives:
         attributes = {"index": str(index[v.value_reference])}
-        if k < n:              # der(q_i) is q_i_dot, and nothing else
-            attributes.update(dependencies=str(index[n + k]), dependenciesKind="constant")
+        if v.equals is not None:       # der(q_i) is q_i_dot, and nothing else
+            attributes.update(dependencies=str(index[v.equals]), dependenciesKind="constant")
         ET.SubElement(element, "Unknown", attributes)
     element = ET.SubElement(structure, "InitialUnknowns")
     for v in sorted(outputs + derivatives, key=lambda v: v.value_reference):
@@ -358,10 +375,12 @@ def _c_string(text: str) -> str:
 
 
 def wrapper_source(name: str, hash16: str, guid: str, variables, settings,
-                   initial, input_starts, n_outputs: int, constraints=None) -> str:
+                   initial, input_starts, n_outputs: int, constraints=None,
+                   quaternions=None) -> str:
     """``<name>_fmi2.c``: the FMI 2.0 functions over the model's C (``fmu/fmi2.c.j2``).
     ``constraints``: the manifest's entry of a constrained model (its equations
-    ``m``, the position ones ``holonomic``), else None."""
+    ``m``, the position ones ``holonomic``), else None; ``quaternions``: the
+    manifest's state indices (w, x, y, z) of each ball or free joint's quaternion."""
     method = capi.METHODS[settings.method]
     codes = [s.code for s in capi.STATUSES]
     by_code = {s.code: s.name for s in capi.STATUSES}
@@ -382,6 +401,7 @@ def wrapper_source(name: str, hash16: str, guid: str, variables, settings,
         "constraints": ({"m": int(constraints["m"]), "mh": int(constraints["holonomic"]),
                          "dep": [int(k) for k in constraints["dependent_speeds"]]}
                         if constraints else None),
+        "quaternions": [[int(k) for k in quat] for quat in quaternions or ()],
     }
     return render("fmu/fmi2.c.j2", context)
 
@@ -469,13 +489,6 @@ def build_fmu(source, out_path, *, method: str | None = None, rtol: float | None
     start = time.perf_counter()
     src = _resolve(source)
     spec = src.spec
-    if spec.joints:
-        raise ModelError("FMU export of a model with ball or free joints is not supported: "
-                         "an FMI 2 importer integrates the quaternions of the state without "
-                         "normalising them (nor knows that 7 coordinates move with 6 speeds)",
-                         file=spec.source, key="joints",
-                         fix="export a model whose rotations are simple ones, or simulate "
-                         "this one with modelgen (its integrators normalise the quaternions)")
     settings = _settings(method, rtol, atol, step, src.defaults)
     jacobian = src.jacobian or capi.METHODS[settings.method].implicit
     texts, manifest, hash16 = _model_sources(spec, src.outputs, jacobian, out_dir)
@@ -486,7 +499,7 @@ def build_fmu(source, out_path, *, method: str | None = None, rtol: float | None
     wrapper = f"{spec.name}_fmi2.c"
     texts[wrapper] = wrapper_source(spec.name, hash16, guid, variables, settings, src.initial,
                                     src.input_starts, len(columns),
-                                    manifest.get("constraints"))
+                                    manifest.get("constraints"), manifest.get("quaternions"))
     for header in FMI2_HEADERS + (FMI2_LICENSE,):
         texts[header] = (fmi2_dir() / header).read_text()
     c_files = [f"{spec.name}.c", "mg_integrate.c", wrapper]
@@ -496,7 +509,8 @@ def build_fmu(source, out_path, *, method: str | None = None, rtol: float | None
                    f"{__version__}; Co-Simulation integrates with mg_integrate: "
                    f"{settings.describe()})")
     xml = model_description(spec.name, description, guid, variables, settings, c_files,
-                            src.experiment, bool(manifest.get("constraints")))
+                            src.experiment,
+                            bool(manifest.get("constraints") or manifest.get("quaternions")))
     statements = max(o["statements"] for o in manifest["ops"].values())
     with tempfile.TemporaryDirectory(prefix="modelgen-fmu-") as tmp:
         tmp = Path(tmp)
