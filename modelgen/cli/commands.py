@@ -17,6 +17,7 @@ import warnings
 from pathlib import Path
 
 from modelgen.cli.kinematics_options import kinematics_line, kinematics_of
+from modelgen.cli.output_paths import check_output_dir, check_output_file, describe_run
 from modelgen.codegen.capi import STATUS_BY_NAME
 from modelgen.codegen.options import BuildOptions
 from modelgen.errors import (ModelgenError,
@@ -197,7 +198,7 @@ def _import_path(args) -> Path:
 
 
 def import_command(args) -> int:
-    _check_output_file(_import_path(args), "model.yaml")
+    check_output_file(_import_path(args), "model.yaml")
     if Path(args.urdf).suffix.lower() == ".xml":
         return _import_mjcf(args)
     from modelgen.model.urdf import import_urdf, urdf_to_yaml
@@ -418,7 +419,7 @@ _SCENE_FLAGS = {"time.end": "--t-end", "time.sample": "--sample", "integrator.st
 
 def _simulate_scene(args) -> int:
     from modelgen.model.scene_timing import Spelling
-    from modelgen.sim.scene import Scene, read_card, remove_stale_products, with_settings
+    from modelgen.sim.scene import Scene, read_card, with_settings
 
     def progress(message):
         if not args.quiet:
@@ -456,35 +457,20 @@ def _simulate_scene(args) -> int:
     with _simulation_progress(args, card.name, card.t_start, card.t_end) as advance:
         result = _quietly(scene.run, p=p, x0=x0, max_steps=args.max_steps, progress=advance,
                           max_output_mb=args.max_output_mb or MAX_OUTPUT_MB)
-    # a plot or animation of an earlier run would otherwise sit beside this run's tables
-    written = ((".png",) if not args.no_plot else ()) + (
-        (f".{args.animate_format}", ".html") if args.animate else ())
-    remove_stale_products(args.output, card.name, written)
+    _remove_stale_products(args, card.name)
+    describe_run(result, model=card.model_name, scene=card.name, outputs=card.outputs,
+                 units=scene.model.units)
     return _report(result, Path(args.output), card.name, args, f"scene {card.name}",
                    scene.conservative, animation=(lambda: scene.spec.model, scene.model, p))
 
 
-def _check_output_dir(path, shown=None) -> None:
-    """Refuse an output directory that cannot be one before anything is built or run
-    (``shown``: the -o path it is the folder of, if not itself)."""
-    fix = "give a directory (it is created if missing)" if shown is None else \
-        "give a file in a directory (missing directories are created)"
-    for parent in (Path(path), *Path(path).parents):
-        if parent.exists():
-            if not parent.is_dir():
-                raise ModelgenError(f"-o {shown or path}: {parent} is a file, not a directory; "
-                                    f"fix: {fix}")
-            break
-
-
-def _check_output_file(path, example: str) -> None:
-    """Refuse an output file that cannot be one (a directory, or under a file) before
-    anything is built or run: the OS would only say so once the work is done."""
-    path = Path(path)
-    if path.is_dir():
-        raise ModelgenError(f"-o {path}: {path} is a directory, not a file; fix: give a file "
-                            f"name, e.g. -o {path / example}")
-    _check_output_dir(path.parent, shown=path)
+def _remove_stale_products(args, name: str) -> None:
+    """Remove the plot or animation of an earlier run of ``name`` that this one does not
+    write: every file of it in -o is then of this run."""
+    from modelgen.sim.scene import remove_stale_products
+    written = ((".png",) if not args.no_plot else ()) + (
+        (f".{args.animate_format}", ".html") if args.animate else ())
+    remove_stale_products(args.output, name, written)
 
 
 def simulate_command(args) -> int:
@@ -492,7 +478,7 @@ def simulate_command(args) -> int:
     from modelgen.model import as_spec, is_scene_file
     from modelgen.sim.load import load
     _check_times(args)
-    _check_output_dir(args.output)
+    check_output_dir(args.output)
     _check_floating_base(args)
     _check_max_operations(args)
     if args.trace and not args.animate:
@@ -506,6 +492,11 @@ def simulate_command(args) -> int:
     model = as_spec(args.model, floating_base=args.floating_base, **_reading(args))
     _check_trace(args, model)
     method = _method(args.method or "rk4")
+    if args.dt is not None and method.adaptive:     # as a scene's run refuses it
+        raise ModelgenError(f"--dt {args.dt:g}: method {method.name} adapts its steps to rtol "
+                            f"and atol, so a step would be ignored; fix: leave out --dt (the "
+                            f"samples are every --sample), or choose a fixed-step method, "
+                            f"e.g. --method rk4")
     t_end, dt = args.t_end or 10.0, args.dt or 1e-3
     sample = args.sample or dt
     _check_output_size(args, _samples(0.0, t_end, sample), _columns_of(model))
@@ -523,6 +514,8 @@ def simulate_command(args) -> int:
     result.energy = cm.energies(result, p)
     how = f"step {dt:g} s" if not method.adaptive else "rtol 1e-8"
     print(f"{cm.name}: {method.name}, {how}, t = 0..{t_end:g} s, {len(result.t)} samples")
+    _remove_stale_products(args, cm.name)
+    describe_run(result, model=cm.name, units=cm.units)
     return _report(result, Path(args.output), cm.name, args, f"{cm.name}: {method.name}, {how}",
                    conservative=None, animation=(model, cm, p))
 
@@ -540,7 +533,7 @@ def linearize_command(args) -> int:
     if out is not None:
         if out.suffix.lower() not in (".npz", ".mat"):
             raise ModelgenError(f"-o {out}: the file must end in .npz or .mat")
-        _check_output_file(out, "linear.npz")
+        check_output_file(out, "linear.npz")
     if args.t is not None and not math.isfinite(args.t):
         raise ModelgenError(f"--t must be a finite time [s], got {args.t!r}")
     if is_scene_file(args.model):
@@ -594,7 +587,7 @@ def bench_command(args) -> int:
     if not Path(args.scene).is_file():
         raise ModelgenError(f"{args.scene}: no such file; fix: give a scene file, e.g. "
                             f"models/scenes/dp_free.yaml")
-    _check_output_dir(args.output)
+    check_output_dir(args.output)
     if not is_scene_file(args.scene):
         raise ModelgenError(f"{args.scene} is a model file, not a scene; fix: `modelgen bench` "
                             f"takes a scene (it names the initial state, time span and "
@@ -623,7 +616,7 @@ def bench_command(args) -> int:
 
 def hard_cases_command(args) -> int:
     import modelgen.bench.hard_cases as hc
-    _check_output_dir(args.output)
+    check_output_dir(args.output)
 
     def progress(name):
         print(f"... {name}", file=sys.stderr, flush=True)
@@ -631,10 +624,13 @@ def hard_cases_command(args) -> int:
                            progress=progress)
     table = hc.markdown(results)
     print(table)
+    from modelgen.sim.result import replacing
     out = Path(args.output)
     out.mkdir(parents=True, exist_ok=True)
-    (out / "hard_cases.md").write_text(table)
-    hc.figure(results).savefig(out / "hard_cases.png", dpi=80)
+    with replacing(out / "hard_cases.md") as part:     # whole files or none, as every result
+        part.write_text(table)
+    with replacing(out / "hard_cases.png") as part:
+        hc.figure(results).savefig(part, dpi=80)
     print(f"wrote {out / 'hard_cases.md'} and {out / 'hard_cases.png'}")
     failed = [r.name for r in results if r.passed is False]
     if failed:
@@ -651,9 +647,9 @@ def fmu_command(args) -> int:
                             f"models/cart_pole.yaml")
     # -o is the .fmu file, or the directory it is written into
     if Path(args.output).suffix.lower() == ".fmu":
-        _check_output_file(args.output, "model.fmu")
+        check_output_file(args.output, "model.fmu")
     else:
-        _check_output_dir(args.output)
+        check_output_dir(args.output)
     fmu = build_fmu(args.model, args.output, method=args.method, rtol=args.rtol,
                     atol=args.atol, step=args.step, out_dir=args.build_dir)
     count = {kind: len(fmu.names(kind)) for kind in ("parameter", "input", "output")}
@@ -670,7 +666,7 @@ def fmu_command(args) -> int:
 def _check_sweep(args, sw) -> None:
     """The flags of a sweep, checked before the model is read or built: the library
     finds a bad chunk, tolerance or method only once the model is loaded."""
-    _check_output_file(args.output, "sweep.nc")
+    check_output_file(args.output, "sweep.nc")
     if args.chunk is not None and args.chunk < 1:
         raise ModelgenError(f"--chunk must be a positive number of runs per call, got "
                             f"{args.chunk}; fix: give e.g. --chunk 64, or leave it out (about "

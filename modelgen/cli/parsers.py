@@ -43,6 +43,15 @@ def _add_reading_options(parser) -> None:
                              "mimic=False (ignore)")
 
 
+#: the exit statuses, as ``modelgen --help`` lists them (the values of EXIT)
+EXIT_STATUS_HELP = (
+    f"exit status: {EXIT['ok']} success; {EXIT['input']} bad input (a model, scene or "
+    f"command-line mistake, an -o that cannot be written); {EXIT['build']} a build error; "
+    f"{EXIT['simulation']} a simulation that failed (its partial results are written); "
+    f"{EXIT['interrupted']} interrupted (Ctrl-C), {EXIT['terminated']} terminated (SIGTERM); "
+    f"{EXIT['internal']} an internal error")
+
+
 class _Parser(argparse.ArgumentParser):
     """An argument parser whose errors end with the fix: the help of the command at fault."""
 
@@ -82,7 +91,8 @@ def _fmu_parser(sub) -> None:
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(
         prog="modelgen",
-        description="Generate fast C code for the equations of motion of multibody models.")
+        description="Generate fast C code for the equations of motion of multibody models.",
+        epilog=EXIT_STATUS_HELP)
     parser.add_argument("--version", action="version", version=f"modelgen {__version__}")
     parser.add_argument("--debug", action="store_true",
                         help="show the Python traceback of an error")
@@ -161,8 +171,9 @@ def _simulate_parser(sub) -> None:
                         "or solve_ivp's RK45, DOP853, Radau, BDF, LSODA (mapped to dopri5, "
                         "dop853, rodas) (default: the scene's, or rk4 for a model)")
     s.add_argument("--max-steps", type=int, default=None, metavar="N",
-                   help="most steps of the integrator (default 100000); a run that needs "
-                        "more stops with a warning saying so")
+                   help="most steps of the integrator (default: 100000, or the steps a "
+                        "fixed-step method needs for the span); a run that needs more stops "
+                        "with a warning saying so (exit status 4)")
     s.add_argument("--init", action="append", metavar="NAME=VALUE",
                    help="initial coordinate or speed, e.g. q1=1.2 or q1_dot=0 (repeatable; "
                         "default 0)")
@@ -170,8 +181,9 @@ def _simulate_parser(sub) -> None:
                    help="override a parameter (repeatable)")
     s.add_argument("--no-plot", action="store_true", help="do not write the PNG")
     s.add_argument("-q", "--quiet", action="store_true",
-                   help="no progress bars or messages on stderr (bars are drawn on a "
-                        "terminal for a build or a run taking more than 2 s)")
+                   help="no progress bars or progress messages on stderr (bars are drawn "
+                        "on a terminal for a build or a run taking more than 2 s); errors, "
+                        "warnings and a failed run's reason are still printed")
     s.add_argument("--max-output-mb", type=float, default=None, metavar="MB",
                    help=f"refuse, before anything runs, results larger than MB megabytes "
                         f"(samples x columns doubles plus the CSV text; default {MAX_OUTPUT_MB:g})")

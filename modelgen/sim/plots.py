@@ -14,6 +14,8 @@ MAX_COLUMNS = 6
 #: values beyond this magnitude are not drawn: matplotlib's tick formatter overflows
 #: on ranges near the largest double (a run that blew up)
 MAX_DRAWN = 1e150
+#: characters of a failed run's reason in the figure's title (the message can list a state)
+MAX_REASON = 90
 
 
 def _line(ax, t, values, **style):
@@ -53,6 +55,10 @@ def result_figure(res, *, title: str = "", conservative=None):
     fig = Figure(figsize=(8, 1.7 * len(panels) + 0.9), layout="constrained")
     axes = fig.subplots(len(panels), 1, sharex=True, squeeze=False)[:, 0]
     t = res.t
+    # each column's unit, when the run recorded them (the command line does)
+    names = res.columns()
+    units = dict(zip(names, res.info["units"])) \
+        if len(res.info.get("units", ())) == len(names) else {}
     for ax, panel in zip(axes, panels):
         if panel == "coordinates":
             for i, name in enumerate(coords):
@@ -87,7 +93,9 @@ def result_figure(res, *, title: str = "", conservative=None):
                                                         range(values.shape[1])]
             for j, column in enumerate(columns):
                 _line(ax, t, values[:, j], label=column)
-            ax.set_ylabel(name)
+            unit = {units.get(column, "") for column in columns}
+            ax.set_ylabel(f"{name} [{unit.pop()}]" if len(unit) == 1 and "" not in unit
+                          else name)
         if ax.get_legend_handles_labels()[0]:
             entries = len(ax.get_legend_handles_labels()[0])
             ax.legend(loc="upper left", bbox_to_anchor=(1.0, 1.0),
@@ -99,5 +107,16 @@ def result_figure(res, *, title: str = "", conservative=None):
     if skipped:
         axes[-1].set_xlabel(f"t [s]        (not drawn: {', '.join(skipped)}, more than "
                             f"{MAX_COLUMNS} columns; they are in the CSV and NPZ)")
-    fig.suptitle(title or res.message)
+    fig.suptitle(_title(res, title))
     return fig
+
+
+def _title(res, title: str) -> str:
+    """The figure's title: ``title`` (else the run's message), and for a run that did
+    not reach its end, where and why it stopped, so the PNG alone says it is partial."""
+    if res.success or not title:
+        return title or res.message
+    reason = res.message.split("; ")[0].split(". ")[0]
+    reason = reason if len(reason) <= MAX_REASON else reason[:MAX_REASON - 3] + "..."
+    where = f" at t = {res.t_fail:g} s" if res.t_fail is not None else ""
+    return f"{title}\nstopped{where} (status {res.status}): {reason}"

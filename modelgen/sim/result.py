@@ -247,17 +247,31 @@ class Result:
     def to_npz(self, path) -> Path:
         """t, y, the state names, every output (``output:<name>``), the energies, the
         work of each effect (``work:<name>``), ``status``, ``message`` and ``partial``
-        (True when the run did not reach its end: interrupted or failed).  The file
-        appears under ``path`` only once it is complete (see :func:`replacing`)."""
+        (True when the run did not reach its end: interrupted or failed), ``t_fail``
+        (NaN unless it failed), ``t_reached`` (where it stopped: ``t_fail``, else the
+        last sample), ``method``, ``columns`` (the CSV's column names, in its order),
+        and when ``info`` has them ``model``, ``scene`` and ``units`` (one per column,
+        "" where unknown; the command line records them).  Only numbers and text:
+        ``np.load(path, allow_pickle=False)`` reads it.  The file appears under
+        ``path`` only once it is complete (see :func:`replacing`)."""
         path = Path(path)
         arrays = {"t": self.t, "y": self.y, "x": self.y.T,
                   **{f"output:{k}": v for k, v in self.outputs.items()}}
         if self.energy is not None:
             arrays["energy"] = self.energy
         arrays.update({f"work:{k}": v for k, v in self.work.items()})
+        columns = self.columns()
+        meta = {key: str(self.info[key]) for key in ("model", "scene") if key in self.info}
+        if len(self.info.get("units", ())) == len(columns):
+            meta["units"] = np.array(self.info["units"], dtype=str)
+        t_fail = np.nan if self.t_fail is None else float(self.t_fail)
+        last = float(self.t[-1]) if len(self.t) else np.nan
+        reached = last if self.t_fail is None else t_fail
         with replacing(path) as part:
             np.savez(part, status=self.status, message=self.message, partial=not self.success,
-                     state_names=np.array(self.state_names), **arrays)
+                     t_fail=t_fail, t_reached=reached, method=str(self.method),
+                     state_names=np.array(self.state_names, dtype=str),
+                     columns=np.array(columns, dtype=str), **meta, **arrays)
         return path
 
     def to_dataframe(self):
