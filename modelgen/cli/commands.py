@@ -782,6 +782,7 @@ def sweep_command(args) -> int:
     print(f"wrote {out}")
     if args.plot:
         png = out.with_suffix(".png")
-        sw.plot_scalar(ds, how, variable, png)
+        with replacing(png) as part:
+            sw.plot_scalar(ds, how, variable, part)
         print(f"wrote {png}")
     return EXIT["simulation"] if ds.attrs["failed"] and args.strict else 0
