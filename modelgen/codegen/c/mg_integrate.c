@@ -15,8 +15,7 @@
  *   rodas4    Rosenbrock 4(3), 6 stages, L-stable, stiffly accurate, with the
  *             Jacobian d xdot / d x and a finite difference d xdot / d t;
  *             Gustafsson's predictive step control; 3rd-order dense output.
- *             Coefficients: Hairer & Wanner, Solving ODEs II, sec. IV.7,
- *             rodas.f with METH = 1.
+ *             Coefficients: Hairer & Wanner II, IV.7, rodas.f with METH = 1.
  *   midpoint  implicit midpoint rule (1-stage Gauss-Legendre, order 2), and
  *   gauss4    2-stage Gauss-Legendre (order 4): implicit, symplectic, fixed
  *             step; simplified Newton iteration to round-off.
@@ -30,18 +29,15 @@
  * time from the system (MG_WORK_SIZE).  The constants are in mg_integrate.h,
  * rendered from modelgen/codegen/capi.py, which also holds the messages.
  *
- * One translation unit: this file is the driver and includes the method
- * families of mg_integrate/ (numerics, the system, explicit Runge-Kutta,
- * rodas, Gauss, events, step size control), which are not compiled alone.
- * Every helper stays static, and a C user compiles this one file.
+ * One translation unit: this file is the driver and includes the method families
+ * of mg_integrate/ (numerics, the system, explicit Runge-Kutta, rodas, Gauss,
+ * events, step size control), not compiled alone; a C user compiles this file.
  *
  * Each output directory holds a copy of this file, and a program that embeds
- * several models compiles every one of them: with gcc or clang on ELF and
- * Mach-O the four public functions are weak definitions, so the linker keeps
- * one copy instead of failing on duplicates.  Their link names carry the ABI
- * version (mg_integrate.h), so only copies of one interface are merged, and
- * copies of two interfaces stay apart, each serving its own models.  PE/COFF
- * (Windows) has no such merge: compile one copy there.
+ * several models compiles them all: with gcc or clang on ELF and Mach-O the four
+ * public functions are weak, so the linker keeps one copy.  Their link names carry
+ * the ABI version (mg_integrate.h): only copies of one interface merge, and those
+ * of two stay apart, each serving its own models.  PE/COFF: compile one copy.
  * ------------------------------------------------------------------------- */
 #if (defined(__GNUC__) || defined(__clang__)) && (defined(__ELF__) || defined(__APPLE__))
 #define MG_WEAK __attribute__((weak))
@@ -397,20 +393,42 @@ static int mg_step(mg_run *r)
     }
 }
 
+/* Why a Gauss step failed even halved: an overflowing iterate or a singular matrix,
+ * which a smaller step may cure, unless the rhs is not finite at the start state at a
+ * time the step needs (t_seen, where it met one; the stages; the end): NON_FINITE. */
+static int mg_gauss_failure(mg_run *r, double t_seen)
+{
+    const double *c = r->method == MG_METHOD_MIDPOINT ? mg_gl1_c : mg_gl2_c;
+    const double c2 = c[r->method == MG_METHOD_GAUSS4], t = r->t, h = r->h;
+    const double times[4] = {t_seen, t + c[0] * h, t + c2 * h, r->t_new};
+    int i, status;
+    for (i = 0; i < 4; ++i)
+        if (times[i] == times[i] && (status = mg_ode_f(&r->o, times[i], r->x, r->xw)))
+            return status;
+    r->o.t_fail = r->t;
+    return MG_STATUS_IMPLICIT_FAILED;
+}
+
 /* One attempted step: *accepted = 1, or 0 when it is to be tried again with the new
  * h (a singular Rosenbrock matrix, a stage that overflowed, or an error above the
- * tolerances); or a failure.
- * An adaptive step whose stages or result left the finite numbers is rejected like
- * one with too large an error, its step cut by 5 (solve_ivp's smallest factor): a
- * trial step can overshoot into a region the solution never reaches (a stiffening
- * spring's exponential force after a long stretch of growing steps).  After
- * MG_OVERFLOW_CUTS such cuts in a row, or when the step no longer moves t, the run
- * stops as NON_FINITE at the last accepted state.  Not for a failure of rodas's
- * Jacobian at that state itself, which a smaller step would meet again. */
+ * tolerances); or a failure.  An adaptive step whose stages or result left the
+ * finite numbers is rejected, its step cut by 5 (solve_ivp's smallest factor): a
+ * trial step can overshoot where the solution never goes (a stiffening spring's
+ * exponential force after long growing steps).  After MG_OVERFLOW_CUTS such cuts
+ * in a row, or when the step no longer moves t, the run stops as NON_FINITE at the
+ * last accepted state; at once when rodas's Jacobian fails at that state itself. */
 #define MG_OVERFLOW_CUTS 30
 static int mg_attempt(mg_run *r, int *accepted)
 {
-    int status = mg_step(r);
+    const int gauss = r->method == MG_METHOD_MIDPOINT || r->method == MG_METHOD_GAUSS4;
+    const double t_fail = r->o.t_fail;
+    int status;
+    r->o.t_fail = NAN; /* set by the rhs only when it fails */
+    status = mg_step(r);
+    if (gauss && status == MG_STATUS_IMPLICIT_FAILED)
+        status = mg_gauss_failure(r, r->o.t_fail);
+    else if (r->o.t_fail != r->o.t_fail) /* no NaN left in the stop array */
+        r->o.t_fail = t_fail;
     *accepted = 0;
     if (status == MG_STATUS_IMPLICIT_FAILED && r->adaptive && r->singular < 5) {
         ++r->singular; /* rodas4: singular matrix; retry with half the step (as rodas.f) */
