@@ -17,14 +17,14 @@ from modelgen.errors import (BuildError, DerivationError, MassMatrixError, Model
 from modelgen.version import __version__
 
 __all__ = ["load", "load_scene", "generate_model", "as_spec", "is_scene_file", "sweep", "grid",
-           "ModelgenError", "ModelError", "BuildError", "DerivationError", "SimulationError",
+           "Model", "ModelgenError", "ModelError", "BuildError", "DerivationError", "SimulationError",
            "MassMatrixError", "TemplateError", "__version__"]
 
 #: public name -> the module that defines it (imported on first use)
 _LAZY = {"load": "modelgen.sim.load", "load_scene": "modelgen.sim.load",
          "generate_model": "modelgen.sim.load", "as_spec": "modelgen.model",
          "is_scene_file": "modelgen.model", "sweep": "modelgen.sim.sweep",
-         "grid": "modelgen.sim.sweep"}
+         "grid": "modelgen.sim.sweep", "Model": "modelgen.model"}
 
 
 def __getattr__(name):

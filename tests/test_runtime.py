@@ -162,6 +162,22 @@ def test_result_tables_round_trip(dp, tmp_path):
         assert np.array_equal(npz["y"], res.y) and list(npz["state_names"]) == list(dp.state_names)
 
 
+def test_each_column_of_the_table_is_a_key_by_its_csv_name(tmp_path):
+    """What the CSV's header names (an output's column, the energies, a work) indexes
+    the result too, as a series (n_times,), equal to that column of the table (a
+    one-column output named as its column, ``energy``, is the output: (n_times, 1))."""
+    from conftest import SCENES
+    import modelgen
+    res = modelgen.load_scene(SCENES / "dp_damped.yaml", tmp_path).run()
+    table = res.table()
+    for k, column in enumerate(res.columns()):
+        assert column in res and np.array_equal(np.ravel(res[column]), table[:, k]), column
+        assert column in res.keys()
+    assert res["elbow.x"].shape == res.t.shape and "elbow.w" not in res
+    with pytest.raises(KeyError, match="nor a column of the table"):
+        res["elbow.w"]
+
+
 def test_plot_returns_a_figure_and_leaves_pyplot_alone(dp, tmp_path):
     import matplotlib
     backend = matplotlib.get_backend()

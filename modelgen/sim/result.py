@@ -171,27 +171,50 @@ class Result:
     # -- access by name -----------------------------------------------------------
     def __getitem__(self, name: str):
         """A state's time series (``res["q1"]``, ``res["q1_dot"]``), a recorded output
-        (``res["elbow"]``, shape (n_times, columns)), or else a field (``res["nfev"]``),
-        as scipy's OdeResult allows.  Names of states and outputs come first."""
+        (``res["elbow"]``, shape (n_times, columns)), a field (``res["nfev"]``), as
+        scipy's OdeResult allows, or else one column of :meth:`table` by its CSV
+        name (``res["elbow.x"]``, ``res["kinetic"]``, ``res["work.damping"]``:
+        shape (n_times,)).  Names of states and outputs come first."""
         if name in self.state_names:
             return self.y[self.state_names.index(name)]
         if name in self.outputs:
             return self.outputs[name]
         if name in _FIELDS:
             return getattr(self, name)
-        raise KeyError(f"{name!r} is neither a state, a recorded output nor a field; states "
-                       f"and outputs: {', '.join(self.names()) or 'none'}")
+        column = self._column(name)
+        if column is not None:
+            return column
+        raise KeyError(f"{name!r} is neither a state, a recorded output, a field nor a "
+                       f"column of the table; states and outputs: "
+                       f"{', '.join(self.names()) or 'none'}")
+
+    def _column(self, name):
+        """The column of :meth:`table` whose CSV name is ``name`` (an output's column, an
+        energy or a work), or None."""
+        for output, values in self.outputs.items():
+            columns = list(self.output_columns.get(output, ()))
+            if name in columns:
+                return np.asarray(values).reshape(len(self.t), -1)[:, columns.index(name)]
+        if self.energy is not None and name in ("kinetic", "potential", "total"):
+            return (self.energy.sum(axis=1) if name == "total"
+                    else self.energy[:, ("kinetic", "potential").index(name)])
+        if name.startswith("work.") and name[5:] in self.work:
+            return np.asarray(self.work[name[5:]])
+        return None
 
     def __contains__(self, name) -> bool:
-        return name in self.state_names or name in self.outputs or name in _FIELDS
+        return (name in self.state_names or name in self.outputs or name in _FIELDS
+                or self._column(name) is not None)
 
     def names(self) -> list:
         """The states, then the recorded outputs."""
         return list(self.state_names) + list(self.outputs)
 
     def keys(self) -> list:
-        """Everything ``res[...]`` accepts: states, outputs, then the fields."""
-        return self.names() + [f for f in _FIELDS if f not in self.names()]
+        """Everything ``res[...]`` accepts: states, outputs, the fields, then the other
+        columns of :meth:`table` (an output's, the energies, the works)."""
+        named = self.names() + [f for f in _FIELDS if f not in self.names()]
+        return named + [c for c in self.columns() if c not in named]
 
     def energy_change(self) -> EnergyChange:
         """E(end) - E(0) of a run with recorded energies, against the largest
