@@ -314,6 +314,27 @@ def test_cli_linearize_prints_eigenvalues_and_writes_npz(tmp_path):
     assert bad.returncode == 2 and "--at z: unknown state" in bad.stderr
 
 
+def test_a_scenes_linearization_has_its_own_outputs_not_its_power_records(tmp_path,
+                                                                           capsys):
+    """A damped scene records each damper's power for its energy balance, as outputs
+    of its build; its linearization's y are the outputs the scene asks for, from
+    Python (Scene.linearize) and from the command line, as its FMU's are."""
+    from modelgen.cli import main
+    scene = modelgen.load_scene(SCENES / "dp_damped.yaml", tmp_path / "b", linearize=True)
+    assert any(name.startswith("power_") for name in scene.model.outputs)
+    lin = scene.linearize()
+    assert list(lin.outputs) == [c for name in ("elbow", "energy", "damping")
+                                 for c in scene.model.outputs[name]]
+    full = scene.model.linearize(scene.initial_state(), t=0.0)
+    rows = [list(full.outputs).index(c) for c in lin.outputs]
+    np.testing.assert_array_equal(lin.C, full.C[rows])
+    np.testing.assert_array_equal(lin.A, full.A)
+    assert main(["linearize", str(SCENES / "dp_damped.yaml"), "--build-dir",
+                 str(tmp_path / "b")]) == 0
+    printed = capsys.readouterr().out
+    assert "C (elbow.x" in printed and "power_" not in printed
+
+
 def test_generated_linearize_compiles_strictly_as_c99_and_cxx(build, scene, tmp_path):
     """Every branch of the template (aba/crba, with and without inputs and outputs)
     compiles with -Werror -pedantic as C99 and as C++ (the build itself uses -Werror)."""

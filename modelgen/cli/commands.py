@@ -565,7 +565,9 @@ def linearize_command(args) -> int:
         cm = load(model, args.build_dir, options=BuildOptions(linearize=True))
     if args.equilibrium:
         x0 = at_rest(cm, x0, u, p, t)
-    lin = cm.linearize(x0, u=u, t=t, p=p)
+    # a scene's y: its own outputs, not the power ones recorded for its energy balance
+    lin = cm.linearize(x0, u=u, t=t, p=p,
+                       outputs=None if spec is None else [o.name for o in spec.outputs])
     print(lin)
     if out is not None:
         out.parent.mkdir(parents=True, exist_ok=True)

@@ -390,6 +390,17 @@ class Scene:
         from modelgen.sim.animate import animate    # its drawing needs the kinematics
         return animate(res, self.spec.model, path, compiled=self.model, **options)
 
+    def linearize(self, x0=None, u=None, t=None, p=None, outputs=None):
+        """The state space model of :meth:`CompiledModel.linearize` about the scene's
+        initial state (or ``x0``), its inputs at ``t`` (default its start; ``u``
+        overrides them by name) and with y the scene's own outputs (``outputs``
+        selects among them): not the ``power`` outputs a scene records for its
+        energy balance.  Build the scene with ``linearize=True``."""
+        t = self.card.t_start if t is None else t
+        inputs = dict(self.inputs_at(t), **(u or {}))
+        asked = [out.name for out in self.card.outputs] if outputs is None else outputs
+        return self.model.linearize(self.initial_state(x0), u=inputs, t=t, p=p, outputs=asked)
+
     def initial_state(self, x0=None) -> np.ndarray:
         """The scene's initial state, or ``x0`` (an array, or names -> values over it)."""
         s, cm = self.card, self.model
