@@ -391,8 +391,9 @@ def _report(result, out: Path, name: str, args, title: str, conservative,
                   f"{balance:.3e} J{relative}")
             from modelgen.sim.mechanical_work import UNRESOLVED
             if result.info.get("work_unresolved", 0.0) > UNRESOLVED:
-                print(f"modelgen: note: a power changes faster than the samples resolve, "
-                      f"so the work's quadrature may be off by up to "
+                print(f"modelgen: note: a power changes faster than the samples resolve "
+                      f"(a fast transient, or an input that jumps between two samples), so "
+                      f"the work's quadrature may be off by up to "
                       f"{result.info['work_quadrature_check']:.3e} J an interval; a finer "
                       f"--sample separates it from the integration error", file=sys.stderr)
     if result.info.get("stability_warning"):
