@@ -95,7 +95,9 @@ def test_python_dash_m_modelgen_prints_the_version():
 
 @pytest.mark.parametrize("flags, message", [
     (["--set", "gg=1"], "--set gg: unknown parameter"),
-    (["--set", "g=abc"], "'abc' is not a number"),
+    (["--set", "g=abc"], "'abc' is not a number or an expression of numbers (undefined "
+                         "name 'abc'"),
+    (["--init", "q1=pi/"], "'pi/' is not a number or an expression of numbers"),
     (["--dt", "-1"], "--dt must be a positive number"),
     (["--init", "q9=1"], "--init q9: unknown state"),
     (["--method", "rk44"], "unknown method 'rk44'"),

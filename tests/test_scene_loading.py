@@ -1,6 +1,7 @@
 """Scenes: the shipped scene files, the reduced model, and every scene error's message."""
 from __future__ import annotations
 
+import math
 import os
 from dataclasses import replace
 from pathlib import Path
@@ -224,6 +225,21 @@ def test_numbers_must_be_finite(value, shown):
     assert error(initial=f"{{q1: {value}, q2: 0.5, q1_dot: 0.0, q2_dot: 0.0}}") == (
         f"s.yaml:7: initial.q1: the initial value of 'q1' must be a finite real number but is "
         f"the number {shown}; fix: write a number such as 1.0")
+
+
+def test_an_initial_value_may_be_an_expression_of_numbers():
+    """As a model file's expressions: the upright pendulum is where a user types pi."""
+    s = scene(initial="{q1: pi - 0.1, q2: '2*pi/3', q1_dot: sqrt(2), q2_dot: '-1e-3'}")
+    # evaluated exactly, then rounded once: pi - 1/10, not the double pi minus the double 0.1
+    assert s.initial == (3.0415926535897935, 2.0943951023931957, math.sqrt(2), -1e-3)
+    assert math.pi - 0.1 == 3.041592653589793
+    assert error(initial="{q1: pi - c, q2: 0.5, q1_dot: 0.0, q2_dot: 0.0}") == (
+        "s.yaml:7: initial.q1: the initial value of 'q1' must be a number or an expression "
+        "of numbers; it names 'c'; fix: write a number such as 1.0 or an expression of "
+        "numbers such as pi/2")
+    assert "invalid expression" in error(initial="{q1: pi -, q2: 0, q1_dot: 0, q2_dot: 0}")
+    assert "sqrt(...) is not a finite real number" in error(
+        initial="{q1: sqrt(-1), q2: 0, q1_dot: 0, q2_dot: 0}")
 
 
 @pytest.mark.parametrize("outputs, expected", [

@@ -16,6 +16,7 @@ import time
 import warnings
 from pathlib import Path
 
+from modelgen.cli.assignments import parameter_overrides, parse_assignments, state_overrides
 from modelgen.cli.kinematics_options import kinematics_line, kinematics_of
 from modelgen.cli.output_paths import check_output_dir, check_output_file, describe_run
 from modelgen.codegen.capi import STATUS_BY_NAME
@@ -240,38 +241,6 @@ def _write_import(args, imported, text: str, *, inputs: bool) -> int:
     return 0
 
 
-def _parse_assignments(items, what):
-    out = {}
-    for item in items or ():
-        name, sep, value = item.partition("=")
-        if not sep:
-            raise ModelgenError(f"--{what} takes NAME=VALUE, got {item!r}")
-        try:
-            out[name.strip()] = float(value)
-        except ValueError:
-            raise ModelgenError(f"--{what} {item!r}: {value!r} is not a number") from None
-        if not math.isfinite(out[name.strip()]):
-            raise ModelgenError(f"--{what} {item!r}: the value must be a finite number")
-    return out
-
-
-def _state_overrides(names, items) -> dict:
-    init = _parse_assignments(items, "init")
-    for key in init:
-        if key not in names:
-            raise ModelgenError(f"--init {key}: unknown state; the state is {', '.join(names)}")
-    return init
-
-
-def _parameter_overrides(parameters, items) -> dict:
-    values = _parse_assignments(items, "set")
-    for key in values:
-        if key not in parameters:
-            raise ModelgenError(f"--set {key}: unknown parameter; parameters are "
-                                f"{', '.join(parameters) or 'none'}")
-    return values
-
-
 def _quietly(run, *args, **kwargs):
     """``run(*args, **kwargs)`` without the max_steps RuntimeWarning: the CLI prints
     the result's message (which says the same) itself."""
@@ -435,8 +404,8 @@ def _simulate_scene(args) -> int:
     if spec is not None:
         _check_trace(args, spec.model)
     # every override is checked before anything is built
-    init = _state_overrides(list(card.coordinates) + list(card.speeds), args.init)
-    p = _parameter_overrides(list(card.parameters), args.set) or None
+    init = state_overrides(list(card.coordinates) + list(card.speeds), args.init)
+    p = parameter_overrides(list(card.parameters), args.set) or None
     changes = {k: v for k, v in (("t_end", args.t_end), ("step", args.dt),
                                  ("sample_dt", args.sample)) if v is not None}
     if args.method is not None:
@@ -504,9 +473,9 @@ def simulate_command(args) -> int:
     with _generation_progress(args, model.name) as stages:
         cm = load(model, args.build_dir, progress=stages, max_operations=args.max_operations)
     x0 = cm.neutral_state()
-    for key, value in _state_overrides(cm.state_names, args.init).items():
+    for key, value in state_overrides(cm.state_names, args.init).items():
         x0[cm.state_names.index(key)] = value
-    p = _parameter_overrides(cm.parameters, args.set) or None
+    p = parameter_overrides(cm.parameters, args.set) or None
     times = np.linspace(0.0, t_end, int(round(t_end / sample)) + 1)
     with _simulation_progress(args, cm.name, 0.0, t_end) as advance:
         result = _quietly(cm.simulate, x0, (0.0, t_end), t_eval=times, method=method.name,
@@ -546,17 +515,17 @@ def linearize_command(args) -> int:
         x0, t = np.zeros(model.nq + model.n), args.t or 0.0
     # every value is checked before anything is built
     states = list(model.coordinates) + list(model.speeds)
-    at = _parse_assignments(args.at, "at")
+    at = parse_assignments(args.at, "at")
     for key, value in at.items():
         if key not in states:
             raise ModelgenError(f"--at {key}: unknown state; the state is {', '.join(states)}")
         x0[states.index(key)] = value
-    u = _parse_assignments(args.u, "u")
+    u = parse_assignments(args.u, "u")
     for key in u:
         if key not in model.inputs:
             raise ModelgenError(f"--u {key}: unknown input; inputs are "
                                 f"{', '.join(model.inputs) or 'none'}")
-    p = _parameter_overrides([name for name, _ in model.parameters], args.set) or None
+    p = parameter_overrides([name for name, _ in model.parameters], args.set) or None
     if args.equilibrium:
         check_equilibrium(model)
     if spec is not None:

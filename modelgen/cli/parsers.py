@@ -175,8 +175,8 @@ def _simulate_parser(sub) -> None:
                         "fixed-step method needs for the span); a run that needs more stops "
                         "with a warning saying so (exit status 4)")
     s.add_argument("--init", action="append", metavar="NAME=VALUE",
-                   help="initial coordinate or speed, e.g. q1=1.2 or q1_dot=0 (repeatable; "
-                        "default 0)")
+                   help="initial coordinate or speed, e.g. q1=1.2, q1=pi/2 or q1_dot=0 "
+                        "(a number or an expression of numbers; repeatable; default 0)")
     s.add_argument("--set", action="append", metavar="NAME=VALUE",
                    help="override a parameter (repeatable)")
     s.add_argument("--no-plot", action="store_true", help="do not write the PNG")
@@ -254,8 +254,9 @@ def _linearize_parser(sub) -> None:
                                     "frequencies and damping ratios.")
     lz.add_argument("model", help="model YAML, URDF or scene YAML file")
     lz.add_argument("--at", action="append", metavar="NAME=VALUE",
-                    help="coordinate or speed of the operating point, e.g. q1=3.14159 "
-                         "(repeatable; default: the scene's initial state, or 0)")
+                    help="coordinate or speed of the operating point, e.g. q1=pi "
+                         "(a number or an expression of numbers; repeatable; default: the "
+                         "scene's initial state, or 0)")
     lz.add_argument("--u", action="append", metavar="NAME=VALUE",
                     help="input at the operating point (repeatable; default: the scene's "
                          "input at --t, or 0)")

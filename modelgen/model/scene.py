@@ -22,9 +22,11 @@ from dataclasses import replace
 from modelgen.errors import ModelError
 from modelgen.model import is_scene_text
 from modelgen.model.builder import ModelBuilder, replay
+from modelgen.model.expr import ExpressionParseError, parse_expression
 from modelgen.model.messages import article, closest, describe, listing
 from modelgen.model.names import NAME_RE, check_name
 from modelgen.model.reader import compose, read_text
+from modelgen.model.schema import NUMERIC_STRING
 from modelgen.model.scene_timing import timing_problem
 from modelgen.model.sections import (builder_from_text, check_top_level, load_effects,
                                      load_parameters)
@@ -129,6 +131,21 @@ class _SceneReader:
 
     def number(self, value, key: str, what: str) -> float:
         return self.ctx.number(value, key, what)
+
+    def constant(self, value, key: str, what: str) -> float:
+        """A number, or an expression of numbers (``pi - 0.1``, ``2*pi/3``: the upright
+        pendulum is where a user types pi), as a double: evaluated exactly, rounded
+        once (the grammar refuses what is not a finite real number)."""
+        if not isinstance(value, str) or NUMERIC_STRING.match(value):
+            return self.number(value, key, what)
+        try:
+            return float(parse_expression(value, {}))
+        except ExpressionParseError as exc:
+            reason = (f"it names '{exc.name}'" if exc.name is not None
+                      else f"invalid expression: {exc.reason}")
+            raise self.error(f"{what} must be a number or an expression of numbers; {reason}",
+                             key, "write a number such as 1.0 or an expression of numbers "
+                             "such as pi/2") from None
 
     def mapping(self, key: str, example: str) -> dict:
         """The mapping at top-level ``key`` ({} if absent or null)."""
@@ -342,7 +359,7 @@ class _SceneReader:
                 raise self.error(f"unknown coordinate or speed '{s}'", key,
                                  fix + f"the state of model '{full.name}' is "
                                  + ", ".join(state))
-            given[s] = self.number(v, key, f"the initial value of '{s}'")
+            given[s] = self.constant(v, key, f"the initial value of '{s}'")
         missing = [s for s in state if s not in given]
         if missing:
             names = " and ".join(", ".join(f"'{m}'" for m in missing).rsplit(", ", 1))
