@@ -15,9 +15,10 @@ from modelgen.model.spec import (TIME, ActionSpec, BaseSpec, BodySpec, FrameSpec
 
 ROOT = Path(__file__).resolve().parent.parent
 MODEL_FILES = sorted((ROOT / "models").glob("*.yaml"))
-SHIPPED = ["arm7", "cart_pole", "double_pendulum", "four_bar", "heavy_top", "incline_block",
-           "rolling_disc", "simple_pendulum", "slider_crank", "spherical_pendulum", "spring_chain",
-           "tennis_racket", "torque_free_body", "whipple_bicycle"]
+SHIPPED = ["arm7", "cart_pole", "double_pendulum", "four_bar", "furuta_pendulum", "heavy_top",
+           "incline_block", "rolling_disc", "simple_pendulum", "slider_crank",
+           "spherical_pendulum", "spring_chain", "tennis_racket", "torque_free_body",
+           "whipple_bicycle"]
 Z = sympy.Integer(0)
 
 
