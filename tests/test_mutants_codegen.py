@@ -29,6 +29,7 @@ from modelgen.sim import scene as scene_module
 
 from conftest import MODELS, SCENES
 from test_aba import branched_tree
+from test_integrators import DRIVEN
 
 
 # -- printer: constants keep every bit of their double -------------------------
@@ -239,21 +240,6 @@ def test_an_early_part_is_discarded_when_its_header_or_command_changed(tmp_path)
             early.stop()
 
 
-DRIVEN_MODEL = """\
-name: driven_pendulum
-coordinates: [q]
-parameters: {L: 1.0, m: 1.0, g: 9.81, A: 0.8, w: 3.0}
-bases:
-  B1: {parent: E, axis: 3, angle: q}
-points:
-  P: {from: O, base: B1, coordinates: [0, -L, 0]}
-bodies:
-  bob: {mass: m, G: P, base: B1}
-gravity: [0, -g, 0]
-actions:
-  drive: {body: bob, point: O, base: B1, torque: [0, 0, A*sin(w*t)], force: [0, 0, 0]}
-"""
-
 DRIVEN_SCENE = """\
 scene: driven_swing
 model: driven.yaml
@@ -269,14 +255,14 @@ def test_outputs_recorded_backwards_are_those_at_the_reported_times(tmp_path):
     """An output that depends on t itself (a torque ``A sin(w t)``) recorded while
     integrating backwards is evaluated at t, not at the reversed system's s = -t:
     against ``output_values`` at each reported time and the closed form."""
-    (tmp_path / "driven.yaml").write_text(DRIVEN_MODEL)
+    (tmp_path / "driven.yaml").write_text(DRIVEN)     # A = 5, w = 3
     (tmp_path / "scene.yaml").write_text(DRIVEN_SCENE)
     cm = modelgen.load_scene(tmp_path / "scene.yaml", tmp_path / "build").model
     t_eval = np.linspace(1.0, 0.2, 5)
     res = cm.simulate([0.4, 0.0], (1.0, 0.2), t_eval=t_eval, rtol=1e-10, atol=1e-10)
     assert res.success and np.array_equal(res.t, t_eval)
     got = np.asarray(res.outputs["torque"]).ravel()
-    np.testing.assert_allclose(got, 0.8 * np.sin(3.0 * t_eval), rtol=1e-12, atol=1e-14)
+    np.testing.assert_allclose(got, 5.0 * np.sin(3.0 * t_eval), rtol=1e-12, atol=1e-14)
     for k, t in enumerate(res.t):
         assert got[k] == pytest.approx(cm.output_values(t, res.y[:, k])[0], rel=1e-12)
 
